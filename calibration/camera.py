@@ -1,0 +1,249 @@
+"""Pinhole camera with OpenCV distortion, as a validated value object.
+
+Conventions (spec/INTERFACES.md): world frame right-handed, metres, +Y up, patient faces -Z.
+Extrinsics are world -> camera: ``x_cam = R @ x_world + t`` with ``R`` from the Rodrigues vector
+``rvec``. The camera looks along its +Z axis, image x to the right, image y down (OpenCV).
+Distortion coefficients are in OpenCV order (k1, k2, p1, p2[, k3[, k4, k5, k6]]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from calibration.errors import CalibrationError
+
+_ALLOWED_DIST_LENGTHS = (4, 5, 8)
+
+
+def rotation_from_rvec(rvec: np.ndarray) -> np.ndarray:
+    """(3,) Rodrigues vector -> (3, 3) rotation matrix."""
+    rot, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
+    return rot
+
+
+def rvec_from_rotation(rot: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation matrix -> (3,) Rodrigues vector."""
+    rvec, _ = cv2.Rodrigues(np.asarray(rot, dtype=np.float64))
+    return rvec.reshape(3)
+
+
+def check_rotation(rot: np.ndarray, what: str, tol: float = 1e-6) -> None:
+    """Raise CalibrationError unless ``rot`` is a proper rotation (orthonormal, det +1)."""
+    rot = np.asarray(rot, dtype=np.float64)
+    if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+        raise CalibrationError(f"{what}: rotation must be a finite 3x3 matrix, got shape {rot.shape}")
+    if np.abs(rot @ rot.T - np.eye(3)).max() > tol * 1e3 or abs(np.linalg.det(rot) - 1.0) > tol * 1e3:
+        raise CalibrationError(
+            f"{what}: the matrix is not a rotation (R R^T != I or det != 1); "
+            "give a Rodrigues vector or an orthonormal matrix"
+        )
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class Camera:
+    """One calibrated camera.
+
+    Attributes:
+        name: camera name, e.g. ``"cam1"``.
+        size_px: (width, height) of its images in pixels.
+        K: (3, 3) float64 intrinsic matrix in pixels.
+        dist: (n,) float64 OpenCV distortion coefficients, n in {4, 5, 8}.
+        rvec: (3,) float64 Rodrigues vector, world -> camera.
+        t_m: (3,) float64 translation in metres, world -> camera.
+        fisheye: True for the OpenCV fisheye model (read and written, not used for projection here).
+    """
+
+    name: str
+    size_px: tuple[int, int]
+    K: np.ndarray
+    dist: np.ndarray
+    rvec: np.ndarray
+    t_m: np.ndarray
+    fisheye: bool = False
+    R: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        what = f"camera {self.name!r}"
+        K = np.asarray(self.K, dtype=np.float64)
+        if K.shape != (3, 3) or not np.all(np.isfinite(K)):
+            raise CalibrationError(f"{what}: matrix must be a finite 3x3 array, got shape {K.shape}")
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or np.any(K[2, :2] != 0):
+            raise CalibrationError(
+                f"{what}: matrix must be [[fx,s,cx],[0,fy,cy],[0,0,1]] with fx, fy > 0"
+            )
+        dist = np.asarray(self.dist, dtype=np.float64).reshape(-1)
+        if dist.size not in _ALLOWED_DIST_LENGTHS or not np.all(np.isfinite(dist)):
+            raise CalibrationError(
+                f"{what}: distortions must hold 4, 5 or 8 finite numbers (k1,k2,p1,p2[,k3...]), "
+                f"got {dist.size}"
+            )
+        rvec = np.asarray(self.rvec, dtype=np.float64).reshape(-1)
+        t_m = np.asarray(self.t_m, dtype=np.float64).reshape(-1)
+        if rvec.size != 3 or t_m.size != 3 or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(t_m))):
+            raise CalibrationError(f"{what}: rotation and translation must be 3 finite numbers each")
+        size = tuple(int(round(float(v))) for v in self.size_px)
+        if len(size) != 2 or min(size) <= 0:
+            raise CalibrationError(f"{what}: size must be [width, height] in pixels, got {self.size_px}")
+        for arr in (K, dist, rvec, t_m):
+            arr.setflags(write=False)
+        R = rotation_from_rvec(rvec)
+        R.setflags(write=False)
+        object.__setattr__(self, "K", K)
+        object.__setattr__(self, "dist", dist)
+        object.__setattr__(self, "rvec", rvec)
+        object.__setattr__(self, "t_m", t_m)
+        object.__setattr__(self, "size_px", size)
+        object.__setattr__(self, "R", R)
+
+    # ----------------------------------------------------------------- constructors
+    @classmethod
+    def from_rotation(cls, name: str, size_px, K, dist, R, t_m, fisheye: bool = False) -> "Camera":
+        """Build from a (3, 3) world -> camera rotation matrix instead of a Rodrigues vector."""
+        check_rotation(R, f"camera {name!r}")
+        return cls(name, size_px, K, dist, rvec_from_rotation(R), t_m, fisheye)
+
+    @classmethod
+    def look_at(
+        cls,
+        name: str,
+        size_px: tuple[int, int],
+        f_px: float,
+        eye_m,
+        target_m,
+        up=(0.0, 1.0, 0.0),
+        dist=(0.0, 0.0, 0.0, 0.0),
+    ) -> "Camera":
+        """A camera at ``eye_m`` looking at ``target_m`` (world metres), principal point centred."""
+        eye = np.asarray(eye_m, dtype=np.float64)
+        z = np.asarray(target_m, dtype=np.float64) - eye
+        z /= np.linalg.norm(z)
+        x = np.cross(z, np.asarray(up, dtype=np.float64))  # image right = forward x up
+        if np.linalg.norm(x) < 1e-9:
+            raise CalibrationError(f"camera {name!r}: viewing direction is parallel to 'up'")
+        x /= np.linalg.norm(x)
+        y = np.cross(z, x)  # image down
+        R = np.stack([x, y, z])  # rows: camera axes in world coordinates
+        w, h = size_px
+        K = np.array([[f_px, 0.0, (w - 1) / 2.0], [0.0, f_px, (h - 1) / 2.0], [0.0, 0.0, 1.0]])
+        return cls.from_rotation(name, (w, h), K, np.asarray(dist, float), R, -R @ eye)
+
+    def with_size(self, size_px: tuple[int, int]) -> "Camera":
+        """The same camera at another resolution (intrinsics scaled; pixel centres kept consistent)."""
+        sx = size_px[0] / self.size_px[0]
+        sy = size_px[1] / self.size_px[1]
+        K = self.K.copy()
+        K[0, 0] *= sx
+        K[0, 1] *= sx
+        K[1, 1] *= sy
+        K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
+        K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
+        return Camera(self.name, size_px, K, self.dist, self.rvec, self.t_m, self.fisheye)
+
+    # ----------------------------------------------------------------- derived quantities
+    @property
+    def centre_m(self) -> np.ndarray:
+        """(3,) optical centre in world metres."""
+        return -self.R.T @ self.t_m
+
+    @property
+    def extrinsic(self) -> np.ndarray:
+        """(3, 4) [R | t], world -> camera (normalized-coordinate projection matrix)."""
+        return np.hstack([self.R, self.t_m[:, None]])
+
+    @property
+    def P(self) -> np.ndarray:
+        """(3, 4) pixel projection matrix K [R | t] of the ideal (undistorted) pinhole."""
+        return self.K @ self.extrinsic
+
+    @property
+    def has_distortion(self) -> bool:
+        return bool(np.any(self.dist != 0.0))
+
+    # ----------------------------------------------------------------- geometry
+    def world_to_camera(self, p_world_m: np.ndarray) -> np.ndarray:
+        """(N, 3) world metres -> (N, 3) camera-frame metres."""
+        p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
+        return p @ self.R.T + self.t_m
+
+    def project(self, p_world_m: np.ndarray) -> np.ndarray:
+        """(N, 3) world metres -> (N, 2) float64 distorted pixel coordinates.
+
+        Points behind the camera (z <= 0) give NaN.
+        """
+        p_cam = self.world_to_camera(p_world_m)
+        z = p_cam[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = p_cam[:, :2] / z[:, None]
+        uv = self.distort_normalized(xn)
+        uv[z <= 1e-9] = np.nan
+        return uv
+
+    def distort_normalized(self, xn: np.ndarray) -> np.ndarray:
+        """(N, 2) ideal normalized coordinates -> (N, 2) distorted pixel coordinates."""
+        xn = np.asarray(xn, dtype=np.float64).reshape(-1, 2)
+        x, y = xn[:, 0], xn[:, 1]
+        if self.has_distortion:
+            d = np.zeros(8)
+            d[: self.dist.size] = self.dist
+            k1, k2, p1, p2, k3, k4, k5, k6 = d
+            r2 = x * x + y * y
+            radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+            xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+            yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        else:
+            xd, yd = x, y
+        K = self.K
+        u = K[0, 0] * xd + K[0, 1] * yd + K[0, 2]
+        v = K[1, 1] * yd + K[1, 2]
+        return np.stack([u, v], axis=1)
+
+    def undistort_points(self, uv_px: np.ndarray) -> np.ndarray:
+        """(N, 2) distorted pixel coordinates -> (N, 2) ideal normalized coordinates (x/z, y/z)."""
+        uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+        if uv.shape[0] == 0:
+            return np.zeros((0, 2))
+        if not self.has_distortion:
+            K = self.K
+            y = (uv[:, 0, 1] - K[1, 2]) / K[1, 1]
+            x = (uv[:, 0, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+            return np.stack([x, y], axis=1)
+        crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
+        if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
+            xn = cv2.undistortPointsIter(uv, self.K, self.dist, None, None, crit)
+        else:  # OpenCV 5.x folded the criteria into undistortPoints
+            xn = cv2.undistortPoints(uv, self.K, self.dist, R=None, P=None, criteria=crit)
+        return xn.reshape(-1, 2)
+
+    def back_project(self, uv_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates -> rays in the world.
+
+        Args:
+            uv_px: (N, 2) distorted pixel coordinates.
+        Returns:
+            origin_m: (3,) optical centre in world metres.
+            dir_world: (N, 3) unit ray directions in world coordinates.
+        """
+        xn = self.undistort_points(uv_px)
+        d_cam = np.hstack([xn, np.ones((xn.shape[0], 1))])
+        d_world = d_cam @ self.R  # R^T d for each row
+        d_world /= np.linalg.norm(d_world, axis=1, keepdims=True)
+        return self.centre_m, d_world
+
+    def undistort_image(self, image: np.ndarray) -> np.ndarray:
+        """Remove lens distortion from an image of this camera (same K, same size)."""
+        if not self.has_distortion:
+            return image
+        return cv2.undistort(image, self.K, self.dist)
+
+    def check_image_size(self, size_px: tuple[int, int], source: str) -> None:
+        """Raise CalibrationError if images from ``source`` do not have this camera's size."""
+        w, h = (int(size_px[0]), int(size_px[1]))
+        if (w, h) != tuple(self.size_px):
+            cw, ch = self.size_px
+            raise CalibrationError(
+                f"the calibration of {self.name} is for {cw}x{ch} but {source} delivers {w}x{h}: "
+                "recalibrate or set the camera to the calibrated size"
+            )
