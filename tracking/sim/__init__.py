@@ -1,0 +1,1 @@
+"""The simulated patient studio: body model, motions, virtual cameras and renderer."""
