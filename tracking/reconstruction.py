@@ -1,0 +1,296 @@
+"""Unlabelled 3D points from the marker centroids of N >= 2 cameras.
+
+For each marker colour separately: every pair of centroids from two cameras that agrees with the
+epipolar geometry proposes a point; the proposal collects the centroids of the other cameras that
+lie near its projection; proposals are ranked (more cameras first, then smaller reprojection
+error) and accepted greedily so that a centroid serves one point only. Two checks reject the
+*ghost* points that wrong pairings create:
+
+- reprojection: every observation must lie within ``gate_px`` of the point's projection; with three
+  or more cameras an observation that disagrees (a partly hidden ball has a shifted centroid) is
+  dropped and the point triangulated again;
+- size: markers are balls of known radius, so a blob's radius in pixels says how far the ball is
+  (``r_px = f R / depth``). A wrong pairing puts the point at the wrong depth, where the observed
+  blob sizes do not fit. A two-camera point is accepted only if it is size-consistent and
+  unambiguous (no competing pairing for either centroid).
+
+Pure numpy; camera geometry enters as arrays prepared once in :class:`RigGeometry`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from calibration.camera import Camera
+from tracking.triangulation import reprojection_errors_px, triangulate
+
+
+@dataclass(frozen=True, slots=True)
+class CameraObservations:
+    """Centroids of one camera in one frame.
+
+    Attributes:
+        uv_px: (N, 2) float64 distorted pixel centroids.
+        colour: (N,) int palette index of each centroid.
+        radius_px: (N,) float64 equivalent radius sqrt(area / pi) of each blob (NaN if unknown).
+    """
+
+    uv_px: np.ndarray
+    colour: np.ndarray
+    radius_px: np.ndarray
+
+    @staticmethod
+    def empty() -> "CameraObservations":
+        return CameraObservations(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0))
+
+
+@dataclass(frozen=True, slots=True)
+class Points3D:
+    """Unlabelled 3D points of one frame.
+
+    Attributes:
+        p_world_m: (P, 3) float64 world metres.
+        colour: (P,) int palette index.
+        n_cameras: (P,) int number of cameras used.
+        reproj_px: (P,) float64 RMS reprojection error over the cameras used, pixels.
+        obs_index: (P, C) int index of the centroid used in each camera, -1 if none.
+    """
+
+    p_world_m: np.ndarray
+    colour: np.ndarray
+    n_cameras: np.ndarray
+    reproj_px: np.ndarray
+    obs_index: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.p_world_m.shape[0])
+
+
+@dataclass(frozen=True, slots=True)
+class RigGeometry:
+    """Camera arrays prepared once for the per-frame reconstruction.
+
+    Attributes:
+        cameras: the calibrated cameras, in order.
+        extrinsics: (C, 3, 4) ``[R | t]`` world -> camera.
+        focal_px: (C,) mean focal length in pixels.
+        essential: (C, C, 3, 3) essential matrices with ``x_j^T E[i, j] x_i = 0`` (normalized coords).
+    """
+
+    cameras: tuple[Camera, ...]
+    extrinsics: np.ndarray
+    focal_px: np.ndarray
+    essential: np.ndarray
+
+    @staticmethod
+    def from_cameras(cameras: Sequence[Camera]) -> "RigGeometry":
+        cams = tuple(cameras)
+        ext = np.stack([c.extrinsic for c in cams])
+        focal = np.array([(c.K[0, 0] + c.K[1, 1]) / 2.0 for c in cams])
+        n = len(cams)
+        E = np.zeros((n, n, 3, 3))
+        for i in range(n):
+            for j in range(n):
+                if i == j:
+                    continue
+                R_ji = cams[j].R @ cams[i].R.T  # camera i -> camera j
+                t_ji = cams[j].t_m - R_ji @ cams[i].t_m
+                tx = np.array([[0, -t_ji[2], t_ji[1]], [t_ji[2], 0, -t_ji[0]], [-t_ji[1], t_ji[0], 0]])
+                E[i, j] = tx @ R_ji
+        return RigGeometry(cams, ext, focal, E)
+
+    @property
+    def n_cameras(self) -> int:
+        return len(self.cameras)
+
+
+@dataclass(frozen=True, slots=True)
+class ReconstructionParams:
+    """Gates of the reconstruction.
+
+    Attributes:
+        gate_px: largest epipolar distance / reprojection error of an accepted observation, pixels.
+        max_rms_px: largest RMS reprojection error of an accepted point, pixels.
+        marker_radius_m: radius of the marker balls (for the size check).
+        size_ratio_range: accepted (observed radius / expected radius) per observation.
+        min_depth_m, max_depth_m: plausible distance of a marker from a camera.
+    """
+
+    gate_px: float = 3.0
+    max_rms_px: float = 2.0
+    marker_radius_m: float = 0.02
+    size_ratio_range: tuple[float, float] = (0.6, 1.5)
+    min_depth_m: float = 0.3
+    max_depth_m: float = 8.0
+
+
+def _epipolar_distance_px(geo: RigGeometry, i: int, j: int, xi: np.ndarray, xj: np.ndarray) -> np.ndarray:
+    """(Ni, 2), (Nj, 2) normalized -> (Ni, Nj) symmetric epipolar distance in pixels."""
+    E = geo.essential[i, j]
+    hi = np.hstack([xi, np.ones((len(xi), 1))])
+    hj = np.hstack([xj, np.ones((len(xj), 1))])
+    lines_j = hi @ E.T  # epipolar lines in camera j of points in i: l = E x_i
+    lines_i = hj @ E  # lines in camera i of points in j: l = E^T x_j
+    num = hj @ lines_j.T  # (Nj, Ni): x_j . (E x_i)
+    num = np.abs(num.T)  # (Ni, Nj)
+    nj = np.hypot(lines_j[:, 0], lines_j[:, 1])[:, None]  # distance in camera j
+    ni = np.hypot(lines_i[:, 0], lines_i[:, 1])[None, :]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_j = num / nj * geo.focal_px[j]
+        d_i = num / ni * geo.focal_px[i]
+    return np.maximum(d_i, d_j)
+
+
+def _depths(geo: RigGeometry, p: np.ndarray) -> np.ndarray:
+    """(N, 3) -> (N, C) depth of each point in each camera."""
+    return np.einsum("cj,nj->nc", geo.extrinsics[:, 2, :3], p) + geo.extrinsics[None, :, 2, 3]
+
+
+def reconstruct(
+    geo: RigGeometry,
+    observations: Sequence[CameraObservations],
+    params: ReconstructionParams = ReconstructionParams(),
+) -> Points3D:
+    """Match centroids across cameras and triangulate them.
+
+    Args:
+        geo: the rig's prepared geometry.
+        observations: one :class:`CameraObservations` per camera, in rig order.
+        params: gates.
+    Returns:
+        The accepted points (unlabelled), sorted by colour.
+    """
+    n_cams = geo.n_cameras
+    if len(observations) != n_cams:
+        raise ValueError(f"expected observations for {n_cams} cameras, got {len(observations)}")
+    xn_all = [geo.cameras[c].undistort_points(o.uv_px) for c, o in enumerate(observations)]
+    colours = np.unique(np.concatenate([o.colour for o in observations])) if n_cams else np.zeros(0)
+    pts, cols, ncs, errs, idxs = [], [], [], [], []
+    for colour in colours:
+        sel = [np.flatnonzero(o.colour == colour) for o in observations]
+        xn = [xn_all[c][sel[c]] for c in range(n_cams)]
+        rad = [observations[c].radius_px[sel[c]] for c in range(n_cams)]
+        for p, obs_local, err in _reconstruct_colour(geo, xn, rad, params):
+            obs_global = np.array([sel[c][k] if k >= 0 else -1 for c, k in enumerate(obs_local)])
+            pts.append(p)
+            cols.append(int(colour))
+            ncs.append(int((obs_local >= 0).sum()))
+            errs.append(err)
+            idxs.append(obs_global)
+    if not pts:
+        return Points3D(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, n_cams), np.int64))
+    return Points3D(np.array(pts), np.array(cols), np.array(ncs), np.array(errs), np.array(idxs))
+
+
+def _refine(geo: RigGeometry, xn_obs: np.ndarray, seen: np.ndarray, params: ReconstructionParams):
+    """Triangulate candidates and drop their worst observation while it breaks the gate.
+
+    Args:
+        xn_obs: (K, C, 2) normalized observations of K candidates; seen: (K, C) bool (modified).
+    Returns:
+        p (K, 3), err (K, C) pixel errors, seen (K, C).
+    """
+    seen = seen.copy()
+    for _ in range(geo.n_cameras):
+        p = triangulate(geo.extrinsics, xn_obs, seen)
+        err = reprojection_errors_px(geo.extrinsics, geo.focal_px, p, xn_obs, seen)
+        worst = np.nanargmax(np.where(seen, err, -1.0), axis=1)
+        worst_err = err[np.arange(len(p)), worst]
+        fix = (worst_err > params.gate_px) & (seen.sum(axis=1) >= 3)
+        if not fix.any():
+            break
+        seen[np.flatnonzero(fix), worst[fix]] = False
+    return p, err, seen
+
+
+def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], params: ReconstructionParams):
+    """Yield (point, obs index per camera (C,) with -1, rms px) for one colour."""
+    n_cams = geo.n_cameras
+    counts = [len(x) for x in xn]
+    # 1. proposals from every epipolar-consistent pair
+    props = []  # (cam_i, k_i, cam_j, k_j)
+    for i in range(n_cams):
+        for j in range(i + 1, n_cams):
+            if counts[i] == 0 or counts[j] == 0:
+                continue
+            d = _epipolar_distance_px(geo, i, j, xn[i], xn[j])
+            ki, kj = np.nonzero(d < params.gate_px)
+            for a, b in zip(ki, kj):
+                props.append((i, a, j, b))
+    if not props:
+        return
+    K = len(props)
+    xn_obs = np.full((K, n_cams, 2), np.nan)
+    seen = np.zeros((K, n_cams), dtype=bool)
+    obs = np.full((K, n_cams), -1, dtype=np.int64)
+    for r, (i, a, j, b) in enumerate(props):
+        xn_obs[r, i], xn_obs[r, j] = xn[i][a], xn[j][b]
+        seen[r, i] = seen[r, j] = True
+        obs[r, i], obs[r, j] = a, b
+    p2 = triangulate(geo.extrinsics, xn_obs, seen)
+    # 2. gather support from the other cameras
+    for c in range(n_cams):
+        if counts[c] == 0:
+            continue
+        free = ~seen[:, c]
+        if not free.any():
+            continue
+        cam = geo.extrinsics[c]
+        pc = p2 @ cam[:, :3].T + cam[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            proj = pc[:, :2] / pc[:, 2:3]
+        dist = np.linalg.norm(proj[:, None, :] - xn[c][None, :, :], axis=-1) * geo.focal_px[c]
+        best = np.argmin(dist, axis=1)
+        ok = free & (dist[np.arange(K), best] < 2.0 * params.gate_px) & (pc[:, 2] > 0)
+        xn_obs[ok, c] = xn[c][best[ok]]
+        seen[ok, c] = True
+        obs[ok, c] = best[ok]
+    # 3. triangulate with everything, dropping disagreeing views
+    p, err, seen = _refine(geo, xn_obs, seen, params)
+    obs = np.where(seen, obs, -1)
+    n_used = seen.sum(axis=1)
+    rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1))
+    depth = _depths(geo, p)
+    valid = (n_used >= 2) & np.isfinite(rms) & (rms <= params.max_rms_px)
+    valid &= np.all(~seen | ((depth > params.min_depth_m) & (depth < params.max_depth_m)), axis=1)
+    # size consistency: observed radius vs. f R / depth
+    r_obs = np.full((K, n_cams), np.nan)
+    for c in range(n_cams):
+        if counts[c]:
+            r_obs[:, c] = np.where(obs[:, c] >= 0, rad[c][np.maximum(obs[:, c], 0)], np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = r_obs / (geo.focal_px[None, :] * params.marker_radius_m / depth)
+    lo, hi = params.size_ratio_range
+    size_ok = np.where(seen & np.isfinite(ratio), (ratio > lo) & (ratio < hi), True)
+    # a ball may be partly hidden in one view (smaller blob); require most views to fit
+    size_fit = size_ok.sum(axis=1) >= np.maximum(2, n_used - 1)
+    valid &= size_fit
+    # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
+    #    each centroid serves one point
+    order = np.lexsort((rms, -n_used))
+    used = [np.zeros(n, dtype=bool) for n in counts]
+
+    def free(r: int) -> bool:
+        return not any(used[c][obs[r, c]] for c in np.flatnonzero(seen[r]))
+
+    def take(r: int):
+        for c in np.flatnonzero(seen[r]):
+            used[c][obs[r, c]] = True
+        return p[r], obs[r].copy(), float(rms[r])
+
+    for r in order:
+        if valid[r] and n_used[r] >= 3 and free(r):
+            yield take(r)
+    # 5. two-camera points only when unambiguous among what is left: a centroid with two
+    #    plausible partners in the other camera cannot be resolved from two views
+    pending = [r for r in order if valid[r] and n_used[r] == 2 and free(r)]
+    partners = [np.zeros(n, np.int64) for n in counts]
+    for r in pending:
+        for c in np.flatnonzero(seen[r]):
+            partners[c][obs[r, c]] += 1
+    for r in pending:
+        if free(r) and all(partners[c][obs[r, c]] == 1 for c in np.flatnonzero(seen[r])):
+            yield take(r)
