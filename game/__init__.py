@@ -1,0 +1,1 @@
+"""The application: the pygame + moderngl game, its scenes, and the ``rehab`` command line."""

@@ -1,0 +1,201 @@
+"""The ``rehab`` command line.
+
+Each sub-command imports what it needs when it runs, so ``rehab track`` never loads pygame or
+OpenGL. Errors the user can fix (:class:`calibration.errors.RehabError`) are printed as one line on
+stderr with exit code 1; nothing else is caught, so a real bug still shows its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+from calibration.errors import RehabError
+
+log = logging.getLogger("rehab")
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = text.lower().split("x")
+        size = (int(w), int(h))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size {text!r} must look like 640x480") from None
+    if min(size) < 16 or max(size) > 8192:
+        raise argparse.ArgumentTypeError(f"size {text!r} is out of range (16..8192 pixels)")
+    return size
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} must be positive")
+    return value
+
+
+# --------------------------------------------------------------------------- simulate
+def _add_simulate(sub) -> None:
+    p = sub.add_parser(
+        "simulate",
+        help="render a synthetic recording of the simulated patient, with ground truth",
+        description="Render a recording folder (spec/INTERFACES.md) of the simulated patient seen by "
+        "virtual cameras, with truth.trc and truth_angles.csv.",
+    )
+    p.add_argument("out_dir", type=Path, help="output recording folder (created)")
+    p.add_argument("--motion", default="right_external_rotation",
+                   help="built-in motion name, or a motion YAML file (default: %(default)s)")
+    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
+    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
+    p.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default: 640x480)")
+    p.add_argument("--fps", type=_positive_float, default=30.0, help="frame rate (default: %(default)s)")
+    p.add_argument("--seconds", type=_positive_float, default=None, help="cut the motion to this length")
+    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95 (default: %(default)s)")
+    p.add_argument("--sex", choices=("female", "male"), default="female")
+    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma in 8-bit units (default: %(default)s)")
+    p.add_argument("--drift", type=float, default=0.0,
+                   help="brightness drop over the recording as a fraction, e.g. 0.4 (default: none)")
+    p.add_argument("--cast", default=None, help="colour cast as R,G,B gains reached at the end, e.g. 1.1,1.0,0.85")
+    p.add_argument("--images", action="store_true", help="write PNG folders instead of lossless AVI videos")
+    p.add_argument("--markerset", default="upper_limb_seated", help="marker set name or YAML file")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise")
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _cmd_simulate(args) -> int:
+    from tracking.sim.studio import SimulationSettings, simulate_recording
+
+    cast = None
+    if args.cast:
+        try:
+            cast = tuple(float(v) for v in args.cast.split(","))
+            assert len(cast) == 3 and all(0.2 < v < 5 for v in cast)
+        except (ValueError, AssertionError):
+            raise RehabError(f"--cast {args.cast!r}: give three gains like 1.1,1.0,0.85") from None
+    settings = SimulationSettings(
+        motion=args.motion,
+        rig=args.rig,
+        n_cameras=args.cameras,
+        size_px=args.size,
+        fps=args.fps,
+        seconds=args.seconds,
+        percentile=args.percentile,
+        sex=args.sex,
+        noise_sigma=args.noise,
+        brightness_drop=args.drift,
+        colour_cast=cast,
+        markerset=args.markerset,
+        seed=args.seed,
+        images=args.images,
+    )
+    summary = simulate_recording(args.out_dir, settings, progress=True)
+    print(summary)
+    return 0
+
+
+# --------------------------------------------------------------------------- track
+def _add_track(sub) -> None:
+    p = sub.add_parser(
+        "track",
+        help="track a recording folder offline with the online algorithm",
+        description="Track a recording folder frame by frame (no look-ahead) and write the results.",
+    )
+    p.add_argument("recording", type=Path, help="recording folder (spec/INTERFACES.md)")
+    p.add_argument("--calibration", type=Path, default=None, help="calibration file (default: RECORDING/calibration.toml)")
+    p.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
+    p.add_argument("--marker-color", action="append", default=None, metavar="R,G,B",
+                   help="override marker colours: once for all markers, or once per marker in marker-set order")
+    p.add_argument("--points", type=Path, default=None,
+                   help="write unlabelled 3D points: frame,time,x_mm,y_mm,z_mm,n_cameras,reproj_px")
+    p.set_defaults(func=_cmd_track)
+
+
+def _cmd_track(args) -> int:
+    from tracking.offline import track_recording
+
+    if args.points is None:
+        raise RehabError("nothing to write: give --points points.csv")
+    report = track_recording(
+        args.recording,
+        calibration=args.calibration,
+        markerset=args.markerset,
+        marker_colours=args.marker_color,
+        points_csv=args.points,
+        progress=True,
+    )
+    print(report)
+    return 0
+
+
+# --------------------------------------------------------------------------- angles
+def _add_angles(sub) -> None:
+    p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
+    p.add_argument("trc", type=Path, help="marker file with the marker set's names (mm)")
+    p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
+    p.set_defaults(func=_cmd_angles)
+
+
+def _cmd_angles(args) -> int:
+    from tracking.angles import angles_from_trc_file
+
+    n = angles_from_trc_file(args.trc, args.out)
+    print(f"wrote {n} frames of joint angles to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- bench
+def _add_bench(sub) -> None:
+    p = sub.add_parser("bench", help="measure speed: colour table, centroids, triangulation, simulator")
+    p.add_argument("--frames", type=int, default=60, help="frame sets per measurement (default: %(default)s)")
+    p.add_argument("--quick", action="store_true", help="fewer frames, for a smoke run")
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args) -> int:
+    from tracking.bench import run_benchmarks
+
+    n = 10 if args.quick else args.frames
+    for line in run_benchmarks(n_frames=n):
+        print(line, flush=True)
+    return 0
+
+
+# --------------------------------------------------------------------------- main
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rehab",
+        description="Colour-marker motion capture for rehabilitation: tracking, ROM tests and games.",
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log more detail")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _add_simulate(sub)
+    _add_track(sub)
+    _add_angles(sub)
+    _add_bench(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="rehab: %(levelname)s: %(message)s",
+        stream=sys.stderr,
+    )
+    try:
+        return int(args.func(args) or 0)
+    except RehabError as exc:
+        print(f"rehab: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("rehab: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,130 @@
+"""Full-frame measurement: images of all cameras -> unlabelled 3D marker points.
+
+The first half of the seed pipeline (METHOD.md sections 4 and 5.1): the colour lookup table over
+each whole image, connected regions to sub-pixel centroids gated by area and roundness, then
+cross-camera matching and triangulation. The tracker (search windows) reuses the same pieces;
+this module is also the full-frame baseline it is benchmarked against.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from calibration.camera import Camera
+from tracking.blobs import Blobs, find_blobs
+from tracking.colour_table import ColourTable
+from tracking.reconstruction import (
+    CameraObservations,
+    Points3D,
+    ReconstructionParams,
+    RigGeometry,
+    reconstruct,
+)
+
+
+@dataclass(frozen=True, slots=True)
+class BlobGates:
+    """Plausible blob sizes for one camera, from the marker size and the working distances."""
+
+    min_area_px: float
+    max_area_px: float
+    min_roundness: float
+
+
+def blob_gates(camera: Camera, marker_radius_m: float, near_m: float = 0.8, far_m: float = 5.0,
+               min_roundness: float = 0.5) -> BlobGates:
+    """Area gates for a ball of ``marker_radius_m`` seen between ``near_m`` and ``far_m``.
+
+    The lower gate keeps a ball that is up to ~75 % hidden at the far distance (but at least
+    3 pixels, below which a centroid is noise); the upper gate allows 1.5x the nearest full ball.
+    """
+    f = float(camera.K[0, 0] + camera.K[1, 1]) / 2.0
+    r_far = f * marker_radius_m / far_m
+    r_near = f * marker_radius_m / near_m
+    return BlobGates(
+        min_area_px=max(3.0, 0.25 * np.pi * r_far**2),
+        max_area_px=1.5 * np.pi * r_near**2,
+        min_roundness=min_roundness,
+    )
+
+
+def observations_from_blobs(blobs: Blobs) -> CameraObservations:
+    return CameraObservations(blobs.uv_px, blobs.colour, blobs.radius_px)
+
+
+@dataclass
+class StageTimes:
+    """Accumulated seconds per pipeline stage (for benchmarks)."""
+
+    colour_s: float = 0.0
+    blobs_s: float = 0.0
+    reconstruct_s: float = 0.0
+    frames: int = 0
+
+    def per_frame_ms(self) -> dict[str, float]:
+        n = max(self.frames, 1)
+        return {
+            "colour table": 1000 * self.colour_s / n,
+            "centroids": 1000 * self.blobs_s / n,
+            "triangulation": 1000 * self.reconstruct_s / n,
+        }
+
+
+@dataclass
+class FrameMeasurer:
+    """Measures unlabelled marker points from full images of every camera.
+
+    Args:
+        cameras: calibrated cameras, in the order of the images.
+        table: colour lookup table of the marker palette.
+        marker_radius_m: radius of the marker balls.
+        params: reconstruction gates.
+    """
+
+    cameras: Sequence[Camera]
+    table: ColourTable
+    marker_radius_m: float
+    params: ReconstructionParams | None = None
+    times: StageTimes = field(default_factory=StageTimes)
+
+    def __post_init__(self) -> None:
+        self.geometry = RigGeometry.from_cameras(self.cameras)
+        self.gates = [blob_gates(c, self.marker_radius_m) for c in self.cameras]
+        if self.params is None:
+            self.params = ReconstructionParams(marker_radius_m=self.marker_radius_m)
+
+    def blobs(self, images: Sequence[np.ndarray]) -> list[Blobs]:
+        """Centroids of marker-coloured regions in each whole image."""
+        out = []
+        for img, gate in zip(images, self.gates):
+            t0 = time.perf_counter()
+            labels = self.table.classify(img)
+            t1 = time.perf_counter()
+            out.append(
+                find_blobs(
+                    labels,
+                    self.table.n_colours,
+                    min_area_px=gate.min_area_px,
+                    max_area_px=gate.max_area_px,
+                    min_roundness=gate.min_roundness,
+                )
+            )
+            t2 = time.perf_counter()
+            self.times.colour_s += t1 - t0
+            self.times.blobs_s += t2 - t1
+        return out
+
+    def measure(self, images: Sequence[np.ndarray]) -> Points3D:
+        """(H, W, 3) uint8 BGR images, one per camera -> unlabelled 3D points (world metres)."""
+        if len(images) != len(self.cameras):
+            raise ValueError(f"expected {len(self.cameras)} images, got {len(images)}")
+        blobs = self.blobs(images)
+        t0 = time.perf_counter()
+        points = reconstruct(self.geometry, [observations_from_blobs(b) for b in blobs], self.params)
+        self.times.reconstruct_s += time.perf_counter() - t0
+        self.times.frames += 1
+        return points

@@ -1,0 +1,268 @@
+"""Recording folders (spec/INTERFACES.md): reading them frame by frame, and writing them.
+
+```
+recording/
+  calibration.toml          cameras, in order
+  cam1.avi cam2.avi ...     one video per camera (any codec OpenCV reads), or
+  cam1/ cam2/ ...           one folder of numbered images per camera (000000.png, ...)
+  truth.trc                 simulator only: ground-truth marker positions
+  truth_angles.csv          simulator only: ground-truth joint angles
+  meta.yaml                 frame rate, marker set, marker colours, how it was made
+```
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import cv2
+import numpy as np
+import yaml
+
+from calibration.camera import Camera
+from calibration.errors import CalibrationError
+from calibration.files import check_camera_count, check_frame_sizes, load_calibration, save_calibration_toml
+from tracking.errors import RecordingError
+
+log = logging.getLogger(__name__)
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+VIDEO_SUFFIXES = (".avi", ".mp4", ".mkv", ".mov")
+
+
+@dataclass(frozen=True, slots=True)
+class FrameSet:
+    """Synchronized images of all cameras at one instant.
+
+    Attributes:
+        index: frame number from 0.
+        time_s: time stamp in seconds from the start of the recording.
+        images: one (H, W, 3) uint8 BGR image per camera, in calibration order.
+    """
+
+    index: int
+    time_s: float
+    images: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class RecordingMeta:
+    """The parsed meta.yaml (unknown keys are kept in ``extra``)."""
+
+    fps: float
+    markerset: str = "upper_limb_seated"
+    marker_colours: tuple[tuple[int, int, int], ...] | None = None
+    n_frames: int | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def read_meta(folder: Path) -> RecordingMeta:
+    path = folder / "meta.yaml"
+    if not path.is_file():
+        raise RecordingError(f"{path} not found: a recording folder needs meta.yaml with at least 'fps: 30'")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except yaml.YAMLError as exc:
+        raise RecordingError(f"{path}: invalid YAML ({getattr(exc, 'problem', exc)}); fix the file") from None
+    if not isinstance(data, dict):
+        raise RecordingError(f"{path}: expected keys such as 'fps: 30'")
+    fps = data.get("fps")
+    if not isinstance(fps, (int, float)) or fps <= 0:
+        raise RecordingError(f"{path}: 'fps' must be a positive number of frames per second")
+    colours = data.get("marker_colours")
+    known = {"fps", "markerset", "marker_colours", "n_frames"}
+    return RecordingMeta(
+        fps=float(fps),
+        markerset=str(data.get("markerset", "upper_limb_seated")),
+        marker_colours=tuple(tuple(int(v) for v in c) for c in colours) if colours else None,
+        n_frames=int(data["n_frames"]) if data.get("n_frames") is not None else None,
+        extra={k: v for k, v in data.items() if k not in known},
+    )
+
+
+class _VideoReader:
+    def __init__(self, path: Path):
+        self.path = path
+        self.cap = cv2.VideoCapture(str(path))
+        if not self.cap.isOpened():
+            raise RecordingError(f"{path}: OpenCV cannot open this video; re-encode it (e.g. MJPG or FFV1 AVI)")
+        self.size = (int(self.cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(self.cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        n = int(self.cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        self.n_frames = n if n > 0 else None
+
+    def read(self) -> np.ndarray | None:
+        ok, frame = self.cap.read()
+        return frame if ok else None
+
+    def close(self) -> None:
+        self.cap.release()
+
+
+class _ImageFolderReader:
+    def __init__(self, path: Path):
+        self.path = path
+        self.files = sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not self.files:
+            raise RecordingError(f"{path}: no images (.png/.jpg) in this camera folder")
+        first = self._load(self.files[0])
+        self.size = (first.shape[1], first.shape[0])
+        self.n_frames = len(self.files)
+        self._next = 0
+
+    def _load(self, file: Path) -> np.ndarray:
+        img = cv2.imread(str(file), cv2.IMREAD_COLOR)
+        if img is None:
+            raise RecordingError(f"{file}: unreadable image; replace or delete it")
+        return img
+
+    def read(self) -> np.ndarray | None:
+        if self._next >= len(self.files):
+            return None
+        img = self._load(self.files[self._next])
+        self._next += 1
+        return img
+
+    def close(self) -> None:
+        pass
+
+
+def _camera_source(folder: Path, name: str):
+    for suffix in VIDEO_SUFFIXES:
+        if (folder / f"{name}{suffix}").is_file():
+            return _VideoReader(folder / f"{name}{suffix}")
+    if (folder / name).is_dir():
+        return _ImageFolderReader(folder / name)
+    return None
+
+
+class Recording:
+    """A recording folder opened for reading. Iterate it for :class:`FrameSet` objects.
+
+    The calibration decides how many cameras there are and their names; each camera's images come
+    from ``<name>.avi`` (or .mp4/.mkv/.mov) or a folder ``<name>/`` of numbered images. A frame
+    size that differs from the calibration, or a camera without images, is an error. If one camera
+    ends before the others, reading stops there with a warning (nothing read so far is lost).
+    """
+
+    def __init__(self, folder: str | Path, calibration: str | Path | None = None):
+        self.folder = Path(folder)
+        if not self.folder.is_dir():
+            raise RecordingError(f"{self.folder}: no such recording folder")
+        self.meta = read_meta(self.folder)
+        calib_path = Path(calibration) if calibration else self.folder / "calibration.toml"
+        self.cameras: tuple[Camera, ...] = tuple(load_calibration(calib_path))
+        found = sorted(
+            p.stem if p.is_file() else p.name
+            for p in self.folder.iterdir()
+            if (p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES) or (p.is_dir() and p.name.startswith("cam"))
+        )
+        readers = [_camera_source(self.folder, c.name) for c in self.cameras]
+        n_sources = sum(r is not None for r in readers)
+        if n_sources != len(self.cameras):
+            for r in readers:
+                if r is not None:
+                    r.close()
+            missing = [c.name for c, r in zip(self.cameras, readers) if r is None]
+            check_camera_count(self.cameras, len(found), f"the recording {self.folder}")
+            raise RecordingError(
+                f"{self.folder}: no video or image folder for {', '.join(missing)} "
+                f"(found {', '.join(found) or 'none'}); name them after the cameras in the calibration"
+            )
+        self._readers = readers
+        try:
+            check_frame_sizes(self.cameras, [r.size for r in readers], [r.path.name for r in readers])
+        except CalibrationError:
+            self.close()
+            raise
+        counts = [r.n_frames for r in readers if r.n_frames is not None]
+        self.n_frames = min(counts) if counts else self.meta.n_frames
+        if counts and max(counts) != min(counts):
+            log.warning("cameras have different frame counts %s; tracking stops at the shortest", counts)
+
+    @property
+    def fps(self) -> float:
+        return self.meta.fps
+
+    def __iter__(self) -> Iterator[FrameSet]:
+        index = 0
+        while True:
+            images = [r.read() for r in self._readers]
+            if any(img is None for img in images):
+                ended = [r.path.name for r, img in zip(self._readers, images) if img is None]
+                if len(ended) < len(images):
+                    log.warning(
+                        "%s ended at frame %d while the other cameras go on; stopping there", ", ".join(ended), index
+                    )
+                return
+            yield FrameSet(index, index / self.meta.fps, tuple(images))
+            index += 1
+
+    def close(self) -> None:
+        for r in self._readers:
+            r.close()
+
+    def __enter__(self) -> "Recording":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class RecordingWriter:
+    """Writes a recording folder: calibration, one lossless video (or image folder) per camera, meta.
+
+    Args:
+        folder: output folder (created).
+        cameras: the cameras, in order; their names name the files.
+        fps: frame rate.
+        images: write numbered PNG folders instead of FFV1 AVI videos.
+    """
+
+    def __init__(self, folder: str | Path, cameras: Sequence[Camera], fps: float, *, images: bool = False):
+        self.folder = Path(folder)
+        self.folder.mkdir(parents=True, exist_ok=True)
+        self.cameras = tuple(cameras)
+        self.fps = float(fps)
+        self.images = images
+        self.n_frames = 0
+        save_calibration_toml(self.folder / "calibration.toml", self.cameras)
+        self._writers = []
+        if not images:
+            fourcc = cv2.VideoWriter_fourcc(*"FFV1")
+            for cam in self.cameras:
+                w = cv2.VideoWriter(str(self.folder / f"{cam.name}.avi"), fourcc, self.fps, tuple(cam.size_px))
+                if not w.isOpened():
+                    raise RecordingError(
+                        f"cannot write {cam.name}.avi with the FFV1 codec here; use image folders instead (--images)"
+                    )
+                self._writers.append(w)
+        else:
+            for cam in self.cameras:
+                (self.folder / cam.name).mkdir(exist_ok=True)
+
+    def write(self, images: Sequence[np.ndarray]) -> None:
+        """Append one frame set: one (H, W, 3) uint8 BGR image per camera."""
+        for k, (cam, img) in enumerate(zip(self.cameras, images)):
+            if self.images:
+                cv2.imwrite(str(self.folder / cam.name / f"{self.n_frames:06d}.png"), img, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            else:
+                self._writers[k].write(img)
+        self.n_frames += 1
+
+    def write_meta(self, markerset: str, marker_colours: np.ndarray, **extra) -> None:
+        meta = {
+            "fps": self.fps,
+            "n_frames": self.n_frames,
+            "markerset": markerset,
+            "marker_colours": [list(map(int, c)) for c in np.asarray(marker_colours)],
+            **extra,
+        }
+        (self.folder / "meta.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
+
+    def close(self) -> None:
+        for w in self._writers:
+            w.release()
+        self._writers = []
