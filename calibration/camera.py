@@ -67,10 +67,18 @@ class Camera:
 
     def __post_init__(self) -> None:
         what = f"camera {self.name!r}"
+        # The size is checked first: with_size() derives K from it, so a bad size must be named as such.
+        try:
+            size_f = np.asarray(self.size_px, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            size_f = np.zeros(0)
+        if size_f.size != 2 or not np.all(np.isfinite(size_f)) or size_f.min() < 0.5:
+            raise CalibrationError(f"{what}: size must be [width, height] in pixels, got {self.size_px!r}")
+        size = (int(round(size_f[0])), int(round(size_f[1])))
         K = np.asarray(self.K, dtype=np.float64)
         if K.shape != (3, 3) or not np.all(np.isfinite(K)):
             raise CalibrationError(f"{what}: matrix must be a finite 3x3 array, got shape {K.shape}")
-        if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or np.any(K[2, :2] != 0):
+        if K[0, 0] <= 0 or K[1, 1] <= 0 or abs(K[2, 2] - 1.0) > 1e-9 or K[1, 0] != 0 or np.any(K[2, :2] != 0):
             raise CalibrationError(
                 f"{what}: matrix must be [[fx,s,cx],[0,fy,cy],[0,0,1]] with fx, fy > 0"
             )
@@ -84,9 +92,6 @@ class Camera:
         t_m = np.asarray(self.t_m, dtype=np.float64).reshape(-1)
         if rvec.size != 3 or t_m.size != 3 or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(t_m))):
             raise CalibrationError(f"{what}: rotation and translation must be 3 finite numbers each")
-        size = tuple(int(round(float(v))) for v in self.size_px)
-        if len(size) != 2 or min(size) <= 0:
-            raise CalibrationError(f"{what}: size must be [width, height] in pixels, got {self.size_px}")
         for arr in (K, dist, rvec, t_m):
             arr.setflags(write=False)
         R = rotation_from_rvec(rvec)
@@ -119,6 +124,8 @@ class Camera:
         """A camera at ``eye_m`` looking at ``target_m`` (world metres), principal point centred."""
         eye = np.asarray(eye_m, dtype=np.float64)
         z = np.asarray(target_m, dtype=np.float64) - eye
+        if not np.linalg.norm(z) > 1e-12:  # also catches NaN
+            raise CalibrationError(f"camera {name!r}: eye and target must be distinct finite points")
         z /= np.linalg.norm(z)
         x = np.cross(z, np.asarray(up, dtype=np.float64))  # image right = forward x up
         if np.linalg.norm(x) < 1e-9:
@@ -210,11 +217,19 @@ class Camera:
             y = (uv[:, 0, 1] - K[1, 2]) / K[1, 1]
             x = (uv[:, 0, 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
             return np.stack([x, y], axis=1)
+        # OpenCV ignores the skew K[0, 1]; remove it here so that this inverts distort_normalized():
+        # the distorted normalized y is (v - cy) / fy whatever the skew, and u - s*y = fx*x + cx.
+        K = self.K
+        if K[0, 1] != 0.0:
+            uv = uv.copy()
+            uv[:, 0, 0] -= K[0, 1] * (uv[:, 0, 1] - K[1, 2]) / K[1, 1]
+            K = K.copy()
+            K[0, 1] = 0.0
         crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-10)
         if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4.x
-            xn = cv2.undistortPointsIter(uv, self.K, self.dist, None, None, crit)
+            xn = cv2.undistortPointsIter(uv, K, self.dist, None, None, crit)
         else:  # OpenCV 5.x folded the criteria into undistortPoints
-            xn = cv2.undistortPoints(uv, self.K, self.dist, R=None, P=None, criteria=crit)
+            xn = cv2.undistortPoints(uv, K, self.dist, R=None, P=None, criteria=crit)
         return xn.reshape(-1, 2)
 
     def back_project(self, uv_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
