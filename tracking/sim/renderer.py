@@ -35,6 +35,7 @@ import time
 from dataclasses import dataclass, field
 from typing import NamedTuple, Sequence
 
+import cv2
 import moderngl
 import numpy as np
 
@@ -339,11 +340,18 @@ void main() {
 }
 """
 
+# Edge modes: N_SAMPLES > 0 (MSAA): a coverage mask from one ray test per sample.
+# N_SAMPLES == 0 and COVERAGE: alpha = analytic pixel coverage (blended; used for markers,
+# drawn last), and with u_id_pass only the pixels whose centre is inside write the id.
+# Otherwise: a hard edge at the pixel centre, like a rasterized mesh.
 _FRAGMENT_ELLIPSOID = """
 uniform mat4 u_clip_from_world;
 uniform mat3 u_ray_from_window;  // world ray direction through window position (x, y, 1)
 #if N_SAMPLES > 0
 uniform vec2 u_sample_offset[N_SAMPLES];  // sample positions relative to the pixel centre
+#endif
+#if COVERAGE
+uniform bool u_id_pass;
 #endif
 flat in vec3 v_centre;
 flat in mat3 v_inv;
@@ -354,13 +362,16 @@ layout(location = 0) out vec4 f_bgr;
 layout(location = 1) out uint f_id;
 
 void main() {
-    // In the ellipsoid's unit-sphere space the ray o + t d meets |x| = 1.
+    // In the ellipsoid's unit-sphere space the ray o + t d meets |x| = 1 where
+    // a t^2 + 2 b t + c = 0; the ray hits in front of the camera iff b < 0 and disc > 0.
     vec3 o = v_inv * (u_eye - v_centre);
     vec3 ray = u_ray_from_window * vec3(gl_FragCoord.xy, 1.0);
     vec3 d = v_inv * ray;
     float c = dot(o, o) - 1.0;
     float a = dot(d, d);
     float b = dot(o, d);
+    float disc = b * b - a * c;
+    float alpha = 1.0;
 #if N_SAMPLES > 0
     vec3 ddx = v_inv * u_ray_from_window[0];
     vec3 ddy = v_inv * u_ray_from_window[1];
@@ -372,11 +383,19 @@ void main() {
     }
     if (mask == 0) discard;
     gl_SampleMask[0] = mask;
-    float disc = max(b * b - a * c, 0.0);  // an edge pixel whose centre misses: take the rim
+#elif COVERAGE
+    if (b >= 0.0) discard;
+    // Signed distance (pixels) from the pixel centre to the outline disc = 0, to first order;
+    // a straight edge at distance s covers 0.5 + s of the pixel.
+    vec3 ddx = v_inv * u_ray_from_window[0];
+    vec3 ddy = v_inv * u_ray_from_window[1];
+    vec2 grad = 2.0 * vec2(b * dot(o, ddx) - c * dot(d, ddx), b * dot(o, ddy) - c * dot(d, ddy));
+    alpha = clamp(0.5 + disc / max(length(grad), 1e-30), 0.0, 1.0);
+    if (alpha <= 0.0 || (u_id_pass && disc <= 0.0)) discard;
 #else
-    float disc = b * b - a * c;
     if (b >= 0.0 || disc <= 0.0) discard;
 #endif
+    disc = max(disc, 0.0);  // an edge pixel whose centre misses: shade the rim
     float t = (-b - sqrt(disc)) / a;
     vec3 unit = o + t * d;
     vec3 pos = u_eye + t * ray;
@@ -385,7 +404,7 @@ void main() {
     if (z_ndc < -1.0 || z_ndc > 1.0) discard;
     gl_FragDepth = 0.5 * z_ndc + 0.5;
     vec3 n = normalize(transpose(v_inv) * unit);
-    f_bgr = vec4(shade(n, pos, v_rgb, v_spec).bgr, 1.0);
+    f_bgr = vec4(shade(n, pos, v_rgb, v_spec).bgr, alpha);
     f_id = v_id;
 }
 """
@@ -495,7 +514,18 @@ class _InstanceStream:
         self.release()
         self._capacity = capacity
         self.buffer = self._ctx.buffer(reserve=capacity * self._floats * 4, dynamic=True)
-        content = [(self.buffer, self._format, *self._names)]
+        # Attributes the compiler optimised away (e.g. specular without lights) become padding.
+        tokens = self._format.split(" ")
+        suffix = tokens[-1][tokens[-1].index("/"):]
+        tokens[-1] = tokens[-1][: tokens[-1].index("/")]
+        fmt, names = [], []
+        for token, name in zip(tokens, self._names):
+            if name in self._program:
+                fmt.append(token)
+                names.append(name)
+            else:
+                fmt.append(f"{4 * int(token[:-1])}x")
+        content = [(self.buffer, " ".join(fmt) + suffix, *names)]
         if self._mesh is None:
             self.vao = self._ctx.vertex_array(self._program, content)
         else:
@@ -590,19 +620,27 @@ class StudioRenderer:
         defs = {"N_LIGHTS": n_lights}
         self._prog_ellipsoid = ctx.program(
             vertex_shader=_glsl(version, defs, _VERTEX_ELLIPSOID),
-            fragment_shader=_glsl(version, {**defs, "N_SAMPLES": msaa}, _SHADE_GLSL, _FRAGMENT_ELLIPSOID),
+            fragment_shader=_glsl(version, {**defs, "N_SAMPLES": msaa, "COVERAGE": 0}, _SHADE_GLSL, _FRAGMENT_ELLIPSOID),
         )
+        # Markers always get analytic coverage: continuous, so centroids are exact to < 0.01 px
+        # (4x MSAA quantizes edge coverage to quarters: errors up to ~0.06 px).
+        self._prog_marker = ctx.program(
+            vertex_shader=_glsl(330, defs, _VERTEX_ELLIPSOID),
+            fragment_shader=_glsl(330, {**defs, "N_SAMPLES": 0, "COVERAGE": 1}, _SHADE_GLSL, _FRAGMENT_ELLIPSOID),
+        )
+        self._owned.append(self._prog_marker)
         self._prog_band = ctx.program(
             vertex_shader=_glsl(330, defs, _SHADE_GLSL, _VERTEX_CAPSULE_BAND), fragment_shader=_glsl(330, {}, _FRAGMENT_FLAT)
         )
         self._prog_room = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_ROOM), fragment_shader=_glsl(330, {}, _FRAGMENT_FLAT))
         self._prog_post = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_FULLSCREEN), fragment_shader=_glsl(330, {}, _FRAGMENT_POST))
         self._owned += [self._prog_ellipsoid, self._prog_band, self._prog_room, self._prog_post]
+        self._programs = tuple(dict.fromkeys((self._prog_ellipsoid, self._prog_marker, self._prog_band, self._prog_room)))
         self._light_dirs = np.zeros((n_lights, 3))
         if n_lights:
             d = np.asarray(lighting.directions, float)
             self._light_dirs = d / np.linalg.norm(d, axis=1, keepdims=True)
-        for prog in (self._prog_ellipsoid, self._prog_band):
+        for prog in dict.fromkeys((self._prog_ellipsoid, self._prog_marker, self._prog_band)):
             self._set(prog, "u_ambient", float(lighting.ambient))
             if n_lights:
                 prog["u_light_dir"].write(self._light_dirs.astype(np.float32).tobytes())
@@ -613,10 +651,10 @@ class StudioRenderer:
             self._prog_ellipsoid["u_sample_offset"].write(offsets.tobytes())
 
         # Instance streams: ray-cast ellipsoids (4-vertex quads) and capsule bands (mesh).
-        self._ellipsoids = _InstanceStream(
-            ctx, self._prog_ellipsoid, None, "3f 3f 3f 3f 3f 3f 3f 3f 2f/i",
-            ("i_centre", "i_ax0", "i_ax1", "i_ax2", "i_inv0", "i_inv1", "i_inv2", "i_rgb", "i_spec_id"), 26, vertices=4,
-        )
+        inst_names = ("i_centre", "i_ax0", "i_ax1", "i_ax2", "i_inv0", "i_inv1", "i_inv2", "i_rgb", "i_spec_id")
+        inst_format = "3f 3f 3f 3f 3f 3f 3f 3f 2f/i"
+        self._ellipsoids = _InstanceStream(ctx, self._prog_ellipsoid, None, inst_format, inst_names, 26, vertices=4)
+        self._markers = _InstanceStream(ctx, self._prog_marker, None, inst_format, inst_names, 26, vertices=4)
         verts, tris = cone_band(48)
         band_vbo, band_ibo = ctx.buffer(verts.tobytes()), ctx.buffer(tris.astype(np.int32).tobytes())
         self._owned += [band_vbo, band_ibo]
@@ -624,7 +662,7 @@ class StudioRenderer:
             ctx, self._prog_band, (band_vbo, band_ibo, "3f", "in_ring"), "3f 3f 2f 3f 1f/i",
             ("i_p0", "i_p1", "i_r", "i_rgb", "i_spec"), 12,
         )
-        self._streams = [self._ellipsoids, self._bands]
+        self._streams = [self._ellipsoids, self._markers, self._bands]
         self._room_vao = None
         if room:
             mesh = build_room(ceiling=ceiling)
@@ -746,8 +784,7 @@ class StudioRenderer:
         vis = bool(with_visibility)
         self._upload_scene(scene)
         gain = tuple(float(exposure) * float(g) for g in colour_cast)
-        programs = (self._prog_ellipsoid, self._prog_band, self._prog_room)
-        for prog in programs:
+        for prog in self._programs:
             prog["u_gain"].value = gain
 
         ctx.enable_only(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
@@ -763,7 +800,7 @@ class StudioRenderer:
         for vp, uniforms in zip(self._ideal_vps, self._per_camera):
             fbo.viewport = vp
             fbo.scissor = vp  # guard-band clipping must not spill into a neighbour's viewport
-            for prog in programs:
+            for prog in self._programs:
                 for name, value in uniforms.items():
                     if name in prog:
                         if isinstance(value, bytes):
@@ -775,6 +812,7 @@ class StudioRenderer:
             self._bands.draw()
             if self._room_vao is not None:
                 self._room_vao.render(moderngl.TRIANGLES)
+            self._draw_markers(fbo, vis)
         fbo.scissor = None
         if self._msaa:
             ctx.copy_framebuffer(self._fbo_resolved[vis], fbo)
@@ -837,11 +875,42 @@ class StudioRenderer:
         data[: len(sc), 24] = np.where(s_id > 0, 0.0, spec)  # marker balls are matte
         data[:, 25] = 0.0
         data[: len(sc), 25] = s_id
-        self._ellipsoids.upload(data)
+        is_marker = np.zeros(n, bool)
+        is_marker[: len(sc)] = s_id > 0
+        self._ellipsoids.upload(data[~is_marker])
+        self._markers.upload(data[is_marker])
 
         keep = np.linalg.norm(p1 - p0, axis=1) > 1e-9
         band = np.hstack([p0, p1, np.stack([r0, r1], 1), c_rgb, np.full((len(p0), 1), spec)])[keep]
         self._bands.upload(band.astype(np.float32))
+
+    def _draw_markers(self, fbo: moderngl.Framebuffer, vis: bool) -> None:
+        """Marker balls, last: blended with their analytic pixel coverage, then their ids.
+
+        The id pass writes where the pixel centre lies inside the outline and the depth equals
+        the marker's own (depth test <=, no depth writes), so counts are whole visible pixels.
+        """
+        if not self._markers.count:
+            return
+        ctx = self._ctx
+        on, off = (True,) * 4, (False,) * 4
+        prog = self._prog_marker
+        if vis:
+            fbo.color_mask = (on, off)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        prog["u_id_pass"].value = False
+        self._markers.draw()
+        ctx.disable(moderngl.BLEND)
+        if vis:  # ids where the pixel centre is inside and the depth equals the marker's own
+            fbo.color_mask = (off, on)
+            fbo.depth_mask = False
+            ctx.depth_func = "<="
+            prog["u_id_pass"].value = True
+            self._markers.draw()
+            ctx.depth_func = "<"
+            fbo.depth_mask = True
+            fbo.color_mask = (on, on)
 
     def _post_pass(self, vis: bool, sigma: float, seed: int) -> moderngl.Framebuffer:
         """Distortion warp and sensor noise from the resolved ideal atlas into the output atlas."""
@@ -868,8 +937,10 @@ class StudioRenderer:
         """One readback of the output atlas (and its id attachment), cut into camera images."""
         w, h = self._out_size
         bgra = np.empty((h, w, 4), np.uint8)
-        fbo.read_into(bgra, viewport=(0, 0, w, h), components=4, alignment=1)
-        images = tuple(np.ascontiguousarray(bgra[vp.y : vp.y + vp.h, vp.x : vp.x + vp.w, :3]) for vp in self._out_vps)
+        fbo.read_into(bgra, viewport=(0, 0, w, h), components=4, alignment=1)  # RGBA reads are fastest
+        bgr = cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR)
+        # Stacked cameras of the atlas width are contiguous views: no copy.
+        images = tuple(np.ascontiguousarray(bgr[vp.y : vp.y + vp.h, vp.x : vp.x + vp.w]) for vp in self._out_vps)
         if not vis:
             return RenderResult(images, None)
         marker_pixels = np.zeros((len(self._cameras), n_markers), np.int32)
@@ -1013,8 +1084,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.preview:
-        import cv2
-
         w, h = (int(v) for v in args.size.lower().split("x"))
         with StudioRenderer(typical_studio_cameras((w, h))) as renderer:
             result = renderer.render(mannequin_scene())

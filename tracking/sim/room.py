@@ -111,7 +111,7 @@ def _clutter(b: _Builder) -> None:
     b.box((tx + 0.15, top + 0.08, tz - 0.1), (0.25, 0.16, 0.3), (35, 60, 190))
     b.box((tx + 0.4, top + 0.015, tz + 0.15), (0.3, 0.03, 0.25), (165, 125, 160))
     # Boxes on the floor, front-right: orange and khaki (low-saturation yellow).
-    b.box((2.4, 0.2, -2.5), (0.5, 0.4, 0.4), (235, 120, 25))
+    b.box((2.4, 0.2, -2.5), (0.5, 0.4, 0.4), (230, 100, 20))
     b.box((2.45, 0.55, -2.5), (0.35, 0.3, 0.3), (180, 168, 125))
     # Teal cabinet on the right wall, white shelf unit on the left wall.
     b.box((hw - 0.25, 0.6, 0.8), (0.45, 1.2, 0.8), (20, 125, 130))
