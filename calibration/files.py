@@ -381,10 +381,10 @@ def _camera_from_opencv_node(path: Path, index: int, node) -> Camera:
     fisheye = False
     _, f_node = _aliased(node, ("fisheye",), where, required=False)
     if f_node is not None:
-        flag = _node_sized(f_node, (1,), where, "fisheye", "0 or 1")[0]
-        if flag not in (0.0, 1.0):
+        flag = _node_numbers(f_node, where, "fisheye").reshape(-1) if not f_node.isString() else None
+        if flag is None or flag.size != 1 or flag[0] not in (0.0, 1.0):
             raise CalibrationError(f"{where}: 'fisheye' must be 0 or 1: {_FIX_FILE}")
-        fisheye = bool(flag)
+        fisheye = bool(flag[0])
 
     r_node = node.getNode("R")
     v_node = node.getNode("rvec")
