@@ -568,24 +568,27 @@ def check_camera_count(
     n_sources: int,
     what: str,
     *,
+    kind: str = "videos or image folders",
     calibration_name: str = "the calibration",
-    where: str = "the recording",
 ) -> None:
     """Raise CalibrationError unless there is one source per calibrated camera.
 
     Args:
         cameras: the calibration, in order.
         n_sources: how many videos, image folders or live cameras there are.
-        what: plural noun for the sources, e.g. ``"videos"``, ``"image folders"``, ``"cameras"``.
+        what: what holds the sources, e.g. ``"the recording"``, ``"the recording rec/"`` or
+            ``"this computer"``.
+        kind: plural noun for the sources, e.g. ``"videos"`` or ``"cameras"`` (made singular
+            word by word for a count of 1).
         calibration_name: the calibration's file name for the message, e.g. ``"calibration.toml"``.
-        where: what holds the sources, e.g. ``"the recording"`` or ``"this computer"``.
     Raises:
         CalibrationError: "calibration.toml has 4 cameras but the recording has 3 videos: ...".
     """
     if len(cameras) == n_sources:
         return
-    noun = what[:-1] if n_sources == 1 and what.endswith("s") else what
+    if n_sources == 1:
+        kind = " ".join(w[:-1] if w.endswith("s") else w for w in kind.split())
     raise CalibrationError(
-        f"{calibration_name} has {len(cameras)} cameras but {where} has {n_sources} {noun}: "
+        f"{calibration_name} has {len(cameras)} cameras but {what} has {n_sources} {kind}: "
         "give one per camera in calibration order, or the matching calibration with --calibration FILE"
     )

@@ -470,12 +470,16 @@ def test_check_frame_sizes():
 
 def test_check_camera_count():
     cams = [Camera.look_at(f"cam{i}", (640, 480), 600.0, [i, 1.0, 2.0], [0.0, 1.0, 0.0]) for i in range(4)]
-    check_camera_count(cams, 4, "videos")
+    check_camera_count(cams, 4, "the recording")
     with pytest.raises(CalibrationError) as exc:
-        check_camera_count(cams, 3, "videos", calibration_name="calibration.toml")
+        check_camera_count(cams, 3, "the recording", kind="videos", calibration_name="calibration.toml")
     msg = str(exc.value)
     assert "\n" not in msg
     assert msg.startswith("calibration.toml has 4 cameras but the recording has 3 videos: ")
     assert "--calibration FILE" in msg
+    with pytest.raises(CalibrationError, match="the calibration has 4 cameras but rec/ has 2 videos or image folders"):
+        check_camera_count(cams, 2, "rec/")
     with pytest.raises(CalibrationError, match="this computer has 1 camera: "):
-        check_camera_count(cams, 1, "cameras", where="this computer")
+        check_camera_count(cams, 1, "this computer", kind="cameras")
+    with pytest.raises(CalibrationError, match="rec/ has 1 video or image folder: "):
+        check_camera_count(cams, 1, "rec/")
