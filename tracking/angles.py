@@ -1,0 +1,228 @@
+"""Joint angles of the seated upper body from the 14 ``upper_limb_seated`` markers.
+
+The definitions are those of ``spec/JOINT_ANGLES.md`` (clinical goniometry: 0 in the neutral
+start position, positive in the named direction, degrees). They use marker positions alone, so
+any TRC with the marker names gives the same numbers, and they are vectorized over any leading
+(frame) axes: the live tracker calls :func:`joint_angles` with one (M, 3) frame, ``rehab angles``
+with a whole (T, M, 3) file.
+
+Frames and vectors (world frame: +Y up, the patient faces -Z, the patient's right is +X)::
+
+    y_T = unit(MB - MP)                       up the trunk
+    x_T = unit(MRH - MLH, made orthogonal to y_T)   towards the patient's right
+    z_T = x_T x y_T                           backwards (the patient faces -z_T)
+    out = +x_T (right side), -x_T (left side)
+    E = (E1 + E2) / 2, W = (W1 + W2) / 2, u = E - S (upper arm), f = W - E (forearm)
+
+Signed rotations about an axis use the negated axis on the left side, so that a motion and its
+mirror image across the sagittal plane give the same numbers.
+
+Numerical conventions (documented choices where the spec leaves room):
+
+- A vector is *degenerate* (its angles NaN) when its length is at most ``_REL_EPS`` times the
+  size of what it was made from (coincident markers, a projection of a vector onto the plane
+  normal to it). Lengths may be in any unit.
+- In the planar angles (flexion, abduction, horizontal flexion) a unit-vector component smaller
+  than ``_REL_EPS`` is rounding noise and is taken as exactly 0. So an arm pointing exactly along
+  the plane's normal reads 0 (arm straight sideways: flexion 0; straight forward: abduction 0),
+  and an arm straight up reads +180, not -180 or a random angle. Near the normal these angles are
+  ill-conditioned by nature (the spec gates only horizontal flexion, by elevation).
+- Every signed angle is wrapped into (-180, 180], and -0 is written as 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from calibration.errors import RehabError
+
+MARKER_SET = "upper_limb_seated"
+
+#: Marker names the angles read, in the order of the ``upper_limb_seated`` marker set.
+REQUIRED_MARKERS: tuple[str, ...] = (
+    "MB", "MP", "MLS", "MRS", "MLE1", "MLE2", "MRE1", "MRE2",
+    "MLW1", "MLW2", "MRW1", "MRW2", "MLH", "MRH",
+)
+
+SIDES: tuple[str, ...] = ("left", "right")
+
+#: Angles of one arm, in column order.
+ARM_ANGLES: tuple[str, ...] = (
+    "shoulder_flexion",
+    "shoulder_abduction",
+    "shoulder_elevation",
+    "shoulder_horizontal_flexion",
+    "shoulder_external_rotation",
+    "elbow_flexion",
+    "forearm_supination",
+)
+
+#: Column names in file order: every arm angle of the left side, then of the right side
+#: (``left_shoulder_flexion`` ... ``right_forearm_supination``), then the two trunk leans.
+ANGLE_COLUMNS: tuple[str, ...] = tuple(f"{side}_{angle}" for side in SIDES for angle in ARM_ANGLES) + (
+    "trunk_forward_lean",
+    "trunk_lateral_lean",
+)
+
+#: Horizontal flexion is undefined (NaN) below this shoulder elevation (degrees).
+MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 45.0
+#: Shoulder external rotation is undefined (NaN) below this elbow flexion (degrees).
+MIN_ELBOW_FLEXION_FOR_ROTATION_DEG = 30.0
+
+# Relative size under which a vector or a unit-vector component is rounding noise (float64 has
+# ~1e-16 relative precision; real marker noise is many orders above 1e-9).
+_REL_EPS = 1e-9
+
+_SIDE_SIGN = {"left": -1.0, "right": 1.0}
+
+
+class MissingMarkersError(RehabError):
+    """A marker file lacks names that the joint angles need."""
+
+
+def missing_markers(names: Sequence[str]) -> list[str]:
+    """The names of :data:`REQUIRED_MARKERS` absent from ``names``, in marker-set order."""
+    present = set(names)
+    return [n for n in REQUIRED_MARKERS if n not in present]
+
+
+def require_markers(names: Sequence[str], source: str) -> None:
+    """Raise :class:`MissingMarkersError` (one line) if ``names`` lack any required marker.
+
+    ``source`` names where the names came from, e.g. ``"markers.trc"``; the message reads
+    ``markers.trc lacks MRW1, MRW2: the angles need the upper_limb_seated names``.
+    """
+    missing = missing_markers(names)
+    if missing:
+        raise MissingMarkersError(f"{source} lacks {', '.join(missing)}: the angles need the {MARKER_SET} names")
+
+
+def wrap180(angle_deg: np.ndarray) -> np.ndarray:
+    """Wrap angles (degrees, any shape) into (-180, 180]; NaN stays NaN, -0 becomes 0."""
+    a = np.asarray(angle_deg, dtype=np.float64)
+    return (180.0 - np.mod(180.0 - a, 360.0)) + 0.0
+
+
+def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
+    """Joint angles (degrees) of every frame, per ``spec/JOINT_ANGLES.md``.
+
+    Args:
+        positions: (..., M, 3) float marker positions in the world frame (+Y up, the patient
+            faces -Z), any length unit; typically (T, M, 3) or one frame (M, 3). NaN = missing.
+        names: the M marker names, in the order of ``positions``' marker axis. Names not in
+            :data:`REQUIRED_MARKERS` are ignored; a required name that is absent counts as a
+            marker missing in every frame (use :func:`require_markers` to reject such files).
+
+    Returns:
+        A dict with the keys of :data:`ANGLE_COLUMNS`, in that order, each a float64 array of
+        shape ``positions.shape[:-2]`` (0-d for one frame) in degrees. NaN where undefined:
+        a marker it needs is missing or NaN, a vector is degenerate, horizontal flexion below
+        45 degrees of elevation, external rotation below 30 degrees of elbow flexion.
+    """
+    p = np.asarray(positions, dtype=np.float64)
+    if p.ndim < 2 or p.shape[-1] != 3 or p.shape[-2] != len(names):
+        raise ValueError(f"positions must be (..., {len(names)}, 3) for {len(names)} names, got {p.shape}")
+    batch = p.shape[:-2]
+    index = {name: i for i, name in enumerate(names)}
+    absent = np.full(batch + (3,), np.nan)
+
+    def marker(name: str) -> np.ndarray:
+        return p[..., index[name], :] if name in index else absent
+
+    mb, mp = marker("MB"), marker("MP")
+    y_t = _unit(mb - mp, _norm(mb) + _norm(mp))
+    hips = marker("MRH") - marker("MLH")
+    x_t = _unit(hips - _dot(hips, y_t)[..., None] * y_t, _norm(hips))
+    z_t = np.cross(x_t, y_t)
+
+    out: dict[str, np.ndarray] = {}
+    for side in SIDES:
+        out.update(_arm_angles(side, marker, x_t, y_t, z_t))
+    # World axes: X = right, Y = up, Z = backwards.
+    out["trunk_forward_lean"] = wrap180(np.degrees(np.arctan2(-y_t[..., 2], y_t[..., 1])))
+    out["trunk_lateral_lean"] = wrap180(np.degrees(np.arctan2(y_t[..., 0], y_t[..., 1])))
+    return {name: np.asarray(out[name], dtype=np.float64) for name in ANGLE_COLUMNS}
+
+
+def _arm_angles(side: str, marker, x_t: np.ndarray, y_t: np.ndarray, z_t: np.ndarray) -> dict[str, np.ndarray]:
+    """The seven angles of one arm; ``marker(name)`` gives (..., 3) positions."""
+    sign = _SIDE_SIGN[side]
+    s = "L" if side == "left" else "R"
+    shoulder = marker(f"M{s}S")
+    e1, e2 = marker(f"M{s}E1"), marker(f"M{s}E2")
+    w1, w2 = marker(f"M{s}W1"), marker(f"M{s}W2")
+    elbow = 0.5 * (e1 + e2)
+    wrist = 0.5 * (w1 + w2)
+
+    u = _unit(elbow - shoulder, _norm(elbow) + _norm(shoulder))
+    f = _unit(wrist - elbow, _norm(wrist) + _norm(elbow))
+    down, forward, outward = -y_t, -z_t, sign * x_t
+
+    elevation = _angle_between(u, down)
+    horizontal = _planar_deg(u, outward, forward)
+    elbow_flexion = _angle_between(u, f)
+
+    # External rotation: forearm direction about the upper arm, from "forearm pointing forward".
+    external = _signed_angle(_reject(forward, u), _reject(f, u), sign * u)
+    # Supination: wrist axis about the forearm, relative to the epicondyle axis; 0 = thumb up.
+    supination = wrap180(90.0 + _signed_angle(_reject(e2 - e1, f), _reject(w2 - w1, f), sign * f))
+
+    nan = np.nan
+    return {
+        f"{side}_shoulder_flexion": _planar_deg(u, down, forward),
+        f"{side}_shoulder_abduction": _planar_deg(u, down, outward),
+        f"{side}_shoulder_elevation": elevation,
+        f"{side}_shoulder_horizontal_flexion": np.where(
+            elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG, horizontal, nan
+        ),
+        f"{side}_shoulder_external_rotation": np.where(
+            elbow_flexion >= MIN_ELBOW_FLEXION_FOR_ROTATION_DEG, external, nan
+        ),
+        f"{side}_elbow_flexion": elbow_flexion,
+        f"{side}_forearm_supination": supination,
+    }
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot product over the last axis: (..., 3), (..., 3) -> (...)."""
+    return np.einsum("...i,...i->...", a, b)
+
+
+def _norm(v: np.ndarray) -> np.ndarray:
+    return np.sqrt(_dot(v, v))
+
+
+def _unit(v: np.ndarray, size: np.ndarray) -> np.ndarray:
+    """``v`` normalized; NaN where its length is at most ``_REL_EPS * size`` (degenerate) or NaN."""
+    length = _norm(v)
+    ok = length > _REL_EPS * size
+    return np.where(ok[..., None], v / np.where(ok, length, 1.0)[..., None], np.nan)
+
+
+def _reject(v: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """``v`` projected on the plane normal to the unit ``axis``; NaN where degenerate."""
+    return _unit(v - _dot(v, axis)[..., None] * axis, _norm(v))
+
+
+def _angle_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Unsigned angle (degrees, 0..180) between (..., 3) vectors; atan2 keeps it exact near 0/180."""
+    return np.degrees(np.arctan2(_norm(np.cross(a, b)), _dot(a, b)))
+
+
+def _signed_angle(a: np.ndarray, b: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Angle (degrees, (-180, 180]) from ``a`` to ``b`` about ``axis`` (right-hand rule).
+
+    ``a`` and ``b`` lie in the plane normal to ``axis``.
+    """
+    return wrap180(np.degrees(np.arctan2(_dot(np.cross(a, b), axis), _dot(a, b))))
+
+
+def _planar_deg(v: np.ndarray, zero_axis: np.ndarray, positive_axis: np.ndarray) -> np.ndarray:
+    """``atan2d(v . positive_axis, v . zero_axis)`` for unit ``v``, rounding noise taken as 0."""
+    along = _dot(v, zero_axis)
+    across = _dot(v, positive_axis)
+    along = np.where(np.abs(along) < _REL_EPS, 0.0, along)
+    across = np.where(np.abs(across) < _REL_EPS, 0.0, across)
+    return wrap180(np.degrees(np.arctan2(across, along)))
