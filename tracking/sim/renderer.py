@@ -47,7 +47,7 @@ from tracking.sim.scene import SceneFrame
 
 log = logging.getLogger(__name__)
 
-DEFAULT_MSAA = 4
+DEFAULT_MSAA = 0  # markers are anti-aliased analytically; see StudioRenderer
 NEAR_M = 0.05
 FAR_M = 50.0
 _MAX_LIGHTS = 4
@@ -242,7 +242,8 @@ in vec3 v_colour;
 layout(location = 0) out vec4 f_bgr;
 layout(location = 1) out uint f_id;
 void main() {
-    f_bgr = vec4(v_colour.bgr, 1.0);  // BGR in the RGB channels: the readback is OpenCV BGR as is
+    // BGR in the RGB channels: the readback is OpenCV BGR as is.
+    f_bgr = vec4(v_colour.bgr + sensor_noise(gl_FragCoord.xy), 1.0);
     f_id = 0u;
 }
 """
@@ -404,7 +405,7 @@ void main() {
     if (z_ndc < -1.0 || z_ndc > 1.0) discard;
     gl_FragDepth = 0.5 * z_ndc + 0.5;
     vec3 n = normalize(transpose(v_inv) * unit);
-    f_bgr = vec4(shade(n, pos, v_rgb, v_spec).bgr, alpha);
+    f_bgr = vec4(shade(n, pos, v_rgb, v_spec).bgr + sensor_noise(gl_FragCoord.xy), alpha);
     f_id = v_id;
 }
 """
@@ -416,23 +417,41 @@ void main() {
 }
 """
 
+# Gaussian sensor noise from a hash of (output pixel, seed): reproducible, independent per
+# channel, no state. Added where the final colour of a pixel is written: by the geometry
+# shaders (blending a marker edge keeps the pixel's noise, as both layers carry the same), or
+# by the distortion warp when there is one.
+_NOISE_GLSL = """
+uniform float u_sigma;  // 0..1 units; 0 = off
+uniform uint u_seed_hash;  // the frame's seed, hashed on the CPU
+uint pcg(uint v) {
+    uint state = v * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+// Unit normal deviate from one 32-bit hash: the sum of its four bytes (Irwin-Hall, n = 4) is
+// close to Gaussian (tails cut at 3.5 sigma) and avoids log/sqrt/cos, which llvmpipe
+// evaluates slowly.
+float gauss(uint h) {
+    uint s = (h & 255u) + ((h >> 8u) & 255u) + ((h >> 16u) & 255u) + (h >> 24u);
+    return (float(s) - 510.0) * (1.0 / 147.80);
+}
+vec3 sensor_noise(vec2 frag_coord) {
+    if (u_sigma <= 0.0) return vec3(0.0);
+    uvec2 px = uvec2(frag_coord);
+    uint h = pcg(px.x + pcg(px.y + u_seed_hash));
+    return u_sigma * vec3(gauss(h), gauss(pcg(h ^ 0x9e3779b9u)), gauss(pcg(h + 0x85ebca6bu)));
+}
+"""
+
 _FRAGMENT_POST = """
 uniform sampler2D u_colour;  // resolved ideal atlas, BGR
 uniform usampler2D u_id;
 uniform sampler2D u_lookup;  // output atlas: ideal-atlas window coordinates of each output pixel
 uniform bool u_use_lookup;
 uniform ivec2 u_shift;  // ideal-atlas origin minus output-atlas origin (no lookup)
-uniform float u_sigma;  // Gaussian noise, 0..1 units
-uniform uint u_seed;
 layout(location = 0) out vec4 f_bgr;
 layout(location = 1) out uint f_id;
-
-uint pcg(uint v) {
-    uint state = v * 747796405u + 2891336453u;
-    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
-    return (word >> 22u) ^ word;
-}
-float unit(uint h) { return (float(h >> 8u) + 0.5) * (1.0 / 16777216.0); }
 
 void main() {
     ivec2 px = ivec2(gl_FragCoord.xy);
@@ -451,16 +470,7 @@ void main() {
         c = texelFetch(u_colour, px + u_shift, 0).rgb;
         id = texelFetch(u_id, px + u_shift, 0).r;
     }
-    if (u_sigma > 0.0) {  // Box-Muller on a per-pixel, per-seed hash: reproducible and cheap
-        uint h = pcg(uint(px.x) + pcg(uint(px.y) + pcg(u_seed)));
-        uint h2 = pcg(h + 0x85ebca6bu);
-        float r1 = sqrt(-2.0 * log(unit(h)));
-        float a1 = 6.2831853 * unit(pcg(h ^ 0x9e3779b9u));
-        float r2 = sqrt(-2.0 * log(unit(h2)));
-        float a2 = 6.2831853 * unit(pcg(h2 ^ 0x9e3779b9u));
-        c += u_sigma * vec3(r1 * cos(a1), r1 * sin(a1), r2 * cos(a2));
-    }
-    f_bgr = vec4(c, 1.0);
+    f_bgr = vec4(c + sensor_noise(gl_FragCoord.xy), 1.0);
     f_id = id;
 }
 """
@@ -471,6 +481,13 @@ _SAMPLE_POSITIONS = {
     2: ((0.75, 0.75), (0.25, 0.25)),
     4: ((0.375, 0.125), (0.875, 0.375), (0.125, 0.625), (0.625, 0.875)),
 }
+
+
+def _pcg_hash(v: int) -> int:
+    """The shader's pcg() on the CPU (32-bit unsigned arithmetic)."""
+    state = (v * 747796405 + 2891336453) & 0xFFFFFFFF
+    word = (((state >> ((state >> 28) + 4)) ^ state) * 277803737) & 0xFFFFFFFF
+    return (word >> 22) ^ word
 
 
 def _glsl(version: int, defines: dict[str, int], *parts: str) -> str:
@@ -620,22 +637,27 @@ class StudioRenderer:
         defs = {"N_LIGHTS": n_lights}
         self._prog_ellipsoid = ctx.program(
             vertex_shader=_glsl(version, defs, _VERTEX_ELLIPSOID),
-            fragment_shader=_glsl(version, {**defs, "N_SAMPLES": msaa, "COVERAGE": 0}, _SHADE_GLSL, _FRAGMENT_ELLIPSOID),
+            fragment_shader=_glsl(version, {**defs, "N_SAMPLES": msaa, "COVERAGE": 0}, _SHADE_GLSL, _NOISE_GLSL, _FRAGMENT_ELLIPSOID),
         )
         # Markers always get analytic coverage: continuous, so centroids are exact to < 0.01 px
         # (4x MSAA quantizes edge coverage to quarters: errors up to ~0.06 px).
         self._prog_marker = ctx.program(
             vertex_shader=_glsl(330, defs, _VERTEX_ELLIPSOID),
-            fragment_shader=_glsl(330, {**defs, "N_SAMPLES": 0, "COVERAGE": 1}, _SHADE_GLSL, _FRAGMENT_ELLIPSOID),
+            fragment_shader=_glsl(330, {**defs, "N_SAMPLES": 0, "COVERAGE": 1}, _SHADE_GLSL, _NOISE_GLSL, _FRAGMENT_ELLIPSOID),
         )
         self._owned.append(self._prog_marker)
         self._prog_band = ctx.program(
-            vertex_shader=_glsl(330, defs, _SHADE_GLSL, _VERTEX_CAPSULE_BAND), fragment_shader=_glsl(330, {}, _FRAGMENT_FLAT)
+            vertex_shader=_glsl(330, defs, _SHADE_GLSL, _VERTEX_CAPSULE_BAND), fragment_shader=_glsl(330, {}, _NOISE_GLSL, _FRAGMENT_FLAT)
         )
-        self._prog_room = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_ROOM), fragment_shader=_glsl(330, {}, _FRAGMENT_FLAT))
-        self._prog_post = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_FULLSCREEN), fragment_shader=_glsl(330, {}, _FRAGMENT_POST))
+        self._prog_room = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_ROOM), fragment_shader=_glsl(330, {}, _NOISE_GLSL, _FRAGMENT_FLAT))
+        self._prog_post = ctx.program(vertex_shader=_glsl(330, {}, _VERTEX_FULLSCREEN), fragment_shader=_glsl(330, {}, _NOISE_GLSL, _FRAGMENT_POST))
         self._owned += [self._prog_ellipsoid, self._prog_band, self._prog_room, self._prog_post]
         self._programs = tuple(dict.fromkeys((self._prog_ellipsoid, self._prog_marker, self._prog_band, self._prog_room)))
+        # Per camera: (uniform, bytes) for every program that uses it, resolved once.
+        self._camera_uniform_bytes = [
+            [(prog[name], data) for prog in self._programs for name, data in per_cam.items() if name in prog]
+            for per_cam in self._per_camera
+        ]
         self._light_dirs = np.zeros((n_lights, 3))
         if n_lights:
             d = np.asarray(lighting.directions, float)
@@ -729,18 +751,18 @@ class StudioRenderer:
         return total
 
     @staticmethod
-    def _camera_uniforms(plan: _CameraPlan, vp: _Viewport) -> dict[str, bytes | tuple]:
-        """Per-camera uniform values (column-major float32 bytes for matrices)."""
+    def _camera_uniforms(plan: _CameraPlan, vp: _Viewport) -> dict[str, bytes]:
+        """Per-camera uniform values as float32 bytes (matrices column-major)."""
         cam = plan.camera
         clip = clip_from_camera(plan.K_ideal, plan.ideal_size_px) @ np.vstack([cam.extrinsic, [0.0, 0.0, 0.0, 1.0]])
         window_to_pixel = np.array([[1.0, 0.0, -vp.x - 0.5], [0.0, 1.0, -vp.y - 0.5], [0.0, 0.0, 1.0]])
         ray = cam.R.T @ np.linalg.inv(plan.K_ideal) @ window_to_pixel
-        mat = lambda m: np.ascontiguousarray(m.T, dtype=np.float32).tobytes()  # noqa: E731
+        f32 = lambda m: np.ascontiguousarray(np.asarray(m).T, dtype=np.float32).tobytes()  # noqa: E731
         return {
-            "u_clip_from_world": mat(clip),
-            "u_ray_from_window": mat(ray),
-            "u_eye": tuple(float(v) for v in cam.centre_m),
-            "u_pad_ndc": (3.0 / plan.ideal_size_px[0], 3.0 / plan.ideal_size_px[1]),
+            "u_clip_from_world": f32(clip),
+            "u_ray_from_window": f32(ray),
+            "u_eye": f32(cam.centre_m),
+            "u_pad_ndc": f32([3.0 / plan.ideal_size_px[0], 3.0 / plan.ideal_size_px[1]]),
         }
 
     # ------------------------------------------------------------------ public
@@ -786,6 +808,12 @@ class StudioRenderer:
         gain = tuple(float(exposure) * float(g) for g in colour_cast)
         for prog in self._programs:
             prog["u_gain"].value = gain
+        # Noise goes where each output pixel is last written: the warp pass if there is one.
+        sigma = float(noise_sigma) / 255.0
+        seed_hash = _pcg_hash(int(seed) & 0xFFFFFFFF)
+        for prog in (*self._programs, self._prog_post):
+            self._set(prog, "u_sigma", 0.0 if self._distorted and prog is not self._prog_post else sigma)
+            self._set(prog, "u_seed_hash", seed_hash)
 
         ctx.enable_only(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         # OpenCV's camera frame (y down) is mirrored relative to GL's (y up): outward-wound
@@ -797,16 +825,11 @@ class StudioRenderer:
         fbo.scissor = None
         fbo.viewport = (0, 0, *self._ideal_size)
         fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
-        for vp, uniforms in zip(self._ideal_vps, self._per_camera):
+        for vp, uniform_bytes in zip(self._ideal_vps, self._camera_uniform_bytes):
             fbo.viewport = vp
             fbo.scissor = vp  # guard-band clipping must not spill into a neighbour's viewport
-            for prog in self._programs:
-                for name, value in uniforms.items():
-                    if name in prog:
-                        if isinstance(value, bytes):
-                            prog[name].write(value)
-                        else:
-                            prog[name].value = value
+            for uniform, data in uniform_bytes:
+                uniform.write(data)
             # Near to far, so that early depth tests spare the room's pixels behind the body.
             self._ellipsoids.draw()
             self._bands.draw()
@@ -817,8 +840,8 @@ class StudioRenderer:
         if self._msaa:
             ctx.copy_framebuffer(self._fbo_resolved[vis], fbo)
         out_fbo = self._fbo_resolved[vis]
-        if self._distorted or noise_sigma > 0.0:
-            out_fbo = self._post_pass(vis, float(noise_sigma), int(seed))
+        if self._distorted:
+            out_fbo = self._post_pass(vis)
         return self._read(out_fbo, vis, scene.n_markers)
 
     def release(self) -> None:
@@ -912,7 +935,7 @@ class StudioRenderer:
             fbo.depth_mask = True
             fbo.color_mask = (on, on)
 
-    def _post_pass(self, vis: bool, sigma: float, seed: int) -> moderngl.Framebuffer:
+    def _post_pass(self, vis: bool) -> moderngl.Framebuffer:
         """Distortion warp and sensor noise from the resolved ideal atlas into the output atlas."""
         ctx = self._ctx
         fbo = self._fbo_post[vis]
@@ -922,8 +945,6 @@ class StudioRenderer:
         self._id_tex.use(1)
         self._lookup_tex.use(2)
         prog = self._prog_post
-        self._set(prog, "u_sigma", sigma / 255.0)
-        self._set(prog, "u_seed", seed & 0xFFFFFFFF)
         for plan, ivp, ovp in zip(self._plans, self._ideal_vps, self._out_vps):
             fbo.viewport = ovp
             fbo.scissor = ovp
