@@ -1,29 +1,43 @@
 """Offscreen OpenGL renderer of the simulated studio: virtual cameras imaging a SceneFrame.
 
 One :class:`StudioRenderer` owns a moderngl context (EGL, headless) and renders every camera of
-a calibration into ONE framebuffer atlas (a viewport per camera), resolves the MSAA samples and
-reads the atlas back once per frame set.
+a calibration into ONE framebuffer atlas (a viewport and scissor per camera, cameras stacked top
+to bottom) and reads the atlas back once per frame set.
 
-Geometry matches :meth:`calibration.camera.Camera.project` exactly: the GL projection is built
-from K (fx, fy, cx, cy, skew) with the OpenCV pixel-centre convention (OpenCV pixel (0, 0) is GL
-window (0.5, 0.5) of the camera's viewport). Image row v is drawn at window y = v + 0.5, so the
-bottom-up GL readback is already the top-down OpenCV image and nothing is flipped. Lens
-distortion is applied by rendering an ideal pinhole image (larger, so that it covers the whole
-distorted field of view) and warping it in a second pass through a lookup texture that holds, for
-every distorted output pixel, the ideal pixel it images (``Camera.undistort_points`` then K).
+Geometry matches :meth:`calibration.camera.Camera.project`: the GL projection is built from K
+(fx, fy, cx, cy, skew) with the OpenCV pixel-centre convention (OpenCV pixel (0, 0) is GL window
+(0.5, 0.5) of the camera's viewport). Image row v is drawn at window y = v + 0.5, so the
+bottom-up GL readback already is the top-down OpenCV image and nothing is flipped. Lens
+distortion: an ideal pinhole image is rendered (larger, so that it covers the whole distorted
+field of view) and warped in a second pass through a lookup texture holding, for every distorted
+output pixel, the ideal pixel it images (``Camera.undistort_points`` then K).
+
+Primitives:
+- spheres (markers, joints, capsule end caps) and ellipsoids are ray-cast on instanced
+  screen-space quads bounding their exact outline (dual quadric): exact silhouettes, depths and
+  normals for two triangles each (llvmpipe spends ~0.3 us per triangle, so tessellated spheres
+  were the bottleneck);
+- capsule sides are an instanced 96-triangle band tangent to the two end spheres;
+- the room is one static mesh with its diffuse lighting baked at upload.
+
+Anti-aliasing: marker balls always get analytic coverage (alpha = exact pixel coverage of the
+outline, blended; drawn last), so marker centroids are unbiased to < 0.01 px. ``msaa`` (0, 2, 4)
+additionally anti-aliases every other edge; on llvmpipe 4x MSAA costs ~2.5x the frame time, so
+the default is 0.
 
 Per-frame pipeline::
 
-    clear -> per camera: viewport + scissor, instanced spheres/ellipsoids (3 levels of detail),
-    capsule bands, static room -> MSAA resolve -> [post pass: distortion warp, sensor noise]
-    -> one readback (BGR + marker ids) -> marker pixel counts (np.bincount)
+    upload instances -> clear -> per camera: ellipsoids, capsule bands, room, markers
+    (+ their id pass) -> [MSAA resolve] -> [distortion warp] -> one readback (BGR + ids)
+    -> marker pixel counts (np.bincount)
 
-Colours are treated as sRGB values in 0..1 and shaded multiplicatively (Lambert + ambient +
-a little Blinn-Phong on skin, clothes and furniture; marker balls matte), which keeps a marker's
-hue exact until a channel saturates. Exposure and colour cast are applied in the shader before
-the 8-bit clamp, as a sensor would.
+Colours are sRGB values in 0..1 shaded multiplicatively (Lambert + ambient + a little
+Blinn-Phong on skin and clothes; marker balls matte), which keeps a marker's hue exact until a
+channel saturates. Exposure and colour cast are applied before the 8-bit clamp, as in a sensor;
+Gaussian sensor noise comes from a per-pixel hash of the seed, added by whichever shader writes
+the pixel last.
 
-Run ``python -m tracking.sim.renderer`` for the speed benchmark and a preview PNG.
+Run ``python -m tracking.sim.renderer --preview out.png`` for the speed benchmark and a preview.
 """
 
 from __future__ import annotations
@@ -900,8 +914,10 @@ class StudioRenderer:
         data[: len(sc), 25] = s_id
         is_marker = np.zeros(n, bool)
         is_marker[: len(sc)] = s_id > 0
-        self._ellipsoids.upload(data[~is_marker])
-        self._markers.upload(data[is_marker])
+        drawable = np.ones(n, bool)  # zero-radius spheres would ray-cast to NaN
+        drawable[:n_sph] = radii > 0.0
+        self._ellipsoids.upload(data[~is_marker & drawable])
+        self._markers.upload(data[is_marker & drawable])
 
         keep = np.linalg.norm(p1 - p0, axis=1) > 1e-9
         band = np.hstack([p0, p1, np.stack([r0, r1], 1), c_rgb, np.full((len(p0), 1), spec)])[keep]
@@ -1057,40 +1073,52 @@ def atlas_2x2(images: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
+# A moderate barrel lens (OpenCV k1, k2, p1, p2) for benchmarks and previews.
+DEMO_LENS = (-0.12, 0.03, 0.0005, -0.0004)
+
+
 def benchmark(
     n_frames: int = 60,
     sizes: Sequence[tuple[int, int]] = ((320, 240), (640, 480)),
-    msaa_values: Sequence[int] = (0, DEFAULT_MSAA),
+    msaa_values: Sequence[int] = (0, 4),
+    lens_values: Sequence[bool] = (False, True),
     with_visibility: bool = True,
-) -> dict[tuple[int, int, int], float]:
-    """Frame sets per second of the 4-camera demo studio, readback included.
+) -> dict[str, dict[str, float]]:
+    """Speed of the 4-camera demo studio (room, mannequin, 14 markers), readback included.
 
-    The mannequin sways a little each frame so that instance uploads are real.
+    The mannequin sways each frame so that instance uploads are real; visibility counts are
+    included by default. With ``lens`` the cameras have lens distortion (warp pass) and the
+    frames get sensor noise (sigma 2).
 
     Returns:
-        {(width, height, msaa): frame sets per second}.
+        {"WxH msaaN[ lens]": {"fps": frame sets per second (wall clock),
+                              "cpu_ms": process CPU time per frame set, all threads}}.
+        On a shared machine the CPU time is the steadier figure.
     """
     scene = mannequin_scene()
-    results = {}
+    results: dict[str, dict[str, float]] = {}
     ctx = create_context()
     try:
         for w, h in sizes:
-            for msaa in msaa_values:
-                with StudioRenderer(typical_studio_cameras((w, h)), msaa=msaa, ctx=ctx) as renderer:
-                    renderer.render(scene)  # warm-up: shader compilation
-                    t0 = time.perf_counter()
-                    for k in range(n_frames):
-                        dx = 0.02 * np.sin(0.3 * k)
-                        moved = dataclasses.replace(
-                            scene,
-                            sphere_centre_m=scene.sphere_centre_m + (dx, 0.0, 0.0),
-                            capsule_p0_m=scene.capsule_p0_m + (dx, 0.0, 0.0),
-                            capsule_p1_m=scene.capsule_p1_m + (dx, 0.0, 0.0),
-                        )
-                        renderer.render(moved, with_visibility=with_visibility, seed=k)
-                    fps = n_frames / (time.perf_counter() - t0)
-                results[(w, h, msaa)] = fps
-                log.info("4 cameras %dx%d msaa %d: %.1f frame sets/s", w, h, msaa, fps)
+            for lens in lens_values:
+                cameras = typical_studio_cameras((w, h), dist=DEMO_LENS if lens else (0.0, 0.0, 0.0, 0.0))
+                for msaa in msaa_values:
+                    with StudioRenderer(cameras, msaa=msaa, ctx=ctx) as renderer:
+                        renderer.render(scene)  # warm-up: shader compilation
+                        t0, c0 = time.perf_counter(), time.process_time()
+                        for k in range(n_frames):
+                            dx = 0.02 * np.sin(0.3 * k)
+                            moved = dataclasses.replace(
+                                scene,
+                                sphere_centre_m=scene.sphere_centre_m + (dx, 0.0, 0.0),
+                                capsule_p0_m=scene.capsule_p0_m + (dx, 0.0, 0.0),
+                                capsule_p1_m=scene.capsule_p1_m + (dx, 0.0, 0.0),
+                            )
+                            renderer.render(moved, with_visibility=with_visibility, noise_sigma=2.0 if lens else 0.0, seed=k)
+                        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                    key = f"{w}x{h} msaa{msaa}" + (" lens" if lens else "")
+                    results[key] = {"fps": n_frames / wall, "cpu_ms": 1e3 * cpu / n_frames}
+                    log.info("4 cameras %s: %.1f frame sets/s, %.1f ms CPU per frame set", key, n_frames / wall, 1e3 * cpu / n_frames)
     finally:
         ctx.release()
     return results
@@ -1099,15 +1127,18 @@ def benchmark(
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m tracking.sim.renderer [--frames N] [--preview PNG]``: benchmark and preview."""
     parser = argparse.ArgumentParser(description="Benchmark the studio renderer; optionally save a 2x2 preview.")
-    parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--frames", type=int, default=60, help="frame sets per benchmark case (0: no benchmark)")
     parser.add_argument("--preview", default=None, help="write a 2x2 atlas PNG of the demo scene here")
     parser.add_argument("--size", default="320x240", help="preview size WxH")
+    parser.add_argument("--msaa", type=int, default=DEFAULT_MSAA, help="preview MSAA samples")
+    parser.add_argument("--lens", action="store_true", help="preview with lens distortion and sensor noise")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     if args.preview:
         w, h = (int(v) for v in args.size.lower().split("x"))
-        with StudioRenderer(typical_studio_cameras((w, h))) as renderer:
-            result = renderer.render(mannequin_scene())
+        cameras = typical_studio_cameras((w, h), dist=DEMO_LENS if args.lens else (0.0, 0.0, 0.0, 0.0))
+        with StudioRenderer(cameras, msaa=args.msaa) as renderer:
+            result = renderer.render(mannequin_scene(), noise_sigma=2.0 if args.lens else 0.0)
         cv2.imwrite(args.preview, atlas_2x2(result.images))
         log.info("preview written to %s; marker pixels per camera:\n%s", args.preview, result.marker_pixels)
     if args.frames > 0:

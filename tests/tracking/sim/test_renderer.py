@@ -294,6 +294,23 @@ def test_release_and_errors(ctx, monkeypatch):
     assert "\n" not in str(info.value)
 
 
+def test_nothing_spills_into_a_neighbouring_viewport(ctx):
+    near = Camera.look_at("near", (96, 64), 90.0, (0.0, 1.0, -1.0), (0.0, 1.0, 0.0))
+    away = Camera.look_at("away", (96, 64), 90.0, (0.0, 1.0, -1.0), (0.0, 1.0, -5.0))
+    white = (1.0, 1.0, 1.0)
+    scene = make_scene(
+        spheres=[((0.0, 1.0, 0.0), 0.6, white, -1), ((0.05, 1.05, -0.75), 0.02, GREEN, 0), ((0.0, 1.0, 0.0), 0.0, white, -1)],
+        capsules=[((-3.0, 1.0, 0.2), (3.0, 1.0, 0.2), 0.3, 0.3, white)],
+        ellipsoids=[((0.0, 0.5, 0.0), np.diag([0.8, 0.2, 0.8]), white)],  # behind "away"
+    )
+    with StudioRenderer([near, away, near], ctx=ctx, room=False, msaa=4) as r:
+        result = r.render(scene)
+    assert result.images[0].min() > 0, "the near camera is filled by the big sphere"
+    assert result.images[1].max() == 0, "the camera looking away sees nothing"
+    np.testing.assert_array_equal(result.images[0], result.images[2])
+    assert result.marker_pixels[:, 0].tolist()[1] == 0 and result.marker_pixels[0, 0] > 0
+
+
 def test_empty_scene_and_many_instances(ctx):
     cam = Camera.look_at("c", (64, 48), 60.0, (0.0, 1.0, -2.0), (0.0, 1.0, 0.0))
     with StudioRenderer([cam], ctx=ctx, room=False) as r:
