@@ -305,7 +305,7 @@ def test_nothing_spills_into_a_neighbouring_viewport(ctx):
     )
     with StudioRenderer([near, away, near], ctx=ctx, room=False, msaa=4) as r:
         result = r.render(scene)
-    assert result.images[0].min() > 0, "the near camera is filled by the big sphere"
+    assert result.images[0].max(axis=2).min() > 0, "the near camera is filled by the big sphere"
     assert result.images[1].max() == 0, "the camera looking away sees nothing"
     np.testing.assert_array_equal(result.images[0], result.images[2])
     assert result.marker_pixels[:, 0].tolist()[1] == 0 and result.marker_pixels[0, 0] > 0
