@@ -1,0 +1,168 @@
+"""Labelled marker trajectories to and from C3D files (with ezc3d).
+
+Writing follows the C3D conventions that biomechanics software expects: floating-point points
+in millimetres (``POINT:UNITS = mm``), a missing point has residual -1 (and zero coordinates), a
+present point a residual >= 0, and ``POINT:X_SCREEN = +X``, ``POINT:Y_SCREEN = +Y`` tell viewers
+that +Y is up (the project's world frame: +Y up, the patient faces -Z).
+
+Residuals are stored in one byte scaled by ``POINT:SCALE``; with the scale written here (-0.1)
+they are kept to 0.1 mm and at most 25.5 mm (larger values are clipped).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from calibration.errors import RehabError
+
+_RESIDUAL_STEP_MM = 0.1
+_RESIDUAL_MAX_MM = 255 * _RESIDUAL_STEP_MM
+_MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+
+
+class C3dError(RehabError):
+    """A C3D file cannot be read, or lacks the markers asked for."""
+
+
+def write_c3d(
+    path: str | Path,
+    names: Sequence[str],
+    positions_mm: np.ndarray,
+    rate_hz: float,
+    residuals: np.ndarray | None = None,
+) -> None:
+    """Write labelled marker trajectories as a C3D file.
+
+    Args:
+        path: file to write.
+        names: the M marker labels (unique, at most 30 characters in many C3D readers).
+        positions_mm: (T, M, 3) float millimetres, world frame; NaN = no position (a marker with
+            any NaN coordinate is missing in that frame: residual -1).
+        rate_hz: frame rate (``POINT:RATE``).
+        residuals: optional (T, M) residuals in mm (e.g. mean reprojection distance) for the
+            present points; default 0. NaN counts as 0. Ignored where the point is missing.
+    """
+    import ezc3d  # heavy import, only where C3D files are written
+
+    names = [str(n) for n in names]
+    p = np.asarray(positions_mm, dtype=np.float64)
+    if p.ndim != 3 or p.shape[1:] != (len(names), 3):
+        raise ValueError(f"positions_mm must be (T, {len(names)}, 3) for {len(names)} names, got {p.shape}")
+    dupes = sorted({n for n in names if names.count(n) > 1})
+    if dupes or any(not n.strip() for n in names):
+        raise ValueError(f"marker names must be non-empty and unique (duplicates: {dupes})")
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise ValueError(f"rate_hz must be positive, got {rate_hz}")
+    if np.isinf(p).any():
+        raise ValueError("positions_mm must be finite or NaN")
+    n_frames, n_markers = p.shape[:2]
+    missing = np.isnan(p).any(axis=2)  # (T, M)
+    if residuals is None:
+        res = np.zeros((n_frames, n_markers))
+    else:
+        res = np.asarray(residuals, dtype=np.float64)
+        if res.shape != (n_frames, n_markers):
+            raise ValueError(f"residuals must be ({n_frames}, {n_markers}), got {res.shape}")
+        if (res < 0).any():
+            raise ValueError("residuals must be >= 0 (missing points are marked by NaN positions)")
+        res = np.clip(np.nan_to_num(res, nan=0.0), 0.0, _RESIDUAL_MAX_MM)
+    # Quantize to the stored step ourselves, nudged up so that the writer's truncation keeps it.
+    res = (np.round(res / _RESIDUAL_STEP_MM) + 0.01) * _RESIDUAL_STEP_MM
+    res[missing] = -1.0
+
+    c3d = ezc3d.c3d()
+    point = c3d["parameters"]["POINT"]
+    point["RATE"]["value"] = [float(rate_hz)]
+    point["LABELS"]["value"] = tuple(names)
+    point["UNITS"]["value"] = ["mm"]
+    point["SCALE"]["value"] = [-_RESIDUAL_STEP_MM]  # negative scale: floating-point points
+    c3d.add_parameter("POINT", "X_SCREEN", "+X")
+    c3d.add_parameter("POINT", "Y_SCREEN", "+Y")
+    points = np.ones((4, n_markers, n_frames))
+    points[:3] = np.where(missing[..., None], 0.0, p).transpose(2, 1, 0)
+    c3d["data"]["points"] = points
+    c3d["data"]["meta_points"] = {
+        "residuals": res.T[None, :, :],
+        "camera_masks": np.zeros((7, n_markers, n_frames), dtype=bool),
+    }
+    c3d.write(str(path))
+
+
+def read_c3d_points(
+    path: str | Path, labels: Sequence[str] | None = None
+) -> tuple[tuple[str, ...], np.ndarray, float]:
+    """Labelled marker trajectories of a C3D file, in millimetres.
+
+    Args:
+        path: C3D file.
+        labels: the markers wanted, in the order wanted; default all. A label matches a point
+            label exactly or, failing that, the part after a ``Subject:`` prefix (Vicon style).
+
+    Returns:
+        names: the M labels (as asked for, or all of the file's, stripped).
+        positions_mm: (T, M, 3) float64 millimetres in the file's own axes; NaN where the point
+            is missing (residual < 0).
+        rate_hz: ``POINT:RATE``.
+    """
+    import ezc3d
+
+    path = Path(path)
+    if not path.is_file():
+        raise C3dError(f"{path}: no such file")
+    try:
+        c3d = ezc3d.c3d(str(path))
+    except (OSError, RuntimeError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else "invalid"
+        raise C3dError(f"{path}: not a readable C3D file ({reason})") from None
+    point = c3d["parameters"]["POINT"]
+    points = np.asarray(c3d["data"]["points"], dtype=np.float64)  # (4, M, T)
+    n_points = points.shape[1]
+    all_names = _point_labels(point)[:n_points]
+    if len(all_names) < n_points:
+        all_names += [f"point{i + 1}" for i in range(len(all_names), n_points)]
+    units = _param_text(point, "UNITS") or "mm"
+    if units.lower() not in _MM_PER_UNIT:
+        raise C3dError(f"{path}: POINT:UNITS {units!r} unknown: expected mm, cm or m")
+    rate = point.get("RATE", {}).get("value", [])
+    rate_hz = float(rate[0]) if len(rate) else float(c3d["header"]["points"]["frame_rate"])
+    if not (np.isfinite(rate_hz) and rate_hz > 0):
+        raise C3dError(f"{path}: POINT:RATE {rate_hz} is not a positive frame rate")
+
+    positions = points[:3].transpose(2, 1, 0) * _MM_PER_UNIT[units.lower()]
+    residuals = np.asarray(c3d["data"]["meta_points"]["residuals"], dtype=np.float64)
+    if residuals.shape == (1, n_points, positions.shape[0]):
+        positions[residuals[0].T < 0] = np.nan
+    positions[np.isnan(positions).any(axis=2)] = np.nan
+    if labels is None:
+        return tuple(all_names), positions, rate_hz
+    index = [_find_label(all_names, label) for label in labels]
+    absent = [label for label, i in zip(labels, index) if i is None]
+    if absent:
+        shown = ", ".join(all_names[:12]) + (", ..." if len(all_names) > 12 else "")
+        raise C3dError(f"{path} lacks markers {', '.join(absent)} (it has {shown})")
+    return tuple(labels), positions[:, index, :], rate_hz
+
+
+def _param_text(group: dict, name: str) -> str:
+    value = group.get(name, {}).get("value", [])
+    return str(value[0]).strip() if len(value) else ""
+
+
+def _point_labels(point: dict) -> list[str]:
+    """POINT:LABELS, then LABELS2, LABELS3, ... (files with more than 255 points)."""
+    names = [str(n).strip() for n in point.get("LABELS", {}).get("value", [])]
+    k = 2
+    while f"LABELS{k}" in point:
+        names += [str(n).strip() for n in point[f"LABELS{k}"]["value"]]
+        k += 1
+    return names
+
+
+def _find_label(names: list[str], label: str) -> int | None:
+    if label in names:
+        return names.index(label)
+    suffix = [i for i, n in enumerate(names) if n.rsplit(":", 1)[-1] == label]
+    return suffix[0] if len(suffix) == 1 else None
