@@ -609,3 +609,30 @@ def test_arm_angles_invariant_to_any_rigid_motion(right, left, axis, angle, shif
         if np.isfinite(a[c]):
             # Angles near +-180 may come out on either side of the wrap: compare on the circle.
             assert abs(float(wrap180(b[c] - a[c]))) < 1e-6, c
+
+
+# ---------------------------------------------------------------- real capture
+
+VICON_NAMES = {  # ours -> the Vicon capture's labels (content/captures/README.md)
+    "MB": "STER", "MP": "XIPH", "MRS": "ACRO_tip", "MRE1": "EPICl", "MRE2": "EPICm",
+    "MRW1": "STYLr", "MRW2": "STYLu", "MRH": "ASISr", "MLH": "ASISl",
+}
+
+
+def test_real_vicon_capture_gives_physiological_angles():
+    """A real right-arm capture (Z up, right +Y, forward -X) turned into our frame."""
+    from content import content_path
+    from tracking.c3d_io import read_c3d_points
+
+    _, theirs, _ = read_c3d_points(content_path("captures", "ezc3d_vicon_upper_limb.c3d"),
+                                   labels=list(VICON_NAMES.values()))
+    ours = theirs[..., [1, 2, 0]]  # (X, Y, Z) = (their Y, their Z, their X): a proper rotation
+    got = joint_angles(ours, list(VICON_NAMES))
+    assert all(np.isnan(got[f"left_{a}"]).all() for a in ARM_ANGLES)  # left arm not marked
+    elevation = got["right_shoulder_elevation"]
+    assert np.isfinite(elevation).all() and elevation.min() < 30 and 80 < elevation.max() < 120
+    flexion = got["right_elbow_flexion"]
+    assert np.nanmin(flexion) >= 0 and 120 < np.nanmax(flexion) < 160
+    assert np.isnan(flexion).sum() == np.isnan(theirs[:, 6, 0]).sum()  # exactly STYLu's gaps
+    assert np.nanmax(np.abs(got["right_forearm_supination"])) < 100
+    assert np.nanmax(np.abs(got["trunk_forward_lean"])) < 30 and np.nanmax(np.abs(got["trunk_lateral_lean"])) < 30

@@ -302,7 +302,7 @@ def test_c3d_default_residuals_and_label_selection(tmp_path):
     assert_one_line_error(info, path, "lacks markers MRW2 (it has Sub:MB, MP, X)")
 
 
-def test_c3d_reads_a_real_capture_in_metres_or_mm():
+def test_c3d_reads_a_real_vicon_capture():
     path = content_path("captures", "ezc3d_vicon_upper_limb.c3d")
     names, q, rate = read_c3d_points(path, labels=["STER", "XIPH", "STYLu"])
     assert rate == 100.0 and q.shape == (580, 3, 3)
