@@ -156,7 +156,6 @@ def test_sphere_centroid_matches_projection(ctx, msaa):
             errors.append(np.linalg.norm(got - expected))
             assert area == pytest.approx(expected_area, rel=0.03)
             assert result.marker_pixels[0, 0] == pytest.approx(expected_area, rel=0.1)
-    print(f"msaa {msaa}: centroid errors {np.round(errors, 4)} px")
     assert max(errors) < 0.02, f"centroid errors {np.round(errors, 4)} px"
 
 
@@ -180,7 +179,6 @@ def test_sphere_centroid_with_lens_distortion(ctx):
             errors.append(np.linalg.norm(got - expected))
             assert result.marker_pixels[0, 0] > 0
     assert max(moved) > 5.0, "the test must exercise the distortion"
-    print(f"distortion: centroid errors {np.round(errors, 4)} px, lens shifts {np.round(moved, 1)} px")
     assert max(errors) < 0.1, f"centroid errors {np.round(errors, 4)} px"
 
 
