@@ -45,7 +45,7 @@ class TableError(RehabError):
     """An angles or status CSV file cannot be read: missing or malformed."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, eq=False)  # arrays: no elementwise __eq__
 class AnglesTable:
     """A joint-angles CSV.
 
@@ -61,7 +61,7 @@ class AnglesTable:
     angles: dict[str, np.ndarray]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, eq=False)  # arrays: no elementwise __eq__
 class StatusTable:
     """A status CSV in array form.
 

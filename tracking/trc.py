@@ -43,7 +43,7 @@ class TrcError(RehabError):
     """A TRC file cannot be read: missing, not a TRC file, or malformed."""
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, eq=False)  # arrays: no elementwise __eq__
 class TrcData:
     """The content of a TRC file.
 
