@@ -12,6 +12,12 @@ import functools
 import numpy as np
 
 
+def _frozen(a: np.ndarray) -> np.ndarray:
+    """Cached meshes are shared: make them read-only."""
+    a.setflags(write=False)
+    return a
+
+
 def _orient_outward(vertices: np.ndarray, triangles: np.ndarray, centre_of: np.ndarray) -> np.ndarray:
     """Swap the winding of triangles whose right-hand normal points towards ``centre_of``.
 
@@ -78,7 +84,7 @@ def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     tris = _orient_outward(vertices, tris, np.zeros((len(tris), 3)))
     face_centre_dist = np.linalg.norm(vertices[tris].mean(axis=1), axis=1).mean()
     vertices *= 2.0 / (1.0 + face_centre_dist)
-    return vertices.astype(np.float32), tris
+    return _frozen(vertices.astype(np.float32)), _frozen(tris)
 
 
 @functools.lru_cache(maxsize=4)
@@ -104,7 +110,7 @@ def cone_band(segments: int = 48) -> tuple[np.ndarray, np.ndarray]:
     ref = np.hstack([vertices[:, :2], vertices[:, 2:]])
     centre = np.hstack([np.zeros((len(tris), 2)), ref[tris][:, :, 2].mean(axis=1, keepdims=True)])
     tris = _orient_outward(ref, tris, centre)
-    return vertices.astype(np.float32), tris
+    return _frozen(vertices.astype(np.float32)), _frozen(tris)
 
 
 def box(centre_m, size_m) -> tuple[np.ndarray, np.ndarray]:
@@ -128,7 +134,6 @@ def box(centre_m, size_m) -> tuple[np.ndarray, np.ndarray]:
             corners = []
             for du, dw in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
                 p = c + n * h
-                p = p.copy()
                 p[u] += du * h[u]
                 p[w] += dw * h[w]
                 corners.append(p)

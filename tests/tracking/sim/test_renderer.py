@@ -22,6 +22,7 @@ from tracking.sim.renderer import (
     mannequin_scene,
     typical_studio_cameras,
 )
+from tracking.sim.meshes import box, cone_band, icosphere
 from tracking.sim.room import SEAT_TOP_M, build_room
 from tracking.sim.scene import SceneFrame
 
@@ -97,6 +98,24 @@ def test_clip_from_camera_matches_camera_project():
     uv = window.T - 0.5  # OpenCV pixel (0, 0) is the centre of window pixel (0, 0)
     np.testing.assert_allclose(uv, cam.project(p), atol=1e-9)
     assert np.all(np.abs(ndc[2]) < 1.0)
+
+
+def test_meshes_are_wound_outward():
+    for subdiv in (0, 1, 2):
+        v, t = icosphere(subdiv)
+        a, b, c = (v[t[:, k]].astype(float) for k in range(3))
+        assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), a + b + c) > 0)
+        assert np.linalg.norm(v, axis=1).min() > 1.0  # inflated to the mean radius
+    ring, t = cone_band(16)
+    pts = ring.astype(float)  # reference cylinder: (cos, sin, t) is already a point
+    a, b, c = (pts[t[:, k]] for k in range(3))
+    radial = (a + b + c) / 3.0
+    radial[:, 2] = 0.0
+    assert np.all(np.einsum("ij,ij->i", np.cross(b - a, c - a), radial) > 0)
+    pos, nrm = box((1.0, 2.0, 3.0), (0.5, 1.0, 2.0))
+    tri = pos.reshape(-1, 3, 3)
+    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    assert np.all(np.einsum("ij,ij->i", face_n, nrm[::3]) > 0)
 
 
 def test_room_has_chair_and_no_marker_coloured_clutter():
