@@ -599,7 +599,8 @@ class StudioRenderer:
         room: draw the clinic room (walls, floor, ceiling, chair, clutter) around the patient.
         msaa: multisample anti-aliasing samples: 0 (off), 2 or 4.
         ctx: an existing moderngl context to share; by default a standalone EGL context is
-            created (and released by :meth:`release`).
+            created (and released by :meth:`release`). ``render`` changes a shared context's
+            state (bound framebuffer, enables, front face, blending): rebind your own after it.
         lighting: lights and specular strength.
         ceiling: draw the room's ceiling.
 
