@@ -140,9 +140,9 @@ def _add_angles(sub) -> None:
 
 
 def _cmd_angles(args) -> int:
-    from tracking.angles import angles_from_trc_file
+    from tracking.tables import angles_csv_from_trc
 
-    n = angles_from_trc_file(args.trc, args.out)
+    n = angles_csv_from_trc(args.trc, args.out)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 

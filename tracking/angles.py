@@ -247,13 +247,3 @@ def _planar_deg(v: np.ndarray, zero_axis: np.ndarray, positive_axis: np.ndarray)
     across = np.where(np.abs(across) < _REL_EPS, 0.0, across)
     return wrap180(np.degrees(np.arctan2(across, along)))
 
-
-def angles_from_trc_file(trc_path, out_csv) -> int:
-    """``rehab angles``: angles of every frame of a TRC file written to an angles CSV.
-
-    File work lives in :func:`tracking.tables.angles_csv_from_trc`; this name is kept for the
-    command line. Returns the number of frames written.
-    """
-    from tracking.tables import angles_csv_from_trc
-
-    return angles_csv_from_trc(trc_path, out_csv)

@@ -159,12 +159,18 @@ def test_angles_csv_from_trc_names_missing_markers(tmp_path):
     assert not (tmp_path / "angles.csv").exists()
 
 
-def test_cli_entry_name_in_angles_module(tmp_path):
-    from tracking.angles import angles_from_trc_file
+def test_rehab_angles_command_writes_csv_and_reports_missing_markers(tmp_path, capsys):
+    from game.cli import main
 
     trc = tmp_path / "m.trc"
     write_trc(trc, REQUIRED_MARKERS, np.ones((1, 14, 3)), 30.0)
-    assert angles_from_trc_file(trc, tmp_path / "a.csv") == 1
+    assert main(["angles", str(trc), "--out", str(tmp_path / "a.csv")]) == 0
+    assert read_angles_csv(tmp_path / "a.csv").frames.tolist() == [0]
+    bad = tmp_path / "bad.trc"
+    write_trc(bad, REQUIRED_MARKERS[:-1], np.ones((1, 13, 3)), 30.0)
+    assert main(["angles", str(bad), "--out", str(tmp_path / "b.csv")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "MRH" in err
 
 
 # ------------------------------------------------------------------------------ status CSV
