@@ -497,22 +497,25 @@ def _sdf_round_cones(p: np.ndarray, a: np.ndarray, b: np.ndarray, ra: np.ndarray
     return np.where(np.sign(z) * a2 * z2 > k, d_b, np.where(np.sign(y) * a2 * y2 < k, d_a, d_side))
 
 
-def _sdf_ellipsoids(p: np.ndarray, c: np.ndarray, axes: np.ndarray) -> np.ndarray:
+def _sdf_ellipsoids(p: np.ndarray, c: np.ndarray, axes: np.ndarray, bound: bool = False) -> np.ndarray:
     """(N, 3) points vs (E,) ellipsoids with (E, 3, 3) orthogonal semi-axis columns -> (N, E).
 
-    The sign is exact; the magnitude is the usual first-order approximation (exact on the
-    surface, good to a fraction of a millimetre within a centimetre of it).
+    The sign is exact. The magnitude is the usual first-order approximation (exact on the
+    surface, good to a fraction of a millimetre within a centimetre of it), or with ``bound`` a
+    lower bound of the distance outside, ``(|q| - 1) * shortest half axis`` (safe for marching).
     """
     lengths = np.linalg.norm(axes, axis=1)  # (E, 3): length of each column
     units = axes / lengths[:, None, :]
     local = np.einsum("ekj,nek->nej", units, p[:, None, :] - c[None, :, :])  # (N, E, 3)
     k0 = np.linalg.norm(local / lengths[None], axis=2)
+    if bound:
+        return (k0 - 1.0) * lengths.min(axis=1)[None, :]
     k1 = np.linalg.norm(local / (lengths[None] ** 2), axis=2)
     return np.where(k1 > 1e-12, k0 * (k0 - 1.0) / np.maximum(k1, 1e-12), -lengths.min(axis=1)[None, :])
 
 
 def scene_signed_distance(scene: SceneFrame, points_m: np.ndarray, skip_sphere: int = -1,
-                          markers: bool = True) -> np.ndarray:
+                          markers: bool = True, bound: bool = False) -> np.ndarray:
     """Signed distance (m) from points to the union of a scene's primitives.
 
     Args:
@@ -520,6 +523,7 @@ def scene_signed_distance(scene: SceneFrame, points_m: np.ndarray, skip_sphere: 
         points_m: (N, 3) world points.
         skip_sphere: index of a sphere to leave out (e.g. the marker being tested), or -1.
         markers: include marker spheres (False: body surfaces only).
+        bound: return a lower bound of the distance (exact sign) that is safe for sphere tracing.
 
     Returns:
         (N,) float64, negative inside a primitive.
@@ -536,7 +540,7 @@ def scene_signed_distance(scene: SceneFrame, points_m: np.ndarray, skip_sphere: 
     if scene.capsule_r0_m.size:
         parts.append(_sdf_round_cones(p, scene.capsule_p0_m, scene.capsule_p1_m, scene.capsule_r0_m, scene.capsule_r1_m))
     if scene.ellipsoid_centre_m.size:
-        parts.append(_sdf_ellipsoids(p, scene.ellipsoid_centre_m, scene.ellipsoid_axes_m))
+        parts.append(_sdf_ellipsoids(p, scene.ellipsoid_centre_m, scene.ellipsoid_axes_m, bound))
     return np.min(np.concatenate(parts, axis=1), axis=1)
 
 
@@ -567,12 +571,19 @@ def _segments_blocked(scene: SceneFrame, starts_m: np.ndarray, eye_m: np.ndarray
     tmin = np.clip(tmin, 0.0, 1.0)
     tmax = np.clip(tmax, 0.0, 1.0)
     length = np.linalg.norm(d, axis=1)
-    n = int(np.ceil(((tmax - tmin) * length).max() / step_m)) + 2
-    frac = np.linspace(0.0, 1.0, n)
-    t = tmin[:, None] + (tmax - tmin)[:, None] * frac[None, :]  # (R, n)
-    pts = starts_m[:, None, :] + t[:, :, None] * d[:, None, :]
-    sd = scene_signed_distance(scene, pts.reshape(-1, 3), skip_sphere=skip_sphere).reshape(t.shape)
-    return (sd < 0.0).any(axis=1)
+    # Sphere tracing: step by the distance bound (at least step_m) until inside a primitive or out.
+    t = tmin.copy()
+    blocked = np.zeros(starts_m.shape[0], dtype=bool)
+    active = t < tmax
+    while active.any():
+        idx = np.flatnonzero(active)
+        pts = starts_m[idx] + t[idx, None] * d[idx]
+        sd = scene_signed_distance(scene, pts, skip_sphere=skip_sphere, bound=True)
+        hit = sd < 0.0
+        blocked[idx[hit]] = True
+        t[idx] += np.maximum(sd, step_m) / length[idx]
+        active[idx] = ~hit & (t[idx] <= tmax[idx])
+    return blocked
 
 
 def is_occluded(scene: SceneFrame, point_m: np.ndarray, eye_m: np.ndarray, skip_marker: int = -1,
@@ -690,6 +701,7 @@ class _Geometry:
     forearm_start_m: float             # forearm capsule starts this far distal of the elbow centre
     girdle_medial_m: np.ndarray        # (3,) medial end of the right shoulder-girdle capsule
     girdle_r: tuple[float, float]      # its radii (medial, lateral)
+    styloid_bump_r: float              # radius of the skin bumps over the styloids
     hand_half_axes: np.ndarray         # (3,) along, width, thickness
 
 
@@ -711,8 +723,14 @@ class BodyModel:
         )
         self._geo = self._build_geometry()
         self._static = self._build_static()
-        self._marker_rgb = (markerset.rgb.astype(np.float32) / 255.0)
-        self._marker_idx = np.arange(markerset.n_markers, dtype=np.int32)
+        n_m, n_asis = markerset.n_markers, self._static["sphere_r"].shape[0]
+        self._marker_radius = np.full(n_m, markerset.radius_m)
+        self._sphere_rgb = np.concatenate([
+            markerset.rgb.astype(np.float32) / 255.0,
+            np.tile(np.array(TROUSERS_RGB, np.float32) / 255.0, (n_asis, 1)),
+            np.tile(np.array(SKIN_RGB, np.float32) / 255.0, (4, 1)),
+        ])
+        self._sphere_marker_index = np.concatenate([np.arange(n_m, dtype=np.int32), np.full(n_asis + 4, -1, np.int32)])
 
     # ------------------------------------------------------------------ construction
     def _build_geometry(self) -> _Geometry:
@@ -759,7 +777,8 @@ class BodyModel:
             sternum_skin=sternum_skin, sternum_n=sternum_n, xiphoid_skin=xiphoid_skin, xiphoid_n=xiphoid_n,
             upper_arm_r=(r_ua, r_elbow), forearm_r=(r_forearm, r_wrist), forearm_start_m=forearm_start,
             girdle_medial_m=np.array([0.2 * thorax_r[0], sternum_skin[1] + 0.01 * H, 0.1 * thorax_r[2]]),
-            girdle_r=(0.6 * d.neck_radius_m, 0.8 * r_ua),
+            girdle_r=(0.6 * d.neck_radius_m, 0.75 * r_ua),
+            styloid_bump_r=0.006 * H,
             hand_half_axes=np.array([0.45 * d.hand_m, 1.5 * d.styloid_half_width_m, 0.55 * r_wrist]),
         )
 
@@ -810,7 +829,7 @@ class BodyModel:
                 @ _rot_y(math.radians(pose.trunk_axial_rotation_deg)))
 
     def girdle_rise_m(self, elevation_deg: float) -> float:
-        """Automatic rise (m) of the acromion and GH with humerus elevation (scapulohumeral rhythm).
+        """Automatic rise (m) of the acromion marker with humerus elevation (scapulohumeral rhythm).
 
         Smoothly 0 below 30 degrees to 0.017 x stature (3 cm for 1.75 m) at 150 degrees and above,
         close to the acromion rise relative to the sternum in the bundled Vicon capture.
@@ -829,11 +848,15 @@ class BodyModel:
         h = arm.humerus_rot
         u = -h[:, 1]
         elev = math.degrees(math.acos(max(-1.0, min(1.0, -u[1]))))
-        rise = self.girdle_rise_m(elev) + arm.shoulder_shrug_m
-        gh = g.gh_right_m + np.array([0.0, rise, 0.0])
         r_ua = g.upper_arm_r[0]
-        gamma = math.asin(0.008 / r_ua) - math.radians(self.scapular_rotation_deg(elev))
+        gamma0 = math.asin(0.008 / r_ua)
+        gamma = gamma0 - math.radians(self.scapular_rotation_deg(elev))
         acr_n = np.array([math.sin(gamma), math.cos(gamma), 0.0])
+        # The acromion marker turns medially over the humeral head; GH rises by what that turn
+        # takes away so that the marker itself rises by the rhythm plus the shrug.
+        turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - math.cos(gamma))
+        rise = self.girdle_rise_m(elev) + arm.shoulder_shrug_m + turn_drop
+        gh = g.gh_right_m + np.array([0.0, rise, 0.0])
         elbow = gh + d.upper_arm_m * u
         fore = h @ _rot_x(math.radians(arm.elbow_flexion_deg)) @ _rot_y(-math.radians(arm.forearm_supination_deg))
         wrist = elbow - d.forearm_m * fore[:, 1]
@@ -841,7 +864,7 @@ class BodyModel:
         ulnar = fore[:, 2]
         return {
             "gh": gh, "elbow": elbow, "wrist": wrist, "fore": fore,
-            "girdle": gh + np.array([-0.5 * r_ua, -0.1 * r_ua, 0.0]),
+            "girdle": gh + np.array([-0.6 * r_ua, -0.35 * r_ua, 0.0]),
             "acr_skin": gh + r_ua * acr_n, "acr_n": acr_n,
             "lat": lat, "ulnar": ulnar,
         }
@@ -984,12 +1007,13 @@ class BodyModel:
         e_c[4] = lumbar + half @ (e_c[4] - lumbar)
         e_axes[4] = half @ e_axes[4]
 
-        n_static_s = st["sphere_r"].shape[0]
+        rb = g.styloid_bump_r
+        bumps = s["skin"][8:12] - rb * s["normal"][8:12]
         return SceneFrame(
-            sphere_centre_m=np.concatenate([markers, st["sphere_c"]]),
-            sphere_radius_m=np.concatenate([np.full(markers.shape[0], self.markerset.radius_m), st["sphere_r"]]),
-            sphere_rgb=np.concatenate([self._marker_rgb, np.tile(np.array(TROUSERS_RGB, np.float32) / 255.0, (n_static_s, 1))]),
-            sphere_marker_index=np.concatenate([self._marker_idx, np.full(n_static_s, -1, np.int32)]),
+            sphere_centre_m=np.concatenate([markers, st["sphere_c"], bumps]),
+            sphere_radius_m=np.concatenate([self._marker_radius, st["sphere_r"], np.full(4, rb)]),
+            sphere_rgb=self._sphere_rgb,
+            sphere_marker_index=self._sphere_marker_index,
             capsule_p0_m=np.concatenate([p0, st["capsule_p0"]]),
             capsule_p1_m=np.concatenate([p1, st["capsule_p1"]]),
             capsule_r0_m=np.concatenate([np.array(cap_r0), st["capsule_r0"]]),
