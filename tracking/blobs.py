@@ -228,7 +228,10 @@ def _coverage(patch_bgr: np.ndarray, patch_labels: np.ndarray, filled: np.ndarra
     grown = cv2.dilate(filled, _K3)
     outer = cv2.dilate(filled, _K7)
     pix = patch_bgr.astype(np.float32)
-    core = inner if inner.any() else filled
+    own = np.equal(patch_labels, colour + 1).view(np.uint8)
+    core = inner & own  # interior pixels of the marker's colour (not a filled specular hole)
+    if not core.any():
+        core = filled & own
     m = cv2.mean(patch_bgr, mask=core)[:3]  # mean colour of the region's interior (BGR)
     norm = float(np.sqrt(m[0] * m[0] + m[1] * m[1] + m[2] * m[2]))
     if norm <= 0.0:

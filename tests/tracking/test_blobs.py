@@ -1,0 +1,220 @@
+"""find_blobs on rendered marker balls with known centres: sub-pixel accuracy, gating, windows."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tracking.blobs import DEFAULT_MIN_ROUNDNESS, Blobs, find_blobs
+from tracking.colour_table import ColourTable
+from tracking.markerset import load_markerset
+
+SUPERSAMPLE = 8
+AMBIENT = 0.3
+FRONTAL = (0.0, 0.0, -1.0)  # light from the camera (the camera looks along +z)
+LIGHTS = (FRONTAL, (1.0, -1.0, -1.0), (-1.0, 0.3, -0.4), (0.2, 1.0, -0.5))
+BACKGROUNDS_RGB = ((90, 90, 90), (40, 40, 50), (170, 160, 150), (224, 172, 140), (30, 40, 90))
+
+
+@pytest.fixture(scope="module")
+def palette() -> np.ndarray:
+    return load_markerset("upper_limb_seated").palette
+
+
+@pytest.fixture(scope="module")
+def table(palette) -> ColourTable:
+    return ColourTable.build(palette)
+
+
+def canvas(w: int, h: int, background_rgb) -> np.ndarray:
+    """(h, w, 3) float64 RGB image of one colour."""
+    return np.broadcast_to(np.asarray(background_rgb, dtype=np.float64), (h, w, 3)).copy()
+
+
+def draw_ball(image_rgb: np.ndarray, centre_px, radius_px: float, rgb, light=FRONTAL) -> None:
+    """Draw a Lambert-shaded ball (ambient 0.3) into a float RGB image, anti-aliased by area.
+
+    Each pixel averages SUPERSAMPLE x SUPERSAMPLE samples; pixel (i, j) covers [j - 0.5, j + 0.5] x
+    [i - 0.5, i + 0.5], so the ball's true centre in OpenCV pixel coordinates is ``centre_px``.
+    """
+    cx, cy = centre_px
+    h, w = image_rgb.shape[:2]
+    x0, x1 = max(int(np.floor(cx - radius_px)) - 1, 0), min(int(np.ceil(cx + radius_px)) + 2, w)
+    y0, y1 = max(int(np.floor(cy - radius_px)) - 1, 0), min(int(np.ceil(cy + radius_px)) + 2, h)
+    offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+    xs = (np.arange(x0, x1)[:, None] + offsets[None, :]).reshape(-1)
+    ys = (np.arange(y0, y1)[:, None] + offsets[None, :]).reshape(-1)
+    dx = (xs[None, :] - cx) / radius_px
+    dy = (ys[:, None] - cy) / radius_px
+    d2 = dx * dx + dy * dy
+    inside = d2 < 1.0
+    nz = -np.sqrt(np.clip(1.0 - d2, 0.0, 1.0))  # surface normal towards the camera
+    lx, ly, lz = np.asarray(light, dtype=np.float64) / np.linalg.norm(light)
+    shading = AMBIENT + (1.0 - AMBIENT) * np.clip(dx * lx + dy * ly + nz * lz, 0.0, None)
+    patch = image_rgb[y0:y1, x0:x1]
+    under = np.repeat(np.repeat(patch, SUPERSAMPLE, axis=0), SUPERSAMPLE, axis=1)
+    samples = np.where(inside[..., None], shading[..., None] * np.asarray(rgb, dtype=np.float64), under)
+    ny, nx = y1 - y0, x1 - x0
+    image_rgb[y0:y1, x0:x1] = samples.reshape(ny, SUPERSAMPLE, nx, SUPERSAMPLE, 3).mean(axis=(1, 3))
+
+
+def to_bgr(image_rgb: np.ndarray, noise: float = 0.0, seed: int = 0) -> np.ndarray:
+    """Float RGB -> OpenCV BGR uint8, with Gaussian sensor noise of ``noise`` counts."""
+    if noise:
+        image_rgb = image_rgb + np.random.default_rng(seed).normal(0.0, noise, image_rgb.shape)
+    return np.round(np.clip(image_rgb, 0, 255))[..., ::-1].astype(np.uint8)
+
+
+def one_ball(centre, radius, rgb, *, light=FRONTAL, background=(90, 90, 90), noise=1.0, seed=0, size=(64, 56)):
+    image = canvas(*size, background)
+    draw_ball(image, centre, radius, rgb, light)
+    return to_bgr(image, noise, seed)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    radius=st.floats(2.5, 12.0),
+    sub_px=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
+    colour=st.integers(0, 2),
+    light=st.sampled_from(LIGHTS),
+    background=st.sampled_from(BACKGROUNDS_RGB),
+    seed=st.integers(0, 2**16),
+)
+def test_centroid_within_a_tenth_of_a_pixel(table, palette, radius, sub_px, colour, light, background, seed):
+    centre = (30.0 + sub_px[0], 27.0 + sub_px[1])
+    image = one_ball(centre, radius, palette[colour], light=light, background=background, seed=seed)
+    blobs = find_blobs(table.classify(image), table.n_colours, image_bgr=image)
+    assert len(blobs) == 1 and blobs.colour[0] == colour
+    assert blobs.uv_px.dtype == np.float64
+    assert np.hypot(*(blobs.uv_px[0] - centre)) <= 0.1
+    assert abs(blobs.radius_px[0] - radius) <= 0.15
+    assert blobs.roundness[0] >= 0.9
+
+
+def test_unmixing_beats_the_binary_centroid(table, palette):
+    """Why centroids are refined from the image: the binary region's centroid is not accurate."""
+    rng = np.random.default_rng(7)
+    errors = {"binary": [], "refined": []}
+    for trial in range(40):
+        centre = (30.0 + rng.uniform(), 27.0 + rng.uniform())
+        colour = trial % 3
+        image = one_ball(centre, 3.0, palette[colour], light=LIGHTS[trial % 4], seed=trial)
+        labels = table.classify(image)
+        for name, given_image in (("binary", None), ("refined", image)):
+            blobs = find_blobs(labels, table.n_colours, image_bgr=given_image, min_roundness=0.0)
+            errors[name].append(np.hypot(*(blobs.uv_px[0] - centre)))
+    rms = {name: float(np.sqrt(np.mean(np.square(e)))) for name, e in errors.items()}
+    assert max(errors["binary"]) > 0.1
+    assert max(errors["refined"]) < 0.1
+    assert rms["refined"] < rms["binary"] / 3
+
+
+def test_binary_centroids_are_not_truncated(table, palette):
+    image = one_ball((20.37, 18.81), 6.0, palette[0])
+    blobs = find_blobs(table.classify(image), table.n_colours)
+    assert len(blobs) == 1
+    assert np.all(blobs.uv_px != np.round(blobs.uv_px))
+    assert np.hypot(*(blobs.uv_px[0] - (20.37, 18.81))) < 0.3
+
+
+def test_area_gates(table, palette):
+    small = one_ball((20.3, 20.6), 1.5, palette[1])
+    labels = table.classify(small)
+    assert len(find_blobs(labels, 3, image_bgr=small)) == 0
+    assert len(find_blobs(labels, 3, image_bgr=small, min_area_px=4)) == 1
+    big = one_ball((28.0, 28.0), 20.0, palette[1], size=(64, 64))
+    labels = table.classify(big)
+    assert len(find_blobs(labels, 3, image_bgr=big)) == 1
+    assert len(find_blobs(labels, 3, image_bgr=big, max_area_px=1000)) == 0
+
+
+def test_touching_markers_of_one_colour_are_one_unround_blob(table, palette):
+    image = canvas(80, 48, (90, 90, 90))
+    draw_ball(image, (30.2, 24.4), 6.0, palette[2])
+    draw_ball(image, (42.0, 24.9), 6.0, palette[2])
+    bgr = to_bgr(image, 1.0)
+    labels = table.classify(bgr)
+    assert len(find_blobs(labels, 3, image_bgr=bgr)) == 0  # rejected by roundness
+    flagged = find_blobs(labels, 3, image_bgr=bgr, min_roundness=0.0)
+    assert len(flagged) == 1  # merged, not split
+    assert flagged.roundness[0] < DEFAULT_MIN_ROUNDNESS
+    assert flagged.area_px[0] > 1.5 * np.pi * 36
+
+
+def test_touching_markers_of_two_colours_stay_apart(table, palette):
+    image = canvas(80, 48, (90, 90, 90))
+    draw_ball(image, (30.2, 24.4), 6.0, palette[0])
+    draw_ball(image, (42.0, 24.9), 6.0, palette[1])
+    bgr = to_bgr(image, 1.0)
+    blobs = find_blobs(table.classify(bgr), 3, image_bgr=bgr)
+    assert blobs.colour.tolist() == [0, 1]
+    assert np.all(np.hypot(*(blobs.uv_px - [(30.2, 24.4), (42.0, 24.9)]).T) < 0.25)
+
+
+def test_specular_highlight_hole_is_filled(table, palette):
+    image = canvas(64, 56, (90, 90, 90))
+    draw_ball(image, (30.4, 27.7), 7.0, palette[0])
+    image[25:28, 28:31] = 255.0  # white highlight, fails the saturation test
+    bgr = to_bgr(image, 1.0)
+    labels = table.classify(bgr)
+    assert np.all(labels[25:28, 28:31] == 0)
+    blobs = find_blobs(labels, 3, image_bgr=bgr)
+    assert len(blobs) == 1
+    assert np.hypot(*(blobs.uv_px[0] - (30.4, 27.7))) < 0.1
+    assert abs(blobs.area_px[0] - np.pi * 49) < 3.0
+
+
+def test_window_results_land_in_full_image_coordinates(table, palette):
+    image = canvas(320, 240, (90, 90, 90))
+    centres = [(40.3, 50.6), (200.8, 60.1), (150.5, 190.4), (300.2, 200.9)]
+    for i, c in enumerate(centres):
+        draw_ball(image, c, 5.0, palette[i % 3], LIGHTS[i])
+    bgr = to_bgr(image, 1.0)
+    whole = find_blobs(table.classify(bgr), 3, image_bgr=bgr)
+    assert len(whole) == len(centres)
+    for c in centres:
+        x0, y0 = int(c[0]) - 15, int(c[1]) - 15
+        x1, y1 = min(x0 + 30, 320), min(y0 + 30, 240)
+        labels = table.classify_window(bgr, x0, y0, x1, y1)
+        found = find_blobs(labels, 3, image_bgr=bgr[y0:y1, x0:x1], offset_px=(x0, y0))
+        assert len(found) == 1
+        match = np.argmin(np.hypot(*(whole.uv_px - found.uv_px[0]).T))
+        np.testing.assert_allclose(found.uv_px[0], whole.uv_px[match], atol=1e-9)
+        assert np.hypot(*(found.uv_px[0] - c)) < 0.1
+
+
+def test_ball_cut_by_the_image_border(table, palette):
+    image = one_ball((2.0, 20.0), 6.0, palette[0], size=(40, 40))
+    blobs = find_blobs(table.classify(image), 3, image_bgr=image, min_roundness=0.0)
+    assert len(blobs) == 1
+    assert 0.0 <= blobs.uv_px[0, 0] < 6.0
+
+
+def test_order_is_by_colour_then_raster(table, palette):
+    image = canvas(120, 60, (90, 90, 90))
+    for centre, colour in (((100.0, 15.0), 1), ((20.0, 45.0), 0), ((60.0, 15.0), 0), ((20.0, 15.0), 2)):
+        draw_ball(image, centre, 5.0, palette[colour])
+    bgr = to_bgr(image, 1.0)
+    blobs = find_blobs(table.classify(bgr), 3, image_bgr=bgr)
+    assert blobs.colour.tolist() == [0, 0, 1, 2]
+    np.testing.assert_allclose(blobs.uv_px, [(60, 15), (20, 45), (100, 15), (20, 15)], atol=0.1)
+    assert blobs.of_colour(0).uv_px.shape == (2, 2)
+
+
+def test_empty_inputs_give_empty_blobs(table):
+    for labels in (np.zeros((0, 0), dtype=np.uint8), np.zeros((48, 64), dtype=np.uint8)):
+        blobs = find_blobs(labels, table.n_colours)
+        assert len(blobs) == 0
+        assert blobs.uv_px.shape == (0, 2) and blobs.uv_px.dtype == np.float64
+        assert blobs.area_px.shape == blobs.roundness.shape == blobs.radius_px.shape == (0,)
+        assert blobs.colour.shape == (0,) and blobs.colour.dtype == np.int64
+    assert len(Blobs.empty().of_colour(0)) == 0
+
+
+def test_mismatched_inputs_raise(table):
+    with pytest.raises(ValueError, match="same window"):
+        find_blobs(np.zeros((10, 10), dtype=np.uint8), 3, image_bgr=np.zeros((10, 11, 3), dtype=np.uint8))
+    with pytest.raises(ValueError, match="uint8"):
+        find_blobs(np.zeros((10, 10), dtype=np.int32), 3)
+    with pytest.raises(ValueError, match="Blobs arrays"):
+        Blobs(np.zeros((2, 2)), np.zeros(1), np.zeros(2, dtype=np.int64), np.zeros(2), np.zeros(2))
