@@ -39,23 +39,32 @@ one AND, and the look-up is one ``np.take``.
 of the colour at the bin's centre. The smaller table stays in cache, but the index needs three
 shifts, three ANDs and two ORs more.
 
-Measured (``benchmark()``, this machine, 2 cores shared with other jobs, median of repeats, 640x480
-frame of a rendered scene with noise; 4 windows of 40x40 per camera):
+Measured with ``benchmark()`` (median of 50 calls; 640x480 frames with a shaded background, a skin
+patch, 14 anti-aliased marker discs of radius 7 px and noise; 2 cores shared with other jobs, so
+figures vary by up to +-50 % between runs; three runs shown as a range):
 
-=====================================  ============  ==================
-                                        full (8 bit)  quantized (6 bit)
-=====================================  ============  ==================
-classify, one 640x480 frame             0.71 ms       1.40 ms
-classify_window, one 40x40 window       7.8 us        12.2 us
-classify + find_blobs, 4 x 640x480      5.0 ms        -
-build                                   0.26 s        0.27 s
-=====================================  ============  ==================
+==========================================  =============  ==================
+                                             full (8 bit)   quantized (6 bit)
+==========================================  =============  ==================
+classify, one 640x480 frame                  0.49-0.61 ms   0.71-0.91 ms
+classify_window, one 40x40 window            11-12 us       19-20 us
+classify_window, 4 windows of 40x40          45-66 us       -
+classify + find_blobs, 4 frames, refined     16-18 ms       -
+classify + find_blobs, 4 frames, binary      4-7 ms         -
+build                                        0.09-0.12 s    3 ms
+==========================================  =============  ==================
 
-The full table is faster for whole frames and for windows (its index costs one operation; the
-quantized index costs eight, which outweighs the cache benefit of a 256 KiB table), and it is
-exact, so it is the default (``DEFAULT_BITS = 8``). On uniformly random colours the 6-bit table
-agrees with the full table on 99.2 % (7 bits: 99.6 %): bins cut by the oblique hue and saturation
-boundaries cannot agree everywhere; on colours from rendered scenes the agreement is > 99.9 %.
+(Earlier runs under heavier load: full 0.63-0.96 ms, quantized 1.14-1.33 ms per frame; windows
+18-26 us and 32-48 us.) The full table was faster in every run, for whole frames and for windows:
+its index costs one operation (0.2-0.3 ms of the frame) and the look-up ~0.4-0.6 ms; the
+quantized index costs eight operations, which outweighs the cache benefit of a 256 KiB table (its
+look-up alone is ~25 % faster). A pre-filter cannot pay off: a look-up is ~2 ns per pixel, less
+than any test that would skip it, and preallocating the index buffer saved nothing measurable.
+So the full table is the default (``DEFAULT_BITS = 8``); it is also exact. On uniformly random
+colours the 6-bit table agrees with the full one on 99.43 % (7 bits 99.74 %, 5 bits 98.87 %):
+a bin cut by an oblique hue or saturation boundary cannot agree on all its colours, so 99.9 % is
+out of reach for any quantized table with this rule; on the colours of markers and backgrounds
+under the test lights and noise the agreement is > 99.9 %.
 """
 
 from __future__ import annotations
@@ -78,7 +87,7 @@ DEFAULT_MIN_SATURATION = 0.8
 DEFAULT_MIN_VALUE = 0.12
 """Minimum HSV value max(R,G,B)/255: the dark side of a ball at 25 % under 30 % less light."""
 DEFAULT_NOISE_COUNTS = 2.0
-"""Saturation margin for noise, in counts: halves noisy dark-skin pixels, costs 0.2 % of marker pixels."""
+"""Saturation margin for noise, in counts: cuts noisy dark-skin pixels to a third for 0.2 % of marker pixels."""
 MIN_PALETTE_SATURATION = 0.5
 """Palette colours less saturated than this cannot be told from skin, wood and greys."""
 MIN_PALETTE_VALUE = 0.3
@@ -210,7 +219,7 @@ class ColourTable:
         min_value: float = DEFAULT_MIN_VALUE,
         noise_counts: float = DEFAULT_NOISE_COUNTS,
     ) -> "ColourTable":
-        """Fill the table for a palette (deterministic; ~0.3 s for the full table).
+        """Fill the table for a palette (deterministic; ~0.1 s for the full table).
 
         Args:
             palette_rgb: (K, 3) uint8 sRGB marker colours, 1 <= K <= 254.
@@ -260,7 +269,9 @@ class ColourTable:
         lut = _fill_table(bits, palette_hsv, hue_tol_deg, min_saturation, min_value, noise_counts)
         lut.setflags(write=False)
         pal.setflags(write=False)
-        return cls(pal, int(bits), float(hue_tol_deg), float(min_saturation), float(min_value), float(noise_counts), lut)
+        return cls(
+            pal, int(bits), float(hue_tol_deg), float(min_saturation), float(min_value), float(noise_counts), lut
+        )
 
     @property
     def n_colours(self) -> int:
@@ -408,7 +419,9 @@ def benchmark(*, repeats: int = 30, seed: int = 0) -> dict[str, float]:
     result["classify_full_640x480_s"] = median_time(lambda: full.classify(frame))
     result["classify_quantized_640x480_s"] = median_time(lambda: quant.classify(frame))
     windows = [(x, y, x + 40, y + 40) for x, y in ((100, 80), (300, 200), (500, 400), (20, 300))]
-    result["classify_window_full_40x40_s"] = median_time(lambda: full.classify_window(frame, *windows[0]), 10 * repeats)
+    result["classify_window_full_40x40_s"] = median_time(
+        lambda: full.classify_window(frame, *windows[0]), 10 * repeats
+    )
     result["classify_window_quantized_40x40_s"] = median_time(
         lambda: quant.classify_window(frame, *windows[0]), 10 * repeats
     )

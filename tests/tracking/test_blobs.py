@@ -71,7 +71,7 @@ def one_ball(centre, radius, rgb, *, light=FRONTAL, background=(90, 90, 90), noi
     return to_bgr(image, noise, seed)
 
 
-@settings(max_examples=60, deadline=None, derandomize=True)
+@settings(max_examples=150, deadline=None, derandomize=True)
 @given(
     radius=st.floats(2.5, 12.0),
     sub_px=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)),
