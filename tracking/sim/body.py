@@ -828,45 +828,72 @@ class BodyModel:
                 @ _rot_x(-math.radians(pose.trunk_forward_lean_deg))
                 @ _rot_y(math.radians(pose.trunk_axial_rotation_deg)))
 
-    def girdle_rise_m(self, elevation_deg: float) -> float:
+    def girdle_rise_m(self, elevation_deg: float | np.ndarray) -> float | np.ndarray:
         """Automatic rise (m) of the acromion marker with humerus elevation (scapulohumeral rhythm).
 
         Smoothly 0 below 30 degrees to 0.017 x stature (3 cm for 1.75 m) at 150 degrees and above,
-        close to the acromion rise relative to the sternum in the bundled Vicon capture.
+        close to the acromion rise relative to the sternum in the bundled Vicon capture. Works on
+        scalars and arrays.
         """
-        s = min(1.0, max(0.0, (elevation_deg - 30.0) / 120.0))
-        return 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s)
+        s = np.clip((np.asarray(elevation_deg, dtype=np.float64) - 30.0) / 120.0, 0.0, 1.0)
+        rise = 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s)
+        return float(rise) if rise.ndim == 0 else rise
 
     @staticmethod
-    def scapular_rotation_deg(elevation_deg: float) -> float:
+    def scapular_rotation_deg(elevation_deg: float | np.ndarray) -> np.ndarray:
         """Upward rotation (deg) that turns the acromion's top face medially as the arm rises."""
-        return 0.5 * min(120.0, max(0.0, elevation_deg - 30.0))
+        return 0.5 * np.clip(np.asarray(elevation_deg, dtype=np.float64) - 30.0, 0.0, 120.0)
+
+    def shoulder_local_m(self, elevation_deg: float | np.ndarray, shrug_m: float | np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Right shoulder in upright-trunk coordinates for humerus elevations and shrugs.
+
+        Args:
+            elevation_deg: (...) humerus elevation from hanging, degrees.
+            shrug_m: (...) shoulder shrug, metres.
+
+        Returns:
+            gh: (..., 3) glenohumeral centre.
+            acromion_skin: (..., 3) skin point over the acromion (the marker rests on it).
+            acromion_normal: (..., 3) outward unit normal there.
+        """
+        r_ua = self._geo.upper_arm_r[0]
+        gamma0 = math.asin(0.008 / r_ua)
+        if np.ndim(elevation_deg) == 0 and np.ndim(shrug_m) == 0:  # per-frame fast path
+            e = float(elevation_deg)
+            gamma = gamma0 - math.radians(0.5 * min(120.0, max(0.0, e - 30.0)))
+            acr_n = np.array([math.sin(gamma), math.cos(gamma), 0.0])
+            turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - math.cos(gamma))
+            s = min(1.0, max(0.0, (e - 30.0) / 120.0))
+            rise = 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s) + float(shrug_m) + turn_drop
+            gh = self._geo.gh_right_m + np.array([0.0, rise, 0.0])
+            return gh, gh + r_ua * acr_n, acr_n
+        gamma = gamma0 - np.radians(self.scapular_rotation_deg(elevation_deg))
+        zero = np.zeros_like(gamma)
+        acr_n = np.stack([np.sin(gamma), np.cos(gamma), zero], axis=-1)
+        # The acromion marker turns medially over the humeral head; GH rises by what that turn
+        # takes away so that the marker itself rises by the rhythm plus the shrug.
+        turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - np.cos(gamma))
+        rise = self.girdle_rise_m(elevation_deg) + np.asarray(shrug_m, dtype=np.float64) + turn_drop
+        gh = self._geo.gh_right_m + np.stack([zero, rise + zero, zero], axis=-1)
+        return gh, gh + r_ua * acr_n, acr_n
 
     def _arm(self, arm: ArmPose) -> dict[str, np.ndarray]:
         """One arm in trunk coordinates, right-side convention (x = lateral)."""
-        d, g = self.dims, self._geo
+        d = self.dims
         h = arm.humerus_rot
         u = -h[:, 1]
         elev = math.degrees(math.acos(max(-1.0, min(1.0, -u[1]))))
-        r_ua = g.upper_arm_r[0]
-        gamma0 = math.asin(0.008 / r_ua)
-        gamma = gamma0 - math.radians(self.scapular_rotation_deg(elev))
-        acr_n = np.array([math.sin(gamma), math.cos(gamma), 0.0])
-        # The acromion marker turns medially over the humeral head; GH rises by what that turn
-        # takes away so that the marker itself rises by the rhythm plus the shrug.
-        turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - math.cos(gamma))
-        rise = self.girdle_rise_m(elev) + arm.shoulder_shrug_m + turn_drop
-        gh = g.gh_right_m + np.array([0.0, rise, 0.0])
+        gh, acr_skin, acr_n = self.shoulder_local_m(elev, arm.shoulder_shrug_m)
+        r_ua = self._geo.upper_arm_r[0]
         elbow = gh + d.upper_arm_m * u
         fore = h @ _rot_x(math.radians(arm.elbow_flexion_deg)) @ _rot_y(-math.radians(arm.forearm_supination_deg))
         wrist = elbow - d.forearm_m * fore[:, 1]
-        lat = h[:, 0]
-        ulnar = fore[:, 2]
         return {
             "gh": gh, "elbow": elbow, "wrist": wrist, "fore": fore,
             "girdle": gh + np.array([-0.6 * r_ua, -0.35 * r_ua, 0.0]),
-            "acr_skin": gh + r_ua * acr_n, "acr_n": acr_n,
-            "lat": lat, "ulnar": ulnar,
+            "acr_skin": acr_skin, "acr_n": acr_n,
+            "lat": h[:, 0], "ulnar": fore[:, 2],
         }
 
     def _solve(self, pose: Pose) -> dict[str, np.ndarray]:
