@@ -28,7 +28,6 @@ with the forearm forward, +90 = palm up.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass, field, replace
 from statistics import NormalDist
@@ -39,16 +38,14 @@ from tracking.errors import ContentError, MotionError
 from tracking.markerset import MarkerSet
 from tracking.sim.scene import SceneFrame
 
-log = logging.getLogger(__name__)
-
 # Adult stature (mean, SD) in metres, roughly ANSUR II / western European adults.
 _STATURE_M = {"female": (1.625, 0.064), "male": (1.755, 0.070)}
 
-# Render colours, sRGB 0-255. Chosen far in hue from the marker colours (yellow ~50 deg,
-# green ~140 deg, magenta ~300 deg): a desaturated skin tone (~18 deg), a dark blue-grey shirt
-# (~225 deg), dark grey trousers and shoes.
+# Render colours, sRGB 0-255, kept away from the saturated marker colours (yellow, green,
+# magenta, cyan): a moderately saturated skin tone (hue ~18 deg, 30 deg from the yellow), a dark
+# grey shirt with a hint of blue (saturation 0.2), dark grey trousers and shoes.
 SKIN_RGB = (205, 150, 125)
-SHIRT_RGB = (58, 70, 100)
+SHIRT_RGB = (62, 66, 78)
 TROUSERS_RGB = (46, 46, 54)
 SHOES_RGB = (30, 28, 28)
 
@@ -414,6 +411,9 @@ class Pose:
         trunk_axial_rotation_deg: + the chest turns towards the patient's left (right-hand rule
             about +Y).
         right, left: the arms, each in the right-side convention (same numbers = same motion).
+
+    ``Pose()`` is upright with both arms hanging straight down (external rotation 0, thumbs
+    forward); the seed's start pose is :func:`reference_pose`.
     """
 
     trunk_forward_lean_deg: float = 0.0
@@ -723,14 +723,33 @@ class BodyModel:
         )
         self._geo = self._build_geometry()
         self._static = self._build_static()
-        n_m, n_asis = markerset.n_markers, self._static["sphere_r"].shape[0]
-        self._marker_radius = np.full(n_m, markerset.radius_m)
-        self._sphere_rgb = np.concatenate([
-            markerset.rgb.astype(np.float32) / 255.0,
-            np.tile(np.array(TROUSERS_RGB, np.float32) / 255.0, (n_asis, 1)),
-            np.tile(np.array(SKIN_RGB, np.float32) / 255.0, (4, 1)),
-        ])
-        self._sphere_marker_index = np.concatenate([np.arange(n_m, dtype=np.int32), np.full(n_asis + 4, -1, np.int32)])
+        self._constant = self._build_constant()
+
+    def _build_constant(self) -> dict[str, np.ndarray]:
+        """Radii and colours of the scene, the same in every frame (read-only arrays).
+
+        Spheres: markers, ASIS bumps, styloid bumps. Capsules: per side (right, left) upper arm,
+        forearm, shoulder girdle; neck; thighs; lower legs. Ellipsoids: thorax, head, right
+        hand, left hand, abdomen; pelvis, feet.
+        """
+        ms, g, st = self.markerset, self._geo, self._static
+        n_m, n_asis = ms.n_markers, st["sphere_r"].shape[0]
+        rgb = lambda *colours: np.array(colours, np.float32) / 255.0  # noqa: E731
+        arm_r0 = [g.upper_arm_r[0], g.forearm_r[0], g.girdle_r[0]]
+        arm_r1 = [g.upper_arm_r[1], g.forearm_r[1], g.girdle_r[1]]
+        out = {
+            "sphere_r": np.concatenate([np.full(n_m, ms.radius_m), st["sphere_r"], np.full(4, g.styloid_bump_r)]),
+            "sphere_rgb": np.concatenate([ms.rgb.astype(np.float32) / 255.0, rgb(*[TROUSERS_RGB] * n_asis),
+                                          rgb(*[SKIN_RGB] * 4)]),
+            "sphere_marker_index": np.concatenate([np.arange(n_m, dtype=np.int32), np.full(n_asis + 4, -1, np.int32)]),
+            "capsule_r0": np.concatenate([arm_r0 * 2 + [g.neck[2]], st["capsule_r0"]]),
+            "capsule_r1": np.concatenate([arm_r1 * 2 + [g.neck[3]], st["capsule_r1"]]),
+            "capsule_rgb": rgb(*[SHIRT_RGB, SKIN_RGB, SHIRT_RGB] * 2, SKIN_RGB, *[TROUSERS_RGB] * 4),
+            "ellipsoid_rgb": np.concatenate([rgb(SHIRT_RGB, SKIN_RGB, SKIN_RGB, SKIN_RGB, SHIRT_RGB), st["ellipsoid_rgb"]]),
+        }
+        for a in out.values():
+            a.setflags(write=False)
+        return out
 
     # ------------------------------------------------------------------ construction
     def _build_geometry(self) -> _Geometry:
@@ -836,11 +855,10 @@ class BodyModel:
         scalars and arrays.
         """
         s = np.clip((np.asarray(elevation_deg, dtype=np.float64) - 30.0) / 120.0, 0.0, 1.0)
-        rise = 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s)
-        return float(rise) if rise.ndim == 0 else rise
+        return 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s)
 
     @staticmethod
-    def scapular_rotation_deg(elevation_deg: float | np.ndarray) -> np.ndarray:
+    def scapular_rotation_deg(elevation_deg: float | np.ndarray) -> float | np.ndarray:
         """Upward rotation (deg) that turns the acromion's top face medially as the arm rises."""
         return 0.5 * np.clip(np.asarray(elevation_deg, dtype=np.float64) - 30.0, 0.0, 120.0)
 
@@ -859,22 +877,13 @@ class BodyModel:
         """
         r_ua = self._geo.upper_arm_r[0]
         gamma0 = math.asin(0.008 / r_ua)
-        if np.ndim(elevation_deg) == 0 and np.ndim(shrug_m) == 0:  # per-frame fast path
-            e = float(elevation_deg)
-            gamma = gamma0 - math.radians(0.5 * min(120.0, max(0.0, e - 30.0)))
-            acr_n = np.array([math.sin(gamma), math.cos(gamma), 0.0])
-            turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - math.cos(gamma))
-            s = min(1.0, max(0.0, (e - 30.0) / 120.0))
-            rise = 0.017 * self.dims.stature_m * s * s * (3.0 - 2.0 * s) + float(shrug_m) + turn_drop
-            gh = self._geo.gh_right_m + np.array([0.0, rise, 0.0])
-            return gh, gh + r_ua * acr_n, acr_n
         gamma = gamma0 - np.radians(self.scapular_rotation_deg(elevation_deg))
-        zero = np.zeros_like(gamma)
+        zero = 0.0 * gamma
         acr_n = np.stack([np.sin(gamma), np.cos(gamma), zero], axis=-1)
         # The acromion marker turns medially over the humeral head; GH rises by what that turn
         # takes away so that the marker itself rises by the rhythm plus the shrug.
         turn_drop = (r_ua + self.markerset.radius_m) * (math.cos(gamma0) - np.cos(gamma))
-        rise = self.girdle_rise_m(elevation_deg) + np.asarray(shrug_m, dtype=np.float64) + turn_drop
+        rise = self.girdle_rise_m(elevation_deg) + shrug_m + turn_drop
         gh = self._geo.gh_right_m + np.stack([zero, rise + zero, zero], axis=-1)
         return gh, gh + r_ua * acr_n, acr_n
 
@@ -961,7 +970,8 @@ class BodyModel:
         """Distance (m) from the elbow's skin to the trunk surface (thorax, abdomen); < 0 inside."""
         scene = self.scene(pose)
         elbow = self.joint_centres_m(pose, side)["elbow"]
-        sd = _sdf_ellipsoids(elbow[None], scene.ellipsoid_centre_m[[0, 4]], scene.ellipsoid_axes_m[[0, 4]])
+        trunk = [0, 4]  # thorax and abdomen (see _build_constant)
+        sd = _sdf_ellipsoids(elbow[None], scene.ellipsoid_centre_m[trunk], scene.ellipsoid_axes_m[trunk])
         return float(sd.min()) - self._geo.upper_arm_r[1]
 
     def elbow_at_side_abduction_deg(self, pose: Pose, side: str = "right") -> float:
@@ -1000,9 +1010,8 @@ class BodyModel:
         half = rotation_exp(0.5 * rotation_log(rt))
         markers = s["skin"][self._marker_landmark] + self.markerset.radius_m * s["normal"][self._marker_landmark]
 
-        cap_p0, cap_p1, cap_r0, cap_r1, cap_rgb = [], [], [], [], []
+        cap_p0, cap_p1 = [], []
         hand_c, hand_axes = [], []
-        (ua0, ua1), (fa0, fa1) = g.upper_arm_r, g.forearm_r
         ha = g.hand_half_axes
         for side in SIDES:
             a = s["arms"][side]
@@ -1011,19 +1020,12 @@ class BodyModel:
             hc = a["wrist"] - (0.008 * self.dims.stature_m + ha[0]) * fore[:, 1]
             cap_p0 += [a["gh"] * m, (a["elbow"] - g.forearm_start_m * fore[:, 1]) * m, g.girdle_medial_m * m]
             cap_p1 += [a["elbow"] * m, a["wrist"] * m, a["girdle"] * m]
-            cap_r0 += [ua0, fa0, g.girdle_r[0]]
-            cap_r1 += [ua1, fa1, g.girdle_r[1]]
-            cap_rgb += [SHIRT_RGB, SKIN_RGB, SHIRT_RGB]
             hand_c.append(hc * m)
             # Hand: long axis along the forearm, width along the styloid axis, thickness palmar.
             axes = np.stack([fore[:, 1] * ha[0], fore[:, 2] * ha[1], fore[:, 0] * ha[2]], axis=1)
             hand_axes.append(m[:, None] * axes)
-        neck0, neck1, nr0, nr1 = g.neck
-        cap_p0.append(neck0)
-        cap_p1.append(neck1)
-        cap_r0.append(nr0)
-        cap_r1.append(nr1)
-        cap_rgb.append(SKIN_RGB)
+        cap_p0.append(g.neck[0])
+        cap_p1.append(g.neck[1])
         p0 = lumbar + (np.array(cap_p0) - lumbar) @ rt.T
         p1 = lumbar + (np.array(cap_p1) - lumbar) @ rt.T
 
@@ -1034,21 +1036,19 @@ class BodyModel:
         e_c[4] = lumbar + half @ (e_c[4] - lumbar)
         e_axes[4] = half @ e_axes[4]
 
-        rb = g.styloid_bump_r
-        bumps = s["skin"][8:12] - rb * s["normal"][8:12]
+        bumps = s["skin"][8:12] - g.styloid_bump_r * s["normal"][8:12]
+        c = self._constant
         return SceneFrame(
             sphere_centre_m=np.concatenate([markers, st["sphere_c"], bumps]),
-            sphere_radius_m=np.concatenate([self._marker_radius, st["sphere_r"], np.full(4, rb)]),
-            sphere_rgb=self._sphere_rgb,
-            sphere_marker_index=self._sphere_marker_index,
+            sphere_radius_m=c["sphere_r"],
+            sphere_rgb=c["sphere_rgb"],
+            sphere_marker_index=c["sphere_marker_index"],
             capsule_p0_m=np.concatenate([p0, st["capsule_p0"]]),
             capsule_p1_m=np.concatenate([p1, st["capsule_p1"]]),
-            capsule_r0_m=np.concatenate([np.array(cap_r0), st["capsule_r0"]]),
-            capsule_r1_m=np.concatenate([np.array(cap_r1), st["capsule_r1"]]),
-            capsule_rgb=np.concatenate([np.array(cap_rgb, np.float32) / 255.0,
-                                        np.tile(np.array(TROUSERS_RGB, np.float32) / 255.0, (4, 1))]),
+            capsule_r0_m=c["capsule_r0"],
+            capsule_r1_m=c["capsule_r1"],
+            capsule_rgb=c["capsule_rgb"],
             ellipsoid_centre_m=np.concatenate([e_c, st["ellipsoid_c"]]),
             ellipsoid_axes_m=np.concatenate([e_axes, st["ellipsoid_axes"]]),
-            ellipsoid_rgb=np.concatenate([np.array([SHIRT_RGB, SKIN_RGB, SKIN_RGB, SKIN_RGB, SHIRT_RGB], np.float32) / 255.0,
-                                          st["ellipsoid_rgb"]]),
+            ellipsoid_rgb=c["ellipsoid_rgb"],
         )

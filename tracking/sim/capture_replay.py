@@ -29,7 +29,6 @@ the capture's first frame, plays it and blends back.
 from __future__ import annotations
 
 import logging
-import math
 from pathlib import Path
 from typing import Literal
 

@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 import pydantic
 
+from content import content_path
 from tracking.content import StrictModel, available, load_model, load_yaml
 from tracking.errors import ContentError, MotionError
 from tracking.markerset import load_markerset
@@ -42,7 +43,6 @@ from tracking.sim.body import (
     reference_arm,
     swing_twist,
 )
-from content import content_path
 
 log = logging.getLogger(__name__)
 
@@ -392,16 +392,21 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         ContentError: a malformed motion YAML (the message names the file and key).
     """
     path = _resolve(name_or_path)
+    # The replay pulls in ezc3d and scipy: import it only when a capture is asked for.
     if path.suffix.lower() == ".c3d":
         from tracking.sim.capture_replay import replay_c3d
 
-        return replay_c3d(path, dims)
-    data = load_yaml(path)
-    kind = data.get("kind") if isinstance(data, dict) else None
-    if kind == "scripted":
-        return scripted_motion(load_model(path, _ScriptedSpec), path.stem, dims)
-    if kind == "capture":
-        from tracking.sim.capture_replay import CaptureSpec, capture_motion
+        motion: Motion = replay_c3d(path, dims)
+    else:
+        data = load_yaml(path)
+        kind = data.get("kind") if isinstance(data, dict) else None
+        if kind == "scripted":
+            motion = scripted_motion(load_model(path, _ScriptedSpec), path.stem, dims)
+        elif kind == "capture":
+            from tracking.sim.capture_replay import CaptureSpec, capture_motion
 
-        return capture_motion(load_model(path, CaptureSpec), path, dims)
-    raise ContentError(f"{path}: kind: must be 'scripted' or 'capture' (got {kind!r})")
+            motion = capture_motion(load_model(path, CaptureSpec), path, dims)
+        else:
+            raise ContentError(f"{path}: kind: must be 'scripted' or 'capture' (got {kind!r})")
+    log.info("motion %s: %.1f s for a %.2f m %s", motion.name, motion.duration_s, dims.stature_m, dims.sex)
+    return motion

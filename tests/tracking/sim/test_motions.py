@@ -296,6 +296,6 @@ def test_capture_blends_in_from_the_reference_and_back():
     assert np.abs(start - just_after).max() < 0.002  # no jump into the capture
     # Resampling: any rate, poses between capture frames are interpolated.
     t = motion.capture_start_s + 10.5 / motion.rate_hz
-    a, b, mid = (model.markers_m(motion.pose_at(motion.capture_start_s + k / motion.rate_hz)) for k in (10, 11, 10.5))
+    a, b = (model.markers_m(motion.pose_at(motion.capture_start_s + k / motion.rate_hz)) for k in (10, 11))
     assert np.abs(model.markers_m(motion.pose_at(t)) - (a + b) / 2).max() < 0.002
     assert len(motion.times(7.3)) == int(motion.duration_s * 7.3 + 1e-9) + 1
