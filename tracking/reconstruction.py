@@ -115,16 +115,25 @@ class ReconstructionParams:
         gate_px: largest epipolar distance / reprojection error of an accepted observation, pixels.
         max_rms_px: largest RMS reprojection error of an accepted point, pixels.
         marker_radius_m: radius of the marker balls (for the size check).
-        size_ratio_range: accepted (observed radius / expected radius) per observation.
+        size_ratio_range: accepted (observed radius / expected radius) per observation of a point
+            seen by three or more cameras (one view may miss it: a partly hidden ball).
+        size_ratio_range_two_view: the tighter range both views of a two-camera point must meet;
+            with no third camera to vouch for it, the blob sizes are what tells a true point
+            from a mirror-image pairing (symmetric rigs pair a left marker in one camera with its
+            right twin in the mirrored camera, consistently with the epipolar geometry).
         min_depth_m, max_depth_m: plausible distance of a marker from a camera.
+        ambiguity_ratio: a two-camera pairing is taken over a rival pairing sharing one of its
+            centroids only if its reprojection error is below this fraction of the rival's.
     """
 
     gate_px: float = 3.0
     max_rms_px: float = 2.0
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
+    size_ratio_range_two_view: tuple[float, float] = (0.85, 1.15)
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
+    ambiguity_ratio: float = 0.35
 
 
 def _epipolar_distance_px(geo: RigGeometry, i: int, j: int, xi: np.ndarray, xj: np.ndarray) -> np.ndarray:
@@ -267,7 +276,9 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     size_ok = np.where(seen & np.isfinite(ratio), (ratio > lo) & (ratio < hi), True)
     # a ball may be partly hidden in one view (smaller blob); require most views to fit
     size_fit = size_ok.sum(axis=1) >= np.maximum(2, n_used - 1)
-    valid &= size_fit
+    lo2, hi2 = params.size_ratio_range_two_view
+    two_view_fit = np.all(~seen | ((ratio > lo2) & (ratio < hi2)), axis=1)
+    valid &= size_fit & ((n_used > 2) | two_view_fit)
     # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
     #    each centroid serves one point
     order = np.lexsort((rms, -n_used))
@@ -284,13 +295,19 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     for r in order:
         if valid[r] and n_used[r] >= 3 and free(r):
             yield take(r)
-    # 5. two-camera points only when unambiguous among what is left: a centroid with two
-    #    plausible partners in the other camera cannot be resolved from two views
+    # 5. two-camera points: a centroid may have several plausible partners in the other camera
+    #    (markers near one epipolar plane). Take a pairing only when it is clearly the best for
+    #    both of its centroids: its reprojection error is below ``ambiguity_ratio`` times that of
+    #    every rival pairing that shares a centroid. Otherwise two views cannot tell, and no
+    #    point is better than a ghost.
     pending = [r for r in order if valid[r] and n_used[r] == 2 and free(r)]
-    partners = [np.zeros(n, np.int64) for n in counts]
-    for r in pending:
-        for c in np.flatnonzero(seen[r]):
-            partners[c][obs[r, c]] += 1
-    for r in pending:
-        if free(r) and all(partners[c][obs[r, c]] == 1 for c in np.flatnonzero(seen[r])):
+    for r in pending:  # ``order`` sorts by error, so the first free one is the best
+        if not free(r):
+            continue
+        cams_r = np.flatnonzero(seen[r])
+        rivals = [
+            q for q in pending
+            if q != r and free(q) and any(obs[q, c] == obs[r, c] for c in cams_r if seen[q, c])
+        ]
+        if all(rms[r] < params.ambiguity_ratio * rms[q] for q in rivals):
             yield take(r)

@@ -96,8 +96,9 @@ def _clutter(b: _Builder) -> None:
     # Door on the back wall, brown, with a grey handle.
     b.box((1.6, 1.0, hw - 0.02), (0.9, 2.0, 0.04), (115, 72, 40))
     b.box((1.25, 1.0, hw - 0.06), (0.12, 0.03, 0.05), (150, 150, 155))
-    # Poster on the front wall: teal frame, white paper, red and blue bands.
-    b.box((0.0, 1.65, -hw + 0.01), (0.9, 0.7, 0.02), (0, 120, 128))
+    # Poster on the front wall: petrol frame (a low-saturation near-miss of the cyan markers),
+    # white paper, red and blue bands.
+    b.box((0.0, 1.65, -hw + 0.01), (0.9, 0.7, 0.02), (70, 118, 124))
     b.box((0.0, 1.65, -hw + 0.025), (0.78, 0.58, 0.01), (240, 240, 236))
     b.box((0.0, 1.78, -hw + 0.035), (0.6, 0.1, 0.01), (200, 35, 35))
     b.box((0.0, 1.55, -hw + 0.035), (0.6, 0.1, 0.01), (30, 70, 180))
@@ -113,8 +114,8 @@ def _clutter(b: _Builder) -> None:
     # Boxes on the floor, front-right: orange and khaki (low-saturation yellow).
     b.box((2.4, 0.2, -2.5), (0.5, 0.4, 0.4), (230, 100, 20))
     b.box((2.45, 0.55, -2.5), (0.35, 0.3, 0.3), (180, 168, 125))
-    # Teal cabinet on the right wall, white shelf unit on the left wall.
-    b.box((hw - 0.25, 0.6, 0.8), (0.45, 1.2, 0.8), (20, 125, 130))
+    # Slate-green cabinet on the right wall, white shelf unit on the left wall.
+    b.box((hw - 0.25, 0.6, 0.8), (0.45, 1.2, 0.8), (72, 112, 108))
     b.box((-hw + 0.2, 0.9, 1.2), (0.35, 1.8, 0.9), (235, 235, 232))
     b.box((-hw + 0.2, 1.2, 1.2), (0.36, 0.03, 0.86), (150, 150, 150))
     # Plant in the back-left corner: terracotta pot, olive (low-saturation green) foliage.

@@ -1,0 +1,236 @@
+"""The simulated studio: a body moving through a motion, imaged by virtual cameras.
+
+It joins the body model (:mod:`tracking.sim.body`), a motion (:mod:`tracking.sim.motions`) and the
+renderer (:mod:`tracking.sim.renderer`), adds lighting drift, colour cast and sensor noise, and
+keeps the ground truth (marker centres, per-camera visibility, joint angles). The tracker never
+sees the truth: it gets only the images, as from real cameras.
+"""
+
+from __future__ import annotations
+
+import csv
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from calibration.camera import Camera
+from tracking.markerset import MarkerSet, load_markerset
+from tracking.recording import FrameSet, RecordingWriter
+from tracking.sim.body import BodyDimensions, BodyModel, Pose
+from tracking.sim.motions import Motion, load_motion
+from tracking.sim.renderer import StudioRenderer
+from tracking.sim.rigs import load_rig
+
+log = logging.getLogger(__name__)
+
+#: A camera "sees" a marker when at least this fraction of the ball's disc is visible.
+SEEN_FRACTION = 0.6
+
+
+@dataclass(frozen=True, slots=True)
+class SimulationSettings:
+    """Everything that defines a simulated recording (all of it is written to meta.yaml)."""
+
+    motion: str = "right_external_rotation"
+    rig: str = "ring4"
+    n_cameras: int | None = None
+    size_px: tuple[int, int] = (640, 480)
+    fps: float = 30.0
+    seconds: float | None = None
+    percentile: float = 50.0
+    sex: str = "female"
+    noise_sigma: float = 1.5
+    brightness_drop: float = 0.0
+    colour_cast: tuple[float, float, float] | None = None
+    markerset: str = "upper_limb_seated"
+    seed: int = 0
+    images: bool = False
+    msaa: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class SimFrame:
+    """One simulated frame set with its ground truth.
+
+    Attributes:
+        frames: the images (what a tracker gets).
+        pose: the body pose.
+        markers_m: (M, 3) true marker centres, world metres.
+        visible_fraction: (C, M) fraction of each marker's disc visible in each camera (0..1).
+    """
+
+    frames: FrameSet
+    pose: Pose
+    markers_m: np.ndarray
+    visible_fraction: np.ndarray
+
+
+def expected_marker_pixels(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float) -> np.ndarray:
+    """(C, M) pixel area of each unoccluded marker ball in each camera (0 outside the image)."""
+    out = np.zeros((len(cameras), len(markers_m)))
+    for c, cam in enumerate(cameras):
+        depth = cam.world_to_camera(markers_m)[:, 2]
+        uv = cam.project(markers_m)
+        w, h = cam.size_px
+        f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r_px = f * radius_m / depth
+        inside = (depth > 0) & (uv[:, 0] > -0.5) & (uv[:, 0] < w - 0.5) & (uv[:, 1] > -0.5) & (uv[:, 1] < h - 0.5)
+        out[c] = np.where(inside, np.pi * r_px**2, 0.0)
+    return out
+
+
+class Studio:
+    """A body model, its marker set and a camera rig with an offscreen renderer.
+
+    Args:
+        cameras: the virtual cameras.
+        markerset: the markers worn by the patient.
+        dims: body dimensions.
+        msaa: renderer anti-aliasing samples (None: the renderer's default).
+        ctx: an existing moderngl context to share (e.g. the game's).
+    """
+
+    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, dims: BodyDimensions, *,
+                 msaa: int | None = None, ctx=None):
+        self.cameras = tuple(cameras)
+        self.markerset = markerset
+        self.body = BodyModel(dims, markerset)
+        kwargs = {} if msaa is None else {"msaa": msaa}
+        self.renderer = StudioRenderer(self.cameras, ctx=ctx, **kwargs)
+
+    def render(self, pose: Pose, index: int, time_s: float, *, exposure: float = 1.0,
+               colour_cast: Sequence[float] = (1.0, 1.0, 1.0), noise_sigma: float = 0.0,
+               seed: int = 0, with_visibility: bool = True) -> SimFrame:
+        scene = self.body.scene(pose)
+        markers = self.body.markers_m(pose)
+        res = self.renderer.render(scene, exposure=exposure, colour_cast=colour_cast,
+                                   noise_sigma=noise_sigma, seed=seed, with_visibility=with_visibility)
+        if res.marker_pixels is not None:
+            expected = expected_marker_pixels(self.cameras, markers, self.markerset.radius_m)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                vis = np.where(expected > 0, res.marker_pixels / expected, 0.0)
+            vis = np.clip(vis, 0.0, 1.0)
+        else:
+            vis = np.full((len(self.cameras), self.markerset.n_markers), np.nan)
+        return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis)
+
+    def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
+             brightness_drop: float = 0.0, colour_cast: Sequence[float] | None = None, seed: int = 0,
+             with_visibility: bool = True) -> Iterator[SimFrame]:
+        """Render a motion frame by frame. Lighting drifts linearly over the motion's length."""
+        duration = motion.duration_s if seconds is None else min(seconds, motion.duration_s)
+        n = int(np.floor(duration * fps + 1e-9)) + 1
+        cast_end = np.asarray(colour_cast if colour_cast is not None else (1.0, 1.0, 1.0), dtype=float)
+        for i in range(n):
+            frac = i / max(n - 1, 1)
+            t = i / fps
+            yield self.render(
+                motion.pose_at(t), i, t,
+                exposure=1.0 - brightness_drop * frac,
+                colour_cast=tuple(1.0 + (cast_end - 1.0) * frac),
+                noise_sigma=noise_sigma,
+                seed=seed * 1_000_003 + i,
+                with_visibility=with_visibility,
+            )
+
+    def n_frames(self, motion: Motion, fps: float, seconds: float | None = None) -> int:
+        duration = motion.duration_s if seconds is None else min(seconds, motion.duration_s)
+        return int(np.floor(duration * fps + 1e-9)) + 1
+
+    def close(self) -> None:
+        self.renderer.release()
+
+    def __enter__(self) -> "Studio":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def studio_from_settings(settings: SimulationSettings) -> tuple[Studio, Motion]:
+    """Build the studio and the motion that a :class:`SimulationSettings` describes."""
+    markerset = load_markerset(settings.markerset)
+    cameras = load_rig(settings.rig, settings.size_px)
+    if settings.n_cameras is not None:
+        if not 2 <= settings.n_cameras <= len(cameras):
+            from tracking.errors import ContentError
+
+            raise ContentError(f"--cameras {settings.n_cameras}: the rig {settings.rig} has {len(cameras)} cameras; give 2..{len(cameras)}")
+        cameras = cameras[: settings.n_cameras]
+    dims = BodyDimensions.from_percentile(settings.percentile, settings.sex)
+    motion = load_motion(settings.motion, dims)
+    return Studio(cameras, markerset, dims, msaa=settings.msaa), motion
+
+
+def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress: bool = False) -> str:
+    """Write a recording folder with ground truth; return a one-line summary."""
+    from tracking.angles import joint_angles
+    from tracking.tables import write_angles_csv
+    from tracking.trc import write_trc
+
+    out_dir = Path(out_dir)
+    studio, motion = studio_from_settings(settings)
+    with studio:
+        writer = RecordingWriter(out_dir, studio.cameras, settings.fps, images=settings.images)
+        truth, vis_rows = [], []
+        n = studio.n_frames(motion, settings.fps, settings.seconds)
+        frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
+                             brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
+                             seed=settings.seed)
+        try:
+            for sf in tqdm(frames, total=n, unit="frame", desc="simulating", disable=not progress):
+                writer.write(sf.frames.images)
+                truth.append(sf.markers_m)
+                vis_rows.append(sf.visible_fraction)
+        finally:
+            writer.close()
+        ms = studio.markerset
+        writer.write_meta(
+            ms.name, ms.rgb,
+            source="simulator",
+            motion=settings.motion,
+            rig=settings.rig,
+            cameras=[c.name for c in studio.cameras],
+            size=list(settings.size_px),
+            body={"percentile": settings.percentile, "sex": settings.sex},
+            noise_sigma=settings.noise_sigma,
+            brightness_drop=settings.brightness_drop,
+            colour_cast=list(settings.colour_cast) if settings.colour_cast else None,
+            seed=settings.seed,
+        )
+    positions_m = np.stack(truth)
+    n_frames = len(positions_m)
+    frame_idx = np.arange(n_frames)
+    times = frame_idx / settings.fps
+    write_trc(out_dir / "truth.trc", ms.names, positions_m * 1000.0, settings.fps)
+    write_angles_csv(out_dir / "truth_angles.csv", frame_idx, times, joint_angles(positions_m, ms.names))
+    write_visibility_csv(out_dir / "truth_visibility.csv", [c.name for c in studio.cameras], ms.names, np.stack(vis_rows))
+    return f"wrote {n_frames} frame sets from {len(studio.cameras)} cameras at {settings.size_px[0]}x{settings.size_px[1]} to {out_dir}"
+
+
+def write_visibility_csv(path: Path, camera_names: Sequence[str], marker_names: Sequence[str], fraction: np.ndarray) -> None:
+    """``frame,marker,<cam1>,<cam2>...``: visible fraction (0..1) of each marker in each camera."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["frame", "marker", *camera_names])
+        for i, per_frame in enumerate(fraction):
+            for m, name in enumerate(marker_names):
+                w.writerow([i, name, *(f"{v:.3f}" for v in per_frame[:, m])])
+
+
+def read_visibility_csv(path: Path, marker_names: Sequence[str]) -> np.ndarray:
+    """Inverse of :func:`write_visibility_csv` -> (T, C, M) fractions."""
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    n_cams = len(rows[0]) - 2
+    index = {n: k for k, n in enumerate(marker_names)}
+    n_frames = max(int(r[0]) for r in rows[1:]) + 1
+    out = np.zeros((n_frames, n_cams, len(marker_names)))
+    for r in rows[1:]:
+        out[int(r[0]), :, index[r[1]]] = [float(v) for v in r[2:]]
+    return out
