@@ -296,7 +296,7 @@ class BodyDimensions:
             hip_width_m=(0.250 if f else 0.222) * H,
             upper_arm_radius_m=(0.0272 if f else 0.0280) * H,
             forearm_radius_m=(0.0245 if f else 0.0260) * H,
-            wrist_radius_m=(0.0155 if f else 0.0160) * H,
+            wrist_radius_m=(0.0110 if f else 0.0115) * H,  # wrist thickness / 2; the styloids stick out
             epicondyle_half_width_m=(0.0185 if f else 0.0200) * H,
             styloid_half_width_m=(0.0155 if f else 0.0165) * H,
             thigh_length_m=0.245 * H,
@@ -438,7 +438,7 @@ class Pose:
 REFERENCE_ABDUCTION_DEG = 16.0
 REFERENCE_EXTERNAL_ROTATION_DEG = -25.0
 REFERENCE_ELBOW_FLEXION_DEG = 10.0
-REFERENCE_SUPINATION_DEG = 35.0
+REFERENCE_SUPINATION_DEG = 25.0
 
 
 def reference_arm(
