@@ -147,6 +147,79 @@ def _cmd_angles(args) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- validate
+def _add_validate(sub) -> None:
+    p = sub.add_parser(
+        "validate",
+        help="measurement accuracy on the simulated patient, motion by motion",
+        description="Render each motion of the simulated patient and compare the measured 3D points "
+        "with the truth: completeness, RMSE, ghost points.",
+    )
+    p.add_argument("--motion", action="append", default=None, help="motion name (repeat; default: all)")
+    p.add_argument("--rig", default="ring4", help="camera layout (default: %(default)s)")
+    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
+    p.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default: 640x480)")
+    p.add_argument("--fps", type=_positive_float, default=15.0, help="frame rate (default: %(default)s)")
+    p.add_argument("--seconds", type=_positive_float, default=None, help="cut each motion to this length")
+    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
+    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95")
+    p.add_argument("--sex", choices=("female", "male"), default="female")
+    p.set_defaults(func=_cmd_validate)
+
+
+def _cmd_validate(args) -> int:
+    from tracking.sim.studio import SimulationSettings
+    from tracking.sim.validate import combine, validate
+
+    base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
+                              seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
+                              sex=args.sex)
+    results = []
+    for name, acc in validate(base, args.motion, progress=True):
+        results.append(acc)
+        print(f"{name:26s} {acc.summary()}", flush=True)
+    if len(results) > 1:
+        print(f"{'all':26s} {combine(results).summary()}")
+    return 0
+
+
+# --------------------------------------------------------------------------- play
+def _add_play(sub) -> None:
+    p = sub.add_parser(
+        "play",
+        help="watch the simulated patient being measured live (interim viewer)",
+        description="Render the simulated patient from the virtual cameras, measure the markers live and "
+        "show the camera images with the detected markers, a front and side view of the measured points "
+        "and the speed. Keys: Space pause, Right arrow next motion, R restart, Esc/Q quit.",
+    )
+    p.add_argument("--motion", default="right_external_rotation",
+                   help="built-in motion name, or a motion YAML file (default: %(default)s)")
+    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
+    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--fps", type=_positive_float, default=15.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--headless", action="store_true",
+                   help="render offscreen without a window, one frame set per 1/fps of motion")
+    p.add_argument("--seconds", type=_positive_float, default=None,
+                   help="stop after this much motion time (default: until quit; 5 with --headless)")
+    p.add_argument("--screenshot", type=Path, default=None, help="save the last frame shown as a PNG")
+    p.set_defaults(func=_cmd_play)
+
+
+def _cmd_play(args) -> int:
+    import os
+
+    # pygame greets on import; keep the command's output to its one summary line.
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+    from game.viewer import PlayOptions, run_viewer
+
+    seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
+    options = PlayOptions(motion=args.motion, rig=args.rig, size_px=args.size, fps=args.fps,
+                          headless=args.headless, seconds=seconds, screenshot=args.screenshot)
+    summary = run_viewer(options)
+    print(f"rehab play: {summary.line()}")
+    return 0
+
+
 # --------------------------------------------------------------------------- bench
 def _add_bench(sub) -> None:
     p = sub.add_parser("bench", help="measure speed: colour table, centroids, triangulation, simulator")
@@ -175,7 +248,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_simulate(sub)
     _add_track(sub)
     _add_angles(sub)
+    _add_validate(sub)
     _add_bench(sub)
+    _add_play(sub)
     return parser
 
 

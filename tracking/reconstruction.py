@@ -130,7 +130,7 @@ class ReconstructionParams:
     max_rms_px: float = 2.0
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
-    size_ratio_range_two_view: tuple[float, float] = (0.85, 1.15)
+    size_ratio_range_two_view: tuple[float, float] = (0.8, 1.15)
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
     ambiguity_ratio: float = 0.35
@@ -215,6 +215,13 @@ def _refine(geo: RigGeometry, xn_obs: np.ndarray, seen: np.ndarray, params: Reco
     return p, err, seen
 
 
+def _size_ratio(geo: RigGeometry, p: np.ndarray, r_obs: np.ndarray, params: ReconstructionParams) -> np.ndarray:
+    """(K, C) observed blob radius / radius expected for a ball at the point's depth (f R / z)."""
+    depth = _depths(geo, p)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return r_obs / (geo.focal_px[None, :] * params.marker_radius_m / depth)
+
+
 def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], params: ReconstructionParams):
     """Yield (point, obs index per camera (C,) with -1, rms px) for one colour."""
     n_cams = geo.n_cameras
@@ -259,19 +266,31 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         obs[ok, c] = best[ok]
     # 3. triangulate with everything, dropping disagreeing views
     p, err, seen = _refine(geo, xn_obs, seen, params)
-    obs = np.where(seen, obs, -1)
-    n_used = seen.sum(axis=1)
-    rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1))
-    depth = _depths(geo, p)
-    valid = (n_used >= 2) & np.isfinite(rms) & (rms <= params.max_rms_px)
-    valid &= np.all(~seen | ((depth > params.min_depth_m) & (depth < params.max_depth_m)), axis=1)
-    # size consistency: observed radius vs. f R / depth
+    # a partly hidden ball shows a smaller blob whose centroid is shifted: leave such views out
+    # of points that keep two or more full-size views
     r_obs = np.full((K, n_cams), np.nan)
     for c in range(n_cams):
         if counts[c]:
             r_obs[:, c] = np.where(obs[:, c] >= 0, rad[c][np.maximum(obs[:, c], 0)], np.nan)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = r_obs / (geo.focal_px[None, :] * params.marker_radius_m / depth)
+    ratio = _size_ratio(geo, p, r_obs, params)
+    partial = seen & (ratio < params.size_ratio_range_two_view[0])
+    redo = partial.any(axis=1) & ((seen & ~partial).sum(axis=1) >= 2)
+    if redo.any():
+        seen[redo] &= ~partial[redo]
+        p_r, err_r, seen_r = _refine(geo, xn_obs[redo], seen[redo], params)
+        p[redo], err[redo], seen[redo] = p_r, err_r, seen_r
+        ratio[redo] = _size_ratio(geo, p_r, r_obs[redo], params)
+    obs = np.where(seen, obs, -1)
+    # proposals that ended with the same centroids are one candidate
+    _, first = np.unique(obs, axis=0, return_index=True)
+    unique = np.zeros(K, dtype=bool)
+    unique[first] = True
+    n_used = seen.sum(axis=1)
+    rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1))
+    depth = _depths(geo, p)
+    valid = unique & (n_used >= 2) & np.isfinite(rms) & (rms <= params.max_rms_px)
+    valid &= np.all(~seen | ((depth > params.min_depth_m) & (depth < params.max_depth_m)), axis=1)
+    # size consistency: observed radius vs. f R / depth
     lo, hi = params.size_ratio_range
     size_ok = np.where(seen & np.isfinite(ratio), (ratio > lo) & (ratio < hi), True)
     # a ball may be partly hidden in one view (smaller blob); require most views to fit

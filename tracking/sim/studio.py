@@ -27,10 +27,6 @@ from tracking.sim.rigs import load_rig
 
 log = logging.getLogger(__name__)
 
-#: A camera "sees" a marker when at least this fraction of the ball's disc is visible.
-SEEN_FRACTION = 0.6
-
-
 @dataclass(frozen=True, slots=True)
 class SimulationSettings:
     """Everything that defines a simulated recording (all of it is written to meta.yaml)."""

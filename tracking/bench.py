@@ -1,0 +1,95 @@
+"""``rehab bench``: speed figures measured in one run, so that their ratios are meaningful.
+
+All timings are medians over frame sets of the simulated patient (4 cameras, a real motion),
+measured on one core in this process. Machines are noisy: quote the ratios.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from typing import Callable, Iterator, Sequence
+
+import numpy as np
+
+from tracking.colour_table import ColourTable
+from tracking.measure import FrameMeasurer
+from tracking.sim.studio import SimulationSettings, studio_from_settings
+
+
+def _median_s(fn: Callable[[], object], repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+def simulate_frames(settings: SimulationSettings, n_frames: int) -> tuple[list[tuple[np.ndarray, ...]], float, object]:
+    """Render ``n_frames`` frame sets; returns (images per frame set, frame sets per second, studio cameras)."""
+    studio, motion = studio_from_settings(settings)
+    with studio:
+        fps = settings.fps
+        start = max(0.0, min(motion.duration_s - n_frames / fps, 2.0))  # skip the still start
+        frames = []
+        t0 = time.perf_counter()
+        for i in range(n_frames):
+            t = start + i / fps
+            sf = studio.render(motion.pose_at(t), i, t, noise_sigma=settings.noise_sigma, seed=i,
+                               with_visibility=False)
+            frames.append(sf.frames.images)
+        rate = n_frames / (time.perf_counter() - t0)
+        return frames, rate, studio.cameras
+
+
+def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> Iterator[str]:
+    """Yield report lines as each measurement finishes."""
+    base = SimulationSettings(motion=motion, rig="ring4", fps=30.0, noise_sigma=1.5)
+    yield f"rehab bench: 4 cameras, motion {motion}, {n_frames} frame sets per figure (medians)"
+
+    # simulator throughput
+    _, rate_small, _ = simulate_frames(replace(base, size_px=(320, 240)), n_frames)
+    frames, rate_large, cameras = simulate_frames(replace(base, size_px=(640, 480)), n_frames)
+    yield f"simulator (render + read back 4 cameras):  320x240 {rate_small:6.1f} frame sets/s   640x480 {rate_large:6.1f} frame sets/s"
+
+    # memory floor: copying the frame set once
+    copy_s = float(np.median([_median_s(lambda f=f: [img.copy() for img in f], 3) for f in frames]))
+
+    # full-frame measurement
+    from tracking.markerset import load_markerset
+
+    ms = load_markerset(base.markerset)
+    table = ColourTable.build(ms.palette)
+    measurer = FrameMeasurer(cameras, table, ms.radius_m)
+    measurer.measure(frames[0])  # warm-up (page in the table)
+    measurer.times.__init__()
+    per_frame = [_median_s(lambda f=f: measurer.measure(f), 1) for f in frames]
+    measure_s = float(np.median(per_frame))
+    stages = measurer.times.per_frame_ms()
+    yield (
+        f"full-frame measurement, 4x640x480:        {1000 * measure_s:7.2f} ms per frame set "
+        f"({1 / measure_s:6.1f} frame sets/s)"
+    )
+    yield "    stages (mean ms): " + ", ".join(f"{k} {v:.2f}" for k, v in stages.items())
+    yield f"memory floor (copy the 4 frames once):     {1000 * copy_s:7.3f} ms per frame set"
+    yield f"ratio measurement / copy:                  {measure_s / copy_s:7.1f}x"
+
+    # colour table: full against quantized, on the same images
+    full = table
+    quant = ColourTable.build(ms.palette, bits=6)
+    imgs = [img for f in frames[: max(5, n_frames // 4)] for img in f]
+    t_full = float(np.median([_median_s(lambda i=i: full.classify(i), 3) for i in imgs]))
+    t_quant = float(np.median([_median_s(lambda i=i: quant.classify(i), 3) for i in imgs]))
+    agree = float(np.mean([np.mean(full.classify(i) == quant.classify(i)) for i in imgs[:8]]))
+    yield (
+        f"colour table per 640x480 image:            full (2^24) {1000 * t_full:.3f} ms, "
+        f"quantized (2^18) {1000 * t_quant:.3f} ms -> {'full' if t_full <= t_quant else 'quantized'} is "
+        f"{max(t_full, t_quant) / min(t_full, t_quant):.2f}x faster; labels agree on {100 * agree:.3f} % of pixels"
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:  # pragma: no cover - convenience
+    for line in run_benchmarks():
+        print(line, flush=True)
+    return 0
