@@ -53,7 +53,7 @@ def blob_gates(camera: Camera, marker_radius_m: float, near_m: float = 0.8, far_
 
 
 def observations_from_blobs(blobs: Blobs) -> CameraObservations:
-    return CameraObservations(blobs.uv_px, blobs.colour, blobs.radius_px)
+    return CameraObservations(blobs.uv_px, blobs.colour, blobs.radius_px, blobs.roundness)
 
 
 @dataclass

@@ -36,15 +36,17 @@ class CameraObservations:
         uv_px: (N, 2) float64 distorted pixel centroids.
         colour: (N,) int palette index of each centroid.
         radius_px: (N,) float64 equivalent radius sqrt(area / pi) of each blob (NaN if unknown).
+        roundness: (N,) float64 in 0..1 (1 = a full disc), or None if unknown (taken as round).
     """
 
     uv_px: np.ndarray
     colour: np.ndarray
     radius_px: np.ndarray
+    roundness: np.ndarray | None = None
 
     @staticmethod
     def empty() -> "CameraObservations":
-        return CameraObservations(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0))
+        return CameraObservations(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0))
 
 
 @dataclass(frozen=True, slots=True)
@@ -121,6 +123,9 @@ class ReconstructionParams:
             with no third camera to vouch for it, the blob sizes are what tells a true point
             from a mirror-image pairing (symmetric rigs pair a left marker in one camera with its
             right twin in the mirrored camera, consistently with the epipolar geometry).
+        min_roundness_two_view: both blobs of a two-camera point must be this round: a partly
+            hidden ball (a crescent) has a shifted centroid and may line up with another marker's
+            view by chance.
         min_depth_m, max_depth_m: plausible distance of a marker from a camera.
         ambiguity_ratio: a two-camera pairing is taken over a rival pairing sharing one of its
             centroids only if its reprojection error is below this fraction of the rival's.
@@ -131,6 +136,7 @@ class ReconstructionParams:
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
     size_ratio_range_two_view: tuple[float, float] = (0.8, 1.15)
+    min_roundness_two_view: float = 0.72
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
     ambiguity_ratio: float = 0.35
@@ -182,7 +188,11 @@ def reconstruct(
         sel = [np.flatnonzero(o.colour == colour) for o in observations]
         xn = [xn_all[c][sel[c]] for c in range(n_cams)]
         rad = [observations[c].radius_px[sel[c]] for c in range(n_cams)]
-        for p, obs_local, err in _reconstruct_colour(geo, xn, rad, params):
+        rnd = [
+            np.ones(len(sel[c])) if observations[c].roundness is None else observations[c].roundness[sel[c]]
+            for c in range(n_cams)
+        ]
+        for p, obs_local, err in _reconstruct_colour(geo, xn, rad, rnd, params):
             obs_global = np.array([sel[c][k] if k >= 0 else -1 for c, k in enumerate(obs_local)])
             pts.append(p)
             cols.append(int(colour))
@@ -222,7 +232,8 @@ def _size_ratio(geo: RigGeometry, p: np.ndarray, r_obs: np.ndarray, params: Reco
         return r_obs / (geo.focal_px[None, :] * params.marker_radius_m / depth)
 
 
-def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], params: ReconstructionParams):
+def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], rnd: list[np.ndarray],
+                        params: ReconstructionParams):
     """Yield (point, obs index per camera (C,) with -1, rms px) for one colour."""
     n_cams = geo.n_cameras
     counts = [len(x) for x in xn]
@@ -296,7 +307,13 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     # a ball may be partly hidden in one view (smaller blob); require most views to fit
     size_fit = size_ok.sum(axis=1) >= np.maximum(2, n_used - 1)
     lo2, hi2 = params.size_ratio_range_two_view
-    two_view_fit = np.all(~seen | ((ratio > lo2) & (ratio < hi2)), axis=1)
+    round_obs = np.ones((K, n_cams))
+    for c in range(n_cams):
+        if counts[c]:
+            round_obs[:, c] = np.where(obs[:, c] >= 0, rnd[c][np.maximum(obs[:, c], 0)], 1.0)
+    two_view_fit = np.all(
+        ~seen | ((ratio > lo2) & (ratio < hi2) & (round_obs >= params.min_roundness_two_view)), axis=1
+    )
     valid &= size_fit & ((n_used > 2) | two_view_fit)
     # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
     #    each centroid serves one point
