@@ -123,9 +123,9 @@ class ReconstructionParams:
             with no third camera to vouch for it, the blob sizes are what tells a true point
             from a mirror-image pairing (symmetric rigs pair a left marker in one camera with its
             right twin in the mirrored camera, consistently with the epipolar geometry).
-        min_roundness_two_view: both blobs of a two-camera point must be this round: a partly
-            hidden ball (a crescent) has a shifted centroid and may line up with another marker's
-            view by chance.
+        roundness_two_view: (every view, best view) roundness of a two-camera point: at least one
+            view must show a whole ball and none a thin crescent. Two crescents of partly hidden
+            balls (shifted centroids) can line up with each other by chance.
         min_depth_m, max_depth_m: plausible distance of a marker from a camera.
         ambiguity_ratio: a two-camera pairing is taken over a rival pairing sharing one of its
             centroids only if its reprojection error is below this fraction of the rival's.
@@ -136,7 +136,7 @@ class ReconstructionParams:
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
     size_ratio_range_two_view: tuple[float, float] = (0.8, 1.15)
-    min_roundness_two_view: float = 0.72
+    roundness_two_view: tuple[float, float] = (0.6, 0.85)
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
     ambiguity_ratio: float = 0.35
@@ -311,9 +311,9 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     for c in range(n_cams):
         if counts[c]:
             round_obs[:, c] = np.where(obs[:, c] >= 0, rnd[c][np.maximum(obs[:, c], 0)], 1.0)
-    two_view_fit = np.all(
-        ~seen | ((ratio > lo2) & (ratio < hi2) & (round_obs >= params.min_roundness_two_view)), axis=1
-    )
+    r_min, r_best = params.roundness_two_view
+    two_view_fit = np.all(~seen | ((ratio > lo2) & (ratio < hi2) & (round_obs >= r_min)), axis=1)
+    two_view_fit &= np.where(seen, round_obs, 0.0).max(axis=1) >= r_best
     valid &= size_fit & ((n_used > 2) | two_view_fit)
     # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
     #    each centroid serves one point
