@@ -555,7 +555,8 @@ def draw_cross(surface: pygame.Surface, centres: Sequence[tuple[int, int]], colo
 def blit_bgr(surface: pygame.Surface, image_bgr: np.ndarray, rect: pygame.Rect) -> None:
     """Draw a (H, W, 3) uint8 BGR image scaled into ``rect``."""
     h, w = image_bgr.shape[:2]
-    interp = cv2.INTER_AREA if rect.w < w else cv2.INTER_LINEAR
+    # Area averaging costs 3 ms per 640x480 image; bilinear is as clean down to half size.
+    interp = cv2.INTER_AREA if 2 * rect.w < w else cv2.INTER_LINEAR
     scaled = np.ascontiguousarray(cv2.resize(image_bgr, rect.size, interpolation=interp))
     surface.blit(pygame.image.frombuffer(scaled, rect.size, "BGR"), rect.topleft)
 
