@@ -286,16 +286,37 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     ratio = _size_ratio(geo, p, r_obs, params)
     partial = seen & (ratio < params.size_ratio_range_two_view[0])
     redo = partial.any(axis=1) & ((seen & ~partial).sum(axis=1) >= 2)
+    # a dropped partial view still belongs to the point: it is consumed with it, so that it
+    # cannot pair by chance with another marker's view later
+    belongs = np.where(partial & redo[:, None], obs, -1)
     if redo.any():
         seen[redo] &= ~partial[redo]
         p_r, err_r, seen_r = _refine(geo, xn_obs[redo], seen[redo], params)
         p[redo], err[redo], seen[redo] = p_r, err_r, seen_r
         ratio[redo] = _size_ratio(geo, p_r, r_obs[redo], params)
     obs = np.where(seen, obs, -1)
+    # any undersized blob at the point's projection in a camera the point does not use is the same
+    # ball, partly hidden there (dropped above, or never gathered): it belongs to the point too
+    depth_all = _depths(geo, p)
+    for c in range(n_cams):
+        if counts[c] == 0:
+            continue
+        cam = geo.extrinsics[c]
+        pc = p @ cam[:, :3].T + cam[:, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            proj = pc[:, :2] / pc[:, 2:3]
+        dist = np.linalg.norm(proj[:, None, :] - xn[c][None, :, :], axis=-1) * geo.focal_px[c]
+        near = np.nan_to_num(dist, nan=np.inf).argmin(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            small = rad[c][near] / (geo.focal_px[c] * params.marker_radius_m / depth_all[:, c])
+        hit = ~seen[:, c] & (dist[np.arange(K), near] < 2.0 * params.gate_px) & (small < params.size_ratio_range_two_view[0])
+        belongs[hit, c] = near[hit]
     # proposals that ended with the same centroids are one candidate
-    _, first = np.unique(obs, axis=0, return_index=True)
+    # (the one that carries dropped partial views is kept)
+    pref = np.argsort(~(belongs >= 0).any(axis=1), kind="stable")
+    _, first = np.unique(obs[pref], axis=0, return_index=True)
     unique = np.zeros(K, dtype=bool)
-    unique[first] = True
+    unique[pref[first]] = True
     n_used = seen.sum(axis=1)
     rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1))
     depth = _depths(geo, p)
@@ -326,6 +347,8 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     def take(r: int):
         for c in np.flatnonzero(seen[r]):
             used[c][obs[r, c]] = True
+        for c in np.flatnonzero(belongs[r] >= 0):
+            used[c][belongs[r, c]] = True
         return p[r], obs[r].copy(), float(rms[r])
 
     for r in order:
@@ -336,7 +359,11 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     #    both of its centroids: its reprojection error is below ``ambiguity_ratio`` times that of
     #    every rival pairing that shares a centroid. Otherwise two views cannot tell, and no
     #    point is better than a ghost.
+    # Candidates whose two views are both whole balls go first (then by error), so that they
+    # consume the partial views that belong to them before a chance pairing can use those.
+    whole = np.where(seen, round_obs, 1.0).min(axis=1) >= r_best
     pending = [r for r in order if valid[r] and n_used[r] == 2 and free(r)]
+    pending.sort(key=lambda r: (not whole[r], rms[r]))
     for r in pending:  # ``order`` sorts by error, so the first free one is the best
         if not free(r):
             continue
@@ -344,6 +371,7 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         rivals = [
             q for q in pending
             if q != r and free(q) and any(obs[q, c] == obs[r, c] for c in cams_r if seen[q, c])
+            and whole[q] >= whole[r]
         ]
         if all(rms[r] < params.ambiguity_ratio * rms[q] for q in rivals):
             yield take(r)
