@@ -25,7 +25,10 @@ saturation 0.3-0.75 at hues of 20-40 deg, next to the yellow; a warm cast brings
 (``noise_counts = 2``) keeps it out. White speculars, greys, black and dark clothes fail the
 saturation or the value floor. With sensor noise of 2.5 counts the table keeps > 99.9 % of marker
 pixels down to 30 % brightness (> 95 % at 18 %); deep-shadow dark skin leaks ~1-10 % scattered
-pixels, which ``find_blobs``'s area and roundness gates reject.
+pixels, which ``find_blobs``'s area and roundness gates reject. Any saturated object within the
+hue tolerance of a marker is marker-coloured to the table: orange and olive pass as yellow, purple
+as magenta, teal and (with a cyan marker at 191 deg) saturated denim blue (213 deg) under a warm
+cast as cyan; clothes and props must avoid the marker hues.
 
 Full and quantized tables
 -------------------------
@@ -40,26 +43,31 @@ of the colour at the bin's centre. The smaller table stays in cache, but the ind
 shifts, three ANDs and two ORs more.
 
 Measured with ``benchmark()`` (median of 50 calls; 640x480 frames with a shaded background, a skin
-patch, 14 anti-aliased marker discs of radius 7 px and noise; 2 cores shared with other jobs, so
-figures vary by up to +-50 % between runs; three runs shown as a range):
+patch, 14 anti-aliased marker discs of radius 7 px and noise) on 2 cores shared with other jobs;
+ranges over three runs at a load average of ~1.5 and of 3-7:
 
-==========================================  =============  ==================
-                                             full (8 bit)   quantized (6 bit)
-==========================================  =============  ==================
-classify, one 640x480 frame                  0.49-0.61 ms   0.71-0.91 ms
-classify_window, one 40x40 window            11-12 us       19-20 us
-classify_window, 4 windows of 40x40          45-66 us       -
-classify + find_blobs, 4 frames, refined     16-18 ms       -
-classify + find_blobs, 4 frames, binary      4-7 ms         -
-build                                        0.09-0.12 s    3 ms
-==========================================  =============  ==================
+==========================================  ==================  ==================
+                                             load ~1.5           load 3-7
+==========================================  ==================  ==================
+classify 640x480, full table                 0.49-0.61 ms        0.51-0.97 ms
+classify 640x480, quantized 6-bit            0.71-0.91 ms        0.79-1.21 ms
+classify_window 40x40, full                  11-12 us            11-26 us
+classify_window 40x40, quantized             19-20 us            19-45 us
+4 windows of 40x40, full                     45-66 us            47-102 us
+classify + find_blobs, 4 frames, binary      4-7 ms              6-9 ms
+classify + find_blobs, 4 frames, refined     16-18 ms            22-31 ms
+build, full / quantized                      0.09-0.12 s / 3 ms  0.12-0.21 s / 3-12 ms
+==========================================  ==================  ==================
 
-(Earlier runs under heavier load: full 0.63-0.96 ms, quantized 1.14-1.33 ms per frame; windows
-18-26 us and 32-48 us.) The full table was faster in every run, for whole frames and for windows:
-its index costs one operation (0.2-0.3 ms of the frame) and the look-up ~0.4-0.6 ms; the
-quantized index costs eight operations, which outweighs the cache benefit of a 256 KiB table (its
-look-up alone is ~25 % faster). A pre-filter cannot pay off: a look-up is ~2 ns per pixel, less
-than any test that would skip it, and preallocating the index buffer saved nothing measurable.
+Interleaved A/B timing (400 frame pairs, 4000 window pairs, load ~3.5): the full table was
+faster in 96 % of frame pairs (median 0.98 vs 1.18 ms) and 99 % of window pairs (11.8 vs
+20.2 us). Its index costs one operation (0.2-0.3 ms of a frame) and the look-up ~0.4-0.6 ms; the
+quantized index costs eight operations, which outweighs the cache benefit of a 256 KiB table
+(its look-up alone is ~25 % faster). There is no pre-filter: the look-up costs ~2 ns per pixel,
+about what any per-pixel test that could skip it would cost; preallocating the index buffer saved
+nothing measurable. Refined blob centroids cost ~0.1-0.3 ms per blob (tracking.blobs; the 16-18 ms
+row predates its last guard, which adds ~10 %).
+
 So the full table is the default (``DEFAULT_BITS = 8``); it is also exact. On uniformly random
 colours the 6-bit table agrees with the full one on 99.43 % (7 bits 99.74 %, 5 bits 98.87 %):
 a bin cut by an oblique hue or saturation boundary cannot agree on all its colours, so 99.9 % is
