@@ -111,6 +111,7 @@ class FrameMeasurer:
                     min_area_px=gate.min_area_px,
                     max_area_px=gate.max_area_px,
                     min_roundness=gate.min_roundness,
+                    image_bgr=img,
                 )
             )
             t2 = time.perf_counter()
