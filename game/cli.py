@@ -38,6 +38,18 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _add_studio_options(p, *, size=(640, 480), fps=30.0) -> None:
+    """Options shared by the commands that run the simulated studio."""
+    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
+    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
+    p.add_argument("--size", type=_size, default=size, help=f"image size WxH (default: {size[0]}x{size[1]})")
+    p.add_argument("--fps", type=_positive_float, default=fps, help="frame rate (default: %(default)s)")
+    p.add_argument("--seconds", type=_positive_float, default=None, help="cut the motion(s) to this length")
+    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95 (default: %(default)s)")
+    p.add_argument("--sex", choices=("female", "male"), default="female")
+    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma in 8-bit units (default: %(default)s)")
+
+
 # --------------------------------------------------------------------------- simulate
 def _add_simulate(sub) -> None:
     p = sub.add_parser(
@@ -49,14 +61,7 @@ def _add_simulate(sub) -> None:
     p.add_argument("out_dir", type=Path, help="output recording folder (created)")
     p.add_argument("--motion", default="right_external_rotation",
                    help="built-in motion name, or a motion YAML file (default: %(default)s)")
-    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
-    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default: 640x480)")
-    p.add_argument("--fps", type=_positive_float, default=30.0, help="frame rate (default: %(default)s)")
-    p.add_argument("--seconds", type=_positive_float, default=None, help="cut the motion to this length")
-    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95 (default: %(default)s)")
-    p.add_argument("--sex", choices=("female", "male"), default="female")
-    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma in 8-bit units (default: %(default)s)")
+    _add_studio_options(p)
     p.add_argument("--drift", type=float, default=0.0,
                    help="brightness drop over the recording as a fraction, e.g. 0.4 (default: none)")
     p.add_argument("--cast", default=None, help="colour cast as R,G,B gains reached at the end, e.g. 1.1,1.0,0.85")
@@ -156,14 +161,7 @@ def _add_validate(sub) -> None:
         "with the truth: completeness, RMSE, ghost points.",
     )
     p.add_argument("--motion", action="append", default=None, help="motion name (repeat; default: all)")
-    p.add_argument("--rig", default="ring4", help="camera layout (default: %(default)s)")
-    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
-    p.add_argument("--size", type=_size, default=(640, 480), help="image size WxH (default: 640x480)")
-    p.add_argument("--fps", type=_positive_float, default=15.0, help="frame rate (default: %(default)s)")
-    p.add_argument("--seconds", type=_positive_float, default=None, help="cut each motion to this length")
-    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
-    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95")
-    p.add_argument("--sex", choices=("female", "male"), default="female")
+    _add_studio_options(p, fps=15.0)
     p.set_defaults(func=_cmd_validate)
 
 
