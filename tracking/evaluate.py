@@ -5,7 +5,9 @@ Definitions used in the docs and acceptance figures:
 - a marker is *seen* by a camera when at least ``seen_fraction`` (75 %) of its ball's disc is
   visible there (the simulator's per-camera visibility). A ball hidden by more than a quarter
   gives a blob whose centroid is shifted by a large fraction of its radius; such views are used
-  when other cameras confirm them, but a point is not owed from them;
+  when other cameras confirm them, but a point is not owed from them. Nor is it owed from a
+  camera in which the ball's disc touches that of another ball of the same colour: one merged
+  blob is a view of neither;
 - a measured point *matches* the nearest true marker if it is within ``match_m`` (20 mm);
   a point matching no marker is a *ghost*;
 - *completeness*: the fraction of (frame, marker) pairs seen by two or more cameras that have a
@@ -53,6 +55,7 @@ def evaluate_points(
     points_m: Sequence[np.ndarray],
     truth_m: np.ndarray,
     visible_fraction: np.ndarray,
+    merged: np.ndarray | None = None,
     *,
     seen_fraction: float = 0.75,
     match_m: float = 0.020,
@@ -63,12 +66,16 @@ def evaluate_points(
         points_m: per frame, (P, 3) measured points in world metres.
         truth_m: (T, M, 3) true marker centres.
         visible_fraction: (T, C, M) visible fraction of each marker in each camera.
+        merged: (T, C, M) bool, marker merged with a same-coloured one in that camera (optional).
     """
     errs: list[float] = []
     seen2 = found = ghosts = ghost_frames = 0
     for t, pts in enumerate(points_m):
         true = truth_m[t]
-        seen = (visible_fraction[t] >= seen_fraction).sum(axis=0) >= 2
+        views = visible_fraction[t] >= seen_fraction
+        if merged is not None:
+            views &= ~merged[t]
+        seen = views.sum(axis=0) >= 2
         seen2 += int(seen.sum())
         if len(pts) == 0:
             continue

@@ -57,12 +57,29 @@ class SimFrame:
         pose: the body pose.
         markers_m: (M, 3) true marker centres, world metres.
         visible_fraction: (C, M) fraction of each marker's disc visible in each camera (0..1).
+        merged: (C, M) bool, the marker's disc touches that of another marker of the same colour in
+            that camera (one blob shows both: it is a view of neither).
     """
 
     frames: FrameSet
     pose: Pose
     markers_m: np.ndarray
     visible_fraction: np.ndarray
+    merged: np.ndarray
+
+
+def merged_markers(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float, colour_index: np.ndarray) -> np.ndarray:
+    """(C, M) bool: marker discs that touch the disc of another marker of the same colour."""
+    out = np.zeros((len(cameras), len(markers_m)), dtype=bool)
+    same = (colour_index[:, None] == colour_index[None, :]) & ~np.eye(len(markers_m), dtype=bool)
+    for c, cam in enumerate(cameras):
+        uv = cam.project(markers_m)
+        depth = cam.world_to_camera(markers_m)[:, 2]
+        f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
+        r_px = f * radius_m / np.maximum(depth, 1e-6)
+        d = np.linalg.norm(uv[:, None, :] - uv[None, :, :], axis=-1)
+        out[c] = np.any(same & (d < r_px[:, None] + r_px[None, :] + 1.0), axis=1)
+    return out
 
 
 def expected_marker_pixels(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float) -> np.ndarray:
@@ -113,7 +130,8 @@ class Studio:
             vis = np.clip(vis, 0.0, 1.0)
         else:
             vis = np.full((len(self.cameras), self.markerset.n_markers), np.nan)
-        return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis)
+        merged = merged_markers(self.cameras, markers, self.markerset.radius_m, self.markerset.colour_index)
+        return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis, merged)
 
     def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
              brightness_drop: float = 0.0, colour_cast: Sequence[float] | None = None, seed: int = 0,

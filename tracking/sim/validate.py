@@ -26,7 +26,7 @@ def validate_motion(settings: SimulationSettings, *, progress: bool = False) -> 
     with studio:
         ms = studio.markerset
         measurer = FrameMeasurer(studio.cameras, ColourTable.build(ms.palette), ms.radius_m)
-        points, truth, vis = [], [], []
+        points, truth, vis, merged = [], [], [], []
         frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
                              brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
                              seed=settings.seed)
@@ -35,7 +35,8 @@ def validate_motion(settings: SimulationSettings, *, progress: bool = False) -> 
             points.append(measurer.measure(sf.frames.images).p_world_m)
             truth.append(sf.markers_m)
             vis.append(sf.visible_fraction)
-    return evaluate_points(points, np.stack(truth), np.stack(vis))
+            merged.append(sf.merged)
+    return evaluate_points(points, np.stack(truth), np.stack(vis), np.stack(merged))
 
 
 def validate(base: SimulationSettings, motions: Sequence[str] | None = None, *, progress: bool = False) -> Iterator[tuple[str, PointAccuracy]]:
