@@ -116,6 +116,9 @@ class ReconstructionParams:
     Attributes:
         gate_px: largest epipolar distance / reprojection error of an accepted observation, pixels.
         max_rms_px: largest RMS reprojection error of an accepted point, pixels.
+        max_rms_px_two_view: the same for a point seen by two cameras only: with sub-pixel
+            centroids a true pair fits within a few tenths of a pixel, while a chance pairing of
+            two different balls usually misses by more.
         marker_radius_m: radius of the marker balls (for the size check).
         size_ratio_range: accepted (observed radius / expected radius) per observation of a point
             seen by three or more cameras (one view may miss it: a partly hidden ball).
@@ -133,9 +136,10 @@ class ReconstructionParams:
 
     gate_px: float = 3.0
     max_rms_px: float = 2.0
+    max_rms_px_two_view: float = 0.7
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
-    size_ratio_range_two_view: tuple[float, float] = (0.8, 1.15)
+    size_ratio_range_two_view: tuple[float, float] = (0.85, 1.15)
     roundness_two_view: tuple[float, float] = (0.6, 0.85)
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
@@ -335,6 +339,7 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     r_min, r_best = params.roundness_two_view
     two_view_fit = np.all(~seen | ((ratio > lo2) & (ratio < hi2) & (round_obs >= r_min)), axis=1)
     two_view_fit &= np.where(seen, round_obs, 0.0).max(axis=1) >= r_best
+    two_view_fit &= rms <= params.max_rms_px_two_view
     valid &= size_fit & ((n_used > 2) | two_view_fit)
     # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
     #    each centroid serves one point
