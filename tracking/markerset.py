@@ -1,9 +1,18 @@
-"""Marker sets: names, colours and placements, loaded from content YAML."""
+"""Marker sets: names, colours and placements, loaded from content YAML.
+
+A marker set may also say how its markers are identified on the first frame (METHOD.md 5.2):
+the reference pose the patient takes, and structure rules of that pose written as coordinate
+orderings in the patient's frame (``identification:`` in the YAML, see :class:`OrderRule`;
+:mod:`tracking.identify` applies them).
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import pydantic
@@ -33,6 +42,98 @@ class _MarkerSpec(StrictModel):
     landmark: str = ""
 
 
+_AXES = {"x": 0, "y": 1, "z": 2, "outward": 0}
+_RULE_NAME = r"[A-Za-z*][A-Za-z0-9_*]*"
+
+
+def _check_names(text: str, sep: str, example: str, min_groups: int, max_groups: int | None = None) -> str:
+    groups = [g.split(",") for g in text.split(sep)]
+    if not min_groups <= len(groups) <= (max_groups or len(groups)):
+        raise ValueError(f"{text!r}: write {example}")
+    for g in groups:
+        for name in g:
+            if not re.fullmatch(_RULE_NAME, name.strip()):
+                raise ValueError(f"{text!r}: {name.strip()!r} is not a marker name; write {example}")
+    return text
+
+
+class _RuleSpec(StrictModel):
+    """An ordering (``order`` + ``along``) or a distance range (``distance`` + ``within_mm``)."""
+
+    order: str | None = pydantic.Field(
+        default=None,
+        description="groups of marker names separated by '<', names within a group by commas; "
+        "every marker of a group is before every marker of the next along the axis. "
+        "'*' stands for each side letter in turn (the same side throughout the rule)",
+    )
+    along: Literal["x", "y", "z", "outward"] | None = pydantic.Field(
+        default=None,
+        description="patient-frame axis: x the patient's right, y up, z backwards (the patient "
+        "faces -z), outward away from the body's midline on the rule's side (needs '*')",
+    )
+    min_margin_mm: float | None = pydantic.Field(default=None, ge=0, le=300)
+    distance: str | None = pydantic.Field(
+        default=None, description="'A, B - C': every marker of the first group to every marker of the second"
+    )
+    within_mm: tuple[float, float] | None = pydantic.Field(
+        default=None, description="accepted [min, max] distance in mm (markers on one rigid body part)"
+    )
+    message: str = pydantic.Field(
+        min_length=1, description="what a therapist reads when the rule fails; {side} is the side's word"
+    )
+
+    @pydantic.field_validator("order")
+    @classmethod
+    def _order_syntax(cls, v: str | None) -> str | None:
+        return None if v is None else _check_names(v, "<", "'A, B < C' (at least two groups)", 2)
+
+    @pydantic.field_validator("distance")
+    @classmethod
+    def _distance_syntax(cls, v: str | None) -> str | None:
+        return None if v is None else _check_names(v, "-", "'A - B, C' (two groups)", 2, 2)
+
+    @pydantic.field_validator("within_mm")
+    @classmethod
+    def _range(cls, v: tuple[float, float] | None) -> tuple[float, float] | None:
+        if v is not None and not 0 <= v[0] < v[1]:
+            raise ValueError(f"within_mm {list(v)} must be [min, max] with 0 <= min < max")
+        return v
+
+    @pydantic.field_validator("message")
+    @classmethod
+    def _one_line(cls, v: str) -> str:
+        v = " ".join(v.split())
+        if not v:
+            raise ValueError("the message is empty: say in plain words what is wrong and how to fix it")
+        return v
+
+    @pydantic.model_validator(mode="after")
+    def _one_kind(self) -> "_RuleSpec":
+        is_order = self.order is not None or self.along is not None
+        is_distance = self.distance is not None or self.within_mm is not None
+        if is_order == is_distance:
+            raise ValueError("give either 'order' with 'along', or 'distance' with 'within_mm'")
+        if is_order and (self.order is None or self.along is None):
+            raise ValueError("an ordering rule needs both 'order' and 'along'")
+        if is_distance and (self.distance is None or self.within_mm is None or self.min_margin_mm is not None):
+            raise ValueError("a distance rule needs 'distance' and 'within_mm' (and takes no min_margin_mm)")
+        return self
+
+
+class _IdentificationSpec(StrictModel):
+    reference_pose: str = pydantic.Field(min_length=1, description="the start pose in plain words")
+    sides: dict[str, Literal["left", "right"]] = pydantic.Field(
+        default={}, description="side letter -> 'left'/'right'; '*' in a rule expands over these"
+    )
+    left_right_pairs: list[tuple[str, str]] = pydantic.Field(
+        min_length=1, description="(left, right) marker pairs across the trunk: the patient's right is "
+        "their mean horizontal direction"
+    )
+    max_turn_deg: float = pydantic.Field(default=30.0, gt=0, lt=90)
+    min_margin_mm: float = pydantic.Field(default=0.0, ge=0, le=300)
+    rules: list[_RuleSpec] = pydantic.Field(min_length=1)
+
+
 class _MarkerSetSpec(StrictModel):
     name: str
     description: str = ""
@@ -40,6 +141,7 @@ class _MarkerSetSpec(StrictModel):
     soft_tissue_mm: float = pydantic.Field(default=5.0, ge=0, lt=50)
     colours: dict[str, tuple[int, int, int]] = {}
     markers: list[_MarkerSpec] = pydantic.Field(min_length=2)
+    identification: _IdentificationSpec | None = None
 
     @pydantic.field_validator("colours")
     @classmethod
@@ -48,6 +150,70 @@ class _MarkerSetSpec(StrictModel):
             if not all(0 <= c <= 255 for c in rgb):
                 raise ValueError(f"colour {key!r} must have three integers 0-255")
         return v
+
+
+@dataclass(frozen=True, slots=True)
+class OrderRule:
+    """One structure rule of the reference pose: marker groups in order along a patient axis.
+
+    ``groups[0] < groups[1] < ...``: every marker of a group lies before (smaller coordinate)
+    every marker of the next group, by at least ``min_margin_m``. A rule written with the side
+    wildcard ``*`` becomes one rule per side.
+
+    Attributes:
+        text: the rule with the side filled in, e.g. ``"MLH < MLW1, MLW2 along outward"``.
+        groups: marker names of each group, in order.
+        axis: patient-frame axis 0 (x, the patient's right), 1 (y, up) or 2 (z, backwards).
+        sign: +1, or -1 for ``outward`` on the left side (outward is -x there).
+        min_margin_m: the smallest accepted separation, metres.
+        message: one line for the therapist, said when the rule fails.
+    """
+
+    text: str
+    groups: tuple[tuple[str, ...], ...]
+    axis: int
+    sign: int
+    min_margin_m: float
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class DistanceRule:
+    """Markers on one rigid body part: their distance stays in a range in any pose.
+
+    Orderings alone let one colour for all markers (or a wrong pose) be "explained" by swapping
+    markers between body parts; distances between markers on one bone forbid that.
+
+    Attributes:
+        text: the rule with the side filled in, e.g. ``"MLE1 - MLE2 within 60-170 mm"``.
+        groups: two groups of marker names; every marker of the first to every one of the second.
+        min_m, max_m: the accepted distance range, metres.
+        message: one line for the therapist, said when the rule fails.
+    """
+
+    text: str
+    groups: tuple[tuple[str, ...], tuple[str, ...]]
+    min_m: float
+    max_m: float
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class IdentificationRules:
+    """How the markers are identified in the reference pose (METHOD.md 5.2).
+
+    Attributes:
+        reference_pose: the pose in plain words (shown to the patient and the therapist).
+        rules: the structure rules (orderings and distances), side wildcards expanded.
+        left_right_pairs: (left, right) marker names across the trunk; the patient's right is
+            their mean horizontal left -> right direction.
+        max_turn_deg: how far the patient may sit turned about the vertical from facing -Z.
+    """
+
+    reference_pose: str
+    rules: tuple[OrderRule | DistanceRule, ...]
+    left_right_pairs: tuple[tuple[str, str], ...]
+    max_turn_deg: float
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +228,8 @@ class MarkerSet:
         rgb: (M, 3) uint8 sRGB colour of each marker.
         radius_m: marker ball radius in metres.
         soft_tissue_m: skin/soft-tissue thickness between bone landmark and ball surface.
+        identification: rules for identifying the markers in the reference pose, or None if the
+            marker set has none.
     """
 
     name: str
@@ -71,6 +239,7 @@ class MarkerSet:
     rgb: np.ndarray
     radius_m: float
     soft_tissue_m: float
+    identification: IdentificationRules | None = None
 
     @property
     def n_markers(self) -> int:
@@ -103,7 +272,7 @@ class MarkerSet:
                 f"{self.n_markers}, one per marker in the order {', '.join(self.names)}"
             )
         rgb.setflags(write=False)
-        return MarkerSet(self.name, self.names, self.segments, self.landmarks, rgb, self.radius_m, self.soft_tissue_m)
+        return dataclasses.replace(self, rgb=rgb)
 
 
 def load_markerset(name_or_path: str | Path = "upper_limb_seated") -> MarkerSet:
@@ -137,4 +306,51 @@ def load_markerset(name_or_path: str | Path = "upper_limb_seated") -> MarkerSet:
         rgb=rgb_arr,
         radius_m=spec.marker_diameter_mm / 2000.0,
         soft_tissue_m=spec.soft_tissue_mm / 1000.0,
+        identification=None if spec.identification is None else _identification(path, spec.identification, names),
+    )
+
+
+def _identification(path: Path, spec: _IdentificationSpec, names: list[str]) -> IdentificationRules:
+    """Expand the side wildcards and check every name against the marker set."""
+    known = set(names)
+
+    def check(where: str, name: str) -> str:
+        if name not in known:
+            raise ContentError(
+                f"{path}: identification.{where}: unknown marker {name!r}; the markers are {', '.join(names)}"
+            )
+        return name
+
+    for i, (left, right) in enumerate(spec.left_right_pairs):
+        check(f"left_right_pairs.{i}", left)
+        check(f"left_right_pairs.{i}", right)
+    rules: list[OrderRule | DistanceRule] = []
+    for i, r in enumerate(spec.rules):
+        where = f"rules.{i}"
+        text = r.order if r.order is not None else r.distance
+        sided = "*" in text
+        if r.along == "outward" and not sided:
+            raise ContentError(f"{path}: identification.{where}: 'along: outward' needs the side wildcard '*' in the order")
+        if sided and not spec.sides:
+            raise ContentError(f"{path}: identification.{where}: '*' needs 'sides' (e.g. {{L: left, R: right}})")
+        for letter, word in (spec.sides.items() if sided else [("", "")]):
+            sep = "<" if r.order is not None else "-"
+            groups = tuple(tuple(check(where, n.strip()) for n in g.split(",")) for g in text.replace("*", letter).split(sep))
+            flat = [n for g in groups for n in g]
+            if len(set(flat)) != len(flat):
+                raise ContentError(f"{path}: identification.{where}: a marker appears twice in {text.replace('*', letter)!r}")
+            message = r.message.replace("{side}", word).replace("*", letter)
+            joined = f" {sep} ".join(", ".join(g) for g in groups)
+            if r.order is not None:
+                margin_mm = r.min_margin_mm if r.min_margin_mm is not None else spec.min_margin_mm
+                sign = -1 if (r.along == "outward" and word == "left") else 1
+                rules.append(OrderRule(f"{joined} along {r.along}", groups, _AXES[r.along], sign, margin_mm / 1000.0, message))
+            else:
+                lo, hi = r.within_mm
+                rules.append(DistanceRule(f"{joined} within {lo:g}-{hi:g} mm", groups, lo / 1000.0, hi / 1000.0, message))
+    return IdentificationRules(
+        reference_pose=" ".join(spec.reference_pose.split()),
+        rules=tuple(rules),
+        left_right_pairs=tuple((a, b) for a, b in spec.left_right_pairs),
+        max_turn_deg=spec.max_turn_deg,
     )

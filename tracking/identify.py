@@ -1,0 +1,500 @@
+"""Identification (labelling) of the markers on the first frame, from the marker set's rules.
+
+METHOD.md 5.2: the patient starts in a reference pose in which the markers keep known orderings
+along the axes of the patient's frame (the left arm left of the sternum, the elbow above the
+wrist, the thumb-side wrist marker in front of the little-finger-side one, ...). The seed sorts
+the 14 points by hand-written steps; here the orderings are data (``identification:`` in the
+marker-set YAML, :class:`tracking.markerset.OrderRule`), so any marker set can state its own.
+
+The search
+    Every rule is a set of pairwise constraints ``sign * (c_b - c_a) >= min_margin`` on one
+    patient-frame coordinate of two markers. Markers are the variables; a marker's domain is the
+    points of its colour. A depth-first search assigns the marker with the fewest candidates left
+    (colour classes of one point first), and after each assignment removes from every
+    constrained neighbour's domain the points that would break a constraint with it (forward
+    checking on bitsets). It is a branch and bound on the worst margin: after each complete
+    assignment the bar rises to its worst margin, so the result is the assignment whose worst
+    rule margin is largest. The same search with the bar lowered below zero finds, when no
+    assignment satisfies the rules, the one that breaks them least, whose worst rule is what the
+    therapist is told. Points of one colour for all 14 markers (the seed's setup) take < 50 ms.
+
+The patient's frame
+    +Y is up (calibration fixes it). The patient may sit turned about the vertical: the first
+    guess of their right (+x) is the principal axis of the points' horizontal spread (the
+    reference pose is wide left-right and shallow front-back), signed towards world +X and
+    limited to ``max_turn_deg``. After a search the frame is re-estimated from the identified
+    ``left_right_pairs`` (shoulders and hips) and the search repeated in that frame until it
+    settles. If the first guess finds nothing, the world frame itself (facing -Z) is tried.
+    Coordinates are taken relative to the points' centroid: nothing depends on the world origin.
+
+For the tracker: :func:`try_identify` returns None while the point counts per colour do not fit
+the marker set (a marker hidden for a moment: wait for the next frame) and raises
+:class:`IdentificationError` when they fit but the pose breaks the rules.
+"""
+
+from __future__ import annotations
+
+import colorsys
+import logging
+import math
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+from calibration.errors import RehabError
+from tracking.errors import ContentError
+from tracking.markerset import IdentificationRules, MarkerSet, OrderRule
+from tracking.reconstruction import Points3D
+
+log = logging.getLogger(__name__)
+
+_AXIS_WORDS = ("x (the patient's right)", "y (up)", "z (backwards)")
+# the principal axis of the horizontal spread is trusted when the spread is this much wider than deep
+_MIN_SPREAD_RATIO = 1.5
+_REFINE_TOL_DEG = 1.0
+_MAX_REFINE = 3
+# every rule holds (up to rounding)
+_SATISFIED = -1e-12
+# relaxed bars for explaining a failure: the best near-assignment is looked for above each in turn
+_RELAXED_BARS_M = (-0.02, -0.05, -0.1, -0.15, -0.2, -0.3, -0.5, -math.inf)
+
+
+class IdentificationError(RehabError):
+    """The markers cannot be identified: a marker is missing or the pose breaks a rule."""
+
+
+@dataclass(frozen=True, slots=True)
+class Identification:
+    """Which point is which marker.
+
+    Attributes:
+        index: (M,) int64 index into the points for each marker of the marker set (marker-set
+            order), -1 for none (never -1 from :func:`identify`, which needs every marker).
+        margin_m: the worst rule margin: min over rules of (separation - the rule's min margin),
+            metres; >= 0 when every rule holds.
+        rule_margins_m: (R,) float64 margin of each rule of ``markerset.identification.rules``.
+        yaw_deg: the patient frame the rules were checked in: the patient's right is
+            (cos, 0, -sin)(yaw) in world coordinates, i.e. the frame is turned about +Y by the
+            right-hand rule from facing -Z (positive: the patient turned towards their left).
+    """
+
+    index: np.ndarray
+    margin_m: float
+    rule_margins_m: np.ndarray
+    yaw_deg: float
+
+
+def colour_word(rgb: Iterable[int]) -> str:
+    """A plain colour name for an sRGB colour (0-255), by hue: 'yellow', 'cyan', ..."""
+    r, g, b = (float(c) / 255.0 for c in rgb)
+    h, s, v = colorsys.rgb_to_hsv(r, g, b)
+    if v < 0.2:
+        return "black"
+    if s < 0.25:
+        return "white" if v > 0.8 else "grey"
+    hue = h * 360.0
+    for limit, word in ((15, "red"), (40, "orange"), (70, "yellow"), (165, "green"), (200, "cyan"),
+                        (255, "blue"), (290, "purple"), (345, "magenta")):
+        if hue < limit:
+            return word
+    return "red"
+
+
+def palette_words(palette: np.ndarray) -> list[str]:
+    """Colour names of a (K, 3) palette, with the RGB added where two colours share a name."""
+    words = [colour_word(c) for c in palette]
+    return [w if words.count(w) == 1 else f"{w} ({','.join(str(int(v)) for v in c)})" for w, c in zip(words, palette)]
+
+
+def patient_axes(yaw_rad: float) -> np.ndarray:
+    """(3, 3) columns: the patient's right, up and backwards in world coordinates."""
+    c, s = math.cos(yaw_rad), math.sin(yaw_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def yaw_from_points(p_world_m: np.ndarray) -> float:
+    """First guess of the patient's yaw (radians): the principal axis of the horizontal spread.
+
+    The sign is the one closer to world +X (the patient roughly faces -Z); an isotropic spread
+    (no clear left-right axis) gives 0.
+    """
+    h = p_world_m[:, [0, 2]] - p_world_m[:, [0, 2]].mean(axis=0)
+    evals, evecs = np.linalg.eigh(h.T @ h)
+    if evals[1] < _MIN_SPREAD_RATIO * max(evals[0], 1e-12):
+        return 0.0
+    ex, ez = evecs[:, 1]
+    if ex < 0:
+        ex, ez = -ex, -ez
+    return math.atan2(-ez, ex)
+
+
+def _bitsets(ok: np.ndarray) -> list[list[int]]:
+    """(..., P) bool -> nested lists of ints with bit q set where ``ok[..., q]``."""
+    n = ok.shape[-1]
+    if n <= 62:
+        return (ok.astype(np.int64) @ (np.int64(1) << np.arange(n, dtype=np.int64))).tolist()
+    packed = np.packbits(ok, axis=-1, bitorder="little")
+    return [[int.from_bytes(row.tobytes(), "little") for row in m] for m in packed]
+
+
+def _yaw_from_pairs(p_world_m: np.ndarray, pairs: np.ndarray) -> float:
+    """Yaw (radians) from the mean horizontal left -> right direction of (left, right) points."""
+    d = p_world_m[pairs[:, 1]] - p_world_m[pairs[:, 0]]
+    d = d[:, [0, 2]]
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    vx, vz = d.sum(axis=0)
+    return math.atan2(-vz, vx)
+
+
+@dataclass(frozen=True, slots=True)
+class _Found:
+    index: np.ndarray
+    slack_m: np.ndarray  # (K,) per constraint
+    yaw: float
+    nodes: int
+
+
+class Identifier:
+    """The rules of a marker set compiled into pairwise constraints, ready for many frames.
+
+    Args:
+        markerset: the marker set; its ``identification`` rules are used unless ``rules`` is given.
+        rules: other rules (e.g. for a different reference pose).
+        max_nodes: search-node budget per search (a safety bound for the live tracker; a search
+            under the rules' bar needs a few hundred).
+    """
+
+    def __init__(self, markerset: MarkerSet, rules: IdentificationRules | None = None, *, max_nodes: int = 200_000):
+        rules = rules if rules is not None else markerset.identification
+        if rules is None:
+            raise ContentError(
+                f"marker set {markerset.name} has no identification rules: add an 'identification:' section to its YAML"
+            )
+        self.markerset = markerset
+        self.rules = rules
+        self.max_nodes = max_nodes
+        self.colour = np.asarray(markerset.colour_index, dtype=np.int64)
+        self.words = palette_words(markerset.palette)
+        idx = {n: i for i, n in enumerate(markerset.names)}
+        # one row per pairwise constraint: markers a, b; rule; ordering (axis, sign, margin) or
+        # distance range (lo, hi)
+        rows = []
+        for r_i, r in enumerate(rules.rules):
+            links = zip(r.groups[:-1], r.groups[1:]) if isinstance(r, OrderRule) else [r.groups]
+            for lo_group, hi_group in links:
+                for na in lo_group:
+                    for nb in hi_group:
+                        if isinstance(r, OrderRule):
+                            rows.append((idx[na], idx[nb], r_i, False, r.axis, r.sign, r.min_margin_m, 0.0, 0.0))
+                        else:
+                            rows.append((idx[na], idx[nb], r_i, True, 0, 1, 0.0, r.min_m, r.max_m))
+        cols = list(zip(*rows))
+        self.c_a, self.c_b, self.c_rule = (np.array(c, np.int64) for c in cols[:3])
+        self.c_dist = np.array(cols[3], bool)
+        self.c_axis = np.array(cols[4], np.int64)
+        self.c_sign, self.c_margin, self.c_lo, self.c_hi = (np.array(c, np.float64) for c in cols[5:])
+        # unordered marker pairs (i < j) with at least one constraint, and which constraints
+        lo_hi = np.sort(np.stack([self.c_a, self.c_b], axis=1), axis=1)
+        self.pairs, self.c_pair = np.unique(lo_hi, axis=0, return_inverse=True)
+        self.c_pair = self.c_pair.reshape(-1)
+        self.c_flip = self.c_a > self.c_b  # constraint written as (j, i) of its pair (i, j)
+        self.lr_pairs = np.array([(idx[l], idx[r]) for l, r in rules.left_right_pairs], np.int64)
+        self.neighbours: list[list[tuple[int, int, bool]]] = [[] for _ in markerset.names]
+        for k, (i, j) in enumerate(self.pairs):
+            self.neighbours[i].append((int(j), k, True))
+            self.neighbours[j].append((int(i), k, False))
+
+    # ------------------------------------------------------------------------------ checks
+
+    def count_problem(self, colour: np.ndarray) -> str | None:
+        """One line on the point counts per colour that do not fit the marker set, or None."""
+        n_col = len(self.words)
+        have = np.bincount(colour[(colour >= 0) & (colour < n_col)], minlength=n_col)
+        want = np.bincount(self.colour, minlength=n_col)
+        problems = []
+        for k in np.flatnonzero(have != want):
+            names = [n for n, c in zip(self.markerset.names, self.colour) if c == k]
+            if have[k] < want[k]:
+                missing = want[k] - have[k]
+                which = "the hidden one" if missing == 1 else f"the {missing} hidden ones"
+                problems.append(
+                    f"{have[k]} of the {want[k]} {self.words[k]} markers are seen: {which} must be seen by two "
+                    f"cameras (check that {self._where(names)} are not covered and the patient is in the reference pose)"
+                )
+            else:
+                problems.append(
+                    f"{have[k]} {self.words[k]} points are seen but there are {want[k]} {self.words[k]} markers "
+                    f"({', '.join(names)}): remove or cover other {self.words[k]} objects in the cameras' view"
+                )
+        stray = int(np.sum((colour < 0) | (colour >= n_col)))
+        if stray:
+            problems.append(f"{stray} points have a colour that is not in the marker set's palette")
+        return "; ".join(problems) if problems else None
+
+    def _where(self, names: list[str]) -> str:
+        ms = self.markerset
+        segs = list(dict.fromkeys(ms.segments[ms.index(n)].replace("_", " ") for n in names))
+        listed = ", ".join(names)
+        if len(segs) > 3:
+            return f"the markers ({listed})"
+        return f"the {' and '.join(segs)} markers ({listed})"
+
+    # ------------------------------------------------------------------------------ search
+
+    def _slack(self, p_m: np.ndarray, c_pat: np.ndarray, pa: np.ndarray, pb: np.ndarray,
+               hard_distances: bool = False) -> np.ndarray:
+        """Slack of every constraint k with marker a at point ``pa[..., k]``, b at ``pb[..., k]``.
+
+        With ``hard_distances`` a distance constraint is +inf when it holds and -inf when not, so
+        that a bound on the worst slack bounds the orderings only.
+        """
+        ax = self.c_axis
+        order = self.c_sign * (c_pat[pb, ax] - c_pat[pa, ax]) - self.c_margin
+        d = np.linalg.norm(p_m[pb] - p_m[pa], axis=-1)
+        dist = np.minimum(d - self.c_lo, self.c_hi - d)
+        if hard_distances:
+            dist = np.where(dist >= 0, np.inf, -np.inf)
+        return np.where(self.c_dist, dist, order)
+
+    def _pair_slack(self, p_m: np.ndarray, c_pat: np.ndarray, hard_distances: bool) -> np.ndarray:
+        """(pairs, P, P) worst slack of each marker pair's constraints, [i at p, j at q]."""
+        n = c_pat.shape[0]
+        pts = np.arange(n)
+        # d[k, p, q]: constraint k with its marker a at point p and b at point q
+        d = self._slack(p_m, c_pat, pts[:, None, None], pts[None, :, None], hard_distances).transpose(2, 0, 1)
+        d = np.where(self.c_flip[:, None, None], d.transpose(0, 2, 1), d)
+        s = np.full((len(self.pairs), n, n), np.inf)
+        np.minimum.at(s, self.c_pair, d)
+        return s
+
+    def _search(self, p_world_m: np.ndarray, colour: np.ndarray, yaw: float, bars_m: Iterable[float],
+                hard_distances: bool = False) -> _Found | None:
+        """The assignment with the largest worst slack, in the frame of ``yaw``.
+
+        ``bars_m`` are lower and lower bars on the worst slack: the search stops at the first
+        bar above which an assignment exists, so a good bar keeps the tree small.
+        """
+        c_pat = (p_world_m - p_world_m.mean(axis=0)) @ patient_axes(yaw)
+        slack = self._pair_slack(p_world_m, c_pat, hard_distances)
+        domains = [0] * len(self.colour)
+        for m, c in enumerate(self.colour):
+            for q in np.flatnonzero(colour == c):
+                domains[m] |= 1 << int(q)
+
+        def slack_of(index: np.ndarray, hard: bool = hard_distances) -> np.ndarray:
+            return self._slack(p_world_m, c_pat, index[self.c_a], index[self.c_b], hard)
+
+        nodes = 0
+        for bar in bars_m:
+            best, nodes_used = _branch_and_bound(slack, domains, self.neighbours, bar, slack_of, self.max_nodes)
+            nodes += nodes_used
+            if nodes_used > self.max_nodes:
+                log.warning("identification search stopped after %d nodes; the result may not be the best", nodes_used)
+            if best is not None:
+                return _Found(best, slack_of(best, False), yaw, nodes)
+        return None
+
+    def _rule_margins(self, slack: np.ndarray) -> np.ndarray:
+        out = np.full(len(self.rules.rules), np.inf)
+        np.minimum.at(out, self.c_rule, slack)
+        return out
+
+    # ------------------------------------------------------------------------------ public
+
+    def identify(self, p_world_m: np.ndarray, colour: np.ndarray) -> Identification:
+        """Label the points of one frame; see :func:`identify`."""
+        p_world_m = np.asarray(p_world_m, dtype=np.float64)
+        colour = np.asarray(colour, dtype=np.int64)
+        if p_world_m.ndim != 2 or p_world_m.shape[1] != 3 or colour.shape != (p_world_m.shape[0],):
+            raise ValueError(f"expected points (P, 3) and colours (P,), got {p_world_m.shape} and {colour.shape}")
+        finite = np.isfinite(p_world_m).all(axis=1)
+        problem = self.count_problem(colour[finite])
+        if problem is not None:
+            raise IdentificationError(problem)
+        keep = np.flatnonzero(finite)
+        pts, col = p_world_m[keep], colour[keep]
+        limit = math.radians(self.rules.max_turn_deg)
+        guess = float(np.clip(yaw_from_points(pts), -limit, limit))
+        found = None
+        for yaw in dict.fromkeys((guess, 0.0)):
+            found = self._settle(pts, col, yaw)
+            if found is not None:
+                break
+        if found is None:
+            raise IdentificationError(self._explain(pts, col, guess))
+        turn = _yaw_from_pairs(pts, found.index[self.lr_pairs])
+        if abs(turn) > limit:
+            raise IdentificationError(self._turned(turn))
+        margins = self._rule_margins(found.slack_m)
+        index = keep[found.index]
+        return Identification(index.astype(np.int64), float(margins.min()), margins, math.degrees(found.yaw))
+
+    def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float) -> _Found | None:
+        """Search in the frame of ``yaw``, then in the frame of the identified left-right pairs."""
+        found = self._search(pts, colour, yaw, [_SATISFIED])
+        for _ in range(_MAX_REFINE):
+            if found is None:
+                break
+            new_yaw = _yaw_from_pairs(pts, found.index[self.lr_pairs])
+            if abs(math.degrees(new_yaw - found.yaw)) < _REFINE_TOL_DEG:
+                break
+            again = self._search(pts, colour, new_yaw, [_SATISFIED])
+            if again is None:
+                break
+            found = again
+        return found
+
+    def _turned(self, yaw: float) -> str:
+        deg = math.degrees(yaw)
+        return (f"the patient sits turned {abs(deg):.0f} degrees to the {'left' if deg > 0 else 'right'} "
+                f"(at most {self.rules.max_turn_deg:g} allowed): turn the chair to face the front")
+
+    def _explain(self, pts: np.ndarray, colour: np.ndarray, yaw: float) -> str:
+        """One line: the worst-broken rule of the assignment that breaks the rules least.
+
+        The distances between markers on one body part hold in any pose, so the assignment is
+        first looked for among those that keep every distance rule: then only orderings fail and
+        their message says how the pose differs. Only if no assignment keeps the distances (a
+        marker misplaced, or a stray point taken for one) are all rules relaxed together. As in
+        :meth:`identify`, the frame follows the near-assignment's own left-right pairs (a wrong
+        pose can mislead the first guess from the spread of the points).
+        """
+        limit = math.radians(self.rules.max_turn_deg)
+        near = None
+        for _ in range(_MAX_REFINE):
+            for hard in (True, False):
+                near = self._search(pts, colour, yaw, _RELAXED_BARS_M, hard_distances=hard)
+                if near is not None:
+                    break
+            if near is None:  # only with a spent node budget
+                return f"the markers cannot be identified: {self.rules.reference_pose}"
+            turn = _yaw_from_pairs(pts, near.index[self.lr_pairs])
+            if abs(turn) > limit:
+                return self._turned(turn)
+            if abs(math.degrees(turn - yaw)) < 2.0:
+                break
+            yaw = turn
+        margins = self._rule_margins(near.slack_m)
+        broken = np.flatnonzero(margins < 0)
+        worst = int(np.argmin(margins))
+        rule = self.rules.rules[worst]
+        more = f"{len(broken)} rules fail, worst " if len(broken) > 1 else "rule "
+        return f"{rule.message} ({more}'{rule.text}' by {-margins[worst] * 1000:.0f} mm)"
+
+
+def identify(p_world_m: np.ndarray, colour: np.ndarray, markerset: MarkerSet) -> Identification:
+    """Which point is which marker, in the reference pose of the marker set's rules.
+
+    Args:
+        p_world_m: (P, 3) float64 unlabelled points, world metres (rows with NaN are ignored).
+        colour: (P,) int palette index of each point (``markerset.palette``).
+        markerset: the marker set with its ``identification`` rules.
+
+    Returns:
+        The assignment that satisfies every rule with the largest worst margin.
+
+    Raises:
+        IdentificationError: the points of some colour are not as many as its markers, or no
+            assignment satisfies the rules (the message says which rule fails, in plain words).
+    """
+    return Identifier(markerset).identify(p_world_m, colour)
+
+
+def try_identify(points: Points3D, identifier: Identifier) -> Identification | None:
+    """For the tracker, once per frame until it succeeds.
+
+    Returns None while the point counts per colour do not fit the marker set (a marker hidden or
+    a stray point for a moment: wait for the next frame); raises :class:`IdentificationError`
+    when they fit but the pose breaks the rules (tell the therapist).
+    """
+    finite = np.isfinite(points.p_world_m).all(axis=1)
+    if identifier.count_problem(np.asarray(points.colour)[finite]) is not None:
+        return None
+    return identifier.identify(points.p_world_m, points.colour)
+
+
+def identify_over_frames(frames: Iterable[Points3D], markerset: MarkerSet, max_frames: int = 30
+                         ) -> tuple[int, Identification]:
+    """Identify on the first of the first ``max_frames`` frames whose point counts fit.
+
+    Returns:
+        (frame number counted from 0, identification).
+
+    Raises:
+        IdentificationError: no frame fits (the message of the last frame's counts), or the first
+            frame that fits breaks the rules.
+    """
+    identifier = Identifier(markerset)
+    last = "no frames"
+    for n, points in enumerate(frames):
+        if n >= max_frames:
+            break
+        result = try_identify(points, identifier)
+        if result is not None:
+            return n, result
+        finite = np.isfinite(points.p_world_m).all(axis=1)
+        last = identifier.count_problem(np.asarray(points.colour)[finite]) or last
+    raise IdentificationError(f"no frame of the first {max_frames} shows every marker: {last}")
+
+
+def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[list[tuple[int, int, bool]]],
+                      bar_m: float, slack_of, max_nodes: int) -> tuple[np.ndarray | None, int]:
+    """Depth-first search for the assignment with the largest worst slack above ``bar_m``.
+
+    Args:
+        slack: (pairs, P, P) worst slack of each constrained marker pair, [first at p, second at q].
+        domains: per marker, a bitset of the points it may take (its colour).
+        neighbours: per marker, (other marker, pair, marker is the pair's first) of its pairs.
+        bar_m: only assignments whose every pair slack exceeds this are considered.
+        slack_of: (M,) assignment -> (K,) slack of every constraint.
+        max_nodes: node budget; the best so far is returned when it is spent.
+
+    Returns:
+        (the best assignment or None, nodes visited).
+    """
+    masks: list[tuple[list[int], list[int]]] = []
+
+    def set_bar(bar: float) -> None:
+        ok = slack > bar
+        masks[:] = list(zip(_bitsets(ok), _bitsets(ok.transpose(0, 2, 1))))
+
+    state = {"bar": bar_m, "best": None, "nodes": 0}
+    set_bar(bar_m)
+
+    def descend(dom: list[int], free: list[int]) -> bool:
+        """False stops the search (budget spent, or nothing left to improve)."""
+        if not free:
+            index = np.array([d.bit_length() - 1 for d in dom], np.int64)
+            s = slack_of(index)
+            worst = float(s.min()) if s.size else math.inf
+            if worst > state["bar"]:
+                state["best"], state["bar"] = index, worst
+                if math.isinf(worst):
+                    return False
+                set_bar(worst)  # from now on only better assignments pass the forward checks
+            return True
+        v = min(free, key=lambda u: dom[u].bit_count())  # fewest candidates first
+        rest = [u for u in free if u != v]
+        d = dom[v]
+        while d:
+            low = d & -d
+            d ^= low
+            state["nodes"] += 1
+            if state["nodes"] > max_nodes:
+                return False
+            q = low.bit_length() - 1
+            new = dom.copy()
+            new[v] = low
+            for u in rest:
+                new[u] &= ~low
+            for u, k, forward in neighbours[v]:
+                new[u] &= masks[k][0 if forward else 1][q]
+            if any(new[u] == 0 for u in rest):
+                continue
+            if not descend(new, rest):
+                return False
+        return True
+
+    descend(domains, list(range(len(domains))))
+    return state["best"], state["nodes"]
