@@ -322,6 +322,11 @@ class Identifier:
             if found is not None:
                 break
         if found is None:
+            seen = yaw_from_points(pts)
+            if abs(seen) > limit:  # the spread says turned too far: do the rules hold in that frame?
+                turned = self._settle(pts, col, seen)
+                if turned is not None:
+                    raise IdentificationError(self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs])))
             raise IdentificationError(self._explain(pts, col, guess))
         turn = _yaw_from_pairs(pts, found.index[self.lr_pairs])
         if abs(turn) > limit:
@@ -371,7 +376,12 @@ class Identifier:
                 return f"the markers cannot be identified: {self.rules.reference_pose}"
             turn = _yaw_from_pairs(pts, near.index[self.lr_pairs])
             if abs(turn) > limit:
-                return self._turned(turn)
+                # a patient turned too far, or a wrong pose that mislabels a pair: the rules hold
+                # in the turned frame only in the first case
+                turned = self._settle(pts, colour, turn)
+                if turned is not None:
+                    return self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs]))
+                break
             if abs(math.degrees(turn - yaw)) < 2.0:
                 break
             yaw = turn
