@@ -7,16 +7,25 @@ the 14 points by hand-written steps; here the orderings are data (``identificati
 marker-set YAML, :class:`tracking.markerset.OrderRule`), so any marker set can state its own.
 
 The search
-    Every rule is a set of pairwise constraints ``sign * (c_b - c_a) >= min_margin`` on one
-    patient-frame coordinate of two markers. Markers are the variables; a marker's domain is the
-    points of its colour. A depth-first search assigns the marker with the fewest candidates left
+    Every rule is a set of pairwise constraints on two markers: an ordering
+    ``sign * (c_b - c_a) >= min_margin`` on one patient-frame coordinate, or a distance range
+    ``lo <= |p_b - p_a| <= hi`` (markers on one bone; these keep a wrong pose, or points all of
+    one colour, from being "explained" by swapping markers between body parts). Markers are the
+    variables; a marker's domain is the points of its colour. A depth-first search assigns the marker with the fewest candidates left
     (colour classes of one point first), and after each assignment removes from every
     constrained neighbour's domain the points that would break a constraint with it (forward
     checking on bitsets). It is a branch and bound on the worst margin: after each complete
     assignment the bar rises to its worst margin, so the result is the assignment whose worst
-    rule margin is largest. The same search with the bar lowered below zero finds, when no
-    assignment satisfies the rules, the one that breaks them least, whose worst rule is what the
-    therapist is told. Points of one colour for all 14 markers (the seed's setup) take < 50 ms.
+    rule margin is largest. Points of one colour for all 14 markers (the seed's setup) take
+    ~5 ms (4 colours ~3 ms).
+
+Explaining a failure
+    When no assignment satisfies the rules, the same search with the bar lowered below zero finds
+    the one that breaks them least (largest worst margin), keeping the distance rules hard where
+    possible (they hold in any pose, so the near-assignment then differs from the reference pose
+    only by the pose); the worst-broken rule's message is what the therapist is told. This takes
+    up to ~150 ms with one colour (a few ms with four). With one colour a pose that mirrors a
+    valid one (palms turned back: the two wrist markers swap places) cannot be told from it.
 
 The patient's frame
     +Y is up (calibration fixes it). The patient may sit turned about the vertical: the first
@@ -24,8 +33,9 @@ The patient's frame
     reference pose is wide left-right and shallow front-back), signed towards world +X and
     limited to ``max_turn_deg``. After a search the frame is re-estimated from the identified
     ``left_right_pairs`` (shoulders and hips) and the search repeated in that frame until it
-    settles. If the first guess finds nothing, the world frame itself (facing -Z) is tried.
-    Coordinates are taken relative to the points' centroid: nothing depends on the world origin.
+    settles. If the first guess finds nothing, the world frame itself (facing -Z) is tried. A
+    patient turned beyond ``max_turn_deg`` (the rules hold in their own frame) is told to turn
+    the chair. Coordinates are relative to the points' centroid: nothing depends on the origin.
 
 For the tracker: :func:`try_identify` returns None while the point counts per colour do not fit
 the marker set (a marker hidden for a moment: wait for the next frame) and raises
@@ -49,7 +59,6 @@ from tracking.reconstruction import Points3D
 
 log = logging.getLogger(__name__)
 
-_AXIS_WORDS = ("x (the patient's right)", "y (up)", "z (backwards)")
 # the principal axis of the horizontal spread is trusted when the spread is this much wider than deep
 _MIN_SPREAD_RATIO = 1.5
 _REFINE_TOL_DEG = 1.0
@@ -315,14 +324,14 @@ class Identifier:
         keep = np.flatnonzero(finite)
         pts, col = p_world_m[keep], colour[keep]
         limit = math.radians(self.rules.max_turn_deg)
-        guess = float(np.clip(yaw_from_points(pts), -limit, limit))
+        seen = yaw_from_points(pts)
+        guess = float(np.clip(seen, -limit, limit))
         found = None
         for yaw in dict.fromkeys((guess, 0.0)):
             found = self._settle(pts, col, yaw)
             if found is not None:
                 break
         if found is None:
-            seen = yaw_from_points(pts)
             if abs(seen) > limit:  # the spread says turned too far: do the rules hold in that frame?
                 turned = self._settle(pts, col, seen)
                 if turned is not None:
@@ -382,7 +391,7 @@ class Identifier:
                 if turned is not None:
                     return self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs]))
                 break
-            if abs(math.degrees(turn - yaw)) < 2.0:
+            if abs(math.degrees(turn - yaw)) < _REFINE_TOL_DEG:
                 break
             yaw = turn
         margins = self._rule_margins(near.slack_m)

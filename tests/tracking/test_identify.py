@@ -356,3 +356,16 @@ def test_the_default_rig_measures_and_identifies_every_marker(measured):
         result = identify(points.p_world_m, points.colour, MS)
         d = np.linalg.norm(points.p_world_m[result.index] - truth_m, axis=1)
         assert d.max() < 0.010
+
+
+def test_bitsets_beyond_62_points_match_the_fast_path():
+    from tracking.identify import _bitsets
+
+    rng = np.random.default_rng(0)
+    ok = rng.random((3, 70, 70)) < 0.5
+    big = _bitsets(ok)
+    for k in range(3):
+        for p in range(70):
+            assert big[k][p] == sum(1 << q for q in range(70) if ok[k, p, q])
+    small = _bitsets(ok[:, :10, :10])
+    assert small[1][4] == sum(1 << q for q in range(10) if ok[1, 4, q])
