@@ -1,9 +1,10 @@
 """Marker sets: names, colours and placements, loaded from content YAML.
 
 A marker set may also say how its markers are identified on the first frame (METHOD.md 5.2):
-the reference pose the patient takes, and structure rules of that pose written as coordinate
-orderings in the patient's frame (``identification:`` in the YAML, see :class:`OrderRule`;
-:mod:`tracking.identify` applies them).
+the reference pose the patient takes, structure rules of that pose written as coordinate
+orderings in the patient's frame (:class:`OrderRule`), and distance ranges of markers on one
+rigid body part (:class:`DistanceRule`), each with a plain-words message for the therapist
+(``identification:`` in the YAML; :mod:`tracking.identify` applies them).
 """
 
 from __future__ import annotations
