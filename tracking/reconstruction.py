@@ -114,7 +114,10 @@ class ReconstructionParams:
     """Gates of the reconstruction.
 
     Attributes:
-        gate_px: largest epipolar distance / reprojection error of an accepted observation, pixels.
+        gate_px: largest epipolar distance of a proposed pair, and distance of a supporting
+            centroid to the proposal's projection (twice this), pixels.
+        drop_px: an observation of a point seen by three or more cameras that misses the point's
+            projection by more than this is dropped (a partly hidden ball, or another ball).
         max_rms_px: largest RMS reprojection error of an accepted point, pixels.
         max_rms_px_two_view: the same for a point seen by two cameras only: with sub-pixel
             centroids a true pair fits within a few tenths of a pixel, while a chance pairing of
@@ -135,12 +138,13 @@ class ReconstructionParams:
     """
 
     gate_px: float = 3.0
-    max_rms_px: float = 2.0
+    drop_px: float = 2.0
+    max_rms_px: float = 1.5
     max_rms_px_two_view: float = 0.7
     marker_radius_m: float = 0.02
     size_ratio_range: tuple[float, float] = (0.6, 1.5)
     size_ratio_range_two_view: tuple[float, float] = (0.85, 1.15)
-    roundness_two_view: tuple[float, float] = (0.6, 0.85)
+    roundness_two_view: tuple[float, float] = (0.6, 0.8)
     min_depth_m: float = 0.3
     max_depth_m: float = 8.0
     ambiguity_ratio: float = 0.35
@@ -222,7 +226,7 @@ def _refine(geo: RigGeometry, xn_obs: np.ndarray, seen: np.ndarray, params: Reco
         err = reprojection_errors_px(geo.extrinsics, geo.focal_px, p, xn_obs, seen)
         worst = np.nanargmax(np.where(seen, err, -1.0), axis=1)
         worst_err = err[np.arange(len(p)), worst]
-        fix = (worst_err > params.gate_px) & (seen.sum(axis=1) >= 3)
+        fix = (worst_err > params.drop_px) & (seen.sum(axis=1) >= 3)
         if not fix.any():
             break
         seen[np.flatnonzero(fix), worst[fix]] = False
