@@ -1,0 +1,442 @@
+"""The per-frame tracker: one object, ``step(images) -> TrackerSample``, for every driver.
+
+METHOD.md sections 5.2-5.4, online (no look-ahead):
+
+1. **Identification** on the reference pose: full-frame measurement, then names from the
+   marker set's rules (:mod:`tracking.identify`).
+2. **Tracking**: each marker's next position is predicted from its history; the prediction is
+   projected into every camera and the colour table runs only inside a search window sized from
+   the prediction's uncertainty; the blobs of the marker's colour in the windows give candidate
+   3D points, and the candidate with the largest marker confidence Q (equation 4) that is also
+   geometrically consistent (distance to the prediction, segment lengths to the other measured
+   markers) is taken.
+3. **Hidden markers**: a marker without a consistent candidate is estimated from its own and
+   its neighbours' motion (:mod:`tracking.hidden`), or reported lost.
+4. **Re-acquisition**: lost markers are searched in the full frame every few frames; if most
+   markers are lost for long, the tracker identifies again (also on request).
+
+Pure computation on arrays: no files, processes or GL.
+"""
+
+from __future__ import annotations
+
+import enum
+import itertools
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from calibration.camera import Camera
+from calibration.errors import RehabError
+from tracking.angles import joint_angles
+from tracking.blobs import find_blobs
+from tracking.colour_table import ColourTable
+from tracking.markerset import MarkerSet
+from tracking.measure import FrameMeasurer, blob_gates
+from tracking.reconstruction import Points3D, RigGeometry
+from tracking.status import MarkerStatus
+from tracking.triangulation import reprojection_errors_px, triangulate
+
+log = logging.getLogger(__name__)
+
+
+class TrackingState(enum.IntEnum):
+    """What the tracker is doing."""
+
+    WAITING = 0  # not identified yet: waiting for the reference pose
+    TRACKING = 1
+
+
+@dataclass(frozen=True, slots=True)
+class TrackerSample:
+    """The tracker's output for one frame set.
+
+    Attributes:
+        frame_index: frame number.
+        time_s: time stamp of the frame set.
+        state: WAITING (no names yet) or TRACKING.
+        positions_m: (M, 3) float64 marker positions, world metres; NaN where lost.
+        status: (M,) uint8 :class:`MarkerStatus` per marker.
+        angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined.
+        message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
+        n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
+    """
+
+    frame_index: int
+    time_s: float
+    state: TrackingState
+    positions_m: np.ndarray
+    status: np.ndarray
+    angles_deg: dict[str, float]
+    message: str = ""
+    n_points: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class TrackerParams:
+    """Knobs of the tracker.
+
+    Attributes:
+        base_sigma_m: position uncertainty of a prediction for a marker measured last frame.
+        accel_sigma_m: added uncertainty per frame without a measurement (unmodelled motion).
+        max_sigma_frames: the uncertainty stops growing after this many frames (the hidden-marker
+            estimate, not the extrapolation, is the prediction then).
+        window_sigmas: search-window half size in prediction standard deviations (plus the ball).
+        max_window_px: cap on the window half size.
+        gate_sigmas: a candidate farther than this many sigmas from the prediction is rejected.
+        same_ball_m: two markers whose candidates are nearer than this hold the same ball: only one
+            keeps it.
+        segment_tol_m: largest change of a learned distance to a neighbour on the same segment.
+        reacquire_every: full-frame search for lost markers every this many frames.
+        reidentify_after: identify again when more than half the markers are lost this many frames.
+        max_reproj_px: largest RMS reprojection error of a candidate.
+    """
+
+    base_sigma_m: float = 0.008
+    accel_sigma_m: float = 0.006
+    max_sigma_frames: int = 5
+    window_sigmas: float = 3.0
+    max_window_px: float = 80.0
+    gate_sigmas: float = 3.0
+    same_ball_m: float = 0.025
+    segment_tol_m: float = 0.03
+    reacquire_every: int = 3
+    reidentify_after: int = 30
+    max_reproj_px: float = 2.5
+
+
+@dataclass
+class StepTimes:
+    """Accumulated seconds per stage of ``step`` (for ``rehab bench``)."""
+
+    windows_s: float = 0.0
+    triangulate_s: float = 0.0
+    hidden_s: float = 0.0
+    full_frame_s: float = 0.0
+    angles_s: float = 0.0
+    frames: int = 0
+
+    def per_frame_ms(self) -> dict[str, float]:
+        n = max(self.frames, 1)
+        return {
+            "windows (colour table + centroids)": 1000 * self.windows_s / n,
+            "candidates + triangulation": 1000 * self.triangulate_s / n,
+            "hidden markers": 1000 * self.hidden_s / n,
+            "full-frame re-acquisition": 1000 * self.full_frame_s / n,
+            "joint angles": 1000 * self.angles_s / n,
+        }
+
+
+class Tracker:
+    """Labels and tracks the markers of one marker set seen by calibrated cameras.
+
+    Args:
+        cameras: calibrated cameras, in the order of the images passed to :meth:`step`.
+        markerset: the markers worn by the patient (names, colours, segments, rules).
+        table: the colour lookup table (default: built from the marker set's colours).
+        params: tracking knobs.
+        fps: frame rate of the source (for time stamps when none are given).
+    """
+
+    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, table: ColourTable | None = None,
+                 params: TrackerParams = TrackerParams(), fps: float = 30.0):
+        from tracking.hidden import Estimator, default_config
+        from tracking.identify import Identifier
+
+        self.cameras = tuple(cameras)
+        self.markerset = markerset
+        self.params = params
+        self.fps = float(fps)
+        self.table = table or ColourTable.build(markerset.palette)
+        self.measurer = FrameMeasurer(self.cameras, self.table, markerset.radius_m)
+        self.geometry: RigGeometry = self.measurer.geometry
+        self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
+        self.colour = markerset.colour_index
+        self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
+        self.identifier = Identifier(markerset)
+        self.times = StepTimes()
+        m = markerset.n_markers
+        # pairs of markers whose distance is (nearly) constant: markers of one segment
+        seg = np.array(markerset.segments)
+        self._same_segment = (seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget everything; the next frames identify the markers again."""
+        m = self.markerset.n_markers
+        self.state = TrackingState.WAITING
+        self.positions = np.full((m, 3), np.nan)
+        self.velocity = np.zeros((m, 3))
+        self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
+        self.frames_unmeasured = np.zeros(m, dtype=np.int64)
+        self.seg_length = np.full((m, m), np.nan)  # learned distances on segments
+        self.estimator = self._estimator_factory()
+        self.frame_count = 0
+        self._lost_streak = 0
+
+    def reidentify(self) -> None:
+        """Identify the markers again from the next frame (the patient takes the reference pose)."""
+        self.reset()
+
+    # ------------------------------------------------------------------ the step
+    def step(self, images: Sequence[np.ndarray], time_s: float | None = None) -> TrackerSample:
+        """Process one synchronized frame set (one BGR image per camera, calibration order)."""
+        if len(images) != len(self.cameras):
+            raise RehabError(f"the tracker has {len(self.cameras)} cameras but got {len(images)} images")
+        index = self.frame_count
+        self.frame_count += 1
+        t = index / self.fps if time_s is None else float(time_s)
+        message = ""
+        n_points = 0
+        if self.state == TrackingState.WAITING:
+            t0 = time.perf_counter()
+            points = self.measurer.measure(images)
+            n_points = len(points)
+            message = self._try_identify(points)
+            self.times.full_frame_s += time.perf_counter() - t0
+        else:
+            n_points = self._track(images)
+        t0 = time.perf_counter()
+        angles = joint_angles(self.positions, self.markerset.names) if self.state == TrackingState.TRACKING else {}
+        self.times.angles_s += time.perf_counter() - t0
+        self.times.frames += 1
+        return TrackerSample(
+            frame_index=index,
+            time_s=t,
+            state=self.state,
+            positions_m=self.positions.copy(),
+            status=self.status.copy(),
+            angles_deg={k: float(v) for k, v in angles.items()},
+            message=message,
+            n_points=n_points,
+        )
+
+    # ------------------------------------------------------------------ identification
+    def _try_identify(self, points: Points3D) -> str:
+        from tracking.identify import IdentificationError, try_identify
+
+        try:
+            ident = try_identify(points, self.identifier)
+        except IdentificationError as exc:
+            return str(exc)
+        if ident is None:
+            return self.identifier.count_problem(np.asarray(points.colour)) or "waiting for the reference pose"
+        idx = np.asarray(ident.index)
+        ok = idx >= 0
+        self.positions[:] = np.nan
+        self.positions[ok] = points.p_world_m[idx[ok]]
+        self.status[:] = np.where(ok, MarkerStatus.MEASURED, MarkerStatus.LOST)
+        self.velocity[:] = 0.0
+        self.frames_unmeasured[:] = np.where(ok, 0, 1)
+        self._learn_lengths(ok)
+        self.estimator.update(self.positions.copy(), ok)
+        self.state = TrackingState.TRACKING
+        log.info("markers identified at frame %d", self.frame_count - 1)
+        return ""
+
+    # ------------------------------------------------------------------ tracking
+    def _track(self, images: Sequence[np.ndarray]) -> int:
+        p = self.params
+        known = np.isfinite(self.positions).all(axis=1)
+        pred = np.where(known[:, None], self.positions + self.velocity, np.nan)
+        sigma = p.base_sigma_m + p.accel_sigma_m * np.minimum(self.frames_unmeasured, p.max_sigma_frames)
+
+        t0 = time.perf_counter()
+        cand = self._window_candidates(images, pred, sigma, known)
+        t1 = time.perf_counter()
+        new_pos, measured = self._choose(cand, pred, sigma, known)
+        t2 = time.perf_counter()
+        self.times.windows_s += t1 - t0
+        self.times.triangulate_s += t2 - t1
+
+        n_points = 0
+        lost_now = ~measured & (self.status == MarkerStatus.LOST)
+        if lost_now.any() and self.frame_count % self.params.reacquire_every == 0:
+            t3 = time.perf_counter()
+            points = self.measurer.measure(images)
+            n_points = len(points)
+            self._reacquire(points, new_pos, measured)
+            self.times.full_frame_s += time.perf_counter() - t3
+
+        t4 = time.perf_counter()
+        est_pos, status = self.estimator.update(np.where(measured[:, None], new_pos, np.nan), measured)
+        self.times.hidden_s += time.perf_counter() - t4
+
+        prev = self.positions
+        self.positions = est_pos
+        self.status = np.asarray(status, dtype=np.uint8)
+        has = np.isfinite(est_pos).all(axis=1) & np.isfinite(prev).all(axis=1)
+        self.velocity = np.where(has[:, None], est_pos - prev, 0.0)
+        self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
+        self._learn_lengths(measured)
+
+        lost = self.status == MarkerStatus.LOST
+        self._lost_streak = self._lost_streak + 1 if lost.sum() > len(lost) // 2 else 0
+        if self._lost_streak >= self.params.reidentify_after:
+            log.warning("most markers lost for %d frames: identifying again", self._lost_streak)
+            self.reset()
+        return n_points
+
+    def _window_candidates(self, images, pred, sigma, known):
+        """Per marker and camera, the blobs of the marker's colour in its search window.
+
+        Returns:
+            list over markers of list over cameras of (K, 3) arrays [u, v, radius_px] (may be empty).
+        """
+        m_count = self.markerset.n_markers
+        out = [[np.zeros((0, 3)) for _ in self.cameras] for _ in range(m_count)]
+        idx = np.flatnonzero(known)
+        if idx.size == 0:
+            return out
+        p = self.params
+        for c, (cam, img) in enumerate(zip(self.cameras, images)):
+            uv = cam.project(pred[idx])
+            depth = cam.world_to_camera(pred[idx])[:, 2]
+            f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
+            r_px = f * self.markerset.radius_m / np.maximum(depth, 1e-3)
+            half = np.minimum(r_px * 1.5 + 2.0 + p.window_sigmas * f * sigma[idx] / np.maximum(depth, 1e-3), p.max_window_px)
+            h_img, w_img = img.shape[:2]
+            gate = self.gates[c]
+            for k, m in enumerate(idx):
+                if not np.isfinite(uv[k]).all() or depth[k] <= 0:
+                    continue
+                x0 = int(max(0, np.floor(uv[k, 0] - half[k])))
+                y0 = int(max(0, np.floor(uv[k, 1] - half[k])))
+                x1 = int(min(w_img, np.ceil(uv[k, 0] + half[k]) + 1))
+                y1 = int(min(h_img, np.ceil(uv[k, 1] + half[k]) + 1))
+                if x1 - x0 < 3 or y1 - y0 < 3:
+                    continue
+                labels = self.table.classify_window(img, x0, y0, x1, y1)
+                colour_label = self.colour[m] + 1
+                if not np.any(labels == colour_label):
+                    continue
+                blobs = find_blobs(labels, self.table.n_colours, image_bgr=img[y0:y1, x0:x1],
+                                   min_area_px=gate.min_area_px, max_area_px=gate.max_area_px,
+                                   min_roundness=gate.min_roundness, offset_px=(x0, y0))
+                sel = blobs.colour == self.colour[m]
+                if sel.any():
+                    out[m][c] = np.column_stack([blobs.uv_px[sel], blobs.radius_px[sel]])
+        return out
+
+    def _choose(self, cand, pred, sigma, known):
+        """The candidate 3D point of each marker with the largest confidence Q (equation 4)."""
+        geo = self.geometry
+        n_cams = geo.n_cameras
+        m_count = self.markerset.n_markers
+        new_pos = np.full((m_count, 3), np.nan)
+        measured = np.zeros(m_count, dtype=bool)
+        q_best = np.zeros(m_count)
+        pred_uv = [cam.project(pred) for cam in self.cameras]  # (M, 2) per camera
+        for m in np.flatnonzero(known):
+            options = []  # per camera: list of (uv, radius) or None for "no centroid"
+            for c in range(n_cams):
+                k = cand[m][c]
+                if len(k) == 0:
+                    options.append([None])
+                    continue
+                d = np.linalg.norm(k[:, :2] - pred_uv[c][m], axis=1)
+                order = np.argsort(d)[:2]  # the two nearest blobs are enough to choose from
+                options.append([k[i] for i in order] + [None])
+            best = None
+            for combo in itertools.product(*options):
+                cams = [c for c in range(n_cams) if combo[c] is not None]
+                if len(cams) < 2:
+                    continue
+                xn = np.full((1, n_cams, 2), np.nan)
+                for c in cams:
+                    xn[0, c] = self.cameras[c].undistort_points(combo[c][None, :2])[0]
+                seen = np.isfinite(xn[..., 0])
+                pt = triangulate(geo.extrinsics, xn, seen)[0]
+                err = reprojection_errors_px(geo.extrinsics, geo.focal_px, pt[None], xn, seen)[0]
+                rms = float(np.sqrt(np.nanmean(err[cams] ** 2)))
+                if rms > self.params.max_reproj_px:
+                    continue
+                if np.linalg.norm(pt - pred[m]) > self.params.gate_sigmas * sigma[m] + 0.01:
+                    continue
+                # Q = prod_j 1 / (1 + |G_j C_j|): distance of each camera's centroid to the prediction
+                q = 1.0
+                for c in cams:
+                    q *= 1.0 / (1.0 + float(np.linalg.norm(combo[c][:2] - pred_uv[c][m])))
+                # prefer more cameras at equal confidence (each camera found the marker)
+                key = (len(cams) >= 3, q)
+                if best is None or key > best[0]:
+                    best = (key, pt)
+            if best is not None:
+                new_pos[m] = best[1]
+                q_best[m] = best[0][1]
+                measured[m] = True
+        # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
+        was_measured = self.status == MarkerStatus.MEASURED
+        rank = np.lexsort((-q_best, ~was_measured))
+        for a_i, a in enumerate(rank):
+            if not measured[a]:
+                continue
+            for b in rank[a_i + 1:]:
+                if measured[b] and np.linalg.norm(new_pos[a] - new_pos[b]) < self.params.same_ball_m:
+                    measured[b] = False
+        measured &= self._segments_consistent(new_pos, measured)
+        new_pos[~measured] = np.nan
+        return new_pos, measured
+
+    def _segments_consistent(self, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """False for a marker whose distance to a segment neighbour broke its learned length.
+
+        Neighbours measured this frame count; so do neighbours known only from last frame's
+        estimate, against a newly found marker (with twice the tolerance), so that a marker
+        coming back from hiding cannot take a ball that is not where its segment says.
+        """
+        tol = self.params.segment_tol_m
+        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+        dev = np.abs(d - self.seg_length)
+        check = self._same_segment & measured[:, None] & measured[None, :] & np.isfinite(self.seg_length)
+        bad_pair = check & (dev > tol)
+        returning = measured & (self.status != MarkerStatus.MEASURED)
+        known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
+        if returning.any() and known_prev.any():
+            d_prev = np.linalg.norm(pos[:, None, :] - self.positions[None, :, :], axis=-1)
+            chk = self._same_segment & returning[:, None] & known_prev[None, :] & np.isfinite(self.seg_length)
+            bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
+            measured = measured & ~bad_prev
+        ok = measured.copy()
+        # drop the marker involved in most broken pairs, one at a time
+        while bad_pair.any():
+            worst = int(np.argmax(bad_pair.sum(axis=1)))
+            ok[worst] = False
+            bad_pair[worst, :] = bad_pair[:, worst] = False
+        return ok
+
+    def _learn_lengths(self, measured: np.ndarray) -> None:
+        pos = self.positions
+        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+        pair = self._same_segment & measured[:, None] & measured[None, :]
+        first = pair & ~np.isfinite(self.seg_length)
+        self.seg_length[first] = d[first]
+        upd = pair & ~first
+        self.seg_length[upd] = 0.95 * self.seg_length[upd] + 0.05 * d[upd]
+
+    def _reacquire(self, points: Points3D, new_pos: np.ndarray, measured: np.ndarray) -> None:
+        """Give lost markers the unexplained full-frame points that fit their segment lengths."""
+        if len(points) == 0:
+            return
+        taken = np.zeros(len(points), dtype=bool)
+        for m in np.flatnonzero(measured):
+            d = np.linalg.norm(points.p_world_m - new_pos[m], axis=1)
+            taken |= d < 0.02
+        for m in np.flatnonzero(~measured & (self.status == MarkerStatus.LOST)):
+            cands = np.flatnonzero(~taken & (points.colour == self.colour[m]))
+            best, best_dev = -1, np.inf
+            for i in cands:
+                nb = np.flatnonzero(self._same_segment[m] & measured & np.isfinite(self.seg_length[m]))
+                if nb.size == 0:
+                    continue
+                dev = np.abs(np.linalg.norm(new_pos[nb] - points.p_world_m[i], axis=1) - self.seg_length[m, nb]).max()
+                if dev < self.params.segment_tol_m and dev < best_dev:
+                    best, best_dev = i, dev
+            if best >= 0:
+                new_pos[m] = points.p_world_m[best]
+                measured[m] = True
+                taken[best] = True
