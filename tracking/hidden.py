@@ -1,0 +1,687 @@
+"""Online estimation of hidden markers (METHOD.md 5.4), without look-ahead.
+
+A marker that no camera pair measures in a frame is *estimated* from the past and from the
+markers measured in this frame, or reported *lost*. Four estimators, each a pure function on
+arrays, and an :class:`Estimator` that keeps their state and calls them every frame:
+
+- **Equation 5**, constant velocity (:func:`constant_velocity`)::
+
+      P_m(n) = P_m(n-1) + dP_m(n-1)
+
+- **Equation 6**, neighbour motion (:func:`neighbour_motion`)::
+
+      P_m(n) = P_m(n-1) + dP_m(n-1) + (1 / sum_i S_mi) sum_i S_mi dP_i(n)
+
+  with the weights ``S_mi`` of neighbour ``i`` for marker ``m`` and ``dP_i(n)`` neighbour i's
+  displacement from frame n-1 to n (measured in both). ``own_velocity=False`` drops the
+  ``dP_m(n-1)`` term: the hidden marker moves exactly as its neighbours do.
+- **Rigid segment** (:func:`rigid_estimate`): the rotation and translation (Kabsch, weighted,
+  reflection-guarded) that carry the segment's measured markers from a reference configuration
+  (learned online, the last frame in which the whole segment was measured) to their positions
+  now carry the hidden marker's reference position too. With only two support markers (or
+  nearly collinear ones) the rotation about their line is undetermined: the marker's predicted
+  position (equation 6 without own velocity) is added as a weak point, which picks the smallest
+  rotation about that line.
+- **Elbow hinge** (:func:`hinge_axis`): a hidden epicondyle marker lies on the elbow's flexion
+  axis at a learned distance from the other epicondyle marker. That axis is perpendicular to the
+  forearm (elbow centre -> wrist) and to the upper arm (shoulder -> elbow centre); the cosines
+  between them, learned while all were measured, absorb the offsets of real landmarks (the
+  acromion marker is not on the humerus' axis). Where the two directions are nearly parallel
+  (elbow straight) the previous axis, turned with the upper arm, fills in the free direction.
+
+The estimate is fed back as the base of the next frame (equations 5 and 6), as the paper does.
+An estimate is dropped to LOST when it leaves what the body allows: a distance to a measured
+marker of a near-rigid pair (``length_pairs``) outside the range learned while both were
+measured, widened by ``tolerance_m``; or the marker hidden longer than ``max_hidden_s``. A marker
+never measured is LOST, and a LOST marker stays LOST until it is measured again.
+
+Configuration is plain arrays (marker indices), so that any marker set can carry it;
+:func:`default_config` gives the values measured for ``upper_limb_seated`` (docs/HIDDEN_MARKERS.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from tracking.status import MarkerStatus
+
+
+class Method(IntEnum):
+    """How a hidden marker is estimated (each falls back to the one below it when ill-posed)."""
+
+    CONSTANT_VELOCITY = 0  # equation 5
+    NEIGHBOURS = 1         # equation 6
+    RIGID = 2              # Kabsch on a segment, falls back to equation 6
+    HINGE = 3              # elbow flexion axis, falls back to RIGID
+
+    @classmethod
+    def parse(cls, value: "Method | str | int") -> "Method":
+        if isinstance(value, str):
+            try:
+                return cls[value.strip().upper()]
+            except KeyError:
+                allowed = ", ".join(m.name.lower() for m in cls)
+                raise ValueError(f"estimator {value!r} is not one of {allowed}") from None
+        return cls(value)
+
+
+@dataclass(frozen=True, slots=True)
+class Hinge:
+    """An elbow hinge for estimating ``marker`` (indices into the marker set).
+
+    Attributes:
+        marker: the epicondyle marker to estimate.
+        partner: the other epicondyle marker of that elbow (the axis runs partner -> marker).
+        shoulder: the acromion marker of that arm (upper-arm direction).
+        wrists: the two styloid markers of that forearm (forearm direction).
+    """
+
+    marker: int
+    partner: int
+    shoulder: int
+    wrists: tuple[int, int]
+
+
+# ---------------------------------------------------------------------------------------------
+# Pure estimators
+
+
+def constant_velocity(p_prev_m: np.ndarray, v_prev_m: np.ndarray) -> np.ndarray:
+    """Equation 5: ``P(n) = P(n-1) + dP(n-1)``.
+
+    Args:
+        p_prev_m: (M, 3) positions in frame n-1, world metres.
+        v_prev_m: (M, 3) displacements from frame n-2 to n-1 (NaN counts as 0).
+
+    Returns:
+        (M, 3) predicted positions in frame n.
+    """
+    return p_prev_m + np.nan_to_num(v_prev_m)
+
+
+def neighbour_motion(
+    p_prev_m: np.ndarray,
+    v_prev_m: np.ndarray,
+    d_now_m: np.ndarray,
+    d_ok: np.ndarray,
+    weights: np.ndarray,
+    *,
+    own_velocity: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Equation 6 for every marker at once.
+
+    Args:
+        p_prev_m: (M, 3) positions in frame n-1, world metres.
+        v_prev_m: (M, 3) each marker's own displacement n-2 -> n-1 (NaN counts as 0).
+        d_now_m: (M, 3) each marker's displacement n-1 -> n (rows with ``d_ok`` False ignored).
+        d_ok: (M,) bool, the displacement is known (measured in both frames).
+        weights: (M, M) ``S[m, i]``, weight of neighbour i for marker m (0: not a neighbour).
+        own_velocity: add the marker's own ``dP_m(n-1)`` (the paper's formula) or not.
+
+    Returns:
+        positions: (M, 3) estimates for frame n.
+        ok: (M,) bool, at least one weighted neighbour moved known (else the row is NaN).
+    """
+    w = weights * d_ok[None, :]
+    total = w.sum(axis=1)
+    ok = total > 0
+    d = np.where(d_ok[:, None], d_now_m, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean_d = (w @ d) / total[:, None]
+    out = p_prev_m + mean_d
+    if own_velocity:
+        out = out + np.nan_to_num(v_prev_m)
+    out[~ok] = np.nan
+    return out, ok
+
+
+def kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted least-squares rotation and translation with ``dst ~ R @ src + t``.
+
+    Args:
+        src, dst: (N, 3) corresponding points.
+        w: (N,) non-negative weights (default 1).
+
+    Returns:
+        R: (3, 3) proper rotation (det +1: a reflection is never returned).
+        t: (3,) translation.
+    """
+    w = np.ones(len(src)) if w is None else np.asarray(w, dtype=np.float64)
+    ws = w / w.sum()
+    cs = ws @ src
+    cd = ws @ dst
+    h = (src - cs).T @ ((dst - cd) * ws[:, None])
+    u, _, vt = np.linalg.svd(h)
+    if np.linalg.det(vt.T @ u.T) < 0:  # reflection guard: flip the least significant axis
+        vt = vt.copy()
+        vt[2] *= -1.0
+    r = vt.T @ u.T
+    return r, cd - r @ cs
+
+
+def spread_m(points_m: np.ndarray) -> float:
+    """RMS distance (m) of (N, 3) points from their best-fitting line (0 for N < 3)."""
+    if len(points_m) < 3:
+        return 0.0
+    s = np.linalg.svd(points_m - points_m.mean(axis=0), compute_uv=False)
+    return float(s[1] / math.sqrt(len(points_m)))
+
+
+def rigid_estimate(
+    ref_m: np.ndarray,
+    cur_m: np.ndarray,
+    target_ref_m: np.ndarray,
+    *,
+    prior_m: np.ndarray | None = None,
+    prior_weight: float = 0.1,
+    min_spread_m: float = 0.015,
+) -> np.ndarray | None:
+    """Carry a segment's hidden marker with the rigid motion of its measured markers.
+
+    Args:
+        ref_m: (K, 3) reference positions of the measured support markers.
+        cur_m: (K, 3) their positions now.
+        target_ref_m: (3,) the hidden marker's reference position (same configuration as ref_m).
+        prior_m: (3,) predicted position of the hidden marker, used as a weak extra point when
+            the support alone leaves a rotation free (K = 2 or collinear points).
+        prior_weight: that point's weight (support markers weigh 1).
+        min_spread_m: support points closer than this (RMS) to a line are collinear.
+
+    Returns:
+        (3,) the estimate, or None when the fit is ill-posed (K < 2, or free rotation and no prior).
+    """
+    k = len(ref_m)
+    if k < 2:
+        return None
+    if k < 3 or spread_m(ref_m) < min_spread_m:
+        if prior_m is None or not np.all(np.isfinite(prior_m)):
+            return None
+        # the prior point lives in the current frame; its reference is where the unconstrained
+        # segment would put it: the target's reference position
+        ref_m = np.vstack([ref_m, target_ref_m])
+        cur_m = np.vstack([cur_m, prior_m])
+        w = np.r_[np.ones(k), prior_weight]
+    else:
+        w = None
+    r, t = kabsch(ref_m, cur_m, w)
+    return r @ target_ref_m + t
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray, right_m: np.ndarray) -> np.ndarray:
+    """(3, 3) trunk -> world rotation, columns x (to the right), y (up the trunk), z (backwards).
+
+    The trunk frame of spec/JOINT_ANGLES.md: ``y = unit(upper - lower)``, ``x`` = ``right - left``
+    made orthogonal to y.
+    """
+    y = _unit(upper_m - lower_m)
+    x = right_m - left_m
+    x = _unit(x - (x @ y) * y)
+    return np.stack([x, y, np.cross(x, y)], axis=1)
+
+
+def _turn(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate v by the smallest rotation taking unit a to unit b (Rodrigues)."""
+    axis = np.cross(a, b)
+    s = float(np.linalg.norm(axis))
+    if s < 1e-12:
+        return v
+    k = axis / s
+    c = float(a @ b)
+    return v * c + np.cross(k, v) * s + k * (k @ v) * (1.0 - c)
+
+
+def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3) -> np.ndarray:
+    """Unit vector n with ``rows @ n = values`` where they determine it, else nearest ``axis_pred``.
+
+    Each row is a linear constraint ``a . n = b``, scaled to unit ``a`` (b becomes a cosine).
+    Along the right-singular directions of the scaled rows whose singular value is at least
+    ``min_singular`` the constraints fix n's components (least squares); the directions they
+    leave free or fix only weakly (two nearly parallel constraints: their difference is mostly
+    noise) keep the prediction's direction, scaled so that n has unit length. With two
+    independent constraints this is the intersection of their planes with the unit sphere on
+    the prediction's side.
+
+    Args:
+        rows: (K, 3) constraint vectors a.
+        values: (K,) right-hand sides b (same units as a).
+        axis_pred: (3,) unit prediction.
+        min_singular: singular values below this count as free directions.
+    """
+    scale = np.linalg.norm(rows, axis=1)
+    a = rows / scale[:, None]
+    b = values / scale
+    u, sv, vt = np.linalg.svd(a, full_matrices=True)
+    keep = np.zeros(3, dtype=bool)
+    keep[: len(sv)] = sv >= min_singular
+    kept = np.flatnonzero(keep)
+    coef = (u[:, kept].T @ b) / sv[kept]
+    fixed = coef @ vt[kept]
+    norm2 = float(coef @ coef)
+    if norm2 >= 1.0:  # inconsistent beyond the unit sphere: the nearest unit vector
+        return fixed / math.sqrt(norm2)
+    free = vt[~keep]
+    rest = free.T @ (free @ axis_pred)  # the prediction's part in the free directions
+    r = float(np.linalg.norm(rest))
+    if r < 1e-9:
+        rest, r = free[0], 1.0
+    return fixed + math.sqrt(1.0 - norm2) * rest / r
+
+
+# ---------------------------------------------------------------------------------------------
+# The stateful estimator
+
+
+class Estimator:
+    """Per-frame hidden-marker estimation with the state it needs (positions, velocities, learned
+    segment shapes, lengths and shoulder pivots).
+
+    Args:
+        methods: (M,) the estimator of each marker (:class:`Method` or its name).
+        weights: (M, M) equation 6 weights ``S[m, i]`` (row m: the neighbours of marker m), or a
+            mapping ``{m: {i: S}}``.
+        segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
+            marker tries the groups that contain it in the order given.
+        hinges: elbow hinges (markers with method HINGE need one).
+        length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
+        trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
+            shoulder pivots are learned (None: the world frame).
+        own_velocity: equation 6 adds the marker's own last displacement (the paper's formula).
+        tolerance_m: drift tolerance on the learned distance ranges.
+        max_hidden_s: an estimate older than this is dropped (a scalar or one per marker).
+        fps: frame rate (for ``max_hidden_s`` and the learning memories).
+        prior_weight: weight of the predicted position in under-determined rigid fits.
+        min_spread_m: support markers nearer than this to one line leave a rotation free.
+        pivot_prior_m: (3,) the shoulder pivot (glenohumeral centre) relative to the shoulder
+            marker in the trunk frame before anything is learned (x right, y up, z backwards).
+        pivot_memory_s: time constant of the pivot learning (older frames are forgotten).
+        min_singular: hinge constraints weaker than this leave the axis to the prediction
+            (:func:`hinge_axis`).
+    """
+
+    def __init__(
+        self,
+        methods: Sequence[Method | str | int],
+        weights: np.ndarray | Mapping[int, Mapping[int, float]],
+        segments: Sequence[Sequence[int]] = (),
+        hinges: Sequence[Hinge] = (),
+        length_pairs: Sequence[tuple[int, int]] = (),
+        trunk: tuple[int, int, int, int] | None = None,
+        *,
+        own_velocity: bool = False,
+        tolerance_m: float = 0.03,
+        max_hidden_s: float | Sequence[float] = 5.0,
+        fps: float = 30.0,
+        prior_weight: float = 0.1,
+        min_spread_m: float = 0.015,
+        pivot_prior_m: Sequence[float] = (0.0, -0.06, 0.0),
+        pivot_memory_s: float = 3.0,
+        min_singular: float = 0.3,
+    ) -> None:
+        m = len(methods)
+        self.n_markers = m
+        self.methods = np.array([Method.parse(x) for x in methods], dtype=np.int8)
+        if isinstance(weights, Mapping):
+            w = np.zeros((m, m))
+            for i, row in weights.items():
+                for j, v in row.items():
+                    w[i, j] = v
+        else:
+            w = np.array(weights, dtype=np.float64)
+        if w.shape != (m, m) or np.any(w < 0) or not np.all(np.isfinite(w)):
+            raise ValueError(f"weights must be a non-negative ({m}, {m}) array, got shape {w.shape}")
+        np.fill_diagonal(w, 0.0)
+        self.weights = w
+        self.segments = tuple(np.array(g, dtype=np.intp) for g in segments)
+        for g in self.segments:
+            if len(g) < 2 or g.min() < 0 or g.max() >= m or len(set(g.tolist())) != len(g):
+                raise ValueError(f"segment {g.tolist()} must list at least 2 distinct marker indices 0..{m - 1}")
+        self._segments_of = [[k for k, g in enumerate(self.segments) if i in g] for i in range(m)]
+        self.hinges = {h.marker: h for h in hinges}
+        for i in np.flatnonzero(self.methods == Method.HINGE):
+            if int(i) not in self.hinges:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
+        # learning arrays over hinges: (H,) marker, partner, shoulder, wrist a, wrist b
+        self._h_idx = np.array([[h.marker, h.partner, h.shoulder, *h.wrists] for h in hinges],
+                               dtype=np.intp).reshape(-1, 5)
+        self._h_row = {h.marker: r for r, h in enumerate(hinges)}
+        self._shoulders = sorted({h.shoulder for h in hinges})
+        pairs = np.array(length_pairs, dtype=np.intp).reshape(-1, 2)
+        self._pair_mask = np.zeros((m, m), dtype=bool)
+        self._pair_mask[pairs[:, 0], pairs[:, 1]] = True
+        self._pair_mask[pairs[:, 1], pairs[:, 0]] = True
+        self._pairs = np.argwhere(np.triu(self._pair_mask))
+        self.trunk = None if trunk is None else np.array(trunk, dtype=np.intp)
+        self.own_velocity = bool(own_velocity)
+        self.tolerance_m = float(tolerance_m)
+        max_s = np.broadcast_to(np.asarray(max_hidden_s, dtype=np.float64), (m,))
+        self.max_hidden_frames = np.ceil(max_s * float(fps))  # float: inf allowed
+        self.prior_weight = float(prior_weight)
+        self.min_spread_m = float(min_spread_m)
+        self.min_singular = float(min_singular)
+        self.pivot_prior_m = np.asarray(pivot_prior_m, dtype=np.float64)
+        self._forget = math.exp(-1.0 / (float(fps) * pivot_memory_s))
+        self._ema = 1.0 - math.exp(-1.0 / (float(fps) * 0.3))  # hinge lengths: ~0.3 s memory
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (after re-identification)."""
+        m = self.n_markers
+        self.positions = np.full((m, 3), np.nan)     # last output, the base of the next frame
+        self.velocity = np.full((m, 3), np.nan)      # last output step
+        self.measured = np.zeros(m, dtype=bool)      # measured in the last frame
+        self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
+        self.hidden_frames = np.zeros(m, dtype=np.int64)
+        self.used = np.full(m, -1, dtype=np.int8)    # Method used for each estimate (-1: none)
+        self.dist_lo = np.full(len(self._pairs), np.inf)
+        self.dist_hi = np.full(len(self._pairs), -np.inf)
+        self.seg_ref = [np.full((len(g), 3), np.nan) for g in self.segments]
+        # per hinge: axis length, and n . (wrist centre - partner)
+        self.hinge_length = np.full(len(self._h_idx), np.nan)
+        self.hinge_fore = np.full(len(self._h_idx), np.nan)
+        # per shoulder: normal equations of the pivot offset (trunk frame) and the offset
+        self._piv_a = {s: np.zeros((3, 3)) for s in self._shoulders}
+        self._piv_b = {s: np.zeros(3) for s in self._shoulders}
+        self.pivot_offset = {s: self.pivot_prior_m.copy() for s in self._shoulders}
+        self.trunk_rot = np.eye(3)
+
+    # ------------------------------------------------------------------ learning
+    def _learn(self, p: np.ndarray, ok: np.ndarray) -> None:
+        if len(self._pairs):
+            i, j = self._pairs[:, 0], self._pairs[:, 1]
+            both = ok[i] & ok[j]
+            if both.any():
+                d = np.linalg.norm(p[i] - p[j], axis=1)
+                self.dist_lo = np.where(both, np.fmin(self.dist_lo, d), self.dist_lo)
+                self.dist_hi = np.where(both, np.fmax(self.dist_hi, d), self.dist_hi)
+        for k, g in enumerate(self.segments):
+            if ok[g].all():
+                self.seg_ref[k] = p[g]
+        if self.trunk is not None and ok[self.trunk].all():
+            self.trunk_rot = trunk_rotation(*p[self.trunk])
+        if not len(self._h_idx):
+            return
+        full = ok[self._h_idx].all(axis=1)
+        if not full.any():
+            return
+        idx = self._h_idx[full]
+        mk, pa, sh, wa, wb = (p[idx[:, c]] for c in range(5))
+        e = mk - pa
+        length = np.linalg.norm(e, axis=1)
+        n = e / length[:, None]
+        fore = np.einsum("ij,ij->i", n, 0.5 * (wa + wb) - pa)  # n . (wrist centre - partner)
+        rows = np.flatnonzero(full)
+        first = ~np.isfinite(self.hinge_length[rows])
+        old_len, old_fore = self.hinge_length[rows], self.hinge_fore[rows]
+        self.hinge_length[rows] = np.where(first, length, old_len + self._ema * (length - old_len))
+        self.hinge_fore[rows] = np.where(first, fore, old_fore + self._ema * (fore - old_fore))
+        # shoulder pivot G = S + R g: the axis is perpendicular to the humerus, n . (centre - G) = 0,
+        # i.e. (R^T n) . g = n . (centre - S); one equation per frame and elbow marker
+        centre = 0.5 * (mk + pa)
+        a_t = n @ self.trunk_rot  # rows: R^T n
+        rhs = np.einsum("ij,ij->i", n, centre - sh)
+        for s in self._shoulders:
+            sel = idx[:, 2] == s
+            if not sel.any():
+                continue
+            self._piv_a[s] = self._forget * self._piv_a[s] + a_t[sel].T @ a_t[sel]
+            self._piv_b[s] = self._forget * self._piv_b[s] + a_t[sel].T @ rhs[sel]
+            self.pivot_offset[s] = np.linalg.solve(self._piv_a[s] + np.eye(3),
+                                                   self._piv_b[s] + self.pivot_prior_m)
+
+    # ------------------------------------------------------------------ estimation
+    def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        h = self.hinges[k]
+        r = self._h_row[k]
+        length = self.hinge_length[r]
+        if not (ok[h.partner] and ok[h.shoulder]) or not np.isfinite(length):
+            return None
+        # prediction: the rigid forearm-elbow fit (exact while the forearm does not turn), else
+        # the axis of the previous frame
+        rigid = self._rigid(k, p, ok, prior)
+        if rigid is not None:
+            axis_pred = _unit(rigid - p[h.partner])
+        else:
+            prev_axis = self.positions[k] - self.positions[h.partner]
+            if not np.all(np.isfinite(prev_axis)):
+                return None
+            axis_pred = _unit(prev_axis)
+        # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
+        # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset[h.shoulder]
+        rows = [p[h.partner] - pivot]
+        values = [-0.5 * length]
+        wa, wb = h.wrists
+        if ok[wa] and ok[wb]:
+            rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
+            values.append(self.hinge_fore[r])
+        n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular)
+        return p[h.partner] + length * n
+
+    def _rigid(self, k: int, p: np.ndarray, ok: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        for s in self._segments_of[k]:
+            seg = self.segments[s]
+            ref = self.seg_ref[s]
+            if not np.isfinite(ref).all():
+                continue
+            me = int(np.flatnonzero(seg == k)[0])
+            sup = ok[seg]
+            sup[me] = False
+            est = rigid_estimate(ref[sup], p[seg[sup]], ref[me], prior_m=prior,
+                                 prior_weight=self.prior_weight, min_spread_m=self.min_spread_m)
+            if est is not None:
+                return est
+        return None
+
+    def update(self, positions_m: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One frame: pass measured markers through, estimate the hidden ones.
+
+        Args:
+            positions_m: (M, 3) float64 world metres; rows of unmeasured markers are ignored (NaN).
+            measured: (M,) bool, the marker was measured in this frame.
+
+        Returns:
+            positions: (M, 3) measured or estimated positions, NaN where LOST (a new array).
+            status: (M,) uint8 :class:`~tracking.status.MarkerStatus` values.
+        """
+        ok = np.asarray(measured, dtype=bool) & np.isfinite(positions_m).all(axis=1)
+        p = np.where(ok[:, None], positions_m, np.nan)
+        self._learn(p, ok)
+
+        prev = self.positions
+        has_base = np.isfinite(prev).all(axis=1)
+        hidden_frames = np.where(ok, 0, self.hidden_frames + 1)
+        hidden = ~ok & has_base & (hidden_frames <= self.max_hidden_frames)
+        used = np.full(self.n_markers, -1, dtype=np.int8)
+
+        if hidden.any():
+            d_ok = ok & self.measured
+            d_now = np.where(d_ok[:, None], p - prev, 0.0)
+            eq6, eq6_ok = neighbour_motion(prev, self.velocity, d_now, d_ok, self.weights,
+                                           own_velocity=self.own_velocity)
+            if self.own_velocity:  # the prior of rigid fits moves with the neighbours only
+                prior = eq6 - np.nan_to_num(self.velocity)
+            else:
+                prior = eq6
+            prior = np.where(eq6_ok[:, None], prior, prev)
+            for k in np.flatnonzero(hidden):
+                method = self.methods[k]
+                est = None
+                if method == Method.HINGE:
+                    est = self._hinge(k, p, ok, prior[k])
+                    used[k] = Method.HINGE
+                    method = Method.RIGID
+                if est is None and method == Method.RIGID:
+                    est = self._rigid(k, p, ok, prior[k])
+                    used[k] = Method.RIGID
+                    method = Method.NEIGHBOURS
+                if est is None and method == Method.NEIGHBOURS and eq6_ok[k]:
+                    est = eq6[k]
+                    used[k] = Method.NEIGHBOURS
+                if est is None:
+                    est = constant_velocity(prev[k], self.velocity[k])
+                    used[k] = Method.CONSTANT_VELOCITY
+                p[k] = est
+
+            # drift: a distance to a measured partner outside the learned range (+ tolerance)
+            if len(self._pairs):
+                i, j = self._pairs[:, 0], self._pairs[:, 1]
+                check = ((hidden[i] & ok[j]) | (hidden[j] & ok[i])) & (self.dist_hi >= self.dist_lo)
+                if check.any():
+                    d = np.linalg.norm(p[i[check]] - p[j[check]], axis=1)
+                    out = (d < self.dist_lo[check] - self.tolerance_m) | (d > self.dist_hi[check] + self.tolerance_m)
+                    if out.any():
+                        bad = np.r_[i[check][out], j[check][out]]
+                        hidden[bad] = False
+            p[~ok & ~hidden] = np.nan
+            used[~hidden] = -1
+        else:
+            p[~ok] = np.nan
+
+        known = ok | hidden
+        # a reappearing marker keeps the velocity of its estimate (its measured jump is estimate error)
+        keep_v = ok & ~self.measured & has_base
+        self.velocity = np.where(keep_v[:, None], self.velocity, np.where(known[:, None], p - prev, np.nan))
+        self.positions = p
+        self.measured = ok
+        self.hidden_frames = hidden_frames
+        self.used = used
+        self.status = np.where(ok, MarkerStatus.MEASURED,
+                               np.where(hidden, MarkerStatus.ESTIMATED, MarkerStatus.LOST)).astype(np.uint8)
+        return p.copy(), self.status.copy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Recommended configuration (docs/HIDDEN_MARKERS.md). '*' is a side letter (L or R), '#' the
+# other side's letter; the tables hold for both arms.
+
+#: Equation 6 weights S: marker -> {neighbour: S}.
+WEIGHTS: dict[str, dict[str, float]] = {
+    "MB": {"MP": 1.0, "MLS": 0.25, "MRS": 0.25},
+    "MP": {"MB": 1.0, "MLS": 0.25, "MRS": 0.25},
+    "M*S": {"MB": 1.0, "MP": 0.5, "M*E1": 0.25, "M*E2": 0.25},
+    "M*E1": {"M*E2": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
+    "M*E2": {"M*E1": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
+    "M*W1": {"M*W2": 4.0, "M*E1": 0.5, "M*E2": 0.5},
+    "M*W2": {"M*W1": 4.0, "M*E1": 0.5, "M*E2": 0.5},
+    "M*H": {"M#H": 1.0},
+}
+
+#: Rigid groups, in the order a hidden marker tries them.
+SEGMENTS: tuple[tuple[str, ...], ...] = (
+    ("MB", "MP", "MLS", "MRS"),
+    ("M*E1", "M*E2", "M*W1", "M*W2"),
+    ("M*S", "M*E1", "M*E2", "M*W1", "M*W2"),
+    ("MLH", "MRH"),
+)
+
+#: The estimator of each marker.
+METHODS: dict[str, Method] = {
+    "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
+    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.RIGID, "M*W2": Method.RIGID,
+    "M*H": Method.NEIGHBOURS,
+}
+
+#: Near-rigid pairs whose distance is checked for drift.
+LENGTH_PAIRS: tuple[tuple[str, str], ...] = (
+    ("MB", "MP"), ("MLH", "MRH"), ("M*E1", "M*E2"), ("M*W1", "M*W2"),
+    ("M*E1", "M*W1"), ("M*E1", "M*W2"), ("M*E2", "M*W1"), ("M*E2", "M*W2"),
+    ("MB", "M*S"), ("MP", "M*S"),
+)
+
+#: Longest occlusion an estimate is reported for, per estimator (seconds).
+MAX_HIDDEN_S: dict[Method, float] = {
+    Method.CONSTANT_VELOCITY: 0.5, Method.NEIGHBOURS: 2.0, Method.RIGID: 5.0, Method.HINGE: 20.0,
+}
+
+SIDE_LETTERS = ("L", "R")
+
+
+def _expand(pattern: str) -> list[tuple[str, str]]:
+    """'M*E1' -> [(side, 'MLE1'), (side, 'MRE1')]; a name without '*' or '#' -> [('', name)]."""
+    if "*" not in pattern and "#" not in pattern:
+        return [("", pattern)]
+    out = []
+    for s, o in zip(SIDE_LETTERS, SIDE_LETTERS[::-1]):
+        out.append((s, pattern.replace("*", s).replace("#", o)))
+    return out
+
+
+def _side(pattern: str, side: str) -> str:
+    other = {"L": "R", "R": "L", "": ""}[side]
+    return pattern.replace("*", side).replace("#", other)
+
+
+def default_config(markerset, *, method: Method | str | None = None, own_velocity: bool = False) -> dict:
+    """Keyword arguments of :class:`Estimator` for a marker set: ``Estimator(**default_config(ms), fps=...)``.
+
+    ``upper_limb_seated`` markers get the measured tables above (:data:`WEIGHTS`,
+    :data:`SEGMENTS`, :data:`METHODS`, :data:`LENGTH_PAIRS`, :data:`MAX_HIDDEN_S`); markers of
+    other sets get equation 6 with weight 1 for the markers of their own ``segment``.
+
+    Args:
+        markerset: a :class:`~tracking.markerset.MarkerSet` (names, segments).
+        method: one estimator for every marker instead of the recommended ones (comparisons).
+        own_velocity: equation 6 as the paper writes it (with the marker's own last velocity).
+    """
+    names = list(markerset.names)
+    index = {n: i for i, n in enumerate(names)}
+    m = len(names)
+    seg = np.array(markerset.segments)
+    weights = ((seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)).astype(np.float64)
+    methods = [Method.NEIGHBOURS] * m
+    for pattern, row in WEIGHTS.items():
+        for side, name in _expand(pattern):
+            if name in index and all(_side(k, side) in index for k in row):
+                i = index[name]
+                weights[i] = 0.0
+                for k, s in row.items():
+                    weights[i, index[_side(k, side)]] = s
+    for pattern, meth in METHODS.items():
+        for _, name in _expand(pattern):
+            if name in index:
+                methods[index[name]] = meth
+    segments = []
+    for group in SEGMENTS:
+        for side in (SIDE_LETTERS if any("*" in g for g in group) else ("",)):
+            names_g = [_side(g, side) for g in group]
+            if all(n in index for n in names_g):
+                segments.append(tuple(index[n] for n in names_g))
+    hinges = []
+    for side in SIDE_LETTERS:
+        arm = [f"M{side}{k}" for k in ("S", "E1", "E2", "W1", "W2")]
+        if all(n in index for n in arm):
+            s, e1, e2, w1, w2 = (index[n] for n in arm)
+            hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
+    hinge_markers = {h.marker for h in hinges}
+    methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
+    pairs = []
+    for a, b in LENGTH_PAIRS:
+        for side in (SIDE_LETTERS if "*" in a + b else ("",)):
+            na, nb = _side(a, side), _side(b, side)
+            if na in index and nb in index:
+                pairs.append((index[na], index[nb]))
+    if method is not None:
+        methods = [Method.parse(method)] * m
+    max_hidden = [MAX_HIDDEN_S[Method(x)] for x in methods]
+    trunk = None
+    if all(n in index for n in ("MB", "MP", "MLH", "MRH")):
+        trunk = (index["MB"], index["MP"], index["MLH"], index["MRH"])
+    return {
+        "methods": methods,
+        "trunk": trunk,
+        "weights": weights,
+        "segments": segments,
+        "hinges": hinges,
+        "length_pairs": pairs,
+        "own_velocity": own_velocity,
+        "max_hidden_s": max_hidden,
+    }

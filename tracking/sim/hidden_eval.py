@@ -1,0 +1,251 @@
+"""The seed's hidden-marker experiment on simulated motions: estimators compared against truth.
+
+For each motion the true marker centres come from the body model, and which markers are hidden
+comes from rendering the studio: a marker is *measured* in a frame when at least two cameras see
+it (``seen_fraction`` of its disc visible and its disc not merged with a same-coloured one, the
+definitions of :mod:`tracking.evaluate`), otherwise it is *hidden*. Measured positions get
+Gaussian noise (``noise_mm`` per coordinate). Each estimator then runs online over the frames, and
+is scored on:
+
+- an *occlusion event*: a run of hidden frames of one marker after it was first measured, ending
+  with the marker measured again inside the motion;
+- *error at reappearance*: distance between the estimate for the frame in which the marker is
+  measured again (what the estimator would have reported had it stayed hidden: the point the
+  tracker searches around) and the true centre there; mean and max over events;
+- *error while hidden*: mean distance between estimate and truth over all hidden frames that have
+  an estimate (frames of events that never end included).
+
+Regenerate the table of docs/HIDDEN_MARKERS.md with ``python -m tracking.sim.hidden_eval``
+(renders each motion once at 320x240 and 30 frames/s, ~20-40 ms per frame; ``--cache DIR`` keeps
+the visibility between runs; 15 frames/s uses every other frame).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import hashlib
+import logging
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from tracking.hidden import Estimator, Method, default_config
+from tracking.markerset import MarkerSet
+from tracking.status import MarkerStatus
+
+log = logging.getLogger(__name__)
+
+#: Motions of the comparison: the seed's experiment, the two capture replays, and the scripted
+#: motions with occlusions.
+MOTIONS: tuple[str, ...] = (
+    "right_external_rotation", "vicon_upper_limb", "qualisys_walk", "elbow_flexion_supination",
+    "reach", "shoulder_flexion", "trunk_lean_compensation",
+)
+
+
+@dataclass(frozen=True, slots=True)
+class OcclusionData:
+    """Truth and measurability of one motion.
+
+    Attributes:
+        motion: motion name.
+        fps: frame rate.
+        names: marker names.
+        truth_m: (T, M, 3) true marker centres, world metres.
+        measured: (T, M) bool, seen by at least two cameras.
+    """
+
+    motion: str
+    fps: float
+    names: tuple[str, ...]
+    truth_m: np.ndarray
+    measured: np.ndarray
+
+    def every(self, step: int) -> "OcclusionData":
+        """Every ``step``-th frame (30 -> 15 frames/s with step 2)."""
+        return replace(self, fps=self.fps / step, truth_m=self.truth_m[::step], measured=self.measured[::step])
+
+
+def occlusion_data(motion: str, *, fps: float = 30.0, size_px: tuple[int, int] = (320, 240), rig: str = "ring4",
+                   seen_fraction: float = 0.75, cache_dir: Path | None = None) -> OcclusionData:
+    """Render ``motion`` once per frame and return truth and which markers two cameras see.
+
+    The cache key hashes the true trajectories and the cameras, so a changed body, motion or rig
+    is rendered again.
+    """
+    from tracking.sim.studio import SimulationSettings, studio_from_settings
+
+    studio, mot = studio_from_settings(SimulationSettings(motion=motion, rig=rig, size_px=size_px, fps=fps))
+    try:
+        n = studio.n_frames(mot, fps)
+        truth = np.stack([studio.body.markers_m(mot.pose_at(i / fps)) for i in range(n)])
+        names = tuple(studio.markerset.names)
+        key = hashlib.sha1(truth.tobytes())
+        for cam in studio.cameras:
+            key.update(np.asarray(cam.P, dtype=np.float64).tobytes())
+        key.update(f"{size_px}{seen_fraction}".encode())
+        path = None if cache_dir is None else Path(cache_dir) / f"{motion}_{fps:g}fps_{key.hexdigest()[:16]}.npz"
+        if path is not None and path.exists():
+            return OcclusionData(motion, fps, names, truth, np.load(path)["measured"])
+        measured = np.zeros(truth.shape[:2], dtype=bool)
+        t0 = time.perf_counter()
+        for i, sf in enumerate(studio.play(mot, fps)):
+            merged = getattr(sf, "merged", np.zeros_like(sf.visible_fraction, dtype=bool))
+            views = (sf.visible_fraction >= seen_fraction) & ~merged
+            measured[i] = views.sum(axis=0) >= 2
+        log.info("%s: rendered %d frames in %.1f s", motion, n, time.perf_counter() - t0)
+    finally:
+        studio.close()
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        np.savez_compressed(path, measured=measured)
+    return OcclusionData(motion, fps, names, truth, measured)
+
+
+@dataclass(frozen=True, slots=True)
+class Score:
+    """One estimator on one motion.
+
+    Attributes:
+        events: occlusion events that end with the marker measured again.
+        reappear_mm: (events,) error at reappearance of each event (NaN: no estimate then).
+        event_markers: (events,) marker index of each event.
+        hidden_frames: hidden (frame, marker) pairs after the marker's first measurement.
+        estimated_frames: those with an estimate (the rest were LOST).
+        hidden_err_mm: (estimated_frames,) error of each estimate.
+        update_ms: mean time of one :meth:`Estimator.update`.
+    """
+
+    events: int
+    reappear_mm: np.ndarray
+    event_markers: np.ndarray
+    hidden_frames: int
+    estimated_frames: int
+    hidden_err_mm: np.ndarray
+    update_ms: float
+
+    def for_marker(self, k: int) -> np.ndarray:
+        return self.reappear_mm[self.event_markers == k]
+
+
+def run_estimator(data: OcclusionData, estimator: Estimator, *, noise_mm: float = 1.0, seed: int = 0) -> Score:
+    """Feed the frames of ``data`` (noisy where measured) to ``estimator`` and score it."""
+    rng = np.random.default_rng(seed)
+    noisy = data.truth_m + rng.normal(0.0, noise_mm / 1000.0, data.truth_m.shape)
+    meas = data.measured
+    t_frames, m = meas.shape
+    seen = np.zeros(m, dtype=bool)
+    reappear, markers, errs = [], [], []
+    hidden_frames = estimated = 0
+    spent = 0.0
+    for t in range(t_frames):
+        ok = meas[t]
+        back = ok & seen & (~meas[t - 1] if t > 0 else False)
+        if back.any():
+            # what the estimator would have said had the returning markers stayed hidden
+            shadow = copy.deepcopy(estimator)
+            p_s, st_s = shadow.update(np.where((ok & ~back)[:, None], noisy[t], np.nan), ok & ~back)
+            for k in np.flatnonzero(back):
+                has = st_s[k] == MarkerStatus.ESTIMATED
+                reappear.append(np.linalg.norm(p_s[k] - data.truth_m[t, k]) * 1000.0 if has else np.nan)
+                markers.append(k)
+        t0 = time.perf_counter()
+        p, st = estimator.update(np.where(ok[:, None], noisy[t], np.nan), ok)
+        spent += time.perf_counter() - t0
+        hid = ~ok & seen
+        hidden_frames += int(hid.sum())
+        est = hid & (st == MarkerStatus.ESTIMATED)
+        estimated += int(est.sum())
+        errs.extend(np.linalg.norm(p[est] - data.truth_m[t, est], axis=1) * 1000.0)
+        seen |= ok
+    return Score(len(reappear), np.array(reappear), np.array(markers, dtype=np.intp), hidden_frames, estimated,
+                 np.array(errs), 1000.0 * spent / t_frames)
+
+
+#: The compared estimators: label -> (method for every marker or None: recommended, own_velocity).
+ESTIMATORS: dict[str, tuple[Method | None, bool]] = {
+    "eq. 5 (constant velocity)": (Method.CONSTANT_VELOCITY, False),
+    "eq. 6 as written (+ own velocity)": (Method.NEIGHBOURS, True),
+    "eq. 6 without own velocity": (Method.NEIGHBOURS, False),
+    "rigid segments": (Method.RIGID, False),
+    "recommended (per marker)": (None, False),
+}
+
+
+def make_estimator(markerset: MarkerSet | Sequence[str], label: str, fps: float, *, gates: bool = False) -> Estimator:
+    """An estimator of :data:`ESTIMATORS`; without ``gates`` nothing is dropped to LOST (raw accuracy)."""
+    method, own = ESTIMATORS[label]
+    cfg = default_config(markerset, method=method, own_velocity=own)
+    if not gates:
+        cfg["max_hidden_s"] = np.inf
+        cfg["tolerance_m"] = np.inf
+    return Estimator(**cfg, fps=fps)
+
+
+def _fmt(x: float) -> str:
+    return "-" if not np.isfinite(x) else f"{x:.1f}"
+
+
+def comparison_rows(datasets: Sequence[OcclusionData], markerset: MarkerSet, *, noise_mm: float = 1.0,
+                    seeds: Sequence[int] = (0,), labels: Sequence[str] = tuple(ESTIMATORS),
+                    gates: bool = False) -> list[dict]:
+    """One row per (motion, fps, estimator), scores pooled over the noise seeds."""
+    rows = []
+    for data in datasets:
+        for label in labels:
+            scores = [run_estimator(data, make_estimator(markerset, label, data.fps, gates=gates),
+                                    noise_mm=noise_mm, seed=s) for s in seeds]
+            re = np.concatenate([s.reappear_mm for s in scores])
+            he = np.concatenate([s.hidden_err_mm for s in scores])
+            rows.append({
+                "motion": data.motion, "fps": data.fps, "estimator": label,
+                "events": scores[0].events,
+                "reappear_mean_mm": float(np.nanmean(re)) if np.isfinite(re).any() else np.nan,
+                "reappear_max_mm": float(np.nanmax(re)) if np.isfinite(re).any() else np.nan,
+                "hidden_mean_mm": float(he.mean()) if he.size else np.nan,
+                "hidden_frames": scores[0].hidden_frames,
+                "estimated_fraction": sum(s.estimated_frames for s in scores) / max(sum(s.hidden_frames for s in scores), 1),
+                "update_ms": float(np.mean([s.update_ms for s in scores])),
+                "scores": scores,
+            })
+    return rows
+
+
+def table_markdown(rows: Sequence[dict]) -> str:
+    lines = [
+        "| motion | fps | estimator | events | reappearance mean (mm) | reappearance max (mm) | while hidden mean (mm) |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in rows:
+        lines.append(f"| {r['motion']} | {r['fps']:g} | {r['estimator']} | {r['events']} | {_fmt(r['reappear_mean_mm'])} "
+                     f"| {_fmt(r['reappear_max_mm'])} | {_fmt(r['hidden_mean_mm'])} |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    from tracking.markerset import load_markerset
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--motions", nargs="*", default=list(MOTIONS))
+    ap.add_argument("--fps", nargs="*", type=int, default=[15, 30], help="15 and/or 30 (15 = every other 30 fps frame)")
+    ap.add_argument("--cache", type=Path, default=None, help="folder keeping the rendered visibility")
+    ap.add_argument("--seeds", type=int, default=3, help="noise draws pooled per row")
+    ap.add_argument("--noise-mm", type=float, default=1.0)
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    ms = load_markerset()
+    datasets = []
+    for motion in args.motions:
+        d30 = occlusion_data(motion, fps=30.0, cache_dir=args.cache)
+        for f in sorted(args.fps):
+            datasets.append(d30.every(30 // f))
+    rows = comparison_rows(datasets, ms, noise_mm=args.noise_mm, seeds=range(args.seeds))
+    print(table_markdown(rows))
+
+
+if __name__ == "__main__":
+    main()
