@@ -21,12 +21,12 @@ Pure computation on arrays: no files, processes or GL.
 from __future__ import annotations
 
 import enum
-import itertools
 import logging
 import time
 from dataclasses import dataclass, field
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from calibration.camera import Camera
@@ -246,7 +246,7 @@ class Tracker:
         sigma = p.base_sigma_m + p.accel_sigma_m * np.minimum(self.frames_unmeasured, p.max_sigma_frames)
 
         t0 = time.perf_counter()
-        cand = self._window_candidates(images, pred, sigma, known)
+        cand = self._window_observations(images, pred, sigma, known)
         t1 = time.perf_counter()
         new_pos, measured = self._choose(cand, pred, sigma, known)
         t2 = time.perf_counter()
@@ -281,94 +281,143 @@ class Tracker:
             self.reset()
         return n_points
 
-    def _window_candidates(self, images, pred, sigma, known):
-        """Per marker and camera, the blobs of the marker's colour in its search window.
+    def _window_observations(self, images, pred, sigma, known):
+        """Each marker's centroid in each camera, from the colour table inside its search window.
+
+        Q (equation 4) is a product of one factor per camera, 1 / (1 + |G_j C_j|), so the candidate
+        of largest Q takes in every camera the centroid nearest to the predicted image position.
+        The window's pixels of the marker's colour usually form that one ball: its centroid comes
+        from the mask's moments, computed for all of a camera's windows at once (one gather of the
+        windows' pixels, one table look-up, array reductions). A window whose mask is too large or
+        not round holds several balls (or clutter): then its regions are separated and the one
+        nearest to the prediction is taken.
 
         Returns:
-            list over markers of list over cameras of (K, 3) arrays [u, v, radius_px] (may be empty).
+            uv (M, C, 2) float64 centroids (NaN where none), radius (M, C) equivalent radius in px.
         """
         m_count = self.markerset.n_markers
-        out = [[np.zeros((0, 3)) for _ in self.cameras] for _ in range(m_count)]
-        idx = np.flatnonzero(known)
-        if idx.size == 0:
-            return out
+        n_cams = len(self.cameras)
+        uv_out = np.full((m_count, n_cams, 2), np.nan)
+        rad_out = np.full((m_count, n_cams), np.nan)
         p = self.params
+        # markers measured last frame share small windows (vectorized); the others (coming back
+        # from hiding: larger uncertainty) get windows of their own size
+        recent = known & (self.frames_unmeasured == 0)
+        for group in (np.flatnonzero(recent), np.flatnonzero(known & ~recent)):
+            if group.size:
+                self._windows(images, pred, sigma, group, uv_out, rad_out, shared=group is not None and recent[group[0]])
+        return uv_out, rad_out
+
+    def _windows(self, images, pred, sigma, idx, uv_out, rad_out, shared: bool) -> None:
+        """Fill uv_out/rad_out for markers ``idx`` (see :meth:`_window_observations`)."""
+        p = self.params
+        lut = self.table.lut
+        target = (self.colour[idx] + 1).astype(np.uint8)
+        if not shared:  # one marker at a time, each with its own window size
+            if idx.size > 1:
+                for m in idx:
+                    self._windows(images, pred, sigma, np.array([m]), uv_out, rad_out, shared=False)
+                return
         for c, (cam, img) in enumerate(zip(self.cameras, images)):
             uv = cam.project(pred[idx])
             depth = cam.world_to_camera(pred[idx])[:, 2]
             f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
-            r_px = f * self.markerset.radius_m / np.maximum(depth, 1e-3)
-            half = np.minimum(r_px * 1.5 + 2.0 + p.window_sigmas * f * sigma[idx] / np.maximum(depth, 1e-3), p.max_window_px)
+            safe_depth = np.maximum(depth, 1e-3)
+            r_px = f * self.markerset.radius_m / safe_depth
+            half = np.minimum(r_px * 1.5 + 2.0 + p.window_sigmas * f * sigma[idx] / safe_depth, p.max_window_px)
             h_img, w_img = img.shape[:2]
+            valid = np.isfinite(uv).all(axis=1) & (depth > 0)
+            valid &= (uv[:, 0] > -half) & (uv[:, 0] < w_img + half) & (uv[:, 1] > -half) & (uv[:, 1] < h_img + half)
+            if not valid.any():
+                continue
+            # one window size for the camera: the largest needed (hidden markers' larger windows
+            # are rare and short-lived)
+            hw = int(np.ceil(half[valid].max()))
+            size = 2 * hw + 1
+            cx = np.round(np.where(valid, uv[:, 0], 0)).astype(np.int64)
+            cy = np.round(np.where(valid, uv[:, 1], 0)).astype(np.int64)
+            offs = np.arange(-hw, hw + 1)
+            xs = cx[:, None] + offs[None, :]  # (K, S)
+            ys = cy[:, None] + offs[None, :]
+            inside = ((xs >= 0) & (xs < w_img))[:, None, :] & ((ys >= 0) & (ys < h_img))[:, :, None]
+            flat = ys.clip(0, h_img - 1)[:, :, None] * w_img + xs.clip(0, w_img - 1)[:, None, :]
+            img_c = np.ascontiguousarray(img)
+            words = np.ndarray((h_img * w_img - 1,), dtype="<u4", buffer=img_c, strides=(3,))
+            pix = words[np.minimum(flat, h_img * w_img - 2)] & 0xFFFFFF  # the last pixel reads its neighbour
+            labels = lut[pix]
+            mask = (labels == target[:, None, None]) & inside & valid[:, None, None]
+            col = mask.sum(axis=1, dtype=np.float64)  # (K, S) counts per column
+            row = mask.sum(axis=2, dtype=np.float64)  # (K, S) counts per row
+            m00 = col.sum(axis=1)
+            ok = m00 >= self.gates[c].min_area_px
+            with np.errstate(divide="ignore", invalid="ignore"):
+                mx = (col * offs).sum(axis=1) / m00
+                my = (row * offs).sum(axis=1) / m00
+                mu20 = (col * offs**2).sum(axis=1) / m00 - mx**2
+                mu02 = (row * offs**2).sum(axis=1) / m00 - my**2
+                mu11 = np.einsum("kij,i,j->k", mask, offs.astype(np.float64), offs.astype(np.float64)) / m00 - mx * my
+                spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
+                lam1 = (mu20 + mu02) / 2.0 + spread
+                lam2 = (mu20 + mu02) / 2.0 - spread
+                roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
+            simple = ok & (m00 <= 1.6 * np.pi * r_px**2) & (roundness >= 0.6)
+            uv_out[idx[simple], c, 0] = cx[simple] + mx[simple]
+            uv_out[idx[simple], c, 1] = cy[simple] + my[simple]
+            rad_out[idx[simple], c] = np.sqrt(m00[simple] / np.pi)
             gate = self.gates[c]
-            for k, m in enumerate(idx):
-                if not np.isfinite(uv[k]).all() or depth[k] <= 0:
-                    continue
-                x0 = int(max(0, np.floor(uv[k, 0] - half[k])))
-                y0 = int(max(0, np.floor(uv[k, 1] - half[k])))
-                x1 = int(min(w_img, np.ceil(uv[k, 0] + half[k]) + 1))
-                y1 = int(min(h_img, np.ceil(uv[k, 1] + half[k]) + 1))
-                if x1 - x0 < 3 or y1 - y0 < 3:
-                    continue
-                labels = self.table.classify_window(img, x0, y0, x1, y1)
-                colour_label = self.colour[m] + 1
-                if not np.any(labels == colour_label):
-                    continue
-                blobs = find_blobs(labels, self.table.n_colours, image_bgr=img[y0:y1, x0:x1],
-                                   min_area_px=gate.min_area_px, max_area_px=gate.max_area_px,
-                                   min_roundness=gate.min_roundness, offset_px=(x0, y0))
-                sel = blobs.colour == self.colour[m]
-                if sel.any():
-                    out[m][c] = np.column_stack([blobs.uv_px[sel], blobs.radius_px[sel]])
-        return out
+            for k in np.flatnonzero(ok & ~simple):  # several regions in the window: separate them
+                m = idx[k]
+                x0, y0 = max(0, cx[k] - hw), max(0, cy[k] - hw)
+                x1, y1 = min(w_img, cx[k] + hw + 1), min(h_img, cy[k] + hw + 1)
+                win_labels = self.table.classify_window(img, x0, y0, x1, y1)
+                blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
+                                   max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
+                                   offset_px=(x0, y0))
+                sel = np.flatnonzero(blobs.colour == self.colour[m])
+                if sel.size:
+                    j = sel[np.argmin(np.linalg.norm(blobs.uv_px[sel] - uv[k], axis=1))]
+                    uv_out[m, c] = blobs.uv_px[j]
+                    rad_out[m, c] = blobs.radius_px[j]
 
-    def _choose(self, cand, pred, sigma, known):
-        """The candidate 3D point of each marker with the largest confidence Q (equation 4)."""
+    def _choose(self, obs, pred, sigma, known):
+        """Triangulate every marker from its window centroids; keep geometrically consistent ones."""
+        uv, rad = obs
         geo = self.geometry
-        n_cams = geo.n_cameras
-        m_count = self.markerset.n_markers
-        new_pos = np.full((m_count, 3), np.nan)
-        measured = np.zeros(m_count, dtype=bool)
-        q_best = np.zeros(m_count)
-        pred_uv = [cam.project(pred) for cam in self.cameras]  # (M, 2) per camera
-        for m in np.flatnonzero(known):
-            options = []  # per camera: list of (uv, radius) or None for "no centroid"
-            for c in range(n_cams):
-                k = cand[m][c]
-                if len(k) == 0:
-                    options.append([None])
-                    continue
-                d = np.linalg.norm(k[:, :2] - pred_uv[c][m], axis=1)
-                order = np.argsort(d)[:2]  # the two nearest blobs are enough to choose from
-                options.append([k[i] for i in order] + [None])
-            best = None
-            for combo in itertools.product(*options):
-                cams = [c for c in range(n_cams) if combo[c] is not None]
-                if len(cams) < 2:
-                    continue
-                xn = np.full((1, n_cams, 2), np.nan)
-                for c in cams:
-                    xn[0, c] = self.cameras[c].undistort_points(combo[c][None, :2])[0]
-                seen = np.isfinite(xn[..., 0])
-                pt = triangulate(geo.extrinsics, xn, seen)[0]
-                err = reprojection_errors_px(geo.extrinsics, geo.focal_px, pt[None], xn, seen)[0]
-                rms = float(np.sqrt(np.nanmean(err[cams] ** 2)))
-                if rms > self.params.max_reproj_px:
-                    continue
-                if np.linalg.norm(pt - pred[m]) > self.params.gate_sigmas * sigma[m] + 0.01:
-                    continue
-                # Q = prod_j 1 / (1 + |G_j C_j|): distance of each camera's centroid to the prediction
-                q = 1.0
-                for c in cams:
-                    q *= 1.0 / (1.0 + float(np.linalg.norm(combo[c][:2] - pred_uv[c][m])))
-                # prefer more cameras at equal confidence (each camera found the marker)
-                key = (len(cams) >= 3, q)
-                if best is None or key > best[0]:
-                    best = (key, pt)
-            if best is not None:
-                new_pos[m] = best[1]
-                q_best[m] = best[0][1]
-                measured[m] = True
+        m_count, n_cams = uv.shape[:2]
+        xn = np.full_like(uv, np.nan)
+        for c, cam in enumerate(self.cameras):
+            ok = np.isfinite(uv[:, c, 0])
+            if ok.any():
+                xn[ok, c] = cam.undistort_points(uv[ok, c])
+        seen = np.isfinite(xn[..., 0]) & known[:, None]
+        # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
+        # shifted centroid: leave it out while two full views remain
+        depth = np.einsum("cj,mj->mc", geo.extrinsics[:, 2, :3], np.nan_to_num(pred)) + geo.extrinsics[None, :, 2, 3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = rad / (geo.focal_px[None, :] * self.markerset.radius_m / depth)
+        partial = seen & (ratio < 0.8)
+        keep_full = (seen & ~partial).sum(axis=1) >= 2
+        seen &= ~(partial & keep_full[:, None])
+        pts = np.full((m_count, 3), np.nan)
+        for _ in range(n_cams):
+            pts = triangulate(geo.extrinsics, xn, seen)
+            err = reprojection_errors_px(geo.extrinsics, geo.focal_px, pts, xn, seen)
+            worst = np.argmax(np.where(seen, err, -1.0), axis=1)
+            worst_err = err[np.arange(m_count), worst]
+            drop = (worst_err > self.params.max_reproj_px) & (seen.sum(axis=1) >= 3)
+            if not drop.any():
+                break
+            seen[np.flatnonzero(drop), worst[drop]] = False
+        n_seen = seen.sum(axis=1)
+        rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1)) if m_count else np.zeros(0)
+        with np.errstate(invalid="ignore"):
+            measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px)
+            measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
+        # Q of the chosen candidate, for the one-ball-one-marker rule
+        pred_uv = np.stack([cam.project(np.nan_to_num(pred)) for cam in self.cameras], axis=1)
+        q_cam = 1.0 / (1.0 + np.linalg.norm(uv - pred_uv, axis=-1))
+        q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
+        new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
         was_measured = self.status == MarkerStatus.MEASURED
         rank = np.lexsort((-q_best, ~was_measured))
