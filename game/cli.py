@@ -172,12 +172,14 @@ def _cmd_validate(args) -> int:
     base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex)
-    results = []
-    for name, acc in validate(base, args.motion, progress=True):
+    results, whole = [], []
+    for name, acc, acc_whole in validate(base, args.motion, progress=True):
         results.append(acc)
-        print(f"{name:26s} {acc.summary()}", flush=True)
+        whole.append(acc_whole)
+        print(f"{name:26s} {acc.summary()}; whole-ball views: {100 * acc_whole.completeness:.2f} %", flush=True)
     if len(results) > 1:
-        print(f"{'all':26s} {combine(results).summary()}")
+        print(f"{'all':26s} {combine(results).summary()}; whole-ball views: "
+              f"{100 * combine(whole).completeness:.2f} %")
     return 0
 
 
