@@ -116,20 +116,32 @@ def _add_track(sub) -> None:
                    help="override marker colours: once for all markers, or once per marker in marker-set order")
     p.add_argument("--points", type=Path, default=None,
                    help="write unlabelled 3D points: frame,time,x_mm,y_mm,z_mm,n_cameras,reproj_px")
+    p.add_argument("--out", type=Path, default=None, help="labelled markers as an OpenSim TRC file (mm)")
+    p.add_argument("--status", type=Path, default=None,
+                   help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
+    p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
+    p.add_argument("--c3d", type=Path, default=None, help="labelled markers as a C3D file")
     p.set_defaults(func=_cmd_track)
 
 
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
 
-    if args.points is None:
-        raise RehabError("nothing to write: give --points points.csv")
+    labelled = args.out or args.status or args.angles or args.c3d
+    if args.points and labelled:
+        raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
+    if not (args.points or labelled):
+        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --points)")
     report = track_recording(
         args.recording,
         calibration=args.calibration,
         markerset=args.markerset,
         marker_colours=args.marker_color,
         points_csv=args.points,
+        trc=args.out,
+        status_csv=args.status,
+        angles_csv=args.angles,
+        c3d=args.c3d,
         progress=True,
     )
     print(report)

@@ -13,6 +13,7 @@ from tqdm import tqdm
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet, load_markerset, parse_rgb
 from tracking.measure import FrameMeasurer
+from tracking.errors import RecordingError
 from tracking.recording import Recording
 
 log = logging.getLogger(__name__)
@@ -35,9 +36,21 @@ def track_recording(
     markerset: str | None = None,
     marker_colours: Sequence[str] | None = None,
     points_csv: Path | None = None,
+    trc: Path | None = None,
+    status_csv: Path | None = None,
+    angles_csv: Path | None = None,
+    c3d: Path | None = None,
     progress: bool = False,
 ) -> str:
-    """Measure every frame set of a recording; write the unlabelled points. Returns a summary line."""
+    """Track a recording frame by frame and write what was asked. Returns a summary line.
+
+    ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``
+    and ``c3d`` the labelled markers from the tracker (the online algorithm, no look-ahead).
+    """
+    if trc or status_csv or angles_csv or c3d:
+        return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
+                               points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
+                               c3d=c3d, progress=progress)
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         table = ColourTable.build(ms.palette)
@@ -67,3 +80,51 @@ def track_recording(
     per = measurer.times.per_frame_ms()
     timing = ", ".join(f"{k} {v:.1f} ms" for k, v in per.items())
     return f"{n_frames} frame sets, {n_points / max(n_frames, 1):.1f} points per frame ({timing})"
+
+
+def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
+                    c3d, progress) -> str:
+    from tracking.angles import joint_angles
+    from tracking.c3d_io import write_c3d
+    from tracking.status import MarkerStatus
+    from tracking.tables import write_angles_csv, write_status_csv
+    from tracking.tracker import Tracker, TrackingState
+    from tracking.trc import write_trc
+
+    with Recording(folder, calibration) as rec:
+        ms = markerset_for(rec, markerset, marker_colours)
+        tracker = Tracker(rec.cameras, ms, fps=rec.fps)
+        positions, status, frames, times = [], [], [], []
+        waiting_message = ""
+        frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
+        for fs in frame_iter:
+            sample = tracker.step(fs.images, fs.time_s)
+            if sample.state == TrackingState.WAITING:
+                waiting_message = sample.message
+            positions.append(np.where(sample.status[:, None] == MarkerStatus.LOST, np.nan, sample.positions_m))
+            status.append(sample.status)
+            frames.append(fs.index)
+            times.append(fs.time_s)
+    if not frames:
+        raise RecordingError(f"{folder}: the recording has no frames")
+    pos_mm = np.stack(positions) * 1000.0
+    st = np.stack(status)
+    frames_a, times_a = np.asarray(frames), np.asarray(times)
+    if not (st != MarkerStatus.LOST).any():
+        raise RecordingError(
+            f"{folder}: the markers were never identified ({waiting_message or 'no reference pose'}); "
+            "the recording must start with the patient in the reference pose"
+        )
+    if trc:
+        write_trc(trc, ms.names, pos_mm, rec.fps, frame_numbers=frames_a, times_s=times_a)
+    if status_csv:
+        write_status_csv(status_csv, frames_a, times_a, ms.names, pos_mm, st)
+    if angles_csv:
+        write_angles_csv(angles_csv, frames_a, times_a, joint_angles(pos_mm, ms.names))
+    if c3d:
+        write_c3d(c3d, ms.names, pos_mm, rec.fps)
+    share = {s.name.lower(): float(np.mean(st == s)) for s in MarkerStatus}
+    return (
+        f"{len(frames)} frame sets: {100 * share['measured']:.1f} % of marker positions measured, "
+        f"{100 * share['estimated']:.1f} % estimated, {100 * share['lost']:.1f} % lost"
+    )
