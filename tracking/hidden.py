@@ -87,6 +87,21 @@ class Hinge:
     wrists: tuple[int, int]
 
 
+@dataclass(frozen=True, slots=True)
+class Forearm:
+    """A forearm for estimating the wrist marker ``marker`` from the other one (indices).
+
+    Attributes:
+        marker: the styloid marker to estimate.
+        partner: the other styloid marker of that wrist.
+        elbow: the two epicondyle markers of that arm (the flexion axis).
+    """
+
+    marker: int
+    partner: int
+    elbow: tuple[int, int]
+
+
 # ---------------------------------------------------------------------------------------------
 # Pure estimators
 
@@ -177,19 +192,22 @@ def rigid_estimate(
     cur_m: np.ndarray,
     target_ref_m: np.ndarray,
     *,
+    weights: np.ndarray | None = None,
     prior_m: np.ndarray | None = None,
     prior_weight: float = 0.1,
     min_spread_m: float = 0.015,
 ) -> np.ndarray | None:
-    """Carry a segment's hidden marker with the rigid motion of its measured markers.
+    """Carry a segment's hidden marker with the rigid motion of its other markers.
 
     Args:
-        ref_m: (K, 3) reference positions of the measured support markers.
+        ref_m: (K, 3) reference positions of the support markers (a frame in which the hidden
+            marker was measured too).
         cur_m: (K, 3) their positions now.
-        target_ref_m: (3,) the hidden marker's reference position (same configuration as ref_m).
+        target_ref_m: (3,) the hidden marker's position in the reference frame.
+        weights: (K,) support weights (default 1; estimated supports weigh less).
         prior_m: (3,) predicted position of the hidden marker, used as a weak extra point when
             the support alone leaves a rotation free (K = 2 or collinear points).
-        prior_weight: that point's weight (support markers weigh 1).
+        prior_weight: that point's weight.
         min_spread_m: support points closer than this (RMS) to a line are collinear.
 
     Returns:
@@ -198,45 +216,62 @@ def rigid_estimate(
     k = len(ref_m)
     if k < 2:
         return None
+    w = np.ones(k) if weights is None else np.asarray(weights, dtype=np.float64)
     if k < 3 or spread_m(ref_m) < min_spread_m:
         if prior_m is None or not np.all(np.isfinite(prior_m)):
             return None
-        # the prior point lives in the current frame; its reference is where the unconstrained
-        # segment would put it: the target's reference position
+        # the prior lives in the current frame; its reference is the target's reference position
         ref_m = np.vstack([ref_m, target_ref_m])
         cur_m = np.vstack([cur_m, prior_m])
-        w = np.r_[np.ones(k), prior_weight]
-    else:
-        w = None
+        w = np.r_[w, prior_weight]
     r, t = kabsch(ref_m, cur_m, w)
     return r @ target_ref_m + t
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.sqrt((v * v).sum(axis=-1, keepdims=True))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product of (..., 3) arrays (np.cross costs ~20 us on tiny arrays)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+
+
+def _ema(old: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
+    """Exponential moving average; NaN (nothing learned yet) takes the new value."""
+    return np.where(np.isfinite(old), old + rate * (new - old), new)
 
 
 def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray, right_m: np.ndarray) -> np.ndarray:
     """(3, 3) trunk -> world rotation, columns x (to the right), y (up the trunk), z (backwards).
 
     The trunk frame of spec/JOINT_ANGLES.md: ``y = unit(upper - lower)``, ``x`` = ``right - left``
-    made orthogonal to y.
+    made orthogonal to y. (Plain floats: on 3-vectors they are several times faster than numpy.)
     """
-    y = _unit(upper_m - lower_m)
-    x = right_m - left_m
-    x = _unit(x - (x @ y) * y)
-    return np.stack([x, y, np.cross(x, y)], axis=1)
+    (ax, ay, az), (bx, by, bz), (lx, ly, lz), (qx, qy, qz) = np.stack([upper_m, lower_m, left_m, right_m]).tolist()
+    ux, uy, uz = ax - bx, ay - by, az - bz
+    k = 1.0 / math.sqrt(ux * ux + uy * uy + uz * uz)
+    yx, yy, yz = ux * k, uy * k, uz * k
+    rx, ry, rz = qx - lx, qy - ly, qz - lz
+    d = rx * yx + ry * yy + rz * yz
+    rx, ry, rz = rx - d * yx, ry - d * yy, rz - d * yz
+    k = 1.0 / math.sqrt(rx * rx + ry * ry + rz * rz)
+    xx, xy, xz = rx * k, ry * k, rz * k
+    zx, zy, zz = xy * yz - xz * yy, xz * yx - xx * yz, xx * yy - xy * yx
+    return np.array([[xx, yx, zx], [xy, yy, zy], [xz, yz, zz]])
 
 
 def _turn(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate v by the smallest rotation taking unit a to unit b (Rodrigues)."""
-    axis = np.cross(a, b)
+    axis = _cross(a, b)
     s = float(np.linalg.norm(axis))
     if s < 1e-12:
         return v
     k = axis / s
     c = float(a @ b)
-    return v * c + np.cross(k, v) * s + k * (k @ v) * (1.0 - c)
+    return v * c + _cross(k, v) * s + k * (k @ v) * (1.0 - c)
 
 
 def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3) -> np.ndarray:
@@ -276,6 +311,48 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
     return fixed + math.sqrt(1.0 - norm2) * rest / r
 
 
+def wrist_centre(
+    partner_m: np.ndarray,
+    elbow_a_m: np.ndarray,
+    elbow_b_m: np.ndarray,
+    along_m: float,
+    radius_m: float,
+    centre_pred_m: np.ndarray,
+) -> np.ndarray:
+    """Wrist centre (midpoint of the two styloid markers) from one styloid marker and the elbow.
+
+    The forearm turns about the elbow's flexion axis (through the two epicondyle markers), so
+    the wrist centre lies on a circle about that axis: ``along_m`` from the elbow centre along the
+    axis, ``radius_m`` from it. Pronation-supination turns the styloid markers about the forearm's
+    long axis (elbow centre -> wrist centre), so the measured one lies in the plane through the
+    wrist centre perpendicular to that axis. Of the (up to) two points of the circle that satisfy
+    this, the one nearer ``centre_pred_m`` is returned.
+
+    Args:
+        partner_m: (3,) the measured styloid marker.
+        elbow_a_m, elbow_b_m: (3,) the epicondyle markers (measured or estimated).
+        along_m, radius_m: the learned wrist-centre circle.
+        centre_pred_m: (3,) a prediction of the wrist centre.
+    """
+    centre = 0.5 * (elbow_a_m + elbow_b_m)
+    n = _unit(elbow_b_m - elbow_a_m)
+    pred = centre_pred_m - centre
+    a = pred - (pred @ n) * n
+    norm_a = float(np.linalg.norm(a))
+    if norm_a < 1e-9:
+        return centre_pred_m
+    a /= norm_a
+    b = _cross(n, a)
+    q = partner_m - centre - along_m * n
+    qa, qb = float(q @ a), float(q @ b)
+    rq = math.hypot(qa, qb)
+    phi = math.atan2(qb, qa)
+    delta = math.acos(min(1.0, radius_m / rq)) if rq > 0 else 0.0
+    # angles measured from the prediction's direction (theta = 0): the solution nearer to 0
+    theta = min((phi - delta, phi + delta), key=lambda t: abs(math.remainder(t, 2 * math.pi)))
+    return centre + along_m * n + radius_m * (math.cos(theta) * a + math.sin(theta) * b)
+
+
 # ---------------------------------------------------------------------------------------------
 # The stateful estimator
 
@@ -290,7 +367,8 @@ class Estimator:
             mapping ``{m: {i: S}}``.
         segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
             marker tries the groups that contain it in the order given.
-        hinges: elbow hinges (markers with method HINGE need one).
+        hinges: elbow hinges (elbow markers with method HINGE).
+        forearms: forearms (wrist markers with method HINGE).
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
             shoulder pivots are learned (None: the world frame).
@@ -305,6 +383,11 @@ class Estimator:
         pivot_memory_s: time constant of the pivot learning (older frames are forgotten).
         min_singular: hinge constraints weaker than this leave the axis to the prediction
             (:func:`hinge_axis`).
+        estimate_weight: weight of a marker estimated earlier in the same frame as support of a
+            rigid fit (measured markers weigh 1).
+        velocity_decay_s: where a fit leaves a direction free, the hidden marker moves with its
+            neighbours (equation 6) plus its own velocity relative to them, which decays with
+            this time constant (0: none; a scalar or one per marker).
     """
 
     def __init__(
@@ -313,6 +396,7 @@ class Estimator:
         weights: np.ndarray | Mapping[int, Mapping[int, float]],
         segments: Sequence[Sequence[int]] = (),
         hinges: Sequence[Hinge] = (),
+        forearms: Sequence[Forearm] = (),
         length_pairs: Sequence[tuple[int, int]] = (),
         trunk: tuple[int, int, int, int] | None = None,
         *,
@@ -325,6 +409,8 @@ class Estimator:
         pivot_prior_m: Sequence[float] = (0.0, -0.06, 0.0),
         pivot_memory_s: float = 3.0,
         min_singular: float = 0.3,
+        estimate_weight: float = 0.3,
+        velocity_decay_s: float | Sequence[float] = 0.15,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -346,14 +432,23 @@ class Estimator:
                 raise ValueError(f"segment {g.tolist()} must list at least 2 distinct marker indices 0..{m - 1}")
         self._segments_of = [[k for k, g in enumerate(self.segments) if i in g] for i in range(m)]
         self.hinges = {h.marker: h for h in hinges}
+        self.forearms = {f.marker: f for f in forearms}
         for i in np.flatnonzero(self.methods == Method.HINGE):
-            if int(i) not in self.hinges:
-                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
+            if int(i) not in self.hinges and int(i) not in self.forearms:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge or forearm")
+        self._f_idx = np.array([[f.marker, f.partner, *f.elbow] for f in forearms], dtype=np.intp).reshape(-1, 4)
+        self._f_row = {f.marker: r for r, f in enumerate(forearms)}
+        # estimation order: elbows, then wrists (which use the elbows), then the rest
+        rank = np.full(m, 0)
+        rank[list(self.forearms)] = 1
+        rank[list(self.hinges)] = 2
+        self._rank = rank * 10 + self.methods
         # learning arrays over hinges: (H,) marker, partner, shoulder, wrist a, wrist b
         self._h_idx = np.array([[h.marker, h.partner, h.shoulder, *h.wrists] for h in hinges],
                                dtype=np.intp).reshape(-1, 5)
         self._h_row = {h.marker: r for r, h in enumerate(hinges)}
-        self._shoulders = sorted({h.shoulder for h in hinges})
+        self._shoulder_slot = {sh: i for i, sh in enumerate(sorted({h.shoulder for h in hinges}))}
+        self._h_shoulder_slot = np.array([self._shoulder_slot[h.shoulder] for h in hinges], dtype=np.intp)
         pairs = np.array(length_pairs, dtype=np.intp).reshape(-1, 2)
         self._pair_mask = np.zeros((m, m), dtype=bool)
         self._pair_mask[pairs[:, 0], pairs[:, 1]] = True
@@ -367,9 +462,16 @@ class Estimator:
         self.prior_weight = float(prior_weight)
         self.min_spread_m = float(min_spread_m)
         self.min_singular = float(min_singular)
+        self.estimate_weight = float(estimate_weight)
         self.pivot_prior_m = np.asarray(pivot_prior_m, dtype=np.float64)
         self._forget = math.exp(-1.0 / (float(fps) * pivot_memory_s))
         self._ema = 1.0 - math.exp(-1.0 / (float(fps) * 0.3))  # hinge lengths: ~0.3 s memory
+        finite = self.max_hidden_frames[np.isfinite(self.max_hidden_frames)]
+        self._hist_len = int(max(2, min(finite.max() if finite.size else 10.0 * fps, 20.0 * fps) + 1))
+        # velocity carried into a free rotation decays to 1/e in ``velocity_decay_s``
+        tau = np.broadcast_to(np.asarray(velocity_decay_s, dtype=np.float64), (m,))
+        with np.errstate(divide="ignore"):
+            self._decay = np.where(tau > 0, np.exp(-1.0 / (float(fps) * tau)), 0.0)[:, None]
         self.reset()
 
     def reset(self) -> None:
@@ -383,62 +485,94 @@ class Estimator:
         self.used = np.full(m, -1, dtype=np.int8)    # Method used for each estimate (-1: none)
         self.dist_lo = np.full(len(self._pairs), np.inf)
         self.dist_hi = np.full(len(self._pairs), -np.inf)
-        self.seg_ref = [np.full((len(g), 3), np.nan) for g in self.segments]
+        # recent frames (a ring): rigid fits take their reference configuration from them
+        self._hist_pos = np.full((self._hist_len, m, 3), np.nan)
+        self._hist_ok = np.zeros((self._hist_len, m), dtype=bool)
+        self._hist_frame = np.full(self._hist_len, -1, dtype=np.int64)
+        self.frame = -1
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
-        # per shoulder: normal equations of the pivot offset (trunk frame) and the offset
-        self._piv_a = {s: np.zeros((3, 3)) for s in self._shoulders}
-        self._piv_b = {s: np.zeros(3) for s in self._shoulders}
-        self.pivot_offset = {s: self.pivot_prior_m.copy() for s in self._shoulders}
-        self.trunk_rot = np.eye(3)
+        # per forearm: wrist centre along the flexion axis and distance from it
+        self.fore_along = np.full(len(self._f_idx), np.nan)
+        self.fore_radius = np.full(len(self._f_idx), np.nan)
+        # per shoulder: normal equations of the pivot offset (trunk frame)
+        self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
+        self._piv_b = np.zeros((len(self._shoulder_slot), 3))
+        self._trunk_m: np.ndarray | None = None
+        self._trunk_rot: np.ndarray | None = None
 
     # ------------------------------------------------------------------ learning
     def _learn(self, p: np.ndarray, ok: np.ndarray) -> None:
+        slot = self.frame % self._hist_len
+        self._hist_pos[slot] = p
+        self._hist_ok[slot] = ok
+        self._hist_frame[slot] = self.frame
         if len(self._pairs):
-            i, j = self._pairs[:, 0], self._pairs[:, 1]
-            both = ok[i] & ok[j]
+            both = ok[self._pairs].all(axis=1)
             if both.any():
-                d = np.linalg.norm(p[i] - p[j], axis=1)
+                q = p[self._pairs]
+                d = np.sqrt(((q[:, 0] - q[:, 1]) ** 2).sum(axis=1))
                 self.dist_lo = np.where(both, np.fmin(self.dist_lo, d), self.dist_lo)
                 self.dist_hi = np.where(both, np.fmax(self.dist_hi, d), self.dist_hi)
-        for k, g in enumerate(self.segments):
-            if ok[g].all():
-                self.seg_ref[k] = p[g]
         if self.trunk is not None and ok[self.trunk].all():
-            self.trunk_rot = trunk_rotation(*p[self.trunk])
-        if not len(self._h_idx):
+            self._trunk_m = p[self.trunk]
+            self._trunk_rot = None
+        if not (len(self._f_idx) or len(self._h_idx)):
             return
-        full = ok[self._h_idx].all(axis=1)
-        if not full.any():
-            return
-        idx = self._h_idx[full]
-        mk, pa, sh, wa, wb = (p[idx[:, c]] for c in range(5))
-        e = mk - pa
-        length = np.linalg.norm(e, axis=1)
-        n = e / length[:, None]
-        fore = np.einsum("ij,ij->i", n, 0.5 * (wa + wb) - pa)  # n . (wrist centre - partner)
-        rows = np.flatnonzero(full)
-        first = ~np.isfinite(self.hinge_length[rows])
-        old_len, old_fore = self.hinge_length[rows], self.hinge_fore[rows]
-        self.hinge_length[rows] = np.where(first, length, old_len + self._ema * (length - old_len))
-        self.hinge_fore[rows] = np.where(first, fore, old_fore + self._ema * (fore - old_fore))
-        # shoulder pivot G = S + R g: the axis is perpendicular to the humerus, n . (centre - G) = 0,
-        # i.e. (R^T n) . g = n . (centre - S); one equation per frame and elbow marker
-        centre = 0.5 * (mk + pa)
-        a_t = n @ self.trunk_rot  # rows: R^T n
-        rhs = np.einsum("ij,ij->i", n, centre - sh)
-        for s in self._shoulders:
-            sel = idx[:, 2] == s
-            if not sel.any():
+        # a few 3-vectors per arm: plain floats are several times faster than numpy here
+        pl, okl = p.tolist(), ok.tolist()
+        rate = self._ema
+        for r, (w, wp, ea, eb) in enumerate(self._f_idx.tolist()):
+            if not (okl[w] and okl[wp] and okl[ea] and okl[eb]):
                 continue
-            self._piv_a[s] = self._forget * self._piv_a[s] + a_t[sel].T @ a_t[sel]
-            self._piv_b[s] = self._forget * self._piv_b[s] + a_t[sel].T @ rhs[sel]
-            self.pivot_offset[s] = np.linalg.solve(self._piv_a[s] + np.eye(3),
-                                                   self._piv_b[s] + self.pivot_prior_m)
+            v = [0.5 * (pl[w][i] + pl[wp][i] - pl[ea][i] - pl[eb][i]) for i in range(3)]  # elbow -> wrist centre
+            e = [pl[eb][i] - pl[ea][i] for i in range(3)]
+            le = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            along = (v[0] * e[0] + v[1] * e[1] + v[2] * e[2]) / le
+            radius = math.sqrt(max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - along * along, 0.0))
+            old_a, old_r = self.fore_along[r], self.fore_radius[r]
+            first = not math.isfinite(old_r)
+            self.fore_along[r] = along if first else old_a + rate * (along - old_a)
+            self.fore_radius[r] = radius if first else old_r + rate * (radius - old_r)
+        for r, (mk, pa, sh, wa, wb) in enumerate(self._h_idx.tolist()):
+            if not (okl[mk] and okl[pa] and okl[sh] and okl[wa] and okl[wb]):
+                continue
+            e = [pl[mk][i] - pl[pa][i] for i in range(3)]
+            length = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            n = [c / length for c in e]
+            fore = sum(n[i] * (0.5 * (pl[wa][i] + pl[wb][i]) - pl[pa][i]) for i in range(3))  # n . (wrist centre - partner)
+            old_l, old_f = self.hinge_length[r], self.hinge_fore[r]
+            first = not math.isfinite(old_l)
+            self.hinge_length[r] = length if first else old_l + rate * (length - old_l)
+            self.hinge_fore[r] = fore if first else old_f + rate * (fore - old_f)
+            # shoulder pivot G = S + R g: the axis is perpendicular to the humerus,
+            # n . (centre - G) = 0, i.e. (R^T n) . g = n . (centre - S): one equation per frame,
+            # accumulated with forgetting (normal equations per shoulder, solved when needed)
+            if mk < pa:  # the other marker's hinge gives the same equation (n reversed)
+                continue
+            rhs = sum(n[i] * (0.5 * (pl[mk][i] + pl[pa][i]) - pl[sh][i]) for i in range(3))
+            rt = self.trunk_rot.tolist()
+            a_t = [n[0] * rt[0][j] + n[1] * rt[1][j] + n[2] * rt[2][j] for j in range(3)]
+            k = self._h_shoulder_slot[r]
+            self._piv_a[k] = self._forget * self._piv_a[k] + np.array([[a_t[i] * a_t[j] for j in range(3)] for i in range(3)])
+            self._piv_b[k] = self._forget * self._piv_b[k] + np.array([rhs * a_t[i] for i in range(3)])
+
+    @property
+    def trunk_rot(self) -> np.ndarray:
+        """(3, 3) trunk -> world rotation of the last frame with the trunk markers measured."""
+        if self._trunk_rot is None:
+            self._trunk_rot = np.eye(3) if self._trunk_m is None else trunk_rotation(*self._trunk_m)
+        return self._trunk_rot
+
+    def pivot_offset(self, shoulder: int) -> np.ndarray:
+        """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame."""
+        k = self._shoulder_slot[shoulder]
+        return np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
 
     # ------------------------------------------------------------------ estimation
-    def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+    def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
+               base: np.ndarray) -> np.ndarray | None:
         h = self.hinges[k]
         r = self._h_row[k]
         length = self.hinge_length[r]
@@ -446,17 +580,17 @@ class Estimator:
             return None
         # prediction: the rigid forearm-elbow fit (exact while the forearm does not turn), else
         # the axis of the previous frame
-        rigid = self._rigid(k, p, ok, prior)
+        rigid = self._rigid(k, p, weight, prior)
         if rigid is not None:
             axis_pred = _unit(rigid - p[h.partner])
         else:
-            prev_axis = self.positions[k] - self.positions[h.partner]
+            prev_axis = base[k] - base[h.partner]
             if not np.all(np.isfinite(prev_axis)):
                 return None
             axis_pred = _unit(prev_axis)
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
-        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset[h.shoulder]
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder)
         rows = [p[h.partner] - pivot]
         values = [-0.5 * length]
         wa, wb = h.wrists
@@ -466,16 +600,64 @@ class Estimator:
         n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular)
         return p[h.partner] + length * n
 
-    def _rigid(self, k: int, p: np.ndarray, ok: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+    def _forearm(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        f = self.forearms[k]
+        r = self._f_row[k]
+        ea, eb = f.elbow
+        if not (weight[f.partner] == 1.0 and weight[ea] > 0 and weight[eb] > 0) or not np.isfinite(self.fore_radius[r]):
+            return None
+        pred = self._rigid(k, p, weight, prior)
+        if pred is None:
+            pred = prior
+        centre = wrist_centre(p[f.partner], p[ea], p[eb], self.fore_along[r], self.fore_radius[r],
+                              0.5 * (pred + p[f.partner]))
+        return 2.0 * centre - p[f.partner]
+
+    def _model(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
+               base: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """Hinge, forearm or rigid estimate of marker k as its method allows, and the method used."""
+        method = self.methods[k]
+        if method == Method.HINGE:
+            est = (self._hinge(k, p, ok, weight, prior, base) if k in self.hinges
+                   else self._forearm(k, p, weight, prior))
+            if est is not None:
+                return est, Method.HINGE
+            method = Method.RIGID
+        if method == Method.RIGID:
+            est = self._rigid(k, p, weight, prior)
+            if est is not None:
+                return est, Method.RIGID
+        return None, -1
+
+    def _reference(self, k: int, cand: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The most recent stored frame in which marker k and at least three of the candidate
+        supports ``cand`` (indices) were measured (else the one with most of them), as
+        (positions (M, 3), measured (M,))."""
+        has = self._hist_ok[:, k] & (self._hist_frame >= 0)
+        if not has.any() or not len(cand):
+            return None
+        count = np.where(has, self._hist_ok[:, cand].sum(axis=1), -1)
+        need = min(3, int(count.max()))
+        if need < 1:
+            return None
+        slots = np.flatnonzero(count >= need)
+        slot = slots[np.argmax(self._hist_frame[slots])]
+        return self._hist_pos[slot], self._hist_ok[slot]
+
+    def _rigid(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        """Rigid estimate of marker k from the first of its segments that gives one.
+
+        ``weight[i]`` is marker i's weight as a support now (0: no position this frame).
+        """
         for s in self._segments_of[k]:
             seg = self.segments[s]
-            ref = self.seg_ref[s]
-            if not np.isfinite(ref).all():
+            cand = seg[(weight[seg] > 0) & (seg != k)]
+            ref = self._reference(k, cand)
+            if ref is None:
                 continue
-            me = int(np.flatnonzero(seg == k)[0])
-            sup = ok[seg]
-            sup[me] = False
-            est = rigid_estimate(ref[sup], p[seg[sup]], ref[me], prior_m=prior,
+            ref_pos, ref_ok = ref
+            sup = cand[ref_ok[cand]]
+            est = rigid_estimate(ref_pos[sup], p[sup], ref_pos[k], weights=weight[sup], prior_m=prior,
                                  prior_weight=self.prior_weight, min_spread_m=self.min_spread_m)
             if est is not None:
                 return est
@@ -494,6 +676,7 @@ class Estimator:
         """
         ok = np.asarray(measured, dtype=bool) & np.isfinite(positions_m).all(axis=1)
         p = np.where(ok[:, None], positions_m, np.nan)
+        self.frame += 1
         self._learn(p, ok)
 
         prev = self.positions
@@ -507,29 +690,26 @@ class Estimator:
             d_now = np.where(d_ok[:, None], p - prev, 0.0)
             eq6, eq6_ok = neighbour_motion(prev, self.velocity, d_now, d_ok, self.weights,
                                            own_velocity=self.own_velocity)
-            if self.own_velocity:  # the prior of rigid fits moves with the neighbours only
-                prior = eq6 - np.nan_to_num(self.velocity)
-            else:
-                prior = eq6
-            prior = np.where(eq6_ok[:, None], prior, prev)
-            for k in np.flatnonzero(hidden):
-                method = self.methods[k]
-                est = None
-                if method == Method.HINGE:
-                    est = self._hinge(k, p, ok, prior[k])
-                    used[k] = Method.HINGE
-                    method = Method.RIGID
-                if est is None and method == Method.RIGID:
-                    est = self._rigid(k, p, ok, prior[k])
-                    used[k] = Method.RIGID
-                    method = Method.NEIGHBOURS
-                if est is None and method == Method.NEIGHBOURS and eq6_ok[k]:
-                    est = eq6[k]
-                    used[k] = Method.NEIGHBOURS
+            # what a rigid fit's free rotation follows: the neighbours' motion plus the marker's own
+            # velocity relative to them, decaying (equation 6 with a damped equation 5 term)
+            step6 = np.where(eq6_ok[:, None], eq6 - prev, 0.0)
+            prior = prev + step6 + self._decay * np.nan_to_num(self.velocity - step6)
+            weight = ok.astype(np.float64)
+            # hinges first, then rigid segments (which may lean on the elbows' estimates), ...
+            order = np.flatnonzero(hidden)
+            order = order[np.argsort(-self._rank[order], kind="stable")]
+            for k in order:
+                est, how = self._model(k, p, ok, weight, prior[k], prev)
                 if est is None:
-                    est = constant_velocity(prev[k], self.velocity[k])
-                    used[k] = Method.CONSTANT_VELOCITY
+                    if self.methods[k] == Method.CONSTANT_VELOCITY:
+                        est, how = constant_velocity(prev[k], self.velocity[k]), Method.CONSTANT_VELOCITY
+                    elif eq6_ok[k]:
+                        est, how = eq6[k], Method.NEIGHBOURS
+                    else:  # nothing to follow: the own velocity, decaying (a seated body mostly rests)
+                        est, how = prior[k], Method.CONSTANT_VELOCITY
+                used[k] = how
                 p[k] = est
+                weight[k] = self.estimate_weight
 
             # drift: a distance to a measured partner outside the learned range (+ tolerance)
             if len(self._pairs):
@@ -586,7 +766,7 @@ SEGMENTS: tuple[tuple[str, ...], ...] = (
 #: The estimator of each marker.
 METHODS: dict[str, Method] = {
     "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
-    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.RIGID, "M*W2": Method.RIGID,
+    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.HINGE, "M*W2": Method.HINGE,
     "M*H": Method.NEIGHBOURS,
 }
 
@@ -596,6 +776,11 @@ LENGTH_PAIRS: tuple[tuple[str, str], ...] = (
     ("M*E1", "M*W1"), ("M*E1", "M*W2"), ("M*E2", "M*W1"), ("M*E2", "M*W2"),
     ("MB", "M*S"), ("MP", "M*S"),
 )
+
+#: Time constant (s) of the own relative velocity kept in free directions of a fit
+#: (``velocity_decay_s``): wrists swing with the forearm, elbows move with the humerus.
+VELOCITY_DECAY_S: dict[str, float] = {"M*E1": 0.0, "M*E2": 0.0}
+DEFAULT_VELOCITY_DECAY_S = 0.15
 
 #: Longest occlusion an estimate is reported for, per estimator (seconds).
 MAX_HIDDEN_S: dict[Method, float] = {
@@ -661,7 +846,13 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         if all(n in index for n in arm):
             s, e1, e2, w1, w2 = (index[n] for n in arm)
             hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
-    hinge_markers = {h.marker for h in hinges}
+    forearms = []
+    for side in SIDE_LETTERS:
+        arm = [f"M{side}{k}" for k in ("E1", "E2", "W1", "W2")]
+        if all(n in index for n in arm):
+            e1, e2, w1, w2 = (index[n] for n in arm)
+            forearms += [Forearm(w1, w2, (e1, e2)), Forearm(w2, w1, (e1, e2))]
+    hinge_markers = {h.marker for h in hinges} | {f.marker for f in forearms}
     methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
     pairs = []
     for a, b in LENGTH_PAIRS:
@@ -672,6 +863,11 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
     if method is not None:
         methods = [Method.parse(method)] * m
     max_hidden = [MAX_HIDDEN_S[Method(x)] for x in methods]
+    decay = [DEFAULT_VELOCITY_DECAY_S] * m
+    for pattern, tau in VELOCITY_DECAY_S.items():
+        for _, name in _expand(pattern):
+            if name in index:
+                decay[index[name]] = tau
     trunk = None
     if all(n in index for n in ("MB", "MP", "MLH", "MRH")):
         trunk = (index["MB"], index["MP"], index["MLH"], index["MRH"])
@@ -681,7 +877,9 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         "weights": weights,
         "segments": segments,
         "hinges": hinges,
+        "forearms": forearms,
         "length_pairs": pairs,
         "own_velocity": own_velocity,
         "max_hidden_s": max_hidden,
+        "velocity_decay_s": decay,
     }
