@@ -1,0 +1,375 @@
+"""Hidden-marker estimation: each estimator on synthetic motion with known truth, the Estimator's
+status handling, and the seed's experiment (MRE2 behind the elbow) on the simulated patient."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tracking.hidden import (
+    Estimator,
+    Forearm,
+    Hinge,
+    Method,
+    constant_velocity,
+    default_config,
+    hinge_axis,
+    kabsch,
+    neighbour_motion,
+    rigid_estimate,
+    trunk_rotation,
+    wrist_centre,
+)
+from tracking.markerset import load_markerset
+from tracking.status import MarkerStatus
+
+LOST, MEASURED, ESTIMATED = MarkerStatus.LOST, MarkerStatus.MEASURED, MarkerStatus.ESTIMATED
+
+
+def rotation(axis, angle_rad):
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle_rad) * k + (1 - math.cos(angle_rad)) * k @ k
+
+
+def random_rotation(rng):
+    return rotation(rng.normal(size=3), rng.uniform(-math.pi, math.pi))
+
+
+# A small rigid body (4 markers, 10-20 cm apart) and its motion: rotation about a moving axis and
+# a translation, 30 frames/s.
+BODY = np.array([[0.0, 0.0, 0.0], [0.12, 0.0, 0.0], [0.0, 0.15, 0.02], [0.05, 0.04, 0.18]])
+
+
+def rigid_motion(n_frames):
+    frames = []
+    for i in range(n_frames):
+        t = i / 30.0
+        r = rotation([0.3, 1.0, 0.2 * math.sin(t)], 0.8 * math.sin(1.3 * t)) @ rotation([1, 0, 0], 0.4 * t)
+        frames.append(BODY @ r.T + np.array([0.1 * t, 0.5 + 0.05 * math.sin(2 * t), -0.2 * t]))
+    return np.array(frames)
+
+
+def run(estimator, truth, measured, noise_m=0.0, seed=0):
+    rng = np.random.default_rng(seed)
+    out_p, out_s = [], []
+    for t in range(len(truth)):
+        x = truth[t] + rng.normal(0.0, noise_m, truth[t].shape)
+        p, s = estimator.update(np.where(measured[t][:, None], x, np.nan), measured[t])
+        out_p.append(p)
+        out_s.append(s)
+    return np.array(out_p), np.array(out_s)
+
+
+# ---------------------------------------------------------------------------------- pure functions
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 10_000))
+def test_kabsch_recovers_rotation_and_translation(seed):
+    rng = np.random.default_rng(seed)
+    src = rng.normal(size=(5, 3))
+    r, t = random_rotation(rng), rng.normal(size=3)
+    r_est, t_est = kabsch(src, src @ r.T + t)
+    np.testing.assert_allclose(r_est, r, atol=1e-9)
+    np.testing.assert_allclose(t_est, t, atol=1e-9)
+
+
+def test_kabsch_never_returns_a_reflection():
+    rng = np.random.default_rng(3)
+    src = rng.normal(size=(6, 3))
+    mirrored = src * np.array([-1.0, 1.0, 1.0])
+    r, _ = kabsch(src, mirrored)
+    assert np.linalg.det(r) == pytest.approx(1.0)
+    np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-12)
+
+
+def test_rigid_estimate_exact_and_with_noise():
+    rng = np.random.default_rng(0)
+    r, t = random_rotation(rng), np.array([0.2, -0.1, 0.4])
+    cur = BODY @ r.T + t
+    est = rigid_estimate(BODY[:3], cur[:3], BODY[3])
+    np.testing.assert_allclose(est, cur[3], atol=1e-12)
+    errs = []
+    for _ in range(200):
+        noisy = cur[:3] + rng.normal(0, 0.001, (3, 3))
+        errs.append(np.linalg.norm(rigid_estimate(BODY[:3], noisy, BODY[3]) - cur[3]))
+    assert np.mean(errs) < 0.003  # 1 mm noise on 3 supports 12-15 cm apart, target ~18 cm away
+
+
+def test_rigid_estimate_two_supports_needs_the_prior():
+    r = rotation([0, 0, 1], 0.3)
+    cur = BODY @ r.T
+    assert rigid_estimate(BODY[:2], cur[:2], BODY[3]) is None
+    # with the true position as prior the free rotation about the supports' line is resolved
+    est = rigid_estimate(BODY[:2], cur[:2], BODY[3], prior_m=cur[3])
+    np.testing.assert_allclose(est, cur[3], atol=1e-9)
+
+
+def test_constant_velocity_is_equation_5():
+    p = np.array([[0.0, 1.0, 2.0], [1.0, 1.0, 1.0]])
+    v = np.array([[0.01, 0.0, -0.02], [np.nan, np.nan, np.nan]])
+    np.testing.assert_allclose(constant_velocity(p, v), [[0.01, 1.0, 1.98], [1.0, 1.0, 1.0]])
+
+
+def test_neighbour_motion_is_equation_6():
+    prev = np.zeros((3, 3))
+    own_v = np.array([[0.0, 0.0, 0.01], [0, 0, 0], [0, 0, 0]])
+    d = np.array([[0, 0, 0], [0.02, 0.0, 0.0], [0.0, 0.04, 0.0]])
+    w = np.array([[0, 3.0, 1.0], [1, 0, 0], [1, 0, 0]])
+    ok = np.array([False, True, True])
+    est, est_ok = neighbour_motion(prev, own_v, d, ok, w, own_velocity=True)
+    np.testing.assert_allclose(est[0], [0.015, 0.01, 0.01])  # (3 * 0.02 x + 1 * 0.04 y) / 4 + own
+    est, _ = neighbour_motion(prev, own_v, d, ok, w, own_velocity=False)
+    np.testing.assert_allclose(est[0], [0.015, 0.01, 0.0])
+    assert est_ok.tolist() == [True, False, False]  # markers 1 and 2 have no moving neighbour
+    assert np.isnan(est[1]).all()
+
+
+def test_hinge_axis_intersects_two_constraints_and_keeps_the_prediction_where_free():
+    n_true = np.array([0.6, 0.0, 0.8])
+    rows = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])
+    values = rows @ n_true
+    n = hinge_axis(rows, values, np.array([0.5, 0.5, 0.7]) / np.linalg.norm([0.5, 0.5, 0.7]))
+    np.testing.assert_allclose(n, n_true, atol=1e-12)
+    # the other intersection when the prediction lies on its side
+    n2 = hinge_axis(rows, values, np.array([0.6, 0.7, -0.4]))
+    np.testing.assert_allclose(rows @ n2, values, atol=1e-12)
+    assert np.linalg.norm(n2) == pytest.approx(1.0)
+    # nearly parallel constraints: only their common direction binds, the rest follows the prediction
+    rows = np.array([[1.0, 0.0, 0.0], [-1.0, 0.05, 0.0]])
+    pred = np.array([0.0, 0.6, 0.8])
+    n3 = hinge_axis(rows, np.array([0.0, 0.0]), pred)
+    np.testing.assert_allclose(n3, pred, atol=0.02)
+
+
+def test_trunk_rotation_is_the_spec_frame():
+    r = trunk_rotation(np.array([0, 1.2, 0.0]), np.array([0, 1.0, 0.0]), np.array([-0.1, 0.9, 0.05]),
+                       np.array([0.1, 0.9, 0.05]))
+    np.testing.assert_allclose(r, np.eye(3), atol=1e-12)
+
+
+def forearm_pose(flexion_rad, supination_rad):
+    """Elbow markers on the x axis, forearm turning about it; styloids about the forearm's axis."""
+    e1, e2 = np.array([0.055, 0.0, 0.0]), np.array([-0.055, 0.0, 0.0])
+    f = np.array([0.0, -math.cos(flexion_rad), -math.sin(flexion_rad)])  # forearm direction
+    side = np.cross(f, [1.0, 0.0, 0.0])
+    ulnar = math.cos(supination_rad) * side + math.sin(supination_rad) * np.array([1.0, 0.0, 0.0])
+    wc = 0.25 * f
+    return e1, e2, wc - 0.05 * ulnar, wc + 0.05 * ulnar
+
+
+@pytest.mark.parametrize("flexion, supination", [(0.2, 0.0), (1.5, 0.7), (2.2, -1.0), (0.9, 1.4)])
+def test_wrist_centre_follows_flexion_and_supination(flexion, supination):
+    e1, e2, w1, w2 = forearm_pose(flexion, supination)
+    pred = 0.5 * (w1 + w2) + np.array([0.0, 0.02, 0.02])  # a rough prediction picks the solution
+    wc = wrist_centre(w2, e1, e2, 0.0, 0.25, pred)
+    np.testing.assert_allclose(2 * wc - w2, w1, atol=1e-9)
+
+
+# ---------------------------------------------------------------------------------- the Estimator
+
+def rigid_estimator(method, **kw):
+    w = np.ones((4, 4))
+    return Estimator([method] * 4, w, segments=[(0, 1, 2, 3)], length_pairs=[(0, 1), (0, 2), (0, 3)],
+                     fps=30.0, **kw)
+
+
+def test_rigid_estimator_follows_a_rotating_segment_to_the_noise():
+    truth = rigid_motion(120)
+    measured = np.ones((120, 4), dtype=bool)
+    measured[30:110, 3] = False  # hidden for 2.7 s while the segment turns by ~1 rad
+    p, s = run(rigid_estimator(Method.RIGID), truth, measured)
+    assert (s[30:110, 3] == ESTIMATED).all()
+    np.testing.assert_allclose(p[30:110, 3], truth[30:110, 3], atol=1e-9)
+    # 1 mm noise on the supports now and in the reference frame: a few mm on the hidden marker
+    p, s = run(rigid_estimator(Method.RIGID), truth, measured, noise_m=0.001)
+    err = np.linalg.norm(p[30:110, 3] - truth[30:110, 3], axis=1)
+    assert err.mean() < 0.005 and err.max() < 0.015
+    # equation 6 (translation of the neighbours only) cannot follow the rotation
+    p6, _ = run(rigid_estimator(Method.NEIGHBOURS), truth, measured, noise_m=0.001)
+    assert np.linalg.norm(p6[109, 3] - truth[109, 3]) > 0.03
+
+
+def test_constant_velocity_estimator_is_exact_on_constant_velocity():
+    t = np.arange(60)[:, None, None] / 30.0
+    truth = BODY[None] + t * np.array([0.3, -0.1, 0.05])
+    measured = np.ones((60, 4), dtype=bool)
+    measured[20:50, 1] = False
+    p, s = run(rigid_estimator(Method.CONSTANT_VELOCITY), truth, measured)
+    assert (s[20:50, 1] == ESTIMATED).all()
+    np.testing.assert_allclose(p[20:50, 1], truth[20:50, 1], atol=1e-9)
+
+
+def test_neighbour_estimator_follows_a_translating_neighbour():
+    # marker 1 rests, then its neighbour 0 carries the pair off while 1 is hidden
+    truth = np.zeros((40, 2, 3))
+    truth[:, 1, 0] = 0.1
+    shift = np.clip(np.arange(40) - 10, 0, None)[:, None] * np.array([0.004, 0.002, 0.0])
+    truth += shift[:, None, :]
+    measured = np.ones((40, 2), dtype=bool)
+    measured[8:35, 1] = False
+    e = Estimator([Method.NEIGHBOURS] * 2, {1: {0: 1.0}, 0: {1: 1.0}}, fps=30.0)
+    p, s = run(e, truth, measured)
+    np.testing.assert_allclose(p[8:35, 1], truth[8:35, 1], atol=1e-12)
+    # the paper's formula adds the own last velocity too: with a resting marker the same here,
+    # but once the estimate moves its own step is added again each frame and runs ahead
+    e_lit = Estimator([Method.NEIGHBOURS] * 2, {1: {0: 1.0}, 0: {1: 1.0}}, fps=30.0, own_velocity=True)
+    p_lit, _ = run(e_lit, truth, measured)
+    assert np.linalg.norm(p_lit[34, 1] - truth[34, 1]) > 0.1
+
+
+def test_status_measured_estimated_lost_and_reappearance():
+    truth = rigid_motion(40)
+    measured = np.ones((40, 4), dtype=bool)
+    measured[:, 2] = False            # never seen
+    measured[10:20, 3] = False        # hidden, then back
+    e = rigid_estimator(Method.RIGID)
+    p, s = run(e, truth, measured)
+    assert (s[:, 2] == LOST).all() and np.isnan(p[:, 2]).all()
+    assert (s[:10, 3] == MEASURED).all() and (s[10:20, 3] == ESTIMATED).all() and (s[20:, 3] == MEASURED).all()
+    assert (s[:, :2] == MEASURED).all()
+    np.testing.assert_allclose(p[20:, 3], truth[20:, 3])  # measured positions pass through
+    assert s.dtype == np.uint8
+
+
+def test_hidden_too_long_is_lost_until_measured_again():
+    truth = rigid_motion(60)
+    measured = np.ones((60, 4), dtype=bool)
+    measured[10:50, 3] = False
+    e = rigid_estimator(Method.RIGID, max_hidden_s=0.5)  # 15 frames
+    _, s = run(e, truth, measured)
+    assert (s[10:25, 3] == ESTIMATED).all()
+    assert (s[25:50, 3] == LOST).all()
+    assert (s[50:, 3] == MEASURED).all()
+
+
+def test_drift_beyond_the_learned_lengths_is_lost():
+    # constant velocity carries marker 3 straight on while the segment turns back: its distance
+    # to marker 0 leaves the learned range by more than the tolerance
+    truth = rigid_motion(150)
+    measured = np.ones((150, 4), dtype=bool)
+    measured[40:150, 3] = False
+    e = rigid_estimator(Method.CONSTANT_VELOCITY, tolerance_m=0.03)
+    p, s = run(e, truth, measured)
+    est = s[40:, 3] == ESTIMATED
+    assert est[0] and not est.all()
+    first_lost = 40 + int(np.argmin(est))
+    assert (s[first_lost:, 3] == LOST).all()  # lost stays lost while hidden
+    d = np.linalg.norm(p[first_lost - 1, 3] - p[first_lost - 1, 0])
+    d_true = np.linalg.norm(BODY[3] - BODY[0])
+    assert abs(d - d_true) <= 0.03 + 1e-9  # what was reported stayed within the tolerance
+    # the rigid estimator stays within the body's lengths all along
+    _, s_rigid = run(rigid_estimator(Method.RIGID, tolerance_m=0.03), truth, measured)
+    assert (s_rigid[40:, 3] == ESTIMATED).all()
+
+
+def test_reset_forgets():
+    truth = rigid_motion(10)
+    e = rigid_estimator(Method.RIGID)
+    run(e, truth, np.ones((10, 4), dtype=bool))
+    e.reset()
+    p, s = e.update(np.full((4, 3), np.nan), np.zeros(4, dtype=bool))
+    assert (s == LOST).all() and np.isnan(p).all()
+
+
+def test_configuration_errors():
+    with pytest.raises(ValueError, match="weights"):
+        Estimator([Method.RIGID] * 3, np.ones((2, 2)))
+    with pytest.raises(ValueError, match="hinge"):
+        Estimator([Method.HINGE] * 2, np.ones((2, 2)))
+    with pytest.raises(ValueError, match="segment"):
+        Estimator([Method.RIGID] * 2, np.ones((2, 2)), segments=[(0, 5)])
+    with pytest.raises(ValueError, match="constant_velocity, neighbours, rigid, hinge"):
+        Method.parse("spline")
+    assert Method.parse("rigid") is Method.RIGID
+
+
+# ---------------------------------------------------------------------------------- configuration
+
+def test_default_config_for_the_seed_marker_set():
+    ms = load_markerset("upper_limb_seated")
+    cfg = default_config(ms)
+    m = ms.n_markers
+    w = cfg["weights"]
+    assert w.shape == (m, m) and np.all(np.diag(w) == 0)
+    mirror = {n: n.replace("L", "#").replace("R", "L").replace("#", "R") if n.startswith(("ML", "MR")) else n
+              for n in ms.names}
+    perm = [ms.index(mirror[n]) for n in ms.names]
+    np.testing.assert_array_equal(w, w[np.ix_(perm, perm)])  # both arms alike
+    assert all(w[i].sum() > 0 for i in range(m))             # every marker has neighbours
+    methods = cfg["methods"]
+    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.HINGE
+    assert {h.marker for h in cfg["hinges"]} == {ms.index(n) for n in ("MLE1", "MLE2", "MRE1", "MRE2")}
+    assert all(isinstance(f, Forearm) for f in cfg["forearms"])
+    Estimator(**cfg, fps=15.0)
+    eq5 = default_config(ms, method="constant_velocity")
+    assert set(eq5["methods"]) == {Method.CONSTANT_VELOCITY}
+
+
+def test_default_config_for_another_marker_set_uses_its_segments():
+    class Tiny:
+        names = ("A", "B", "C")
+        segments = ("arm", "arm", "leg")
+
+    cfg = default_config(Tiny())
+    np.testing.assert_array_equal(cfg["weights"], [[0, 1, 0], [1, 0, 0], [0, 0, 0]])
+    assert set(cfg["methods"]) == {Method.NEIGHBOURS} and cfg["hinges"] == [] and cfg["trunk"] is None
+    Estimator(**cfg)
+
+
+def test_hinge_estimator_on_the_simulated_arm_without_rendering():
+    """The elbow hinge through the seed experiment's motion, MRE2 hidden while the elbow flexes
+    and the humerus turns (truth from the body model, 1 mm noise)."""
+    from tracking.sim.body import BodyDimensions, BodyModel
+    from tracking.sim.motions import load_motion
+
+    ms = load_markerset("upper_limb_seated")
+    dims = BodyDimensions.from_percentile(50, "female")
+    body, motion = BodyModel(dims, ms), load_motion("right_external_rotation", dims)
+    fps = 15.0
+    truth = np.array([body.markers_m(motion.pose_at(i / fps)) for i in range(int(motion.duration_s * fps))])
+    k = ms.index("MRE2")
+    measured = np.ones(truth.shape[:2], dtype=bool)
+    measured[30:90, k] = False  # 2 s to 6 s: elbow to the side and flexed, forearm turned out
+    est = Estimator(**default_config(ms), fps=fps)
+    p, s = run(est, truth, measured, noise_m=0.001)
+    assert (s[30:90, k] == ESTIMATED).all()
+    err = np.linalg.norm(p[30:90, k] - truth[30:90, k], axis=1)
+    assert err.mean() < 0.006 and err.max() < 0.015
+
+
+# ---------------------------------------------------------------------------------- the seed's experiment
+
+@pytest.fixture(scope="module")
+def seed_experiment():
+    from tracking.sim.hidden_eval import occlusion_data
+    from tracking.sim.renderer import OffscreenGLUnavailable
+
+    try:
+        return occlusion_data("right_external_rotation", fps=15.0)
+    except OffscreenGLUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+
+
+def test_seed_experiment_mre2_reappears_within_5_mm(seed_experiment):
+    """METHOD.md 'Experiment': MRE2 hidden between elbow and trunk, then found again. The seed
+    reports ~10 mm at reappearance; the recommended estimators must do 5 mm or better on average
+    (over both occlusions and five noise draws), equation 6 as the paper writes it does not."""
+    from tracking.sim.hidden_eval import make_estimator, run_estimator
+
+    ms = load_markerset("upper_limb_seated")
+    data = seed_experiment
+    k = ms.index("MRE2")
+    assert not data.measured[:, k].all(), "the simulated experiment must hide MRE2"
+    best, paper = [], []
+    for seed in range(5):
+        best.append(run_estimator(data, make_estimator(ms, "recommended (per marker)", data.fps), seed=seed).for_marker(k))
+        paper.append(run_estimator(data, make_estimator(ms, "eq. 6 as written (+ own velocity)", data.fps), seed=seed).for_marker(k))
+    best, paper = np.array(best) / 1000.0, np.array(paper) / 1000.0
+    assert best.shape[1] >= 1 and np.isfinite(best).all()
+    assert best.mean() <= 0.005, best
+    assert best.max() <= 0.015, best
+    assert paper.mean() > best.mean()
