@@ -409,7 +409,8 @@ class Tracker:
                 break
             seen[np.flatnonzero(drop), worst[drop]] = False
         n_seen = seen.sum(axis=1)
-        rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1)) if m_count else np.zeros(0)
+        sq = np.where(seen, err, 0.0) ** 2
+        rms = np.sqrt(sq.sum(axis=1) / np.maximum(n_seen, 1))
         with np.errstate(invalid="ignore"):
             measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px)
             measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
