@@ -265,12 +265,17 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         xn_obs[r, i], xn_obs[r, j] = xn[i][a], xn[j][b]
         seen[r, i] = seen[r, j] = True
         obs[r, i], obs[r, j] = a, b
+    # every pair also stays a bare two-camera candidate: if the support gathered below holds a
+    # centroid that another point owns, the clean pair is still there to be taken
+    xn_obs, seen, obs = (np.concatenate([a, a]) for a in (xn_obs, seen, obs))
+    gather = np.arange(2 * K) < K
+    K = 2 * K
     p2 = triangulate(geo.extrinsics, xn_obs, seen)
     # 2. gather support from the other cameras
     for c in range(n_cams):
         if counts[c] == 0:
             continue
-        free = ~seen[:, c]
+        free = ~seen[:, c] & gather
         if not free.any():
             continue
         cam = geo.extrinsics[c]
