@@ -1,8 +1,9 @@
 """Online estimation of hidden markers (METHOD.md 5.4), without look-ahead.
 
-A marker that no camera pair measures in a frame is *estimated* from the past and from the
-markers measured in this frame, or reported *lost*. Four estimators, each a pure function on
-arrays, and an :class:`Estimator` that keeps their state and calls them every frame:
+A marker that no camera pair measures in a frame is *estimated* from the past and from this
+frame's other markers, or reported *lost*. The estimators are pure functions on arrays; the
+:class:`Estimator` keeps their state and calls them every frame (docs/HIDDEN_MARKERS.md has the
+measured comparison and the recommended configuration):
 
 - **Equation 5**, constant velocity (:func:`constant_velocity`)::
 
@@ -12,31 +13,36 @@ arrays, and an :class:`Estimator` that keeps their state and calls them every fr
 
       P_m(n) = P_m(n-1) + dP_m(n-1) + (1 / sum_i S_mi) sum_i S_mi dP_i(n)
 
-  with the weights ``S_mi`` of neighbour ``i`` for marker ``m`` and ``dP_i(n)`` neighbour i's
-  displacement from frame n-1 to n (measured in both). ``own_velocity=False`` drops the
-  ``dP_m(n-1)`` term: the hidden marker moves exactly as its neighbours do.
-- **Rigid segment** (:func:`rigid_estimate`): the rotation and translation (Kabsch, weighted,
-  reflection-guarded) that carry the segment's measured markers from a reference configuration
-  (learned online, the last frame in which the whole segment was measured) to their positions
-  now carry the hidden marker's reference position too. With only two support markers (or
-  nearly collinear ones) the rotation about their line is undetermined: the marker's predicted
-  position (equation 6 without own velocity) is added as a weak point, which picks the smallest
-  rotation about that line.
-- **Elbow hinge** (:func:`hinge_axis`): a hidden epicondyle marker lies on the elbow's flexion
-  axis at a learned distance from the other epicondyle marker. That axis is perpendicular to the
-  forearm (elbow centre -> wrist) and to the upper arm (shoulder -> elbow centre); the cosines
-  between them, learned while all were measured, absorb the offsets of real landmarks (the
-  acromion marker is not on the humerus' axis). Where the two directions are nearly parallel
-  (elbow straight) the previous axis, turned with the upper arm, fills in the free direction.
+  with the weight ``S_mi`` of neighbour i for marker m and ``dP_i(n)`` neighbour i's
+  displacement from frame n-1 to n (measured in both frames). ``own_velocity=False`` drops the
+  ``dP_m(n-1)`` term: with the estimate fed back, the paper's formula adds the neighbours' motion
+  to the marker's velocity every frame, so the estimate runs away (measured: metres).
+- **Rigid segment** (:func:`rigid_estimate`): the rotation and translation (weighted Kabsch,
+  reflection-guarded) that carry the segment's other markers from a reference frame to their
+  positions now carry the hidden marker too. The reference is the most recent frame in which the
+  hidden marker and (at least three of) the supports were measured, so the shape adapts to the
+  person and to slow changes. Markers estimated earlier in the same frame support with a small
+  weight. With two supports (or collinear ones) the rotation about their line is free: a weak
+  pseudo-point at the marker's prediction (its neighbours' motion plus its own relative velocity,
+  decaying) picks it.
+- **Elbow hinge** (:func:`hinge_axis`, :class:`Hinge`): a hidden epicondyle marker lies on the
+  flexion axis, at the learned distance from the other epicondyle marker. The axis is
+  perpendicular to the humerus (shoulder pivot -> elbow centre) and to the forearm (elbow centre
+  -> wrist centre); with the elbow centre on the axis both conditions are linear in the axis
+  direction. The shoulder pivot is the acromion marker plus an offset in the trunk frame learned
+  online from exactly this perpendicularity (the acromion is on the scapula, ~6 cm above the
+  humeral head). Where the two conditions do not fix the axis (elbow nearly straight, wrists
+  hidden) the rigid forearm-elbow fit (or the previous axis) fills in.
+Each estimator falls back to the next simpler one when ill-posed (hinge -> rigid ->
+equation 6 -> the marker's own decaying velocity). The estimate is fed back as the base of the
+next frame, as in the paper. An estimate is dropped to LOST when it leaves what the body allows:
+a distance to a measured partner of a near-rigid pair (``length_pairs``) outside the range learned
+while both were measured, widened by ``tolerance_m``; or the marker hidden longer than
+``max_hidden_s``. A marker never measured is LOST, and a LOST marker stays LOST until it is
+measured again.
 
-The estimate is fed back as the base of the next frame (equations 5 and 6), as the paper does.
-An estimate is dropped to LOST when it leaves what the body allows: a distance to a measured
-marker of a near-rigid pair (``length_pairs``) outside the range learned while both were
-measured, widened by ``tolerance_m``; or the marker hidden longer than ``max_hidden_s``. A marker
-never measured is LOST, and a LOST marker stays LOST until it is measured again.
-
-Configuration is plain arrays (marker indices), so that any marker set can carry it;
-:func:`default_config` gives the values measured for ``upper_limb_seated`` (docs/HIDDEN_MARKERS.md).
+Configuration is plain arrays and marker indices, so any marker set can carry it;
+:func:`default_config` gives the values measured for ``upper_limb_seated``.
 """
 
 from __future__ import annotations
@@ -57,7 +63,7 @@ class Method(IntEnum):
     CONSTANT_VELOCITY = 0  # equation 5
     NEIGHBOURS = 1         # equation 6
     RIGID = 2              # Kabsch on a segment, falls back to equation 6
-    HINGE = 3              # elbow flexion axis, falls back to RIGID
+    HINGE = 3              # elbow flexion axis (elbow markers), falls back to RIGID
 
     @classmethod
     def parse(cls, value: "Method | str | int") -> "Method":
@@ -77,29 +83,14 @@ class Hinge:
     Attributes:
         marker: the epicondyle marker to estimate.
         partner: the other epicondyle marker of that elbow (the axis runs partner -> marker).
-        shoulder: the acromion marker of that arm (upper-arm direction).
-        wrists: the two styloid markers of that forearm (forearm direction).
+        shoulder: the acromion marker of that arm (the shoulder pivot is learned relative to it).
+        wrists: the two styloid markers of that forearm (their midpoint gives the forearm's axis).
     """
 
     marker: int
     partner: int
     shoulder: int
     wrists: tuple[int, int]
-
-
-@dataclass(frozen=True, slots=True)
-class Forearm:
-    """A forearm for estimating the wrist marker ``marker`` from the other one (indices).
-
-    Attributes:
-        marker: the styloid marker to estimate.
-        partner: the other styloid marker of that wrist.
-        elbow: the two epicondyle markers of that arm (the flexion axis).
-    """
-
-    marker: int
-    partner: int
-    elbow: tuple[int, int]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -263,18 +254,8 @@ def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray,
     return np.array([[xx, yx, zx], [xy, yy, zy], [xz, yz, zz]])
 
 
-def _turn(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate v by the smallest rotation taking unit a to unit b (Rodrigues)."""
-    axis = _cross(a, b)
-    s = float(np.linalg.norm(axis))
-    if s < 1e-12:
-        return v
-    k = axis / s
-    c = float(a @ b)
-    return v * c + _cross(k, v) * s + k * (k @ v) * (1.0 - c)
-
-
-def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3) -> np.ndarray:
+def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3,
+               axis_prev: np.ndarray | None = None) -> np.ndarray:
     """Unit vector n with ``rows @ n = values`` where they determine it, else nearest ``axis_pred``.
 
     Each row is a linear constraint ``a . n = b``, scaled to unit ``a`` (b becomes a cosine).
@@ -290,6 +271,8 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
         values: (K,) right-hand sides b (same units as a).
         axis_pred: (3,) unit prediction.
         min_singular: singular values below this count as free directions.
+        axis_prev: (3,) the previous frame's axis: where two constraints leave two mirror-image
+            solutions, the one on its side is taken (continuity), not the prediction's.
     """
     scale = np.linalg.norm(rows, axis=1)
     a = rows / scale[:, None]
@@ -305,52 +288,16 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
         return fixed / math.sqrt(norm2)
     free = vt[~keep]
     rest = free.T @ (free @ axis_pred)  # the prediction's part in the free directions
+    if len(free) == 1 and axis_prev is not None:
+        # one free direction: two solutions, mirror images through the constraints' plane; the
+        # one on the previous axis' side (continuity) unless the previous axis lies in the plane
+        side = float(free[0] @ axis_prev)
+        if abs(side) > 0.05:
+            rest = free[0] * math.copysign(1.0, side)
     r = float(np.linalg.norm(rest))
     if r < 1e-9:
         rest, r = free[0], 1.0
     return fixed + math.sqrt(1.0 - norm2) * rest / r
-
-
-def wrist_centre(
-    partner_m: np.ndarray,
-    elbow_a_m: np.ndarray,
-    elbow_b_m: np.ndarray,
-    along_m: float,
-    radius_m: float,
-    centre_pred_m: np.ndarray,
-) -> np.ndarray:
-    """Wrist centre (midpoint of the two styloid markers) from one styloid marker and the elbow.
-
-    The forearm turns about the elbow's flexion axis (through the two epicondyle markers), so
-    the wrist centre lies on a circle about that axis: ``along_m`` from the elbow centre along the
-    axis, ``radius_m`` from it. Pronation-supination turns the styloid markers about the forearm's
-    long axis (elbow centre -> wrist centre), so the measured one lies in the plane through the
-    wrist centre perpendicular to that axis. Of the (up to) two points of the circle that satisfy
-    this, the one nearer ``centre_pred_m`` is returned.
-
-    Args:
-        partner_m: (3,) the measured styloid marker.
-        elbow_a_m, elbow_b_m: (3,) the epicondyle markers (measured or estimated).
-        along_m, radius_m: the learned wrist-centre circle.
-        centre_pred_m: (3,) a prediction of the wrist centre.
-    """
-    centre = 0.5 * (elbow_a_m + elbow_b_m)
-    n = _unit(elbow_b_m - elbow_a_m)
-    pred = centre_pred_m - centre
-    a = pred - (pred @ n) * n
-    norm_a = float(np.linalg.norm(a))
-    if norm_a < 1e-9:
-        return centre_pred_m
-    a /= norm_a
-    b = _cross(n, a)
-    q = partner_m - centre - along_m * n
-    qa, qb = float(q @ a), float(q @ b)
-    rq = math.hypot(qa, qb)
-    phi = math.atan2(qb, qa)
-    delta = math.acos(min(1.0, radius_m / rq)) if rq > 0 else 0.0
-    # angles measured from the prediction's direction (theta = 0): the solution nearer to 0
-    theta = min((phi - delta, phi + delta), key=lambda t: abs(math.remainder(t, 2 * math.pi)))
-    return centre + along_m * n + radius_m * (math.cos(theta) * a + math.sin(theta) * b)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -367,8 +314,7 @@ class Estimator:
             mapping ``{m: {i: S}}``.
         segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
             marker tries the groups that contain it in the order given.
-        hinges: elbow hinges (elbow markers with method HINGE).
-        forearms: forearms (wrist markers with method HINGE).
+        hinges: elbow hinges (markers with method HINGE need one).
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
             shoulder pivots are learned (None: the world frame).
@@ -396,7 +342,6 @@ class Estimator:
         weights: np.ndarray | Mapping[int, Mapping[int, float]],
         segments: Sequence[Sequence[int]] = (),
         hinges: Sequence[Hinge] = (),
-        forearms: Sequence[Forearm] = (),
         length_pairs: Sequence[tuple[int, int]] = (),
         trunk: tuple[int, int, int, int] | None = None,
         *,
@@ -432,17 +377,11 @@ class Estimator:
                 raise ValueError(f"segment {g.tolist()} must list at least 2 distinct marker indices 0..{m - 1}")
         self._segments_of = [[k for k, g in enumerate(self.segments) if i in g] for i in range(m)]
         self.hinges = {h.marker: h for h in hinges}
-        self.forearms = {f.marker: f for f in forearms}
         for i in np.flatnonzero(self.methods == Method.HINGE):
-            if int(i) not in self.hinges and int(i) not in self.forearms:
-                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge or forearm")
-        self._f_idx = np.array([[f.marker, f.partner, *f.elbow] for f in forearms], dtype=np.intp).reshape(-1, 4)
-        self._f_row = {f.marker: r for r, f in enumerate(forearms)}
-        # estimation order: elbows, then wrists (which use the elbows), then the rest
-        rank = np.full(m, 0)
-        rank[list(self.forearms)] = 1
-        rank[list(self.hinges)] = 2
-        self._rank = rank * 10 + self.methods
+            if int(i) not in self.hinges:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
+        # estimation order: elbows first (rigid fits of the wrists may lean on them), then by method
+        self._rank = np.where(np.isin(np.arange(m), list(self.hinges)), 10, 0) + self.methods
         # learning arrays over hinges: (H,) marker, partner, shoulder, wrist a, wrist b
         self._h_idx = np.array([[h.marker, h.partner, h.shoulder, *h.wrists] for h in hinges],
                                dtype=np.intp).reshape(-1, 5)
@@ -493,9 +432,6 @@ class Estimator:
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
-        # per forearm: wrist centre along the flexion axis and distance from it
-        self.fore_along = np.full(len(self._f_idx), np.nan)
-        self.fore_radius = np.full(len(self._f_idx), np.nan)
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
@@ -518,23 +454,11 @@ class Estimator:
         if self.trunk is not None and ok[self.trunk].all():
             self._trunk_m = p[self.trunk]
             self._trunk_rot = None
-        if not (len(self._f_idx) or len(self._h_idx)):
+        if not len(self._h_idx):
             return
-        # a few 3-vectors per arm: plain floats are several times faster than numpy here
+        # a few 3-vectors per elbow: plain floats are several times faster than numpy here
         pl, okl = p.tolist(), ok.tolist()
         rate = self._ema
-        for r, (w, wp, ea, eb) in enumerate(self._f_idx.tolist()):
-            if not (okl[w] and okl[wp] and okl[ea] and okl[eb]):
-                continue
-            v = [0.5 * (pl[w][i] + pl[wp][i] - pl[ea][i] - pl[eb][i]) for i in range(3)]  # elbow -> wrist centre
-            e = [pl[eb][i] - pl[ea][i] for i in range(3)]
-            le = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-            along = (v[0] * e[0] + v[1] * e[1] + v[2] * e[2]) / le
-            radius = math.sqrt(max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - along * along, 0.0))
-            old_a, old_r = self.fore_along[r], self.fore_radius[r]
-            first = not math.isfinite(old_r)
-            self.fore_along[r] = along if first else old_a + rate * (along - old_a)
-            self.fore_radius[r] = radius if first else old_r + rate * (radius - old_r)
         for r, (mk, pa, sh, wa, wb) in enumerate(self._h_idx.tolist()):
             if not (okl[mk] and okl[pa] and okl[sh] and okl[wa] and okl[wb]):
                 continue
@@ -580,14 +504,15 @@ class Estimator:
             return None
         # prediction: the rigid forearm-elbow fit (exact while the forearm does not turn), else
         # the axis of the previous frame
+        prev_axis = base[k] - base[h.partner]
+        prev_axis = _unit(prev_axis) if np.all(np.isfinite(prev_axis)) else None
         rigid = self._rigid(k, p, weight, prior)
         if rigid is not None:
             axis_pred = _unit(rigid - p[h.partner])
+        elif prev_axis is not None:
+            axis_pred = prev_axis
         else:
-            prev_axis = base[k] - base[h.partner]
-            if not np.all(np.isfinite(prev_axis)):
-                return None
-            axis_pred = _unit(prev_axis)
+            return None
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
         pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder)
@@ -597,29 +522,16 @@ class Estimator:
         if ok[wa] and ok[wb]:
             rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
             values.append(self.hinge_fore[r])
-        n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular)
+        n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
+                       axis_prev=prev_axis)
         return p[h.partner] + length * n
-
-    def _forearm(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
-        f = self.forearms[k]
-        r = self._f_row[k]
-        ea, eb = f.elbow
-        if not (weight[f.partner] == 1.0 and weight[ea] > 0 and weight[eb] > 0) or not np.isfinite(self.fore_radius[r]):
-            return None
-        pred = self._rigid(k, p, weight, prior)
-        if pred is None:
-            pred = prior
-        centre = wrist_centre(p[f.partner], p[ea], p[eb], self.fore_along[r], self.fore_radius[r],
-                              0.5 * (pred + p[f.partner]))
-        return 2.0 * centre - p[f.partner]
 
     def _model(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
                base: np.ndarray) -> tuple[np.ndarray | None, int]:
-        """Hinge, forearm or rigid estimate of marker k as its method allows, and the method used."""
+        """Hinge or rigid estimate of marker k as its method allows, and the method used."""
         method = self.methods[k]
         if method == Method.HINGE:
-            est = (self._hinge(k, p, ok, weight, prior, base) if k in self.hinges
-                   else self._forearm(k, p, weight, prior))
+            est = self._hinge(k, p, ok, weight, prior, base)
             if est is not None:
                 return est, Method.HINGE
             method = Method.RIGID
@@ -766,7 +678,7 @@ SEGMENTS: tuple[tuple[str, ...], ...] = (
 #: The estimator of each marker.
 METHODS: dict[str, Method] = {
     "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
-    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.HINGE, "M*W2": Method.HINGE,
+    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.RIGID, "M*W2": Method.RIGID,
     "M*H": Method.NEIGHBOURS,
 }
 
@@ -779,7 +691,7 @@ LENGTH_PAIRS: tuple[tuple[str, str], ...] = (
 
 #: Time constant (s) of the own relative velocity kept in free directions of a fit
 #: (``velocity_decay_s``): wrists swing with the forearm, elbows move with the humerus.
-VELOCITY_DECAY_S: dict[str, float] = {"M*E1": 0.0, "M*E2": 0.0}
+VELOCITY_DECAY_S: dict[str, float] = {"M*E1": 0.0, "M*E2": 0.0, "M*H": 0.0}
 DEFAULT_VELOCITY_DECAY_S = 0.15
 
 #: Longest occlusion an estimate is reported for, per estimator (seconds).
@@ -846,13 +758,7 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         if all(n in index for n in arm):
             s, e1, e2, w1, w2 = (index[n] for n in arm)
             hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
-    forearms = []
-    for side in SIDE_LETTERS:
-        arm = [f"M{side}{k}" for k in ("E1", "E2", "W1", "W2")]
-        if all(n in index for n in arm):
-            e1, e2, w1, w2 = (index[n] for n in arm)
-            forearms += [Forearm(w1, w2, (e1, e2)), Forearm(w2, w1, (e1, e2))]
-    hinge_markers = {h.marker for h in hinges} | {f.marker for f in forearms}
+    hinge_markers = {h.marker for h in hinges}
     methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
     pairs = []
     for a, b in LENGTH_PAIRS:
@@ -877,7 +783,6 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         "weights": weights,
         "segments": segments,
         "hinges": hinges,
-        "forearms": forearms,
         "length_pairs": pairs,
         "own_velocity": own_velocity,
         "max_hidden_s": max_hidden,

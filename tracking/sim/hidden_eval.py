@@ -29,7 +29,7 @@ import logging
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -226,6 +226,71 @@ def table_markdown(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
+GROUPS: dict[str, tuple[str, ...]] = {
+    "trunk (MB, MP)": ("MB", "MP"),
+    "elbows (M*E1, M*E2)": ("MLE1", "MLE2", "MRE1", "MRE2"),
+    "wrists (M*W1, M*W2)": ("MLW1", "MLW2", "MRW1", "MRW2"),
+    "hips (M*H)": ("MLH", "MRH"),
+}
+
+
+def marker_rows(rows: Sequence[dict], names: Sequence[str], markers: dict[str, tuple[str, ...]]) -> list[dict]:
+    """Reappearance errors pooled over motions (and noise draws) per marker group and estimator."""
+    out = []
+    for group, members in markers.items():
+        idx = [names.index(n) for n in members if n in names]
+        for fps in sorted({r["fps"] for r in rows}):
+            for label in dict.fromkeys(r["estimator"] for r in rows):
+                errs = np.concatenate([sc.reappear_mm[np.isin(sc.event_markers, idx)]
+                                       for r in rows if r["fps"] == fps and r["estimator"] == label
+                                       for sc in r["scores"]])
+                out.append({"group": group, "fps": fps, "estimator": label, "events": len(errs),
+                            "mean": float(np.nanmean(errs)) if errs.size else np.nan,
+                            "median": float(np.nanmedian(errs)) if errs.size else np.nan,
+                            "max": float(np.nanmax(errs)) if errs.size else np.nan})
+    return out
+
+
+def groups_markdown(rows: Sequence[dict]) -> str:
+    lines = ["| markers | fps | estimator | events | reappearance mean (mm) | median (mm) | max (mm) |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for r in rows:
+        lines.append(f"| {r['group']} | {r['fps']:g} | {r['estimator']} | {r['events']} | {_fmt(r['mean'])} "
+                     f"| {_fmt(r['median'])} | {_fmt(r['max'])} |")
+    return "\n".join(lines)
+
+
+def gated_markdown(datasets: Sequence[OcclusionData], markerset: MarkerSet, *, noise_mm: float = 1.0,
+                   seed: int = 0) -> str:
+    """The recommended estimator with its drift and time gates, as the tracker runs it."""
+    lines = ["| motion | fps | hidden (marker-frames) | estimated | lost | error of the estimates: mean (mm) "
+             "| p95 (mm) | max (mm) | update (ms/frame) |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for data in datasets:
+        sc = run_estimator(data, make_estimator(markerset, "recommended (per marker)", data.fps, gates=True),
+                           noise_mm=noise_mm, seed=seed)
+        e = sc.hidden_err_mm
+        frac = sc.estimated_frames / max(sc.hidden_frames, 1)
+        stats = (f"{e.mean():.1f} | {np.percentile(e, 95):.1f} | {e.max():.1f}" if e.size else "- | - | -")
+        lines.append(f"| {data.motion} | {data.fps:g} | {sc.hidden_frames} | {100 * frac:.1f} % "
+                     f"| {100 * (1 - frac):.1f} % | {stats} | {sc.update_ms:.2f} |")
+    return "\n".join(lines)
+
+
+def seed_markdown(rows: Sequence[dict], names: Sequence[str]) -> str:
+    """MRE2 in the seed experiment: each occlusion's error at reappearance, every estimator."""
+    k = list(names).index("MRE2")
+    lines = ["| fps | estimator | MRE2 at reappearance, per occlusion (mean over noise draws, mm) | worst draw (mm) |",
+             "| --- | --- | --- | --- |"]
+    for r in rows:
+        if r["motion"] != "right_external_rotation":
+            continue
+        ev = np.array([sc.for_marker(k) for sc in r["scores"]])
+        lines.append(f"| {r['fps']:g} | {r['estimator']} | {', '.join(f'{v:.1f}' for v in ev.mean(axis=0))} "
+                     f"| {', '.join(f'{v:.1f}' for v in ev.max(axis=0))} |")
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     from tracking.markerset import load_markerset
 
@@ -235,6 +300,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--cache", type=Path, default=None, help="folder keeping the rendered visibility")
     ap.add_argument("--seeds", type=int, default=3, help="noise draws pooled per row")
     ap.add_argument("--noise-mm", type=float, default=1.0)
+    ap.add_argument("--estimators", nargs="*", default=list(ESTIMATORS), help="labels of ESTIMATORS to compare")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     ms = load_markerset()
@@ -243,8 +309,15 @@ def main(argv: Sequence[str] | None = None) -> None:
         d30 = occlusion_data(motion, fps=30.0, cache_dir=args.cache)
         for f in sorted(args.fps):
             datasets.append(d30.every(30 // f))
-    rows = comparison_rows(datasets, ms, noise_mm=args.noise_mm, seeds=range(args.seeds))
+    rows = comparison_rows(datasets, ms, noise_mm=args.noise_mm, seeds=range(args.seeds), labels=args.estimators)
+    print("### Seed experiment: MRE2\n")
+    print(seed_markdown(rows, ms.names))
+    print("\n### Per motion (no gates: raw accuracy)\n")
     print(table_markdown(rows))
+    print("\n### Per marker group, all motions pooled (no gates)\n")
+    print(groups_markdown(marker_rows(rows, ms.names, GROUPS)))
+    print("\n### Recommended estimator with its gates (as the tracker runs it)\n")
+    print(gated_markdown(datasets, ms, noise_mm=args.noise_mm))
 
 
 if __name__ == "__main__":
