@@ -36,9 +36,10 @@ measured comparison and the recommended configuration):
 Each estimator falls back to the next simpler one when ill-posed (hinge -> rigid ->
 equation 6 -> the marker's own decaying velocity). The estimate is fed back as the base of the
 next frame, as in the paper. An estimate is dropped to LOST when it leaves what the body allows:
-a distance to a measured partner of a near-rigid pair (``length_pairs``) outside the range learned
-while both were measured, widened by ``tolerance_m``; or the marker hidden longer than
-``max_hidden_s``. A marker never measured is LOST, and a LOST marker stays LOST until it is
+a distance to a measured partner of a near-rigid pair (``length_pairs``) outside the range
+learned while both were measured, widened by ``tolerance_m``; the marker hidden longer than
+``max_hidden_s``; or no marker of its body segment measured for longer than
+``max_unsupported_s``. A marker never measured is LOST, and a LOST marker stays LOST until it is
 measured again.
 
 Configuration is plain arrays and marker indices, so any marker set can carry it;
@@ -318,9 +319,14 @@ class Estimator:
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
             shoulder pivots are learned (None: the world frame).
+        body_segments: (M,) the body segment of each marker (the marker set's ``segment``): an
+            estimate whose segment has no measured marker for longer than ``max_unsupported_s``
+            is dropped (a whole forearm hidden: its turning is guesswork, and rotations keep the
+            distances the drift check sees). None: no such check.
         own_velocity: equation 6 adds the marker's own last displacement (the paper's formula).
         tolerance_m: drift tolerance on the learned distance ranges.
         max_hidden_s: an estimate older than this is dropped (a scalar or one per marker).
+        max_unsupported_s: see ``body_segments``.
         fps: frame rate (for ``max_hidden_s`` and the learning memories).
         prior_weight: weight of the predicted position in under-determined rigid fits.
         min_spread_m: support markers nearer than this to one line leave a rotation free.
@@ -344,10 +350,12 @@ class Estimator:
         hinges: Sequence[Hinge] = (),
         length_pairs: Sequence[tuple[int, int]] = (),
         trunk: tuple[int, int, int, int] | None = None,
+        body_segments: Sequence[str] | None = None,
         *,
         own_velocity: bool = False,
         tolerance_m: float = 0.03,
         max_hidden_s: float | Sequence[float] = 5.0,
+        max_unsupported_s: float = 0.5,
         fps: float = 30.0,
         prior_weight: float = 0.1,
         min_spread_m: float = 0.015,
@@ -394,6 +402,15 @@ class Estimator:
         self._pair_mask[pairs[:, 1], pairs[:, 0]] = True
         self._pairs = np.argwhere(np.triu(self._pair_mask))
         self.trunk = None if trunk is None else np.array(trunk, dtype=np.intp)
+        if body_segments is None:
+            self._partners = np.zeros((m, m), dtype=bool)
+        else:
+            labels = np.asarray(body_segments)
+            if labels.shape != (m,):
+                raise ValueError(f"body_segments must name one segment per marker ({m}), got {labels.shape}")
+            self._partners = (labels[:, None] == labels[None, :]) & ~np.eye(m, dtype=bool)
+        self._has_partner = self._partners.any(axis=1)
+        self.max_unsupported_frames = math.ceil(max_unsupported_s * float(fps)) if np.isfinite(max_unsupported_s) else np.inf
         self.own_velocity = bool(own_velocity)
         self.tolerance_m = float(tolerance_m)
         max_s = np.broadcast_to(np.asarray(max_hidden_s, dtype=np.float64), (m,))
@@ -421,6 +438,7 @@ class Estimator:
         self.measured = np.zeros(m, dtype=bool)      # measured in the last frame
         self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
         self.hidden_frames = np.zeros(m, dtype=np.int64)
+        self.unsupported_frames = np.zeros(m, dtype=np.int64)  # hidden with the whole segment
         self.used = np.full(m, -1, dtype=np.int8)    # Method used for each estimate (-1: none)
         self.dist_lo = np.full(len(self._pairs), np.inf)
         self.dist_hi = np.full(len(self._pairs), -np.inf)
@@ -594,7 +612,10 @@ class Estimator:
         prev = self.positions
         has_base = np.isfinite(prev).all(axis=1)
         hidden_frames = np.where(ok, 0, self.hidden_frames + 1)
-        hidden = ~ok & has_base & (hidden_frames <= self.max_hidden_frames)
+        alone = self._has_partner & ~(self._partners & ok[None, :]).any(axis=1)
+        unsupported_frames = np.where(~ok & alone, self.unsupported_frames + 1, 0)
+        hidden = (~ok & has_base & (hidden_frames <= self.max_hidden_frames)
+                  & (unsupported_frames <= self.max_unsupported_frames))
         used = np.full(self.n_markers, -1, dtype=np.int8)
 
         if hidden.any():
@@ -645,6 +666,7 @@ class Estimator:
         self.positions = p
         self.measured = ok
         self.hidden_frames = hidden_frames
+        self.unsupported_frames = unsupported_frames
         self.used = used
         self.status = np.where(ok, MarkerStatus.MEASURED,
                                np.where(hidden, MarkerStatus.ESTIMATED, MarkerStatus.LOST)).astype(np.uint8)
@@ -780,6 +802,7 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
     return {
         "methods": methods,
         "trunk": trunk,
+        "body_segments": list(markerset.segments),
         "weights": weights,
         "segments": segments,
         "hinges": hinges,

@@ -351,3 +351,17 @@ def test_seed_experiment_mre2_reappears_within_5_mm(seed_experiment):
     assert best.mean() <= 0.005, best
     assert best.max() <= 0.015, best
     assert paper.mean() > best.mean()
+
+
+def test_a_whole_segment_hidden_is_lost_after_a_while():
+    truth = rigid_motion(40)
+    measured = np.ones((40, 4), dtype=bool)
+    measured[10:40, 2:] = False  # markers 2 and 3 form a body segment; both hidden
+    w = np.ones((4, 4))
+    e = Estimator([Method.NEIGHBOURS] * 4, w, body_segments=["a", "a", "b", "b"], max_unsupported_s=0.2,
+                  fps=30.0)
+    _, s = run(e, truth, measured)
+    assert (s[10:16, 2:] == ESTIMATED).all()
+    assert (s[17:, 2:] == LOST).all()
+    with pytest.raises(ValueError, match="body_segments"):
+        Estimator([Method.NEIGHBOURS] * 4, w, body_segments=["a"])

@@ -182,6 +182,7 @@ def make_estimator(markerset: MarkerSet | Sequence[str], label: str, fps: float,
     cfg = default_config(markerset, method=method, own_velocity=own)
     if not gates:
         cfg["max_hidden_s"] = np.inf
+        cfg["max_unsupported_s"] = np.inf
         cfg["tolerance_m"] = np.inf
     return Estimator(**cfg, fps=fps)
 
