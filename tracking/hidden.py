@@ -158,25 +158,41 @@ def kabsch(src: np.ndarray, dst: np.ndarray, w: np.ndarray | None = None) -> tup
         R: (3, 3) proper rotation (det +1: a reflection is never returned).
         t: (3,) translation.
     """
-    w = np.ones(len(src)) if w is None else np.asarray(w, dtype=np.float64)
-    ws = w / w.sum()
-    cs = ws @ src
-    cd = ws @ dst
-    h = (src - cs).T @ ((dst - cd) * ws[:, None])
+    if w is None:
+        cs, cd = src.mean(axis=0), dst.mean(axis=0)
+        h = (src - cs).T @ (dst - cd)
+    else:
+        ws = w / w.sum()
+        cs, cd = ws @ src, ws @ dst
+        h = (src - cs).T @ ((dst - cd) * ws[:, None])
     u, _, vt = np.linalg.svd(h)
-    if np.linalg.det(vt.T @ u.T) < 0:  # reflection guard: flip the least significant axis
-        vt = vt.copy()
-        vt[2] *= -1.0
     r = vt.T @ u.T
+    if _det3(r) < 0:  # reflection guard: flip the least significant axis
+        vt[2] *= -1.0
+        r = vt.T @ u.T
     return r, cd - r @ cs
+
+
+def _det3(m: np.ndarray) -> float:
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def spread_m(points_m: np.ndarray) -> float:
     """RMS distance (m) of (N, 3) points from their best-fitting line (0 for N < 3)."""
     if len(points_m) < 3:
         return 0.0
-    s = np.linalg.svd(points_m - points_m.mean(axis=0), compute_uv=False)
-    return float(s[1] / math.sqrt(len(points_m)))
+    if len(points_m) == 3:  # the common case, in plain floats: RMS distance from the best line
+        (ax, ay, az), (bx, by, bz), (cx, cy, cz) = points_m.tolist()
+        ux, uy, uz, vx, vy, vz = bx - ax, by - ay, bz - az, cx - ax, cy - ay, cz - az
+        area2 = (uy * vz - uz * vy) ** 2 + (uz * vx - ux * vz) ** 2 + (ux * vy - uy * vx) ** 2
+        sides = ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz + (cx - bx) ** 2 + (cy - by) ** 2 + (cz - bz) ** 2
+        # for 3 points: lambda_2 + lambda_3 = (sum of squared sides - sqrt((...)^2 - 12 area2)) / 6
+        disc = max(sides * sides - 12.0 * area2, 0.0)
+        return math.sqrt(max((sides - math.sqrt(disc)) / 6.0, 0.0) / 3.0)
+    c = points_m - points_m.mean(axis=0)
+    ev = np.linalg.eigvalsh(c.T @ c)  # ascending; the two smallest are the spread off the line
+    return math.sqrt(max(float(ev[0] + ev[1]), 0.0) / len(points_m))
 
 
 def rigid_estimate(
@@ -208,14 +224,16 @@ def rigid_estimate(
     k = len(ref_m)
     if k < 2:
         return None
-    w = np.ones(k) if weights is None else np.asarray(weights, dtype=np.float64)
     if k < 3 or spread_m(ref_m) < min_spread_m:
         if prior_m is None or not np.all(np.isfinite(prior_m)):
             return None
         # the prior lives in the current frame; its reference is the target's reference position
         ref_m = np.vstack([ref_m, target_ref_m])
         cur_m = np.vstack([cur_m, prior_m])
-        w = np.r_[w, prior_weight]
+        w = np.ones(k + 1) if weights is None else np.r_[weights, 0.0]
+        w[-1] = prior_weight
+    else:
+        w = weights
     r, t = kabsch(ref_m, cur_m, w)
     return r @ target_ref_m + t
 
@@ -275,27 +293,25 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
         axis_prev: (3,) the previous frame's axis: where two constraints leave two mirror-image
             solutions, the one on its side is taken (continuity), not the prediction's.
     """
-    scale = np.linalg.norm(rows, axis=1)
+    scale = np.sqrt((rows * rows).sum(axis=1))
     a = rows / scale[:, None]
     b = values / scale
-    u, sv, vt = np.linalg.svd(a, full_matrices=True)
-    keep = np.zeros(3, dtype=bool)
-    keep[: len(sv)] = sv >= min_singular
-    kept = np.flatnonzero(keep)
-    coef = (u[:, kept].T @ b) / sv[kept]
-    fixed = coef @ vt[kept]
+    u, sv, vt = np.linalg.svd(a)  # full: vt (3, 3), rows past len(sv) span the null space
+    k = int((sv >= min_singular).sum())  # singular values come sorted, largest first
+    coef = (u[:, :k].T @ b) / sv[:k]
+    fixed = coef @ vt[:k]
     norm2 = float(coef @ coef)
     if norm2 >= 1.0:  # inconsistent beyond the unit sphere: the nearest unit vector
         return fixed / math.sqrt(norm2)
-    free = vt[~keep]
+    free = vt[k:]
     rest = free.T @ (free @ axis_pred)  # the prediction's part in the free directions
-    if len(free) == 1 and axis_prev is not None:
+    if k == 2 and axis_prev is not None:
         # one free direction: two solutions, mirror images through the constraints' plane; the
         # one on the previous axis' side (continuity) unless the previous axis lies in the plane
         side = float(free[0] @ axis_prev)
         if abs(side) > 0.05:
             rest = free[0] * math.copysign(1.0, side)
-    r = float(np.linalg.norm(rest))
+    r = math.sqrt(float(rest @ rest))
     if r < 1e-9:
         rest, r = free[0], 1.0
     return fixed + math.sqrt(1.0 - norm2) * rest / r
@@ -446,6 +462,7 @@ class Estimator:
         self._hist_pos = np.full((self._hist_len, m, 3), np.nan)
         self._hist_ok = np.zeros((self._hist_len, m), dtype=bool)
         self._hist_frame = np.full(self._hist_len, -1, dtype=np.int64)
+        self._ref_cache: dict[tuple[int, bytes], int] = {}  # (marker, supports) -> reference slot
         self.frame = -1
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
@@ -459,6 +476,8 @@ class Estimator:
     # ------------------------------------------------------------------ learning
     def _learn(self, p: np.ndarray, ok: np.ndarray) -> None:
         slot = self.frame % self._hist_len
+        if self._ref_cache and (ok.any() or any(v == slot for v in self._ref_cache.values())):
+            self._ref_cache = {key: v for key, v in self._ref_cache.items() if not ok[key[0]] and v != slot}
         self._hist_pos[slot] = p
         self._hist_ok[slot] = ok
         self._hist_frame[slot] = self.frame
@@ -563,6 +582,10 @@ class Estimator:
         """The most recent stored frame in which marker k and at least three of the candidate
         supports ``cand`` (indices) were measured (else the one with most of them), as
         (positions (M, 3), measured (M,))."""
+        key = (k, cand.tobytes())
+        slot = self._ref_cache.get(key)
+        if slot is not None:
+            return self._hist_pos[slot], self._hist_ok[slot]
         has = self._hist_ok[:, k] & (self._hist_frame >= 0)
         if not has.any() or not len(cand):
             return None
@@ -571,7 +594,9 @@ class Estimator:
         if need < 1:
             return None
         slots = np.flatnonzero(count >= need)
-        slot = slots[np.argmax(self._hist_frame[slots])]
+        slot = int(slots[np.argmax(self._hist_frame[slots])])
+        # valid while k stays hidden (a newer reference needs k measured) and the slot is kept
+        self._ref_cache[key] = slot
         return self._hist_pos[slot], self._hist_ok[slot]
 
     def _rigid(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
