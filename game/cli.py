@@ -173,17 +173,29 @@ def _add_validate(sub) -> None:
         "with the truth: completeness, RMSE, ghost points.",
     )
     p.add_argument("--motion", action="append", default=None, help="motion name (repeat; default: all)")
+    p.add_argument("--tracker", action="store_true",
+                   help="run the tracker (labels, windows, hidden markers) instead of full-frame measurement")
     _add_studio_options(p, fps=15.0)
     p.set_defaults(func=_cmd_validate)
 
 
 def _cmd_validate(args) -> int:
+    from dataclasses import replace
+
     from tracking.sim.studio import SimulationSettings
     from tracking.sim.validate import combine, validate
 
     base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex)
+    if args.tracker:
+        from tracking.sim.motions import available_motions
+        from tracking.sim.validate import validate_tracking
+
+        for name in args.motion or available_motions():
+            acc = validate_tracking(replace(base, motion=name), progress=True)
+            print(f"{name:26s} {acc.summary()}", flush=True)
+        return 0
     results, whole = [], []
     for name, acc, acc_whole in validate(base, args.motion, progress=True):
         results.append(acc)
