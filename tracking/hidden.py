@@ -32,8 +32,15 @@ measured comparison and the recommended configuration):
   direction. The shoulder pivot is the acromion marker plus an offset in the trunk frame learned
   online from exactly this perpendicularity (the acromion is on the scapula, ~6 cm above the
   humeral head). Where the two conditions do not fix the axis (elbow nearly straight, wrists
-  hidden) the rigid forearm-elbow fit (or the previous axis) fills in.
-Each estimator falls back to the next simpler one when ill-posed (hinge -> rigid ->
+  hidden) the rigid forearm-elbow fit (or the previous axis) fills in; where two mirror-image
+  solutions remain, the one on the previous axis' side is kept.
+- **Forearm** (:func:`wrist_centre`, :class:`Forearm`): a hidden styloid marker comes from the
+  rigid forearm-elbow fit while that fits (RMS misfit of its supports <= ``max_rigid_residual_m``);
+  when the forearm has turned (pronation-supination breaks the rigid shape), it is the mirror of
+  the measured styloid through the wrist centre, which lies on a learned circle about the flexion
+  axis with the measured styloid in its plane perpendicular to the forearm. (The circle alone is
+  exact but amplifies noise: the styloids are only 5 cm off a 24 cm axis.)
+Each estimator falls back to the next simpler one when ill-posed (hinge/forearm -> rigid ->
 equation 6 -> the marker's own decaying velocity). The estimate is fed back as the base of the
 next frame, as in the paper. An estimate is dropped to LOST when it leaves what the body allows:
 a distance to a measured partner of a near-rigid pair (``length_pairs``) outside the range
@@ -64,7 +71,7 @@ class Method(IntEnum):
     CONSTANT_VELOCITY = 0  # equation 5
     NEIGHBOURS = 1         # equation 6
     RIGID = 2              # Kabsch on a segment, falls back to equation 6
-    HINGE = 3              # elbow flexion axis (elbow markers), falls back to RIGID
+    HINGE = 3              # elbow axis (elbow markers) / wrist circle (wrist markers), falls back to RIGID
 
     @classmethod
     def parse(cls, value: "Method | str | int") -> "Method":
@@ -92,6 +99,21 @@ class Hinge:
     partner: int
     shoulder: int
     wrists: tuple[int, int]
+
+
+@dataclass(frozen=True, slots=True)
+class Forearm:
+    """A forearm for estimating the styloid marker ``marker`` when its rigid fit does not hold.
+
+    Attributes:
+        marker: the styloid marker to estimate.
+        partner: the other styloid marker of that wrist.
+        elbow: the two epicondyle markers of that arm (the flexion axis).
+    """
+
+    marker: int
+    partner: int
+    elbow: tuple[int, int]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -204,6 +226,7 @@ def rigid_estimate(
     prior_m: np.ndarray | None = None,
     prior_weight: float = 0.1,
     min_spread_m: float = 0.015,
+    residual: list[float] | None = None,
 ) -> np.ndarray | None:
     """Carry a segment's hidden marker with the rigid motion of its other markers.
 
@@ -217,6 +240,7 @@ def rigid_estimate(
             the support alone leaves a rotation free (K = 2 or collinear points).
         prior_weight: that point's weight.
         min_spread_m: support points closer than this (RMS) to a line are collinear.
+        residual: a one-element list that receives the supports' RMS misfit (m).
 
     Returns:
         (3,) the estimate, or None when the fit is ill-posed (K < 2, or free rotation and no prior).
@@ -235,7 +259,11 @@ def rigid_estimate(
     else:
         w = weights
     r, t = kabsch(ref_m, cur_m, w)
-    return r @ target_ref_m + t
+    est = r @ target_ref_m + t
+    if residual is not None:  # RMS misfit of the supports: how far the segment is from rigid
+        d = ref_m @ r.T + t - cur_m
+        residual[0] = math.sqrt(float((d * d).sum()) / len(d))
+    return est
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -317,6 +345,48 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
     return fixed + math.sqrt(1.0 - norm2) * rest / r
 
 
+def wrist_centre(
+    partner_m: np.ndarray,
+    elbow_a_m: np.ndarray,
+    elbow_b_m: np.ndarray,
+    along_m: float,
+    radius_m: float,
+    centre_pred_m: np.ndarray,
+) -> np.ndarray:
+    """Wrist centre (midpoint of the two styloid markers) from one styloid marker and the elbow.
+
+    The forearm turns about the elbow's flexion axis (through the two epicondyle markers), so
+    the wrist centre lies on a circle about that axis: ``along_m`` from the elbow centre along the
+    axis, ``radius_m`` from it. Pronation-supination turns the styloid markers about the forearm's
+    long axis (elbow centre -> wrist centre), so the measured one lies in the plane through the
+    wrist centre perpendicular to that axis. Of the (up to) two points of the circle that satisfy
+    this, the one nearer ``centre_pred_m`` is returned.
+
+    Args:
+        partner_m: (3,) the measured styloid marker.
+        elbow_a_m, elbow_b_m: (3,) the epicondyle markers (measured or estimated).
+        along_m, radius_m: the learned wrist-centre circle.
+        centre_pred_m: (3,) a prediction of the wrist centre.
+    """
+    centre = 0.5 * (elbow_a_m + elbow_b_m)
+    n = _unit(elbow_b_m - elbow_a_m)
+    pred = centre_pred_m - centre
+    a = pred - (pred @ n) * n
+    norm_a = float(np.linalg.norm(a))
+    if norm_a < 1e-9:
+        return centre_pred_m
+    a /= norm_a
+    b = _cross(n, a)
+    q = partner_m - centre - along_m * n
+    qa, qb = float(q @ a), float(q @ b)
+    rq = math.hypot(qa, qb)
+    phi = math.atan2(qb, qa)
+    delta = math.acos(min(1.0, radius_m / rq)) if rq > 0 else 0.0
+    # angles measured from the prediction's direction (theta = 0): the solution nearer to 0
+    theta = min((phi - delta, phi + delta), key=lambda t: abs(math.remainder(t, 2 * math.pi)))
+    return centre + along_m * n + radius_m * (math.cos(theta) * a + math.sin(theta) * b)
+
+
 # ---------------------------------------------------------------------------------------------
 # The stateful estimator
 
@@ -331,7 +401,9 @@ class Estimator:
             mapping ``{m: {i: S}}``.
         segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
             marker tries the groups that contain it in the order given.
-        hinges: elbow hinges (markers with method HINGE need one).
+        hinges: elbow hinges (elbow markers with method HINGE).
+        forearms: forearms (styloid markers with method HINGE): the rigid forearm fit, or where
+            its misfit exceeds ``max_rigid_residual_m`` (the forearm turned), the wrist circle.
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
             shoulder pivots are learned (None: the world frame).
@@ -356,6 +428,7 @@ class Estimator:
         velocity_decay_s: where a fit leaves a direction free, the hidden marker moves with its
             neighbours (equation 6) plus its own velocity relative to them, which decays with
             this time constant (0: none; a scalar or one per marker).
+        max_rigid_residual_m: see ``forearms``.
     """
 
     def __init__(
@@ -364,6 +437,7 @@ class Estimator:
         weights: np.ndarray | Mapping[int, Mapping[int, float]],
         segments: Sequence[Sequence[int]] = (),
         hinges: Sequence[Hinge] = (),
+        forearms: Sequence[Forearm] = (),
         length_pairs: Sequence[tuple[int, int]] = (),
         trunk: tuple[int, int, int, int] | None = None,
         body_segments: Sequence[str] | None = None,
@@ -380,6 +454,7 @@ class Estimator:
         min_singular: float = 0.3,
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
+        max_rigid_residual_m: float = 0.004,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -401,10 +476,13 @@ class Estimator:
                 raise ValueError(f"segment {g.tolist()} must list at least 2 distinct marker indices 0..{m - 1}")
         self._segments_of = [[k for k, g in enumerate(self.segments) if i in g] for i in range(m)]
         self.hinges = {h.marker: h for h in hinges}
+        self.forearms = {f.marker: f for f in forearms}
         for i in np.flatnonzero(self.methods == Method.HINGE):
-            if int(i) not in self.hinges:
-                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
-        # estimation order: elbows first (rigid fits of the wrists may lean on them), then by method
+            if int(i) not in self.hinges and int(i) not in self.forearms:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge or forearm")
+        self._f_idx = np.array([[f.marker, f.partner, *f.elbow] for f in forearms], dtype=np.intp).reshape(-1, 4)
+        self._f_row = {f.marker: r for r, f in enumerate(forearms)}
+        # estimation order: elbows first (the wrists' fits may lean on them), then by method
         self._rank = np.where(np.isin(np.arange(m), list(self.hinges)), 10, 0) + self.methods
         # learning arrays over hinges: (H,) marker, partner, shoulder, wrist a, wrist b
         self._h_idx = np.array([[h.marker, h.partner, h.shoulder, *h.wrists] for h in hinges],
@@ -435,6 +513,7 @@ class Estimator:
         self.min_spread_m = float(min_spread_m)
         self.min_singular = float(min_singular)
         self.estimate_weight = float(estimate_weight)
+        self.max_rigid_residual_m = float(max_rigid_residual_m)
         self.pivot_prior_m = np.asarray(pivot_prior_m, dtype=np.float64)
         self._forget = math.exp(-1.0 / (float(fps) * pivot_memory_s))
         self._ema = 1.0 - math.exp(-1.0 / (float(fps) * 0.3))  # hinge lengths: ~0.3 s memory
@@ -467,6 +546,9 @@ class Estimator:
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
+        # per forearm: wrist centre along the flexion axis and distance from it
+        self.fore_along = np.full(len(self._f_idx), np.nan)
+        self.fore_radius = np.full(len(self._f_idx), np.nan)
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
@@ -491,11 +573,23 @@ class Estimator:
         if self.trunk is not None and ok[self.trunk].all():
             self._trunk_m = p[self.trunk]
             self._trunk_rot = None
-        if not len(self._h_idx):
+        if not (len(self._f_idx) or len(self._h_idx)):
             return
-        # a few 3-vectors per elbow: plain floats are several times faster than numpy here
+        # a few 3-vectors per arm: plain floats are several times faster than numpy here
         pl, okl = p.tolist(), ok.tolist()
         rate = self._ema
+        for r, (w, wp, ea, eb) in enumerate(self._f_idx.tolist()):
+            if not (okl[w] and okl[wp] and okl[ea] and okl[eb]):
+                continue
+            v = [0.5 * (pl[w][i] + pl[wp][i] - pl[ea][i] - pl[eb][i]) for i in range(3)]  # elbow -> wrist centre
+            e = [pl[eb][i] - pl[ea][i] for i in range(3)]
+            le = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            along = (v[0] * e[0] + v[1] * e[1] + v[2] * e[2]) / le
+            radius = math.sqrt(max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - along * along, 0.0))
+            old_a, old_r = self.fore_along[r], self.fore_radius[r]
+            first = not math.isfinite(old_r)
+            self.fore_along[r] = along if first else old_a + rate * (along - old_a)
+            self.fore_radius[r] = radius if first else old_r + rate * (radius - old_r)
         for r, (mk, pa, sh, wa, wb) in enumerate(self._h_idx.tolist()):
             if not (okl[mk] and okl[pa] and okl[sh] and okl[wa] and okl[wb]):
                 continue
@@ -563,12 +657,29 @@ class Estimator:
                        axis_prev=prev_axis)
         return p[h.partner] + length * n
 
+    def _forearm(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        f = self.forearms[k]
+        r = self._f_row[k]
+        ea, eb = f.elbow
+        resid = [0.0]
+        rigid = self._rigid(k, p, weight, prior, resid)
+        if rigid is not None and resid[0] <= self.max_rigid_residual_m:
+            return rigid
+        # the forearm turned (or no rigid fit): the other styloid, measured, on the wrist circle
+        if not (ok[f.partner] and weight[ea] > 0 and weight[eb] > 0) or not np.isfinite(self.fore_radius[r]):
+            return rigid
+        pred = rigid if rigid is not None else prior
+        centre = wrist_centre(p[f.partner], p[ea], p[eb], self.fore_along[r], self.fore_radius[r],
+                              0.5 * (pred + p[f.partner]))
+        return 2.0 * centre - p[f.partner]
+
     def _model(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
                base: np.ndarray) -> tuple[np.ndarray | None, int]:
         """Hinge or rigid estimate of marker k as its method allows, and the method used."""
         method = self.methods[k]
         if method == Method.HINGE:
-            est = self._hinge(k, p, ok, weight, prior, base)
+            est = (self._hinge(k, p, ok, weight, prior, base) if k in self.hinges
+                   else self._forearm(k, p, ok, weight, prior))
             if est is not None:
                 return est, Method.HINGE
             method = Method.RIGID
@@ -599,7 +710,8 @@ class Estimator:
         self._ref_cache[key] = slot
         return self._hist_pos[slot], self._hist_ok[slot]
 
-    def _rigid(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+    def _rigid(self, k: int, p: np.ndarray, weight: np.ndarray, prior: np.ndarray,
+               residual: list[float] | None = None) -> np.ndarray | None:
         """Rigid estimate of marker k from the first of its segments that gives one.
 
         ``weight[i]`` is marker i's weight as a support now (0: no position this frame).
@@ -613,7 +725,8 @@ class Estimator:
             ref_pos, ref_ok = ref
             sup = cand[ref_ok[cand]]
             est = rigid_estimate(ref_pos[sup], p[sup], ref_pos[k], weights=weight[sup], prior_m=prior,
-                                 prior_weight=self.prior_weight, min_spread_m=self.min_spread_m)
+                                 prior_weight=self.prior_weight, min_spread_m=self.min_spread_m,
+                                 residual=residual)
             if est is not None:
                 return est
         return None
@@ -725,7 +838,7 @@ SEGMENTS: tuple[tuple[str, ...], ...] = (
 #: The estimator of each marker.
 METHODS: dict[str, Method] = {
     "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
-    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.RIGID, "M*W2": Method.RIGID,
+    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.HINGE, "M*W2": Method.HINGE,
     "M*H": Method.NEIGHBOURS,
 }
 
@@ -805,7 +918,13 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         if all(n in index for n in arm):
             s, e1, e2, w1, w2 = (index[n] for n in arm)
             hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
-    hinge_markers = {h.marker for h in hinges}
+    forearms = []
+    for side in SIDE_LETTERS:
+        arm = [f"M{side}{k}" for k in ("E1", "E2", "W1", "W2")]
+        if all(n in index for n in arm):
+            e1, e2, w1, w2 = (index[n] for n in arm)
+            forearms += [Forearm(w1, w2, (e1, e2)), Forearm(w2, w1, (e1, e2))]
+    hinge_markers = {h.marker for h in hinges} | {f.marker for f in forearms}
     methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
     pairs = []
     for a, b in LENGTH_PAIRS:
@@ -831,6 +950,7 @@ def default_config(markerset, *, method: Method | str | None = None, own_velocit
         "weights": weights,
         "segments": segments,
         "hinges": hinges,
+        "forearms": forearms,
         "length_pairs": pairs,
         "own_velocity": own_velocity,
         "max_hidden_s": max_hidden,

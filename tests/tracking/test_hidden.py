@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from tracking.hidden import (
     Estimator,
+    Forearm,
     Method,
     constant_velocity,
     default_config,
@@ -18,6 +19,7 @@ from tracking.hidden import (
     neighbour_motion,
     rigid_estimate,
     trunk_rotation,
+    wrist_centre,
 )
 from tracking.markerset import load_markerset
 from tracking.status import MarkerStatus
@@ -146,6 +148,24 @@ def test_trunk_rotation_is_the_spec_frame():
     r = trunk_rotation(np.array([0, 1.2, 0.0]), np.array([0, 1.0, 0.0]), np.array([-0.1, 0.9, 0.05]),
                        np.array([0.1, 0.9, 0.05]))
     np.testing.assert_allclose(r, np.eye(3), atol=1e-12)
+
+
+def forearm_pose(flexion_rad, supination_rad):
+    """Elbow markers on the x axis, forearm turning about it; styloids about the forearm's axis."""
+    e1, e2 = np.array([0.055, 0.0, 0.0]), np.array([-0.055, 0.0, 0.0])
+    f = np.array([0.0, -math.cos(flexion_rad), -math.sin(flexion_rad)])  # forearm direction
+    side = np.cross(f, [1.0, 0.0, 0.0])
+    ulnar = math.cos(supination_rad) * side + math.sin(supination_rad) * np.array([1.0, 0.0, 0.0])
+    wc = 0.25 * f
+    return e1, e2, wc - 0.05 * ulnar, wc + 0.05 * ulnar
+
+
+@pytest.mark.parametrize("flexion, supination", [(0.2, 0.0), (1.5, 0.7), (2.2, -1.0), (0.9, 1.4)])
+def test_wrist_centre_follows_flexion_and_supination(flexion, supination):
+    e1, e2, w1, w2 = forearm_pose(flexion, supination)
+    pred = 0.5 * (w1 + w2) + np.array([0.0, 0.02, 0.02])  # a rough prediction picks the solution
+    wc = wrist_centre(w2, e1, e2, 0.0, 0.25, pred)
+    np.testing.assert_allclose(2 * wc - w2, w1, atol=1e-9)
 
 
 # ---------------------------------------------------------------------------------- the Estimator
@@ -280,7 +300,9 @@ def test_default_config_for_the_seed_marker_set():
     np.testing.assert_array_equal(w, w[np.ix_(perm, perm)])  # both arms alike
     assert all(w[i].sum() > 0 for i in range(m))             # every marker has neighbours
     methods = cfg["methods"]
-    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.RIGID
+    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.HINGE
+    assert {f.marker for f in cfg["forearms"]} == {ms.index(n) for n in ("MLW1", "MLW2", "MRW1", "MRW2")}
+    assert all(isinstance(f, Forearm) for f in cfg["forearms"])
     assert {h.marker for h in cfg["hinges"]} == {ms.index(n) for n in ("MLE1", "MLE2", "MRE1", "MRE2")}
     Estimator(**cfg, fps=15.0)
     eq5 = default_config(ms, method="constant_velocity")
@@ -294,7 +316,8 @@ def test_default_config_for_another_marker_set_uses_its_segments():
 
     cfg = default_config(Tiny())
     np.testing.assert_array_equal(cfg["weights"], [[0, 1, 0], [1, 0, 0], [0, 0, 0]])
-    assert set(cfg["methods"]) == {Method.NEIGHBOURS} and cfg["hinges"] == [] and cfg["trunk"] is None
+    assert set(cfg["methods"]) == {Method.NEIGHBOURS} and cfg["hinges"] == cfg["forearms"] == []
+    assert cfg["trunk"] is None
     Estimator(**cfg)
 
 
@@ -365,3 +388,27 @@ def test_a_whole_segment_hidden_is_lost_after_a_while():
     assert (s[17:, 2:] == LOST).all()
     with pytest.raises(ValueError, match="body_segments"):
         Estimator([Method.NEIGHBOURS] * 4, w, body_segments=["a"])
+
+
+def test_forearm_switches_to_the_wrist_circle_when_the_forearm_turns():
+    """Elbow markers and one styloid measured, the other hidden while the forearm flexes (rigid
+    fit exact) and then pronates (the rigid fit's misfit grows: the wrist circle takes over)."""
+    frames = [forearm_pose(0.3 + 0.02 * i, 0.0) for i in range(30)]
+    frames += [forearm_pose(0.9, 0.03 * i) for i in range(1, 31)]
+    truth = np.array([np.stack(f) for f in frames])  # (T, 4, 3): E1, E2, W1, W2
+    measured = np.ones((60, 4), dtype=bool)
+    measured[10:, 3] = False
+    cfg = dict(methods=[Method.HINGE, Method.HINGE, Method.HINGE, Method.HINGE], weights=np.ones((4, 4)),
+               segments=[(0, 1, 2, 3)], forearms=[Forearm(2, 3, (0, 1)), Forearm(3, 2, (0, 1))],
+               hinges=[], fps=30.0)
+    cfg["methods"] = [Method.RIGID, Method.RIGID, Method.HINGE, Method.HINGE]
+    p, s = run(Estimator(**cfg), truth, measured)
+    assert (s[10:, 3] == ESTIMATED).all()
+    np.testing.assert_allclose(p[10:30, 3], truth[10:30, 3], atol=1e-9)  # flexion: rigid, exact
+    # pronation: the rigid fit holds until its misfit passes the gate, then the wrist circle is exact
+    err = np.linalg.norm(p[30:, 3] - truth[30:, 3], axis=1)
+    assert err[-10:].max() < 1e-6
+    # the rigid fit alone misses the pronation
+    cfg["methods"] = [Method.RIGID] * 4
+    p_rigid, _ = run(Estimator(**cfg), truth, measured)
+    assert np.linalg.norm(p_rigid[59, 3] - truth[59, 3]) > 0.03
