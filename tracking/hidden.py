@@ -287,15 +287,22 @@ def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray,
 
     The trunk frame of spec/JOINT_ANGLES.md: ``y = unit(upper - lower)``, ``x`` = ``right - left``
     made orthogonal to y. (Plain floats: on 3-vectors they are several times faster than numpy.)
+    A ValueError says which markers make the frame degenerate.
     """
     (ax, ay, az), (bx, by, bz), (lx, ly, lz), (qx, qy, qz) = np.stack([upper_m, lower_m, left_m, right_m]).tolist()
     ux, uy, uz = ax - bx, ay - by, az - bz
-    k = 1.0 / math.sqrt(ux * ux + uy * uy + uz * uz)
+    nu = math.sqrt(ux * ux + uy * uy + uz * uz)
+    if nu < 1e-9:
+        raise ValueError("trunk frame: the upper and lower trunk markers coincide")
+    k = 1.0 / nu
     yx, yy, yz = ux * k, uy * k, uz * k
     rx, ry, rz = qx - lx, qy - ly, qz - lz
     d = rx * yx + ry * yy + rz * yz
     rx, ry, rz = rx - d * yx, ry - d * yy, rz - d * yz
-    k = 1.0 / math.sqrt(rx * rx + ry * ry + rz * rz)
+    nr = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if nr < 1e-9:
+        raise ValueError("trunk frame: the left and right markers lie on the trunk's axis")
+    k = 1.0 / nr
     xx, xy, xz = rx * k, ry * k, rz * k
     zx, zy, zz = xy * yz - xz * yy, xz * yx - xx * yz, xx * yy - xy * yx
     return np.array([[xx, yx, zx], [xy, yy, zy], [xz, yz, zz]])
@@ -552,7 +559,6 @@ class Estimator:
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
-        self._trunk_m: np.ndarray | None = None
         self._trunk_rot: np.ndarray | None = None
 
     # ------------------------------------------------------------------ learning
@@ -571,8 +577,10 @@ class Estimator:
                 self.dist_lo = np.where(both, np.fmin(self.dist_lo, d), self.dist_lo)
                 self.dist_hi = np.where(both, np.fmax(self.dist_hi, d), self.dist_hi)
         if self.trunk is not None and ok[self.trunk].all():
-            self._trunk_m = p[self.trunk]
-            self._trunk_rot = None
+            try:
+                self._trunk_rot = trunk_rotation(*p[self.trunk])
+            except ValueError:  # degenerate this frame: keep the last good frame
+                pass
         if not (len(self._f_idx) or len(self._h_idx)):
             return
         # a few 3-vectors per arm: plain floats are several times faster than numpy here
@@ -584,6 +592,8 @@ class Estimator:
             v = [0.5 * (pl[w][i] + pl[wp][i] - pl[ea][i] - pl[eb][i]) for i in range(3)]  # elbow -> wrist centre
             e = [pl[eb][i] - pl[ea][i] for i in range(3)]
             le = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            if le < 1e-6:  # coincident elbow markers: nothing to learn from this frame
+                continue
             along = (v[0] * e[0] + v[1] * e[1] + v[2] * e[2]) / le
             radius = math.sqrt(max(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] - along * along, 0.0))
             old_a, old_r = self.fore_along[r], self.fore_radius[r]
@@ -595,6 +605,8 @@ class Estimator:
                 continue
             e = [pl[mk][i] - pl[pa][i] for i in range(3)]
             length = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+            if length < 1e-6:
+                continue
             n = [c / length for c in e]
             fore = sum(n[i] * (0.5 * (pl[wa][i] + pl[wb][i]) - pl[pa][i]) for i in range(3))  # n . (wrist centre - partner)
             old_l, old_f = self.hinge_length[r], self.hinge_fore[r]
@@ -616,9 +628,7 @@ class Estimator:
     @property
     def trunk_rot(self) -> np.ndarray:
         """(3, 3) trunk -> world rotation of the last frame with the trunk markers measured."""
-        if self._trunk_rot is None:
-            self._trunk_rot = np.eye(3) if self._trunk_m is None else trunk_rotation(*self._trunk_m)
-        return self._trunk_rot
+        return np.eye(3) if self._trunk_rot is None else self._trunk_rot
 
     def pivot_offset(self, shoulder: int) -> np.ndarray:
         """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame."""
@@ -770,14 +780,21 @@ class Estimator:
             order = np.flatnonzero(hidden)
             order = order[np.argsort(-self._rank[order], kind="stable")]
             for k in order:
-                est, how = self._model(k, p, ok, weight, prior[k], prev)
-                if est is None:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    try:
+                        est, how = self._model(k, p, ok, weight, prior[k], prev)
+                    except np.linalg.LinAlgError:  # degenerate geometry (coincident markers)
+                        est = None
+                if est is None or not np.all(np.isfinite(est)):
                     if self.methods[k] == Method.CONSTANT_VELOCITY:
                         est, how = constant_velocity(prev[k], self.velocity[k]), Method.CONSTANT_VELOCITY
                     elif eq6_ok[k]:
                         est, how = eq6[k], Method.NEIGHBOURS
                     else:  # nothing to follow: the own velocity, decaying (a seated body mostly rests)
                         est, how = prior[k], Method.CONSTANT_VELOCITY
+                if not np.all(np.isfinite(est)):
+                    hidden[k] = False
+                    continue
                 used[k] = how
                 p[k] = est
                 weight[k] = self.estimate_weight

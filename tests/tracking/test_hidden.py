@@ -412,3 +412,22 @@ def test_forearm_switches_to_the_wrist_circle_when_the_forearm_turns():
     cfg["methods"] = [Method.RIGID] * 4
     p_rigid, _ = run(Estimator(**cfg), truth, measured)
     assert np.linalg.norm(p_rigid[59, 3] - truth[59, 3]) > 0.03
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10_000), st.floats(0.0, 0.9))
+def test_any_input_gives_consistent_statuses(seed, p_hidden):
+    """Random (even degenerate) positions and masks never raise; status and NaN agree."""
+    ms = load_markerset("upper_limb_seated")
+    rng = np.random.default_rng(seed)
+    est = Estimator(**default_config(ms), fps=15.0)
+    base = rng.normal(0.0, 0.3, (ms.n_markers, 3))
+    for t in range(25):
+        x = base + rng.normal(0.0, 0.01, base.shape) * (t % 5 != 0)  # every 5th frame: a repeat
+        if t == 7:
+            x[:] = 0.0  # every marker at one point
+        measured = rng.random(ms.n_markers) > p_hidden
+        p, s = est.update(np.where(measured[:, None], x, np.nan), measured)
+        assert np.array_equal(s == MEASURED, measured)
+        assert np.array_equal(np.isnan(p).any(axis=1), s == LOST)
+        np.testing.assert_array_equal(p[measured], x[measured])
