@@ -84,6 +84,8 @@ class TrackerParams:
         accel_sigma_m: added uncertainty per frame without a measurement (unmodelled motion).
         max_sigma_frames: the uncertainty stops growing after this many frames (the hidden-marker
             estimate, not the extrapolation, is the prediction then).
+        speed_sigma: added uncertainty as a fraction of the marker's displacement per frame (a fast
+            swing changes velocity more between frames than a slow one).
         window_sigmas: search-window half size in prediction standard deviations (plus the ball).
         max_window_px: cap on the window half size.
         gate_sigmas: a candidate farther than this many sigmas from the prediction is rejected.
@@ -91,6 +93,8 @@ class TrackerParams:
             keeps it.
         segment_tol_m: largest change of a learned distance to a neighbour on the same segment.
         reacquire_every: full-frame search for lost markers every this many frames.
+        reacquire_radius_m: a lost marker with no measured neighbour on its segment takes a free
+            point of its colour this near to where it was last seen.
         reidentify_after: identify again when more than half the markers are lost this many frames.
         max_reproj_px: largest RMS reprojection error of a candidate.
     """
@@ -98,12 +102,14 @@ class TrackerParams:
     base_sigma_m: float = 0.008
     accel_sigma_m: float = 0.006
     max_sigma_frames: int = 5
+    speed_sigma: float = 0.35
     window_sigmas: float = 3.0
     max_window_px: float = 80.0
     gate_sigmas: float = 3.0
     same_ball_m: float = 0.025
     segment_tol_m: float = 0.03
     reacquire_every: int = 3
+    reacquire_radius_m: float = 0.08
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
 
@@ -159,9 +165,12 @@ class Tracker:
         self.identifier = Identifier(markerset)
         self.times = StepTimes()
         m = markerset.n_markers
-        # pairs of markers whose distance is (nearly) constant: markers of one segment
+        # pairs of markers whose distance is (nearly) constant: markers of one segment, and the
+        # near-rigid pairs across a joint that the hidden-marker model knows (elbow to wrist)
         seg = np.array(markerset.segments)
         self._same_segment = (seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)
+        for i, j in default_config(markerset)["length_pairs"]:
+            self._same_segment[i, j] = self._same_segment[j, i] = True
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -174,6 +183,7 @@ class Tracker:
         self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
         self.frames_unmeasured = np.zeros(m, dtype=np.int64)
         self.seg_length = np.full((m, m), np.nan)  # learned distances on segments
+        self._last_seen = np.full((m, 3), np.nan)  # last measured position of each marker
         self.estimator = self._estimator_factory()
         self.frame_count = 0
         self._lost_streak = 0
@@ -233,6 +243,7 @@ class Tracker:
         self.velocity[:] = 0.0
         self.frames_unmeasured[:] = np.where(ok, 0, 1)
         self._learn_lengths(ok)
+        self._last_seen[ok] = self.positions[ok]
         self.estimator.update(self.positions.copy(), ok)
         self.state = TrackingState.TRACKING
         log.info("markers identified at frame %d", self.frame_count - 1)
@@ -243,7 +254,9 @@ class Tracker:
         p = self.params
         known = np.isfinite(self.positions).all(axis=1)
         pred = np.where(known[:, None], self.positions + self.velocity, np.nan)
-        sigma = p.base_sigma_m + p.accel_sigma_m * np.minimum(self.frames_unmeasured, p.max_sigma_frames)
+        speed = np.linalg.norm(self.velocity, axis=1)
+        sigma = (p.base_sigma_m + p.accel_sigma_m * np.minimum(self.frames_unmeasured, p.max_sigma_frames)
+                 + p.speed_sigma * speed)
 
         t0 = time.perf_counter()
         cand = self._window_observations(images, pred, sigma, known)
@@ -272,6 +285,7 @@ class Tracker:
         has = np.isfinite(est_pos).all(axis=1) & np.isfinite(prev).all(axis=1)
         self.velocity = np.where(has[:, None], est_pos - prev, 0.0)
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
+        self._last_seen[measured] = est_pos[measured]
         self._learn_lengths(measured)
 
         lost = self.status == MarkerStatus.LOST
@@ -476,16 +490,20 @@ class Tracker:
         for m in np.flatnonzero(measured):
             d = np.linalg.norm(points.p_world_m - new_pos[m], axis=1)
             taken |= d < 0.02
+        last = self._last_seen
         for m in np.flatnonzero(~measured & (self.status == MarkerStatus.LOST)):
             cands = np.flatnonzero(~taken & (points.colour == self.colour[m]))
+            nb = np.flatnonzero(self._same_segment[m] & measured & np.isfinite(self.seg_length[m]))
             best, best_dev = -1, np.inf
             for i in cands:
-                nb = np.flatnonzero(self._same_segment[m] & measured & np.isfinite(self.seg_length[m]))
-                if nb.size == 0:
-                    continue
-                dev = np.abs(np.linalg.norm(new_pos[nb] - points.p_world_m[i], axis=1) - self.seg_length[m, nb]).max()
-                if dev < self.params.segment_tol_m and dev < best_dev:
-                    best, best_dev = i, dev
+                if nb.size:  # a measured neighbour on the segment: the learned lengths decide
+                    dev = np.abs(np.linalg.norm(new_pos[nb] - points.p_world_m[i], axis=1) - self.seg_length[m, nb]).max()
+                    if dev < self.params.segment_tol_m and dev < best_dev:
+                        best, best_dev = i, dev
+                elif np.isfinite(last[m]).all():  # otherwise: near where it was last seen
+                    dev = float(np.linalg.norm(points.p_world_m[i] - last[m]))
+                    if dev < self.params.reacquire_radius_m and dev < best_dev:
+                        best, best_dev = i, dev
             if best >= 0:
                 new_pos[m] = points.p_world_m[best]
                 measured[m] = True
