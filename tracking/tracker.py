@@ -353,12 +353,16 @@ class Tracker:
             offs = np.arange(-hw, hw + 1)
             xs = cx[:, None] + offs[None, :]  # (K, S)
             ys = cy[:, None] + offs[None, :]
-            inside = ((xs >= 0) & (xs < w_img))[:, None, :] & ((ys >= 0) & (ys < h_img))[:, :, None]
+            # each marker keeps to its own window inside the shared size (a fast marker's large
+            # window must not make the others swallow their same-coloured neighbours)
+            own = np.abs(offs)[None, :] <= half[:, None]  # (K, S)
+            inside = (((xs >= 0) & (xs < w_img)) & own)[:, None, :] & (((ys >= 0) & (ys < h_img)) & own)[:, :, None]
             flat = ys.clip(0, h_img - 1)[:, :, None] * w_img + xs.clip(0, w_img - 1)[:, None, :]
             img_c = np.ascontiguousarray(img)
             words = np.ndarray((h_img * w_img - 1,), dtype="<u4", buffer=img_c, strides=(3,))
-            pix = words[np.minimum(flat, h_img * w_img - 2)] & 0xFFFFFF  # the last pixel reads its neighbour
-            labels = lut[pix]
+            pix = np.take(words, flat, mode="clip")  # the image's last pixel reads its neighbour
+            np.bitwise_and(pix, 0xFFFFFF, out=pix)
+            labels = np.take(lut, pix)
             mask = (labels == target[:, None, None]) & inside & valid[:, None, None]
             col = mask.sum(axis=1, dtype=np.float64)  # (K, S) counts per column
             row = mask.sum(axis=2, dtype=np.float64)  # (K, S) counts per row
@@ -374,6 +378,8 @@ class Tracker:
                 lam1 = (mu20 + mu02) / 2.0 + spread
                 lam2 = (mu20 + mu02) / 2.0 - spread
                 roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
+            # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
+            ok &= m00 >= 0.4 * np.pi * r_px**2
             simple = ok & (m00 <= 1.6 * np.pi * r_px**2) & (roundness >= 0.6)
             uv_out[idx[simple], c, 0] = cx[simple] + mx[simple]
             uv_out[idx[simple], c, 1] = cy[simple] + my[simple]
@@ -435,13 +441,14 @@ class Tracker:
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
         was_measured = self.status == MarkerStatus.MEASURED
-        rank = np.lexsort((-q_best, ~was_measured))
-        for a_i, a in enumerate(rank):
-            if not measured[a]:
-                continue
-            for b in rank[a_i + 1:]:
-                if measured[b] and np.linalg.norm(new_pos[a] - new_pos[b]) < self.params.same_ball_m:
-                    measured[b] = False
+        d = np.linalg.norm(new_pos[:, None, :] - new_pos[None, :, :], axis=-1)
+        clash = measured[:, None] & measured[None, :] & (d < self.params.same_ball_m)
+        np.fill_diagonal(clash, False)
+        if clash.any():
+            rank = np.lexsort((-q_best, ~was_measured))
+            for a in rank:
+                if measured[a]:
+                    measured &= ~clash[a]
         measured &= self._segments_consistent(new_pos, measured)
         new_pos[~measured] = np.nan
         return new_pos, measured
