@@ -103,7 +103,7 @@ class TrackerParams:
     accel_sigma_m: float = 0.006
     max_sigma_frames: int = 5
     speed_sigma: float = 0.35
-    window_sigmas: float = 3.0
+    window_sigmas: float = 2.5
     max_window_px: float = 80.0
     gate_sigmas: float = 3.0
     same_ball_m: float = 0.025
@@ -313,7 +313,7 @@ class Tracker:
         n_cams = len(self.cameras)
         uv_out = np.full((m_count, n_cams, 2), np.nan)
         rad_out = np.full((m_count, n_cams), np.nan)
-        p = self.params
+        self._pred_uv = np.full((m_count, n_cams, 2), np.nan)  # predictions in each image (for Q)
         # markers measured last frame share small windows (vectorized); the others (coming back
         # from hiding: larger uncertainty) get windows of their own size
         recent = known & (self.frames_unmeasured == 0)
@@ -334,11 +334,12 @@ class Tracker:
                 return
         for c, (cam, img) in enumerate(zip(self.cameras, images)):
             uv = cam.project(pred[idx])
+            self._pred_uv[idx, c] = uv
             depth = cam.world_to_camera(pred[idx])[:, 2]
             f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
             safe_depth = np.maximum(depth, 1e-3)
             r_px = f * self.markerset.radius_m / safe_depth
-            half = np.minimum(r_px * 1.5 + 2.0 + p.window_sigmas * f * sigma[idx] / safe_depth, p.max_window_px)
+            half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * f * sigma[idx] / safe_depth, p.max_window_px)
             h_img, w_img = img.shape[:2]
             valid = np.isfinite(uv).all(axis=1) & (depth > 0)
             valid &= (uv[:, 0] > -half) & (uv[:, 0] < w_img + half) & (uv[:, 1] > -half) & (uv[:, 1] < h_img + half)
@@ -435,8 +436,7 @@ class Tracker:
             measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px)
             measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
         # Q of the chosen candidate, for the one-ball-one-marker rule
-        pred_uv = np.stack([cam.project(np.nan_to_num(pred)) for cam in self.cameras], axis=1)
-        q_cam = 1.0 / (1.0 + np.linalg.norm(uv - pred_uv, axis=-1))
+        q_cam = 1.0 / (1.0 + np.linalg.norm(uv - self._pred_uv, axis=-1))
         q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
