@@ -115,6 +115,9 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
             f"{folder}: the markers were never identified ({waiting_message or 'no reference pose'}); "
             "the recording must start with the patient in the reference pose"
         )
+    for path in (trc, status_csv, angles_csv, c3d):
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
     if trc:
         write_trc(trc, ms.names, pos_mm, rec.fps, frame_numbers=frames_a, times_s=times_a)
     if status_csv:
