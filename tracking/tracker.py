@@ -97,6 +97,8 @@ class TrackerParams:
             point of its colour this near to where it was last seen.
         reidentify_after: identify again when more than half the markers are lost this many frames.
         max_reproj_px: largest RMS reprojection error of a candidate.
+        max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
+            show a ball of the right size in both).
     """
 
     base_sigma_m: float = 0.008
@@ -112,6 +114,7 @@ class TrackerParams:
     reacquire_radius_m: float = 0.08
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
+    max_reproj_px_two_view: float = 0.8
 
 
 @dataclass
@@ -134,6 +137,11 @@ class StepTimes:
             "full-frame re-acquisition": 1000 * self.full_frame_s / n,
             "joint angles": 1000 * self.angles_s / n,
         }
+
+
+def _depth_rows(geo: RigGeometry, p: np.ndarray) -> np.ndarray:
+    """(M, 3) points -> (M, C) depth in each camera (NaN rows stay NaN)."""
+    return np.einsum("cj,mj->mc", geo.extrinsics[:, 2, :3], p) + geo.extrinsics[None, :, 2, 3]
 
 
 class Tracker:
@@ -432,8 +440,14 @@ class Tracker:
         n_seen = seen.sum(axis=1)
         sq = np.where(seen, err, 0.0) ** 2
         rms = np.sqrt(sq.sum(axis=1) / np.maximum(n_seen, 1))
+        # two views always meet in some point: a two-camera candidate must fit tightly and show a
+        # ball of the right size in both views (as in tracking.reconstruction)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio_now = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, pts))
+        size_fit = np.all(~seen | ((ratio_now > 0.75) & (ratio_now < 1.3)), axis=1)
+        two_ok = (rms <= self.params.max_reproj_px_two_view) & size_fit
         with np.errstate(invalid="ignore"):
-            measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px)
+            measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px) & ((n_seen >= 3) | two_ok)
             measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
         # Q of the chosen candidate, for the one-ball-one-marker rule
         q_cam = 1.0 / (1.0 + np.linalg.norm(uv - self._pred_uv, axis=-1))
