@@ -114,7 +114,7 @@ class TrackerParams:
     reacquire_radius_m: float = 0.08
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
-    max_reproj_px_two_view: float = 0.8
+    max_reproj_px_two_view: float = 1.2
 
 
 @dataclass
@@ -444,7 +444,7 @@ class Tracker:
         # ball of the right size in both views (as in tracking.reconstruction)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio_now = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, pts))
-        size_fit = np.all(~seen | ((ratio_now > 0.75) & (ratio_now < 1.3)), axis=1)
+        size_fit = np.all(~seen | ((ratio_now > 0.65) & (ratio_now < 1.35)), axis=1)
         two_ok = (rms <= self.params.max_reproj_px_two_view) & size_fit
         with np.errstate(invalid="ignore"):
             measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px) & ((n_seen >= 3) | two_ok)
