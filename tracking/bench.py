@@ -64,7 +64,7 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> It
     table = ColourTable.build(ms.palette)
     measurer = FrameMeasurer(cameras, table, ms.radius_m)
     measurer.measure(frames[0])  # warm-up (page in the table)
-    measurer.times.__init__()
+    measurer.times.reset()
     per_frame = [_median_s(lambda f=f: measurer.measure(f), 1) for f in frames]
     measure_s = float(np.median(per_frame))
     stages = measurer.times.per_frame_ms()
@@ -84,7 +84,7 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> It
     for f in frames[:warm]:
         tracker.step(f)
     if tracker.state == TrackingState.TRACKING:
-        tracker.times.__init__()
+        tracker.times.reset()
         track_s = float(np.median([_median_s(lambda f=f: tracker.step(f), 1) for f in frames[warm:]]))
         yield (
             f"steady-state tracking, 4x640x480:         {1000 * track_s:7.2f} ms per frame set "

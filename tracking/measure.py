@@ -56,22 +56,27 @@ def observations_from_blobs(blobs: Blobs) -> CameraObservations:
     return CameraObservations(blobs.uv_px, blobs.colour, blobs.radius_px, blobs.roundness)
 
 
-@dataclass
 class StageTimes:
-    """Accumulated seconds per pipeline stage (for benchmarks)."""
+    """Accumulated seconds per named pipeline stage, for benchmarks and summaries.
 
-    colour_s: float = 0.0
-    blobs_s: float = 0.0
-    reconstruct_s: float = 0.0
-    frames: int = 0
+    Args:
+        stages: the stage names, in report order.
+    """
+
+    def __init__(self, stages: Sequence[str]):
+        self.stages = tuple(stages)
+        self.reset()
+
+    def reset(self) -> None:
+        self.seconds = dict.fromkeys(self.stages, 0.0)
+        self.frames = 0
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.seconds[stage] += seconds
 
     def per_frame_ms(self) -> dict[str, float]:
         n = max(self.frames, 1)
-        return {
-            "colour table": 1000 * self.colour_s / n,
-            "centroids": 1000 * self.blobs_s / n,
-            "triangulation": 1000 * self.reconstruct_s / n,
-        }
+        return {k: 1000.0 * v / n for k, v in self.seconds.items()}
 
 
 @dataclass
@@ -89,7 +94,7 @@ class FrameMeasurer:
     table: ColourTable
     marker_radius_m: float
     params: ReconstructionParams | None = None
-    times: StageTimes = field(default_factory=StageTimes)
+    times: StageTimes = field(default_factory=lambda: StageTimes(("colour table", "centroids", "triangulation")))
 
     def __post_init__(self) -> None:
         self.geometry = RigGeometry.from_cameras(self.cameras)
@@ -115,8 +120,8 @@ class FrameMeasurer:
                 )
             )
             t2 = time.perf_counter()
-            self.times.colour_s += t1 - t0
-            self.times.blobs_s += t2 - t1
+            self.times.add("colour table", t1 - t0)
+            self.times.add("centroids", t2 - t1)
         return out
 
     def measure(self, images: Sequence[np.ndarray]) -> Points3D:
@@ -126,6 +131,6 @@ class FrameMeasurer:
         blobs = self.blobs(images)
         t0 = time.perf_counter()
         points = reconstruct(self.geometry, [observations_from_blobs(b) for b in blobs], self.params)
-        self.times.reconstruct_s += time.perf_counter() - t0
+        self.times.add("triangulation", time.perf_counter() - t0)
         self.times.frames += 1
         return points

@@ -310,7 +310,7 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     obs = np.where(seen, obs, -1)
     # any undersized blob at the point's projection in a camera the point does not use is the same
     # ball, partly hidden there (dropped above, or never gathered): it belongs to the point too
-    depth_all = _depths(geo, p)
+    depth = _depths(geo, p)
     for c in range(n_cams):
         if counts[c] == 0:
             continue
@@ -321,7 +321,7 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         dist = np.linalg.norm(proj[:, None, :] - xn[c][None, :, :], axis=-1) * geo.focal_px[c]
         near = np.nan_to_num(dist, nan=np.inf).argmin(axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            small = rad[c][near] / (geo.focal_px[c] * params.marker_radius_m / depth_all[:, c])
+            small = rad[c][near] / (geo.focal_px[c] * params.marker_radius_m / depth[:, c])
         hit = ~seen[:, c] & (dist[np.arange(K), near] < 2.0 * params.gate_px) & (small < params.size_ratio_range_two_view[0])
         belongs[hit, c] = near[hit]
     # proposals that ended with the same centroids are one candidate
@@ -332,7 +332,6 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     unique[pref[first]] = True
     n_used = seen.sum(axis=1)
     rms = np.sqrt(np.nanmean(np.where(seen, err, np.nan) ** 2, axis=1))
-    depth = _depths(geo, p)
     valid = unique & (n_used >= 2) & np.isfinite(rms) & (rms <= params.max_rms_px)
     valid &= np.all(~seen | ((depth > params.min_depth_m) & (depth < params.max_depth_m)), axis=1)
     # size consistency: observed radius vs. f R / depth

@@ -23,10 +23,9 @@ from __future__ import annotations
 import enum
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Sequence
 
-import cv2
 import numpy as np
 
 from calibration.camera import Camera
@@ -35,7 +34,7 @@ from tracking.angles import joint_angles
 from tracking.blobs import find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
-from tracking.measure import FrameMeasurer, blob_gates
+from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import Points3D, RigGeometry
 from tracking.status import MarkerStatus
 from tracking.triangulation import reprojection_errors_px, triangulate
@@ -117,26 +116,14 @@ class TrackerParams:
     max_reproj_px_two_view: float = 1.2
 
 
-@dataclass
-class StepTimes:
-    """Accumulated seconds per stage of ``step`` (for ``rehab bench``)."""
-
-    windows_s: float = 0.0
-    triangulate_s: float = 0.0
-    hidden_s: float = 0.0
-    full_frame_s: float = 0.0
-    angles_s: float = 0.0
-    frames: int = 0
-
-    def per_frame_ms(self) -> dict[str, float]:
-        n = max(self.frames, 1)
-        return {
-            "windows (colour table + centroids)": 1000 * self.windows_s / n,
-            "candidates + triangulation": 1000 * self.triangulate_s / n,
-            "hidden markers": 1000 * self.hidden_s / n,
-            "full-frame re-acquisition": 1000 * self.full_frame_s / n,
-            "joint angles": 1000 * self.angles_s / n,
-        }
+#: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
+STEP_STAGES = (
+    "windows (colour table + centroids)",
+    "candidates + triangulation",
+    "hidden markers",
+    "full-frame re-acquisition",
+    "joint angles",
+)
 
 
 def _depth_rows(geo: RigGeometry, p: np.ndarray) -> np.ndarray:
@@ -171,7 +158,7 @@ class Tracker:
         self.colour = markerset.colour_index
         self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
-        self.times = StepTimes()
+        self.times = StageTimes(STEP_STAGES)
         m = markerset.n_markers
         # pairs of markers whose distance is (nearly) constant: markers of one segment, and the
         # near-rigid pairs across a joint that the hidden-marker model knows (elbow to wrist)
@@ -215,12 +202,12 @@ class Tracker:
             points = self.measurer.measure(images)
             n_points = len(points)
             message = self._try_identify(points)
-            self.times.full_frame_s += time.perf_counter() - t0
+            self.times.add("full-frame re-acquisition", time.perf_counter() - t0)
         else:
             n_points = self._track(images)
         t0 = time.perf_counter()
         angles = joint_angles(self.positions, self.markerset.names) if self.state == TrackingState.TRACKING else {}
-        self.times.angles_s += time.perf_counter() - t0
+        self.times.add("joint angles", time.perf_counter() - t0)
         self.times.frames += 1
         return TrackerSample(
             frame_index=index,
@@ -271,8 +258,8 @@ class Tracker:
         t1 = time.perf_counter()
         new_pos, measured = self._choose(cand, pred, sigma, known)
         t2 = time.perf_counter()
-        self.times.windows_s += t1 - t0
-        self.times.triangulate_s += t2 - t1
+        self.times.add("windows (colour table + centroids)", t1 - t0)
+        self.times.add("candidates + triangulation", t2 - t1)
 
         n_points = 0
         lost_now = ~measured & (self.status == MarkerStatus.LOST)
@@ -281,11 +268,11 @@ class Tracker:
             points = self.measurer.measure(images)
             n_points = len(points)
             self._reacquire(points, new_pos, measured)
-            self.times.full_frame_s += time.perf_counter() - t3
+            self.times.add("full-frame re-acquisition", time.perf_counter() - t3)
 
         t4 = time.perf_counter()
         est_pos, status = self.estimator.update(np.where(measured[:, None], new_pos, np.nan), measured)
-        self.times.hidden_s += time.perf_counter() - t4
+        self.times.add("hidden markers", time.perf_counter() - t4)
 
         prev = self.positions
         self.positions = est_pos
@@ -325,21 +312,17 @@ class Tracker:
         # markers measured last frame share small windows (vectorized); the others (coming back
         # from hiding: larger uncertainty) get windows of their own size
         recent = known & (self.frames_unmeasured == 0)
-        for group in (np.flatnonzero(recent), np.flatnonzero(known & ~recent)):
+        groups = [np.flatnonzero(recent)] + [np.array([m]) for m in np.flatnonzero(known & ~recent)]
+        for group in groups:
             if group.size:
-                self._windows(images, pred, sigma, group, uv_out, rad_out, shared=group is not None and recent[group[0]])
+                self._windows(images, pred, sigma, group, uv_out, rad_out)
         return uv_out, rad_out
 
-    def _windows(self, images, pred, sigma, idx, uv_out, rad_out, shared: bool) -> None:
-        """Fill uv_out/rad_out for markers ``idx`` (see :meth:`_window_observations`)."""
+    def _windows(self, images, pred, sigma, idx, uv_out, rad_out) -> None:
+        """Fill uv_out/rad_out for markers ``idx``, whose windows share one size per camera."""
         p = self.params
         lut = self.table.lut
         target = (self.colour[idx] + 1).astype(np.uint8)
-        if not shared:  # one marker at a time, each with its own window size
-            if idx.size > 1:
-                for m in idx:
-                    self._windows(images, pred, sigma, np.array([m]), uv_out, rad_out, shared=False)
-                return
         for c, (cam, img) in enumerate(zip(self.cameras, images)):
             uv = cam.project(pred[idx])
             self._pred_uv[idx, c] = uv
@@ -421,9 +404,8 @@ class Tracker:
         seen = np.isfinite(xn[..., 0]) & known[:, None]
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
         # shifted centroid: leave it out while two full views remain
-        depth = np.einsum("cj,mj->mc", geo.extrinsics[:, 2, :3], np.nan_to_num(pred)) + geo.extrinsics[None, :, 2, 3]
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = rad / (geo.focal_px[None, :] * self.markerset.radius_m / depth)
+            ratio = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, np.nan_to_num(pred)))
         partial = seen & (ratio < 0.8)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         seen &= ~(partial & keep_full[:, None])
