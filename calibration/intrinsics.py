@@ -1,0 +1,133 @@
+"""Intrinsic calibration of one camera from checkerboard corners (OpenCV ``calibrateCamera``).
+
+The result is a :class:`calibration.camera.Camera` with identity extrinsics, the RMS
+reprojection error over all corners and per image, and the share of the image that the corners
+covered: corners only in the middle leave the lens distortion near the edges unconstrained, so a
+poor coverage gives a warning that says where to move the board.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from calibration.board import Checkerboard, Detection
+from calibration.camera import Camera
+from calibration.errors import CalibrationError
+
+log = logging.getLogger(__name__)
+
+MIN_VIEWS = 4
+COVERAGE_GRID = (8, 6)  # cells across, down
+COVERAGE_WARN = 0.7
+
+
+@dataclass(frozen=True, slots=True)
+class IntrinsicsResult:
+    """One camera's intrinsic calibration.
+
+    Attributes:
+        camera: intrinsics (extrinsics identity).
+        rms_px: RMS reprojection error over all corners, pixels.
+        per_view_rms_px: (V,) RMS per used view, same order as the detections given.
+        coverage: fraction 0..1 of the cells of an 8 x 6 grid over the image that hold a corner.
+        warnings: one-line warnings (poor coverage, few views, a view with a large error).
+    """
+
+    camera: Camera
+    rms_px: float
+    per_view_rms_px: np.ndarray
+    coverage: float
+    warnings: tuple[str, ...]
+
+
+def coverage_of(detections: Sequence[Detection], size_px: tuple[int, int], grid: tuple[int, int] = COVERAGE_GRID) -> tuple[float, np.ndarray]:
+    """Share of the image's grid cells that hold at least one corner.
+
+    Returns:
+        fraction: 0..1.
+        hit: (rows, cols) bool, the cells with a corner.
+    """
+    gx, gy = grid
+    w, h = size_px
+    hit = np.zeros((gy, gx), bool)
+    for det in detections:
+        cx = np.clip((det.uv_px[:, 0] + 0.5) * gx / w, 0, gx - 1).astype(int)
+        cy = np.clip((det.uv_px[:, 1] + 0.5) * gy / h, 0, gy - 1).astype(int)
+        hit[cy, cx] = True
+    return float(hit.mean()), hit
+
+
+def _empty_regions(hit: np.ndarray) -> str:
+    """Which image regions (corners, edges, centre in a 3 x 3 split) hold no corner, in words."""
+    gy, gx = hit.shape
+    names = (("top-left", "top", "top-right"), ("left", "centre", "right"), ("bottom-left", "bottom", "bottom-right"))
+    ys = np.array_split(np.arange(gy), 3)
+    xs = np.array_split(np.arange(gx), 3)
+    empty = [names[i][j] for i in range(3) for j in range(3) if not hit[np.ix_(ys[i], xs[j])].any()]
+    return ", ".join(empty)
+
+
+def calibrate_intrinsics(
+    name: str,
+    detections: Sequence[Detection],
+    board: Checkerboard,
+    *,
+    fix_k3: bool = True,
+) -> IntrinsicsResult:
+    """Calibrate one camera from board detections in its images.
+
+    Args:
+        name: the camera's name.
+        detections: corners of the board in >= 4 images of this camera, all of one size.
+        board: the board.
+        fix_k3: keep k3 at 0 (the 4-coefficient model k1, k2, p1, p2; enough for the usual
+            lenses and safer with few views); False also fits k3.
+    Raises:
+        CalibrationError: too few views or images of different sizes.
+    """
+    if len(detections) < MIN_VIEWS:
+        raise CalibrationError(
+            f"{name}: the board was found in {len(detections)} images; take at least {MIN_VIEWS} "
+            "(15-25 is better) with the board in different places and tilts"
+        )
+    sizes = {d.size_px for d in detections}
+    if len(sizes) != 1:
+        raise CalibrationError(f"{name}: the images have different sizes {sorted(sizes)}: use one camera setting")
+    size = sizes.pop()
+    obj = board.object_points().astype(np.float32)
+    object_points = [obj] * len(detections)
+    image_points = [d.uv_px.astype(np.float32).reshape(-1, 1, 2) for d in detections]
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(object_points, image_points, size, None, None, flags=flags, criteria=crit)
+    dist = dist.reshape(-1)[:5]
+    if fix_k3:
+        dist = dist[:4]
+    cam = Camera(name, size, K, dist, np.zeros(3), np.zeros(3))
+    per_view = np.empty(len(detections))
+    for k, (det, rvec, tvec) in enumerate(zip(detections, rvecs, tvecs)):
+        proj, _ = cv2.projectPoints(obj.astype(np.float64), rvec, tvec, K, dist)
+        per_view[k] = np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - det.uv_px) ** 2, axis=1)))
+    coverage, hit = coverage_of(detections, size)
+    warnings = []
+    if coverage < COVERAGE_WARN:
+        warnings.append(
+            f"{name}: corners cover only {100 * coverage:.0f} % of the image (none in the {_empty_regions(hit)}): "
+            "add images with the board near the edges and corners of the picture"
+        )
+    if len(detections) < 10:
+        warnings.append(f"{name}: only {len(detections)} usable images: 15-25 give a steadier result")
+    worst = int(np.argmax(per_view))
+    if per_view[worst] > max(1.0, 3.0 * float(rms)):
+        warnings.append(
+            f"{name}: image {worst + 1} of the used ones fits badly ({per_view[worst]:.2f} px): "
+            "it may be blurred; remove it and calibrate again"
+        )
+    for w in warnings:
+        log.warning(w)
+    return IntrinsicsResult(cam, float(rms), per_view, coverage, tuple(warnings))
