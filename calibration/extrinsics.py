@@ -1,0 +1,285 @@
+"""Extrinsic calibration of a camera rig from a checkerboard seen by cameras together.
+
+Steps (:func:`calibrate_extrinsics`):
+
+1. The board's pose in every camera that sees it (``solvePnP``: IPPE, then iterative refinement).
+2. Relative poses of camera pairs that saw the same board at the same instant; of a pair's shared
+   views, the one whose relative pose reprojects all shared views best is kept.
+3. A spanning tree over the cameras, the pairs with the most shared views first, chains the
+   relative poses to every camera, so no single view needs all cameras (a ring of cameras around
+   the patient sees a board only two by two).
+4. Bundle adjustment (``scipy.optimize.least_squares``, sparse Jacobian pattern, soft-L1 loss with
+   a 1 px scale) over all camera poses but the first and all board poses; intrinsics stay as
+   calibrated.
+5. The world frame of spec/INTERFACES.md from one board lying face up on the floor or the seat
+   (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
+   corners (the patient's right), corner 0 at ``origin_m``.
+
+Poses are (R, t) pairs mapping the second frame to the first: ``T_a_b`` takes b coordinates to a
+coordinates, ``x_a = R @ x_b + t``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.sparse import lil_matrix
+
+from calibration.board import Checkerboard, Detection
+from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
+from calibration.errors import CalibrationError
+
+log = logging.getLogger(__name__)
+
+Pose = tuple[np.ndarray, np.ndarray]  # (R (3, 3), t (3,))
+
+# World axes (columns: X, Y, Z) in the frame of a board lying face up: X along the board's x,
+# Y up = against the board's z (which points into the printed face), Z = X cross Y = board y.
+_WORLD_AXES_IN_BOARD = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+
+
+@dataclass(frozen=True, slots=True)
+class ExtrinsicsResult:
+    """A calibrated rig.
+
+    Attributes:
+        cameras: the cameras with their extrinsics, world -> camera, in the order given.
+        rms_px: (C,) RMS reprojection error of each camera over its board corners after the
+            bundle adjustment, pixels (NaN for a camera that saw no board).
+        n_views: (C,) number of board views each camera contributed.
+        world_set: True when the world frame comes from a floor board, False when it is the
+            first camera's frame.
+        warnings: one-line warnings.
+    """
+
+    cameras: tuple[Camera, ...]
+    rms_px: np.ndarray
+    n_views: np.ndarray
+    world_set: bool
+    warnings: tuple[str, ...]
+
+
+def compose(a: Pose, b: Pose) -> Pose:
+    """T_x_y composed with T_y_z -> T_x_z."""
+    return a[0] @ b[0], a[0] @ b[1] + a[1]
+
+
+def invert(a: Pose) -> Pose:
+    return a[0].T, -a[0].T @ a[1]
+
+
+def board_pose_in_camera(camera: Camera, det: Detection, board: Checkerboard) -> Pose:
+    """T_cam_board from one detection (PnP with the camera's intrinsics and distortion)."""
+    obj = board.object_points()
+    uv = det.uv_px.reshape(-1, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE)
+    if not ok:
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist)
+    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, camera.K, camera.dist, rvec, tvec)
+    return rotation_from_rvec(rvec.ravel()), tvec.ravel().astype(np.float64)
+
+
+def _reprojection(camera: Camera, T_cam_board: Pose, det: Detection, obj: np.ndarray) -> np.ndarray:
+    """(N, 2) projected minus detected corners, pixels."""
+    p_cam = obj @ T_cam_board[0].T + T_cam_board[1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = camera.distort_normalized(p_cam[:, :2] / p_cam[:, 2:3])
+    return uv - det.uv_px
+
+
+def _rms(res: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(res**2, axis=-1))))
+
+
+def _initial_camera_poses(cameras: Sequence[Camera], board: Checkerboard, views: Mapping[str, Sequence[Detection | None]],
+                          pnp: dict[tuple[str, int], Pose]) -> list[Pose]:
+    """T_cam_ref for every camera (ref = camera 0) by chaining pair poses over a spanning tree."""
+    n = len(cameras)
+    obj = board.object_points()
+    shared: dict[tuple[int, int], list[str]] = {}
+    for name, dets in views.items():
+        seen = [c for c in range(n) if dets[c] is not None]
+        for i in seen:
+            for j in seen:
+                if i < j:
+                    shared.setdefault((i, j), []).append(name)
+    rel: dict[tuple[int, int], Pose] = {}  # rel[i, j] = T_j_i
+    for (i, j), names in shared.items():
+        best, best_err = None, np.inf
+        for cand in names:  # T_j_i = T_j_board T_board_i
+            T_ji = compose(pnp[cand, j], invert(pnp[cand, i]))
+            err = sum(_rms(_reprojection(cameras[j], compose(T_ji, pnp[v, i]), views[v][j], obj)) for v in names)
+            if err < best_err:
+                best, best_err = T_ji, err
+        rel[i, j] = best
+        rel[j, i] = invert(best)
+    poses: list[Pose | None] = [None] * n
+    poses[0] = (np.eye(3), np.zeros(3))
+    while True:  # Prim: attach the unplaced camera with the most views shared with a placed one
+        best_edge, best_count = None, 0
+        for (i, j), names in shared.items():
+            for a, b in ((i, j), (j, i)):
+                if poses[a] is not None and poses[b] is None and len(names) > best_count:
+                    best_edge, best_count = (a, b), len(names)
+        if best_edge is None:
+            break
+        a, b = best_edge
+        poses[b] = compose(rel[a, b], poses[a])  # rel[a, b] = T_b_a
+    missing = [cameras[c].name for c in range(n) if poses[c] is None]
+    if missing:
+        raise CalibrationError(
+            f"{', '.join(missing)} shares no board view with {cameras[0].name} or the cameras linked to it: "
+            "take images where the board is seen by that camera and a neighbour at the same time"
+        )
+    return poses  # type: ignore[return-value]
+
+
+def _pack(poses: Sequence[Pose]) -> np.ndarray:
+    return np.concatenate([np.concatenate([rvec_from_rotation(R), t]) for R, t in poses])
+
+
+def _unpack(x: np.ndarray, n: int) -> list[Pose]:
+    x = x.reshape(n, 6)
+    return [(rotation_from_rvec(r[:3]), r[3:].copy()) for r in x]
+
+
+def calibrate_extrinsics(
+    cameras: Sequence[Camera],
+    board: Checkerboard,
+    views: Mapping[str, Sequence[Detection | None]],
+    *,
+    floor_view: str | None = None,
+    origin_m=(0.0, 0.0, 0.0),
+    turn_deg: float = 0.0,
+) -> ExtrinsicsResult:
+    """Calibrate the cameras' poses from board views.
+
+    Args:
+        cameras: cameras with calibrated intrinsics (their extrinsics are ignored), in rig order.
+        board: the board.
+        views: view name -> one detection per camera (None where that camera did not find the
+            board); one view is one instant, seen by several cameras.
+        floor_view: the view of the board lying face up on the floor or seat, x along the
+            patient's right; sets the world frame. None: the world frame is the first camera's.
+        origin_m: world coordinates of the floor board's corner 0 (metres), e.g. (0, 0.45, 0)
+            for a corner on a seat 0.45 m high.
+        turn_deg: the floor board's x axis points this many degrees from +X towards -Z (turned
+            counter-clockwise seen from above) instead of along +X.
+    Raises:
+        CalibrationError: a camera shares no view with the others, or the floor view is missing.
+    """
+    n = len(cameras)
+    if n < 2:
+        raise CalibrationError("extrinsic calibration needs at least two cameras")
+    for name, dets in views.items():
+        if len(dets) != n:
+            raise CalibrationError(f"view {name!r}: {len(dets)} detections for {n} cameras")
+    views = {name: dets for name, dets in views.items() if sum(d is not None for d in dets) >= 1}
+    if floor_view is not None and floor_view not in views:
+        raise CalibrationError(f"the floor board view {floor_view!r} was not found by any camera: check that image")
+    obj = board.object_points()
+    pnp = {(name, c): board_pose_in_camera(cameras[c], d, board) for name, dets in views.items() for c, d in enumerate(dets) if d is not None}
+    cam_poses = _initial_camera_poses(cameras, board, views, pnp)
+    view_names = list(views)
+    board_poses = []
+    for name in view_names:  # from the camera that sees the board largest
+        dets = views[name]
+        c = max((c for c in range(n) if dets[c] is not None), key=lambda c: np.ptp(dets[c].uv_px, axis=0).prod())
+        board_poses.append(compose(invert(cam_poses[c]), pnp[name, c]))
+    obs = [(c, v) for v, name in enumerate(view_names) for c in range(n) if views[name][c] is not None]
+    n_pts = board.n_corners
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        cams = [(np.eye(3), np.zeros(3))] + _unpack(x[: 6 * (n - 1)], n - 1)
+        boards = _unpack(x[6 * (n - 1):], len(view_names))
+        out = np.empty((len(obs), n_pts, 2))
+        for k, (c, v) in enumerate(obs):
+            out[k] = _reprojection(cameras[c], compose(cams[c], boards[v]), views[view_names[v]][c], obj)
+        return out.ravel()
+
+    sparsity = lil_matrix((len(obs) * n_pts * 2, 6 * (n - 1) + 6 * len(view_names)), dtype=int)
+    for k, (c, v) in enumerate(obs):
+        rows = slice(k * n_pts * 2, (k + 1) * n_pts * 2)
+        if c > 0:
+            sparsity[rows, 6 * (c - 1) : 6 * c] = 1
+        sparsity[rows, 6 * (n - 1) + 6 * v : 6 * (n - 1) + 6 * v + 6] = 1
+    x0 = np.concatenate([_pack(cam_poses[1:]), _pack(board_poses)])
+    sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="soft_l1", f_scale=1.0, x_scale="jac", method="trf",
+                        xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
+    cam_poses = [(np.eye(3), np.zeros(3))] + _unpack(sol.x[: 6 * (n - 1)], n - 1)
+    board_poses = _unpack(sol.x[6 * (n - 1):], len(view_names))
+    res = sol.fun.reshape(len(obs), n_pts, 2)
+    rms = np.full(n, np.nan)
+    n_views = np.zeros(n, int)
+    for c in range(n):
+        mine = [k for k, (cc, _) in enumerate(obs) if cc == c]
+        n_views[c] = len(mine)
+        if mine:
+            rms[c] = _rms(res[mine])
+    warnings = []
+    if floor_view is not None:
+        T_ref_world = compose(board_poses[view_names.index(floor_view)], board_from_world(origin_m, turn_deg))
+    else:
+        T_ref_world = (np.eye(3), np.zeros(3))
+        warnings.append(f"no floor board view: the world frame is {cameras[0].name}'s own (Y is not up)")
+    out = tuple(
+        Camera.from_rotation(cam.name, cam.size_px, cam.K, cam.dist, *compose(T, T_ref_world), fisheye=cam.fisheye)
+        for cam, T in zip(cameras, cam_poses)
+    )
+    for c in range(n):
+        if rms[c] > 1.0:
+            warnings.append(f"{cameras[c].name}: board corners fit to {rms[c]:.2f} px only: check its intrinsics and blurred images")
+    for w in warnings:
+        log.warning(w)
+    return ExtrinsicsResult(out, rms, n_views, floor_view is not None, tuple(warnings))
+
+
+def board_from_world(origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> Pose:
+    """T_board_world of a board lying face up with corner 0 at ``origin_m`` (see calibrate_extrinsics)."""
+    a = np.radians(turn_deg)
+    # The board's x in the world: +X turned by turn_deg about +Y (counter-clockwise from above: towards -Z).
+    Ry = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    R_world_board = Ry @ _WORLD_AXES_IN_BOARD.T
+    R_bw = R_world_board.T
+    return R_bw, -R_bw @ np.asarray(origin_m, float)
+
+
+def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detection | None], board: Checkerboard, *,
+                           origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> tuple[tuple[Camera, ...], float]:
+    """Move a rig calibrated in any frame into the world frame of a floor board.
+
+    The board's pose is fitted to its corners in every camera that found it (the cameras' poses
+    kept fixed), then every camera is re-expressed in the board's world frame.
+
+    Args:
+        cameras: the calibrated rig (any common frame, metric).
+        detections: one per camera, None where the board was not found.
+    Returns:
+        the cameras in the world frame, and the RMS reprojection error of the board in pixels.
+    Raises:
+        CalibrationError: no camera found the board.
+    """
+    seen = [c for c, d in enumerate(detections) if d is not None]
+    if not seen:
+        raise CalibrationError("no camera found the floor board: check that it lies fully in view of at least one camera")
+    obj = board.object_points()
+    c0 = max(seen, key=lambda c: np.ptp(detections[c].uv_px, axis=0).prod())
+    cam_T = [(cam.R, cam.t_m) for cam in cameras]
+    T_frame_board = compose(invert(cam_T[c0]), board_pose_in_camera(cameras[c0], detections[c0], board))
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        T = _unpack(x, 1)[0]
+        return np.concatenate([_reprojection(cameras[c], compose(cam_T[c], T), detections[c], obj).ravel() for c in seen])
+
+    sol = least_squares(residuals, _pack([T_frame_board]), loss="soft_l1", f_scale=1.0, x_scale="jac", xtol=1e-12, ftol=1e-12)
+    T_frame_world = compose(_unpack(sol.x, 1)[0], board_from_world(origin_m, turn_deg))
+    out = tuple(
+        Camera.from_rotation(cam.name, cam.size_px, cam.K, cam.dist, *compose(T, T_frame_world), fisheye=cam.fisheye)
+        for cam, T in zip(cameras, cam_T)
+    )
+    return out, _rms(sol.fun.reshape(-1, 2))
