@@ -1,0 +1,55 @@
+"""Wand ball centroids from a wand recording, for :func:`calibration.wand.calibrate_wand`.
+
+A wand recording is a recording folder (spec/INTERFACES.md: one video or image folder per
+camera, meta.yaml with the frame rate) of a wand with two balls of different marker colours.
+Each frame of each camera is classified with the colour table of the two colours and the blobs
+are found as for tracking; a ball counts in a frame only when exactly one blob of its colour
+passes the size and roundness gates (two candidates are ambiguous, so neither is used).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from tqdm import tqdm
+
+from calibration.camera import Camera
+from calibration.files import load_calibration
+from tracking.blobs import find_blobs
+from tracking.colour_table import ColourTable
+from tracking.measure import blob_gates
+from tracking.recording import Recording
+
+log = logging.getLogger(__name__)
+
+
+def wand_centroids_in_images(images: Sequence[np.ndarray], cameras: Sequence[Camera], table: ColourTable,
+                             ball_radius_m: float) -> np.ndarray:
+    """(C, 2, 2) centroids of ball 0 and ball 1 in one frame set, NaN where not seen once exactly."""
+    out = np.full((len(cameras), 2, 2), np.nan)
+    for c, (img, cam) in enumerate(zip(images, cameras)):
+        gate = blob_gates(cam, ball_radius_m, near_m=0.5)
+        blobs = find_blobs(table.classify(img), table.n_colours, image_bgr=img, min_area_px=gate.min_area_px,
+                           max_area_px=gate.max_area_px, min_roundness=gate.min_roundness)
+        for k in range(2):
+            mine = blobs.of_colour(k)
+            if len(mine) == 1:
+                out[c, k] = mine.uv_px[0]
+    return out
+
+
+def wand_centroids(folder: str | Path, intrinsics: str | Path, colours_rgb255: Sequence[Sequence[int]],
+                   ball_radius_m: float = 0.02, *, progress: bool = False) -> tuple[list[Camera], np.ndarray]:
+    """Read a wand recording and return the cameras of ``intrinsics`` and (C, T, 2, 2) centroids."""
+    cameras = load_calibration(intrinsics)
+    table = ColourTable.build(np.asarray(colours_rgb255, dtype=np.uint8).reshape(2, 3))
+    rows = []
+    with Recording(folder, intrinsics) as rec:
+        for fs in tqdm(rec, total=rec.n_frames, desc="wand centroids", unit="frame", disable=not progress):
+            rows.append(wand_centroids_in_images(fs.images, cameras, table, ball_radius_m))
+    if not rows:
+        return list(cameras), np.full((len(cameras), 0, 2, 2), np.nan)
+    return list(cameras), np.stack(rows, axis=1)
