@@ -283,3 +283,13 @@ def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detec
         for cam, T in zip(cameras, cam_T)
     )
     return out, _rms(sol.fun.reshape(-1, 2))
+
+
+def rig_errors(cameras: Sequence[Camera], truth: Sequence[Camera]) -> tuple[np.ndarray, np.ndarray]:
+    """Per camera: optical-centre distance (mm) and rotation angle (degrees) from the truth."""
+    pos = np.array([1000.0 * np.linalg.norm(a.centre_m - b.centre_m) for a, b in zip(cameras, truth)])
+    ang = []
+    for a, b in zip(cameras, truth):
+        c = (np.trace(a.R @ b.R.T) - 1.0) / 2.0
+        ang.append(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return pos, np.array(ang)

@@ -275,6 +275,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_validate(sub)
     _add_bench(sub)
     _add_play(sub)
+    from game import cli_calibrate  # calibrate, simulate-calibration
+
+    cli_calibrate.add_commands(sub)
     return parser
 
 

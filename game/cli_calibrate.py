@@ -1,0 +1,395 @@
+"""``rehab calibrate intrinsics|extrinsics|wand`` and ``rehab simulate-calibration``.
+
+Folders, as a clinic records them and as the simulator writes them (docs/CALIBRATION.md):
+
+- intrinsics: one folder of board images per camera, named after the camera (``cam1/``, ...);
+- extrinsics: one folder per camera with the board images taken at the same instants under the
+  same file names (``cam1/000.png`` and ``cam2/000.png`` are one view), plus the board lying on
+  the floor or seat in every camera that sees it (``cam*/seat.png``);
+- wand: a recording folder (one video or image folder per camera and meta.yaml).
+
+Every command writes the calibration as TOML (spec/INTERFACES.md) and, on request, OpenCV YAML.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from calibration.errors import CalibrationError, RehabError
+
+log = logging.getLogger("rehab")
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+
+
+def add_commands(sub) -> None:
+    """Register the calibration commands on the ``rehab`` sub-parsers."""
+    p = sub.add_parser("calibrate", help="calibrate cameras from board images or a wand recording",
+                       description="Camera calibration: intrinsics from board images, extrinsics from shared board "
+                       "views or a wand. See docs/CALIBRATION.md.")
+    cal = p.add_subparsers(dest="calibrate_command", required=True, metavar="STEP")
+
+    q = cal.add_parser("intrinsics", help="lens and focal length of each camera from checkerboard images",
+                       description="Calibrate each camera's intrinsics from a folder of checkerboard images per "
+                       "camera (the folder name is the camera name), or from one folder holding such folders.")
+    q.add_argument("folders", nargs="+", type=Path, help="one folder of images per camera, or their parent folder")
+    _board_options(q)
+    q.add_argument("--fit-k3", action="store_true", help="also fit the 3rd radial coefficient (wide-angle lenses)")
+    _output_options(q)
+    q.set_defaults(func=_cmd_intrinsics)
+
+    q = cal.add_parser("extrinsics", help="camera positions from a board seen by cameras together",
+                       description="Calibrate the cameras' positions and orientations from board images taken at "
+                       "the same instants (same file name in every camera's folder), then set the world frame "
+                       "from the board lying face up on the floor or seat.")
+    q.add_argument("views", type=Path, help="folder with one sub-folder of images per camera")
+    q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
+    _board_options(q)
+    _floor_options(q)
+    _output_options(q)
+    q.set_defaults(func=_cmd_extrinsics)
+
+    q = cal.add_parser("wand", help="camera positions from a wand (two balls at a known distance) waved through the volume",
+                       description="Calibrate the cameras' positions from a recording of a two-ball wand; the world "
+                       "frame comes from board images of the board lying on the floor or seat (--floor-views).")
+    q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera, meta.yaml)")
+    q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
+    q.add_argument("--length-mm", type=float, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
+    q.add_argument("--colour", action="append", default=None, metavar="R,G,B",
+                   help="ball colours, twice: ball 0 then ball 1 (default: meta.yaml wand_colours)")
+    q.add_argument("--ball-mm", type=float, default=40.0, help="ball diameter (default: %(default)s)")
+    q.add_argument("--floor-views", type=Path, default=None, help="folder with one sub-folder of board images per camera")
+    _board_options(q, required=False)
+    _floor_options(q)
+    _output_options(q)
+    q.set_defaults(func=_cmd_wand)
+
+    p = sub.add_parser("simulate-calibration", help="render calibration material of a virtual rig, with ground truth",
+                       description="Render board images (intrinsics, extrinsics, seat board) and a wand recording "
+                       "of a virtual camera rig, with the true calibration, so that the calibration commands can be "
+                       "tried and checked.")
+    p.add_argument("out_dir", type=Path, help="output folder (created)")
+    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
+    p.add_argument("--size", default="640x480", help="image size WxH (default: %(default)s)")
+    p.add_argument("--lens", action="store_true", help="give the cameras a moderate barrel distortion")
+    p.add_argument("--images", type=int, default=15, help="intrinsics images per camera (default: %(default)s)")
+    p.add_argument("--per-pair", type=int, default=4, help="extrinsics views per neighbouring camera pair (default: %(default)s)")
+    p.add_argument("--wand-seconds", type=float, default=20.0, help="length of the wand recording (default: %(default)s)")
+    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--check", action="store_true",
+                   help="then calibrate from the material, compare with the truth and with tracking on the true calibration")
+    p.set_defaults(func=_cmd_simulate_calibration)
+
+
+# --------------------------------------------------------------------------- options
+def _board_options(p, *, required: bool = True) -> None:
+    p.add_argument("--board", default="9x6" if not required else None, required=required,
+                   help="inner corners COLSxROWS, one count even and one odd, e.g. 9x6")
+    p.add_argument("--square-mm", type=float, default=None if required else 60.0, required=required,
+                   help="printed square side in mm")
+
+
+def _floor_options(p) -> None:
+    p.add_argument("--floor", default="seat", help="file name (without extension) of the floor/seat board view (default: %(default)s)")
+    p.add_argument("--origin", default="0,0,0", help="world position X,Y,Z in metres of the floor board's first corner "
+                   "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat)")
+    p.add_argument("--turn-deg", type=float, default=0.0,
+                   help="the board's rows point this many degrees from the patient's right, counter-clockwise from above")
+
+
+def _output_options(p) -> None:
+    p.add_argument("--out", type=Path, required=True, help="calibration file to write (.toml)")
+    p.add_argument("--opencv", type=Path, default=None, help="also write OpenCV FileStorage (.yaml/.yml/.xml)")
+
+
+def _triple(text: str, what: str) -> tuple[float, float, float]:
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 3 or not all(np.isfinite(vals)):
+        raise RehabError(f"{what} {text!r}: give three numbers like 0,0.45,0")
+    return vals  # type: ignore[return-value]
+
+
+def _images_in(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+
+
+def _camera_folders(folders: Sequence[Path]) -> list[Path]:
+    """The per-camera folders: the given ones, or the sub-folders of a single parent."""
+    for f in folders:
+        if not f.is_dir():
+            raise RehabError(f"{f}: no such folder")
+    if len(folders) == 1 and not _images_in(folders[0]):
+        subs = sorted(p for p in folders[0].iterdir() if p.is_dir() and _images_in(p))
+        if not subs:
+            raise RehabError(f"{folders[0]}: holds no images and no folders of images (png, jpg, bmp, tif)")
+        return subs
+    return list(folders)
+
+
+def _save(args, cameras, error_px: float) -> None:
+    from calibration.files import save_calibration_opencv, save_calibration_toml
+
+    if args.out.suffix.lower() != ".toml":
+        raise RehabError(f"--out {args.out}: the calibration file must end in .toml (use --opencv for OpenCV YAML)")
+    save_calibration_toml(args.out, cameras, adjusted=False, error=float(error_px))
+    if args.opencv:
+        save_calibration_opencv(args.opencv, cameras)
+
+
+def _report_skipped(skipped: dict[str, str]) -> None:
+    for name, reason in skipped.items():
+        print(f"  skipped {name}: {reason}")
+
+
+# --------------------------------------------------------------------------- intrinsics
+def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verbose: bool = True):
+    """Calibrate every camera folder; returns the IntrinsicsResults (printing a line per camera)."""
+    from calibration.board import detect_in_files
+    from calibration.intrinsics import calibrate_intrinsics
+
+    results = []
+    for folder in _camera_folders(folders):
+        files = _images_in(folder)
+        if not files:
+            raise RehabError(f"{folder}: no images (png, jpg, bmp, tif) in this folder")
+        detections, skipped = detect_in_files(files, board)
+        if not detections:
+            raise RehabError(f"{folder}: the {board.cols}x{board.rows} board was found in none of its {len(files)} images: "
+                             "check --board (inner corners, not squares) and that the whole board is in view")
+        res = calibrate_intrinsics(folder.name, list(detections.values()), board, fix_k3=not fit_k3)
+        results.append(res)
+        if verbose:
+            K = res.camera.K
+            print(f"{folder.name}: {len(detections)} of {len(files)} images used, reprojection {res.rms_px:.3f} px, "
+                  f"f = {K[0, 0]:.1f}/{K[1, 1]:.1f} px, centre ({K[0, 2]:.1f}, {K[1, 2]:.1f}), "
+                  f"coverage {100 * res.coverage:.0f} %")
+            _report_skipped({Path(k).name: v for k, v in skipped.items()})
+            for w in res.warnings:
+                print(f"  warning: {w}")
+    return results
+
+
+def _cmd_intrinsics(args) -> int:
+    from calibration.board import Checkerboard
+
+    board = Checkerboard.parse(args.board, args.square_mm)
+    results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
+    worst = max(r.rms_px for r in results)
+    _save(args, [r.camera for r in results], worst)
+    print(f"wrote the intrinsics of {len(results)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- extrinsics
+def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[str, str]]:
+    """Board detections of every view: {view name: [Detection | None per camera]}, and skipped reasons."""
+    from calibration.board import detect_board, read_gray
+
+    if not folder.is_dir():
+        raise RehabError(f"{folder}: no such folder")
+    views: dict[str, list] = {}
+    skipped: dict[str, str] = {}
+    missing = [c.name for c in cameras if not (folder / c.name).is_dir()]
+    if missing:
+        raise RehabError(f"{folder}: no image folder for {', '.join(missing)}: give one sub-folder per camera, named as in the intrinsics")
+    for c, cam in enumerate(cameras):
+        for path in _images_in(folder / cam.name):
+            row = views.setdefault(path.stem, [None] * len(cameras))
+            gray, reason = read_gray(path)
+            if gray is not None:
+                if (gray.shape[1], gray.shape[0]) != tuple(cam.size_px):
+                    reason = f"{gray.shape[1]}x{gray.shape[0]} but {cam.name} is calibrated for {cam.size_px[0]}x{cam.size_px[1]}"
+                else:
+                    det, reason = detect_board(gray, board)
+                    row[c] = det
+            if row[c] is None:
+                skipped[f"{cam.name}/{path.name}"] = reason
+    if not views:
+        raise RehabError(f"{folder}: no images in the camera folders")
+    return views, skipped
+
+
+def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True):
+    from calibration.extrinsics import calibrate_extrinsics
+
+    views, skipped = detect_views(views_dir, cameras, board)
+    if floor is not None and floor not in views:
+        raise RehabError(f"{views_dir}: no image named {floor!r} (the board on the floor or seat) in the camera folders: give --floor NAME")
+    res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg)
+    if verbose:
+        for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
+            print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
+        if skipped:
+            print(f"  {len(skipped)} camera images without a usable board (normal for cameras that do not face it):")
+            _report_skipped(skipped)
+        for w in res.warnings:
+            print(f"  warning: {w}")
+    return res
+
+
+def _cmd_extrinsics(args) -> int:
+    from calibration.board import Checkerboard
+    from calibration.files import load_calibration
+
+    board = Checkerboard.parse(args.board, args.square_mm)
+    cameras = load_calibration(args.intrinsics)
+    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=_triple(args.origin, "--origin"),
+                         turn_deg=args.turn_deg)
+    _save(args, res.cameras, float(np.nanmax(res.rms_px)))
+    print(f"wrote the calibration of {len(res.cameras)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- wand
+def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colours, ball_mm: float,
+             floor_views: Path | None, board, floor: str, origin_m, turn_deg: float, verbose: bool = True):
+    """Wand calibration, world frame from the floor board if given. Returns (WandResult, cameras)."""
+    from calibration.extrinsics import world_from_floor_board
+    from calibration.wand import calibrate_wand
+    from tracking.markerset import parse_rgb
+    from tracking.recording import read_meta
+    from tracking.wand_capture import wand_centroids
+
+    if not recording.is_dir():
+        raise RehabError(f"{recording}: no such wand recording folder")
+    extra = read_meta(recording).extra
+    if length_mm is None:
+        length_mm = extra.get("wand_length_mm")
+        if not isinstance(length_mm, (int, float)):
+            raise RehabError("give the wand length with --length-mm (distance between the ball centres)")
+    if colours:
+        if len(colours) != 2:
+            raise RehabError("give --colour twice: the colour of ball 0, then of ball 1")
+        rgb = [parse_rgb(c) for c in colours]
+    else:
+        rgb = extra.get("wand_colours")
+        if not (isinstance(rgb, list) and len(rgb) == 2):
+            raise RehabError("give the two ball colours with --colour R,G,B --colour R,G,B")
+    cameras, uv = wand_centroids(recording, intrinsics, rgb, ball_mm / 2000.0, progress=verbose)
+    res = calibrate_wand(cameras, uv, float(length_mm) / 1000.0)
+    out = res.cameras
+    if floor_views is not None:
+        views, _ = detect_views(floor_views, out, board)
+        if floor not in views:
+            raise RehabError(f"{floor_views}: no image named {floor!r} in the camera folders: give --floor NAME")
+        out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg)
+        if verbose:
+            print(f"world frame from the floor board ({sum(d is not None for d in views[floor])} cameras, {floor_rms:.3f} px)")
+    elif verbose:
+        print(f"  warning: no --floor-views: the world frame is {out[res.reference].name}'s own (Y is not up)")
+    if verbose:
+        for cam, rms, n in zip(out, res.rms_px, np.sum(np.isfinite(uv[..., 0]), axis=(1, 2))):
+            print(f"{cam.name}: {n} ball views, reprojection {rms:.3f} px")
+        print(f"wand length error {res.length_rmse_mm:.2f} mm RMS over {res.length_error_mm.size} frames")
+        for w in res.warnings:
+            print(f"  warning: {w}")
+    return res, out
+
+
+def _cmd_wand(args) -> int:
+    from calibration.board import Checkerboard
+
+    board = Checkerboard.parse(args.board, args.square_mm) if args.floor_views else None
+    res, cameras = run_wand(args.recording, args.intrinsics, length_mm=args.length_mm, colours=args.colour,
+                            ball_mm=args.ball_mm, floor_views=args.floor_views, board=board, floor=args.floor,
+                            origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
+    _save(args, cameras, float(np.nanmax(res.rms_px)))
+    print(f"wrote the calibration of {len(cameras)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- simulator
+def _cmd_simulate_calibration(args) -> int:
+    from calibration.camera import Camera
+    from tracking.sim.calibration_material import write_calibration_material
+    from tracking.sim.rigs import load_rig
+
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        raise RehabError(f"--size {args.size!r} must look like 640x480") from None
+    cams = load_rig(args.rig, (w, h))
+    if args.lens:
+        from tracking.sim.renderer import DEMO_LENS
+
+        cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
+    print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
+                                     wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed, progress=True))
+    if args.check:
+        for line in check_material(args.out_dir, seed=args.seed):
+            print(line, flush=True)
+    return 0
+
+
+def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -> list[str]:
+    """Calibrate from simulated material and compare with the truth; returns report lines."""
+    import tempfile
+
+    import yaml
+
+    from calibration.board import Checkerboard
+    from calibration.extrinsics import rig_errors
+    from calibration.files import load_calibration, save_calibration_toml
+
+    folder = Path(folder)
+    material = yaml.safe_load((folder / "material.yaml").read_text(encoding="utf-8"))
+    board = Checkerboard.parse(material["board"]["pattern"], material["board"]["square_mm"])
+    origin = tuple(material["seat_board"]["origin_m"])
+    truth = load_calibration(folder / "truth_calibration.toml")
+    lines = []
+    intr = run_intrinsics([folder / "intrinsics"], board, verbose=False)
+    focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(intr, truth)])
+    lines.append(f"intrinsics: focal length error max {focal.max():.3f} %, reprojection max {max(r.rms_px for r in intr):.3f} px")
+    cams = [r.camera for r in intr]
+    ext = run_extrinsics(folder / "extrinsics", cams, board, floor="seat", origin_m=origin, turn_deg=0.0, verbose=False)
+    pos, ang = rig_errors(ext.cameras, truth)
+    lines.append(f"board extrinsics: position error max {pos.max():.2f} mm, orientation max {ang.max():.3f} deg, "
+                 f"reprojection max {np.nanmax(ext.rms_px):.3f} px")
+    with tempfile.TemporaryDirectory() as tmp:
+        intr_path = Path(tmp) / "intrinsics.toml"
+        save_calibration_toml(intr_path, cams)
+        wres, wcams = run_wand(folder / "wand", intr_path, length_mm=None, colours=None, ball_mm=40.0,
+                               floor_views=folder / "extrinsics", board=board, floor="seat", origin_m=origin,
+                               turn_deg=0.0, verbose=False)
+        wpos, wang = rig_errors(wcams, truth)
+        lines.append(f"wand extrinsics: wand length error {wres.length_rmse_mm:.2f} mm RMS, position error max "
+                     f"{wpos.max():.2f} mm, orientation max {wang.max():.3f} deg, reprojection max {np.nanmax(wres.rms_px):.3f} px")
+        lines.append(tracking_check(Path(tmp) / "rec", truth, ext.cameras, wcams, seconds=track_seconds, seed=seed))
+    return lines
+
+
+def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:
+    """Track a short simulated recording with the true and the recovered calibrations."""
+    from tracking.calibration_check import tracking_difference_mm
+    from tracking.markerset import load_markerset
+    from tracking.recording import RecordingWriter
+    from tracking.sim.body import BodyDimensions
+    from tracking.sim.motions import load_motion
+    from tracking.sim.studio import Studio
+
+    # Rendered with the true cameras (lens included), as simulate_recording would with the rig.
+    markerset = load_markerset("upper_limb_seated")
+    dims = BodyDimensions.from_percentile(50.0, "female")
+    motion = load_motion("shoulder_abduction", dims)
+    fps = 10.0
+    with Studio(truth, markerset, dims) as studio:
+        writer = RecordingWriter(rec_dir, truth, fps)
+        try:
+            for sf in studio.play(motion, fps, seconds=seconds, noise_sigma=1.5, seed=seed, with_visibility=False):
+                writer.write(sf.frames.images)
+        finally:
+            writer.close()
+        writer.write_meta(markerset.name, markerset.rgb, source="simulator: calibration check")
+    d_board, n = tracking_difference_mm(rec_dir, board_cams, truth)
+    d_wand, _ = tracking_difference_mm(rec_dir, wand_cams, truth)
+    return (f"tracking difference against the true calibration over {n} marker positions: "
+            f"board {d_board:.2f} mm RMS, wand {d_wand:.2f} mm RMS")
