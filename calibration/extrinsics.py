@@ -210,7 +210,7 @@ def calibrate_extrinsics(
         sparsity[rows, 6 * (n - 1) + 6 * v : 6 * (n - 1) + 6 * v + 6] = 1
     x0 = np.concatenate([_pack(cam_poses[1:]), _pack(board_poses)])
     sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="soft_l1", f_scale=1.0, x_scale="jac", method="trf",
-                        xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=200)
+                        xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
     cam_poses = [(np.eye(3), np.zeros(3))] + _unpack(sol.x[: 6 * (n - 1)], n - 1)
     board_poses = _unpack(sol.x[6 * (n - 1):], len(view_names))
     res = sol.fun.reshape(len(obs), n_pts, 2)

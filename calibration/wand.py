@@ -264,7 +264,7 @@ def _bundle_adjust(cameras, order, R, t, uv_px, xn, length_m):
         sparsity[lr, n_cam + 3 * lb + k] = 1
     x0 = np.concatenate([np.concatenate([rvec_from_rotation(R[c]), t[c]]) for c in others] + [pts[point_ids].ravel()])
     sol = least_squares(residuals, x0, jac_sparsity=sparsity.tocsr(), loss="soft_l1", f_scale=1.0, x_scale="jac",
-                        method="trf", xtol=1e-10, ftol=1e-10, max_nfev=100)
+                        method="trf", xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
     Rs, ts, P = unpack(sol.x)
     res = sol.fun[: 2 * n_obs].reshape(n_obs, 2)
     rms = np.array([np.sqrt(np.mean(np.sum(res[obs_c == c] ** 2, axis=1))) if np.any(obs_c == c) else np.nan for c in range(C)])
