@@ -25,13 +25,19 @@ from tracking.recording import Recording
 
 log = logging.getLogger(__name__)
 
+MIN_ROUNDNESS = 0.85
+
 
 def wand_centroids_in_images(images: Sequence[np.ndarray], cameras: Sequence[Camera], table: ColourTable,
-                             ball_radius_m: float) -> np.ndarray:
-    """(C, 2, 2) centroids of ball 0 and ball 1 in one frame set, NaN where not seen once exactly."""
+                             ball_radius_m: float, min_roundness: float = MIN_ROUNDNESS) -> np.ndarray:
+    """(C, 2, 2) centroids of ball 0 and ball 1 in one frame set, NaN where not seen once exactly.
+
+    A ball partly hidden (by the stick, the other ball or furniture) has its centroid pulled
+    off the centre, so blobs less round than ``min_roundness`` are left out.
+    """
     out = np.full((len(cameras), 2, 2), np.nan)
     for c, (img, cam) in enumerate(zip(images, cameras)):
-        gate = blob_gates(cam, ball_radius_m, near_m=0.5)
+        gate = blob_gates(cam, ball_radius_m, near_m=0.5, min_roundness=min_roundness)
         blobs = find_blobs(table.classify(img), table.n_colours, image_bgr=img, min_area_px=gate.min_area_px,
                            max_area_px=gate.max_area_px, min_roundness=gate.min_roundness)
         for k in range(2):

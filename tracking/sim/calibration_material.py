@@ -48,6 +48,7 @@ SEAT_TOP_M = 0.45
 DEFAULT_BOARD = Checkerboard(9, 6, 0.06)
 WAND_LENGTH_M = 0.5
 WAND_BALL_RADIUS_M = 0.02
+WAND_STICK_RADIUS_M = 0.003  # a thin carbon rod
 WAND_COLOURS_RGB255 = ((255, 214, 0), (225, 0, 210))  # yellow, magenta (marker palette colours)
 
 
@@ -326,7 +327,7 @@ def wand_scene(balls_m: np.ndarray, radius_m: float = WAND_BALL_RADIUS_M,
         sphere_rgb=np.asarray(colours_rgb255, np.float32) / 255.0,
         sphere_marker_index=np.array([0, 1], np.int32),
         capsule_p0_m=p0[None], capsule_p1_m=p1[None],
-        capsule_r0_m=np.array([0.006]), capsule_r1_m=np.array([0.006]),
+        capsule_r0_m=np.array([WAND_STICK_RADIUS_M]), capsule_r1_m=np.array([WAND_STICK_RADIUS_M]),
         capsule_rgb=np.array([[0.12, 0.12, 0.12]], np.float32),
         ellipsoid_centre_m=np.zeros((0, 3)), ellipsoid_axes_m=np.zeros((0, 3, 3)), ellipsoid_rgb=np.zeros((0, 3), np.float32),
     )
