@@ -98,7 +98,7 @@ def _board_options(p, *, required: bool = True) -> None:
 def _floor_options(p) -> None:
     p.add_argument("--floor", default="seat", help="file name (without extension) of the floor/seat board view (default: %(default)s)")
     p.add_argument("--origin", default="0,0,0", help="world position X,Y,Z in metres of the floor board's first corner "
-                   "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat)")
+                   "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat; write --origin=-0.2,0.45,0 when X is negative)")
     p.add_argument("--turn-deg", type=float, default=0.0,
                    help="the board's rows point this many degrees from the patient's right, counter-clockwise from above")
 
@@ -218,12 +218,19 @@ def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[st
     return views, skipped
 
 
+def _check_floor_view(folder: Path, cameras, floor: str | None) -> None:
+    """Fail early, before any detection, when no camera folder holds the floor board's image."""
+    if floor is None:
+        return
+    if not any((folder / c.name).is_dir() and any(p.stem == floor for p in _images_in(folder / c.name)) for c in cameras):
+        raise RehabError(f"{folder}: no image named {floor!r} (the board on the floor or seat) in the camera folders: give --floor NAME")
+
+
 def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True):
     from calibration.extrinsics import calibrate_extrinsics
 
+    _check_floor_view(views_dir, cameras, floor)
     views, skipped = detect_views(views_dir, cameras, board)
-    if floor is not None and floor not in views:
-        raise RehabError(f"{views_dir}: no image named {floor!r} (the board on the floor or seat) in the camera folders: give --floor NAME")
     res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg)
     if verbose:
         for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
@@ -278,9 +285,8 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
     res = calibrate_wand(cameras, uv, float(length_mm) / 1000.0)
     out = res.cameras
     if floor_views is not None:
+        _check_floor_view(floor_views, out, floor)
         views, _ = detect_views(floor_views, out, board)
-        if floor not in views:
-            raise RehabError(f"{floor_views}: no image named {floor!r} in the camera folders: give --floor NAME")
         out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg)
         if verbose:
             print(f"world frame from the floor board ({sum(d is not None for d in views[floor])} cameras, {floor_rms:.3f} px)")

@@ -1,0 +1,82 @@
+"""``rehab simulate-calibration`` then ``rehab calibrate intrinsics|extrinsics|wand`` on its output."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from calibration.extrinsics import rig_errors
+from calibration.files import load_calibration
+from game.cli import main
+
+
+@pytest.fixture(scope="module")
+def material(tmp_path_factory):
+    from tracking.sim.calibration_material import write_calibration_material
+    from tracking.sim.rigs import load_rig
+
+    out = tmp_path_factory.mktemp("material")
+    cams = load_rig("ring4", (320, 240))
+    write_calibration_material(out, cams, n_intrinsics=6, per_pair=1, wand_seconds=6.0, wand_fps=8.0)
+    return out
+
+
+def test_simulated_material_calibrates_end_to_end(material, tmp_path, capsys):
+    truth = load_calibration(material / "truth_calibration.toml")
+    meta = yaml.safe_load((material / "material.yaml").read_text())
+    origin = ",".join(str(v) for v in meta["seat_board"]["origin_m"])
+    (material / "intrinsics" / "cam2" / "zz_broken.png").write_bytes(b"\x89PNG broken")
+    intr = tmp_path / "intrinsics.toml"
+    assert main(["calibrate", "intrinsics", str(material / "intrinsics"), "--board", "9x6", "--square-mm", "60",
+                 "--out", str(intr), "--opencv", str(tmp_path / "intrinsics.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "skipped zz_broken.png: not an image OpenCV can read" in out
+    cams = load_calibration(intr)
+    assert [c.name for c in cams] == ["cam1", "cam2", "cam3", "cam4"]
+    assert all(abs(c.K[0, 0] / t.K[0, 0] - 1) < 0.01 for c, t in zip(cams, truth))  # 6 small images only
+    assert len(load_calibration(tmp_path / "intrinsics.yaml")) == 4
+
+    board_calib = tmp_path / "board.toml"
+    assert main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics", str(intr), "--board", "9x6",
+                 "--square-mm", "60", f"--origin={origin}", "--out", str(board_calib)]) == 0
+    pos, ang = rig_errors(load_calibration(board_calib), truth)
+    assert pos.max() < 10.0 and ang.max() < 0.3  # the strict figures: test_calib_extrinsics.py
+
+    wand_calib = tmp_path / "wand.toml"
+    assert main(["calibrate", "wand", str(material / "wand"), "--intrinsics", str(intr), "--floor-views",
+                 str(material / "extrinsics"), "--square-mm", "60", f"--origin={origin}", "--out", str(wand_calib)]) == 0
+    out = capsys.readouterr().out
+    rmse = float(out.split("wand length error ")[1].split(" mm")[0])
+    assert rmse < 1.5
+    pos, ang = rig_errors(load_calibration(wand_calib), truth)
+    assert pos.max() < 20.0 and ang.max() < 0.5
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing", "no such folder"),
+    ("empty", "holds no images"),
+    ("blank", "was found in none of its 2 images"),
+])
+def test_bad_input_gives_one_line_errors(tmp_path, capsys, case, message):
+    folder = tmp_path / "cam1"
+    if case != "missing":
+        folder.mkdir()
+    if case == "blank":
+        for k in range(2):
+            cv2.imwrite(str(folder / f"{k}.png"), np.full((240, 320), 128, np.uint8))
+    code = main(["calibrate", "intrinsics", str(folder if case != "empty" else tmp_path), "--board", "9x6",
+                 "--square-mm", "25", "--out", str(tmp_path / "x.toml")])
+    err = capsys.readouterr().err
+    assert code == 1 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_bad_board_and_output_names_give_one_line_errors(material, tmp_path, capsys):
+    assert main(["calibrate", "intrinsics", str(material / "intrinsics"), "--board", "8x6", "--square-mm", "60",
+                 "--out", str(tmp_path / "x.toml")]) == 1
+    assert "even and the other odd" in capsys.readouterr().err
+    assert main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics",
+                 str(material / "truth_calibration.toml"), "--board", "9x6", "--square-mm", "60", "--floor", "nope",
+                 "--out", str(tmp_path / "x.toml")]) == 1
+    assert "no image named 'nope'" in capsys.readouterr().err
