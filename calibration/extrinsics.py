@@ -234,8 +234,8 @@ def calibrate_extrinsics(
     for c in range(n):
         if rms[c] > 1.0:
             warnings.append(f"{cameras[c].name}: board corners fit to {rms[c]:.2f} px only: check its intrinsics and blurred images")
-    for w in warnings:
-        log.warning(w)
+    for w in warnings:  # returned for the caller to show; logged for the record
+        log.info(w)
     return ExtrinsicsResult(out, rms, n_views, floor_view is not None, tuple(warnings))
 
 

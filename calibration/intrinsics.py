@@ -78,6 +78,7 @@ def calibrate_intrinsics(
     board: Checkerboard,
     *,
     fix_k3: bool = True,
+    view_names: Sequence[str] | None = None,
 ) -> IntrinsicsResult:
     """Calibrate one camera from board detections in its images.
 
@@ -87,6 +88,7 @@ def calibrate_intrinsics(
         board: the board.
         fix_k3: keep k3 at 0 (the 4-coefficient model k1, k2, p1, p2; enough for the usual
             lenses and safer with few views); False also fits k3.
+        view_names: a name per detection (e.g. its file name) for the warnings.
     Raises:
         CalibrationError: too few views or images of different sizes.
     """
@@ -124,10 +126,10 @@ def calibrate_intrinsics(
         warnings.append(f"{name}: only {len(detections)} usable images: 15-25 give a steadier result")
     worst = int(np.argmax(per_view))
     if per_view[worst] > max(1.0, 3.0 * float(rms)):
+        which = view_names[worst] if view_names is not None else f"image {worst + 1} of the used ones"
         warnings.append(
-            f"{name}: image {worst + 1} of the used ones fits badly ({per_view[worst]:.2f} px): "
-            "it may be blurred; remove it and calibrate again"
+            f"{name}: {which} fits badly ({per_view[worst]:.2f} px): it may be blurred; remove it and calibrate again"
         )
-    for w in warnings:
-        log.warning(w)
+    for w in warnings:  # returned for the caller to show; logged for the record
+        log.info(w)
     return IntrinsicsResult(cam, float(rms), per_view, coverage, tuple(warnings))

@@ -171,8 +171,8 @@ def calibrate_wand(cameras: Sequence[Camera], uv_px: np.ndarray, length_m: float
     rmse = float(np.sqrt(np.mean(err_mm**2))) if err_mm.size else float("nan")
     if rmse > 2.0:
         warnings.append(f"the wand length varies by {rmse:.1f} mm RMS: check the intrinsics and the wand length")
-    for w in warnings:
-        log.warning(w)
+    for w in warnings:  # returned for the caller to show; logged for the record
+        log.info(w)
     n_frames = int(np.sum(np.all(np.isfinite(pts.reshape(T, 2, 3)), axis=(1, 2))))
     return WandResult(out, i, rms, err_mm, n_frames, tuple(warnings))
 

@@ -24,7 +24,6 @@ from calibration.errors import CalibrationError, RehabError
 
 log = logging.getLogger("rehab")
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
 def add_commands(sub) -> None:
@@ -96,7 +95,9 @@ def _board_options(p, *, required: bool = True) -> None:
 
 
 def _floor_options(p) -> None:
-    p.add_argument("--floor", default="seat", help="file name (without extension) of the floor/seat board view (default: %(default)s)")
+    p.add_argument("--floor", default="seat", type=lambda v: None if v.lower() == "none" else v,
+                   help="file name (without extension) of the floor/seat board view; 'none': keep the first "
+                   "camera's frame, Y not up (default: %(default)s)")
     p.add_argument("--origin", default="0,0,0", help="world position X,Y,Z in metres of the floor board's first corner "
                    "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat; write --origin=-0.2,0.45,0 when X is negative)")
     p.add_argument("--turn-deg", type=float, default=0.0,
@@ -119,6 +120,8 @@ def _triple(text: str, what: str) -> tuple[float, float, float]:
 
 
 def _images_in(folder: Path) -> list[Path]:
+    from tracking.recording import IMAGE_SUFFIXES
+
     return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
 
 
@@ -165,7 +168,8 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
         if not detections:
             raise RehabError(f"{folder}: the {board.cols}x{board.rows} board was found in none of its {len(files)} images: "
                              "check --board (inner corners, not squares) and that the whole board is in view")
-        res = calibrate_intrinsics(folder.name, list(detections.values()), board, fix_k3=not fit_k3)
+        res = calibrate_intrinsics(folder.name, list(detections.values()), board, fix_k3=not fit_k3,
+                                   view_names=[Path(k).name for k in detections])
         results.append(res)
         if verbose:
             K = res.camera.K
@@ -284,14 +288,14 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
     cameras, uv = wand_centroids(recording, intrinsics, rgb, ball_mm / 2000.0, progress=verbose)
     res = calibrate_wand(cameras, uv, float(length_mm) / 1000.0)
     out = res.cameras
-    if floor_views is not None:
+    if floor_views is not None and floor is not None:
         _check_floor_view(floor_views, out, floor)
         views, _ = detect_views(floor_views, out, board)
         out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg)
         if verbose:
             print(f"world frame from the floor board ({sum(d is not None for d in views[floor])} cameras, {floor_rms:.3f} px)")
     elif verbose:
-        print(f"  warning: no --floor-views: the world frame is {out[res.reference].name}'s own (Y is not up)")
+        print(f"  warning: no floor board: the world frame is {out[res.reference].name}'s own (Y is not up)")
     if verbose:
         for cam, rms, n in zip(out, res.rms_px, np.sum(np.isfinite(uv[..., 0]), axis=(1, 2))):
             print(f"{cam.name}: {n} ball views, reprojection {rms:.3f} px")
