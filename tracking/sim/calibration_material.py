@@ -115,14 +115,12 @@ class BoardRaycaster:
         with np.errstate(divide="ignore", invalid="ignore"):
             x = q[:, 0] / q[:, 2]
             y = q[:, 1] / q[:, 2]
-        i, j = np.floor(x), np.floor(y)
         # The printed squares span -1..cols along x and -1..rows along y, then the white margin.
         lo = -1.0 - MARGIN_SQUARES
         on = (q[:, 2] > 0) & (x >= lo) & (x <= board.cols + MARGIN_SQUARES) & (y >= lo) & (y <= board.rows + MARGIN_SQUARES)
         front = float(R_cb[:, 2] @ t_cb) > 0.0  # the camera is on the printed side
         if front:
-            squares = (i >= -1) & (i <= board.cols - 1) & (j >= -1) & (j <= board.rows - 1)
-            black = squares & ((i + j) % 2 == 0)
+            black = board.is_black(x * board.square_m, y * board.square_m)
             level = np.where(black, np.float32(BLACK_LEVEL * light), np.float32(WHITE_LEVEL * light))
         else:
             level = np.full(q.shape[0], np.float32(BACK_LEVEL * light))
