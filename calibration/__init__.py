@@ -1,24 +1,38 @@
-"""Camera models, calibration from images, and calibration files (no dependency on tracking or game)."""
+"""Camera models, calibration from images, and calibration files (no dependency on tracking or game).
+
+The solvers that need scipy (extrinsics, wand) load on first use, so that importing the camera
+model (every tracker process does) stays quick.
+"""
+
+from importlib import import_module
 
 from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera
 from calibration.errors import CalibrationError, RehabError
-from calibration.extrinsics import ExtrinsicsResult, calibrate_extrinsics, world_from_floor_board
 from calibration.intrinsics import IntrinsicsResult, calibrate_intrinsics
-from calibration.wand import WandResult, calibrate_wand
+
+_LAZY = {
+    "ExtrinsicsResult": "calibration.extrinsics",
+    "calibrate_extrinsics": "calibration.extrinsics",
+    "world_from_floor_board": "calibration.extrinsics",
+    "WandResult": "calibration.wand",
+    "calibrate_wand": "calibration.wand",
+}
 
 __all__ = [
     "Camera",
     "CalibrationError",
     "Checkerboard",
     "Detection",
-    "ExtrinsicsResult",
     "IntrinsicsResult",
     "RehabError",
-    "WandResult",
-    "calibrate_extrinsics",
     "calibrate_intrinsics",
-    "calibrate_wand",
     "detect_board",
-    "world_from_floor_board",
+    *_LAZY,
 ]
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'calibration' has no attribute {name!r}")
