@@ -1,0 +1,303 @@
+"""Identification sweep: the reference pose over body sizes, arm perturbations and camera layouts.
+
+``python -m tracking.sim.identify_sweep`` renders the reference pose (METHOD.md 5.2) for
+several bodies (5th percentile woman to 95th percentile man), each with the arms perturbed (each
+arm's shoulder flexion, abduction and axial rotation and the elbow flexion moved by up to +-10
+degrees: a few corner combinations and seeded random ones), in every camera layout of
+``content/rigs``, and runs the :class:`tracking.tracker.Tracker` on it for a few frames (each
+frame with its own sensor noise). Every marker the tracker names is compared with the
+simulator's truth. Deliberately wrong poses (hands in the lap against the body, arms crossed,
+arms raised) must leave the tracker waiting with a therapist message from the marker set's rules,
+never with names.
+
+A case *passes* when the tracker names every marker and every name is right. A case in which
+some markers are named and the others are left for re-acquisition (seen by one camera only) is
+counted apart, and so is a case that stays waiting; a wrong name is a failure whatever else.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import dataclass
+from typing import Iterable, Iterator, Sequence
+
+import numpy as np
+
+from tracking.colour_table import ColourTable
+from tracking.content import available
+from tracking.markerset import MarkerSet, load_markerset
+from tracking.sim.body import (
+    REFERENCE_ABDUCTION_DEG,
+    REFERENCE_ELBOW_FLEXION_DEG,
+    REFERENCE_EXTERNAL_ROTATION_DEG,
+    REFERENCE_SUPINATION_DEG,
+    ArmPose,
+    BodyDimensions,
+    Pose,
+    reference_arm,
+)
+from tracking.sim.rigs import load_rig
+from tracking.sim.studio import Studio
+from tracking.status import MarkerStatus
+from tracking.tracker import Tracker, TrackingState
+
+#: (percentile, sex) of the swept bodies.
+BODIES: tuple[tuple[float, str], ...] = ((5, "female"), (50, "female"), (50, "male"), (95, "male"))
+
+#: A named marker is right when it lies this near to its own true position.
+NAME_TOLERANCE_M = 0.015
+
+#: The perturbed arm angles, in :class:`ArmDelta` order.
+ARM_ANGLES = ("flexion", "abduction", "rotation", "elbow")
+
+
+@dataclass(frozen=True, slots=True)
+class ArmDelta:
+    """Change of one arm from the reference pose, degrees (right-side convention, see body.py)."""
+
+    flexion_deg: float = 0.0
+    abduction_deg: float = 0.0
+    rotation_deg: float = 0.0
+    elbow_deg: float = 0.0
+
+    def arm(self) -> ArmPose:
+        return reference_arm(REFERENCE_ABDUCTION_DEG + self.abduction_deg, self.flexion_deg,
+                             REFERENCE_EXTERNAL_ROTATION_DEG + self.rotation_deg,
+                             REFERENCE_ELBOW_FLEXION_DEG + self.elbow_deg, REFERENCE_SUPINATION_DEG)
+
+
+@dataclass(frozen=True, slots=True)
+class SweepPose:
+    """A named pose of the sweep: the reference pose perturbed, or a deliberately wrong pose."""
+
+    name: str
+    pose: Pose
+    wrong: bool = False
+
+
+def perturbed_poses(n_corners: int = 6, n_random: int = 4, deg: float = 10.0, seed: int = 0) -> list[SweepPose]:
+    """The reference pose, then perturbed ones.
+
+    Args:
+        n_corners: poses at corners of the +-``deg`` box of the 8 angles (4 per arm). The first
+            two corners are all + and all - on both arms; the rest are seeded random corners.
+        n_random: poses with each of the 8 angles uniform in +-``deg`` (seeded).
+        deg: the largest change of each angle.
+        seed: random seed.
+    """
+    rng = np.random.default_rng(seed)
+    out = [SweepPose("reference", Pose(right=ArmDelta().arm(), left=ArmDelta().arm()))]
+    corners = [np.full(8, 1.0), np.full(8, -1.0)]
+    corners += [rng.choice([-1.0, 1.0], 8) for _ in range(max(n_corners - 2, 0))]
+    for k, signs in enumerate(corners[:n_corners]):
+        right, left = ArmDelta(*(deg * signs[:4])), ArmDelta(*(deg * signs[4:]))
+        out.append(SweepPose(f"corner{k + 1} R{_signs(signs[:4])} L{_signs(signs[4:])}",
+                             Pose(right=right.arm(), left=left.arm())))
+    for k in range(n_random):
+        d = rng.uniform(-deg, deg, 8)
+        right, left = ArmDelta(*d[:4]), ArmDelta(*d[4:])
+        out.append(SweepPose(f"random{k + 1}", Pose(right=right.arm(), left=left.arm())))
+    return out
+
+
+def _signs(signs: np.ndarray) -> str:
+    return "".join("+" if s > 0 else "-" for s in signs)
+
+
+def wrong_poses() -> list[SweepPose]:
+    """Poses that break the reference-pose rules; the tracker must explain, not name."""
+    lap = ArmPose.clinical(20.0, 0.0, -30.0, 70.0, 0.0)  # upper arms against the body, hands on the thighs
+    crossed = ArmPose.clinical(40.0, -20.0, -60.0, 90.0, 0.0)
+    raised = ArmPose.clinical(0.0, 150.0, 0.0, 0.0, 0.0)
+    return [
+        SweepPose("arms against the body", Pose(right=lap, left=lap), wrong=True),
+        SweepPose("arms crossed", Pose(right=crossed, left=crossed), wrong=True),
+        SweepPose("arms raised", Pose(right=raised, left=raised), wrong=True),
+    ]
+
+
+@dataclass(frozen=True, slots=True)
+class CaseResult:
+    """What the tracker made of one pose of one body in one layout.
+
+    Attributes:
+        rig, body, pose: the case (body as e.g. "p5 female").
+        wrong_pose: the pose breaks the rules on purpose.
+        identified_frame: frame of identification, -1 if the tracker kept waiting.
+        named: markers named (measured or estimated) after the last frame.
+        wrong: names of markers placed on something else than their ball (> NAME_TOLERANCE_M).
+        unseen: names of markers left unnamed (lost) after the last frame.
+        message: the tracker's last message while waiting ("" once identified).
+        rule_message: the message is one of the marker set's rule messages (a therapist message).
+    """
+
+    rig: str
+    body: str
+    pose: str
+    wrong_pose: bool
+    identified_frame: int
+    named: int
+    wrong: tuple[str, ...]
+    unseen: tuple[str, ...]
+    message: str
+    rule_message: bool
+
+    @property
+    def identified(self) -> bool:
+        return self.identified_frame >= 0
+
+    @property
+    def passed(self) -> bool:
+        """Every marker named right (a reference pose), or waiting with a rule message (a wrong one)."""
+        if self.wrong_pose:
+            return not self.identified and self.rule_message
+        return self.identified and not self.wrong and not self.unseen
+
+
+def body_label(p: float, sex: str) -> str:
+    return f"p{p:g} {sex}"
+
+
+def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepPose, *, frames: int = 3,
+             noise_sigma: float = 1.5, seed: int = 0) -> CaseResult:
+    """Render ``case.pose`` ``frames`` times (fresh noise each) and track it from a reset tracker."""
+    ms = studio.markerset
+    tracker.reset()
+    identified_frame, message, sample, truth = -1, "", None, None
+    for k in range(frames):
+        sf = studio.render(case.pose, k, k / tracker.fps, noise_sigma=noise_sigma, seed=seed * 1009 + k,
+                           with_visibility=False)
+        sample = tracker.step(sf.frames.images)
+        truth = sf.markers_m
+        if sample.state == TrackingState.TRACKING:
+            if identified_frame < 0:
+                identified_frame = k
+        else:
+            message = sample.message
+    named_mask = sample.status != MarkerStatus.LOST
+    d = np.linalg.norm(sample.positions_m - truth, axis=1)
+    wrong = tuple(n for n, ok, dist in zip(ms.names, named_mask, d) if ok and not dist < NAME_TOLERANCE_M)
+    unseen = tuple(n for n, ok in zip(ms.names, named_mask) if not ok) if identified_frame >= 0 else ()
+    rules = ms.identification.rules if ms.identification is not None else ()
+    rule_message = any(message.startswith(r.message) for r in rules)
+    return CaseResult(rig, body, case.name, case.wrong, identified_frame, int(named_mask.sum()), wrong, unseen,
+                      message if identified_frame < 0 else "", rule_message)
+
+
+def sweep(rigs: Sequence[str], bodies: Sequence[tuple[float, str]] = BODIES,
+          poses: Sequence[SweepPose] | None = None, *, size_px: tuple[int, int] = (640, 480), frames: int = 3,
+          markerset: MarkerSet | None = None, noise_sigma: float = 1.5) -> Iterator[CaseResult]:
+    """Every pose of every body in every rig; yields one :class:`CaseResult` per case."""
+    ms = markerset or load_markerset()
+    table = ColourTable.build(ms.palette)
+    poses = list(poses) if poses is not None else perturbed_poses() + wrong_poses()
+    for rig in rigs:
+        cameras = load_rig(rig, size_px)
+        tracker = Tracker(cameras, ms, table=table, fps=15.0)
+        for p, sex in bodies:
+            with Studio(cameras, ms, BodyDimensions.from_percentile(p, sex)) as studio:
+                for k, case in enumerate(poses):
+                    yield run_case(studio, tracker, rig, body_label(p, sex), case, frames=frames,
+                                   noise_sigma=noise_sigma, seed=k)
+
+
+def _short(text: str, n: int = 90) -> str:
+    return text if len(text) <= n else text[: n - 3] + "..."
+
+
+def table_markdown(results: Sequence[CaseResult]) -> str:
+    """Two markdown tables: reference poses (rig x body) and wrong poses (rig x pose)."""
+    ref = [r for r in results if not r.wrong_pose]
+    bad = [r for r in results if r.wrong_pose]
+    lines = []
+    if ref:
+        bodies = list(dict.fromkeys(r.body for r in ref))
+        lines += ["| rig | " + " | ".join(bodies) + " |", "| --- |" + " --- |" * len(bodies)]
+        for rig in dict.fromkeys(r.rig for r in ref):
+            cells = []
+            for body in bodies:
+                cell = [r for r in ref if r.rig == rig and r.body == body]
+                cells.append(_cell(cell))
+            lines.append(f"| {rig} | " + " | ".join(cells) + " |")
+        lines.append("")
+        lines.append("Cell: poses with every marker named right / poses; then what happened in the others "
+                     "(partly named: the unseen markers; waiting: the tracker's message; WRONG: misnamed markers).")
+    if bad:
+        lines += ["", "| rig | pose | " + " | ".join(dict.fromkeys(r.body for r in bad)) + " |",
+                  "| --- | --- |" + " --- |" * len(dict.fromkeys(r.body for r in bad))]
+        for rig, pose in dict.fromkeys((r.rig, r.pose) for r in bad):
+            cells = []
+            for r in (r for r in bad if r.rig == rig and r.pose == pose):
+                if r.identified:
+                    cells.append(f"NAMED ({r.named} markers{', WRONG ' + ','.join(r.wrong) if r.wrong else ''})")
+                else:
+                    cells.append(("" if r.rule_message else "(counts) ") + _short(r.message, 70))
+            lines.append(f"| {rig} | {pose} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _cell(cases: Sequence[CaseResult]) -> str:
+    ok = sum(c.passed for c in cases)
+    text = f"{ok}/{len(cases)}"
+    wrong = sorted({n for c in cases for n in c.wrong})
+    partly = [c for c in cases if c.identified and c.unseen and not c.wrong]
+    waiting = [c for c in cases if not c.identified]
+    notes = []
+    if wrong:
+        notes.append(f"WRONG {','.join(wrong)} in {sum(bool(c.wrong) for c in cases)}")
+    if partly:
+        unseen = sorted({n for c in partly for n in c.unseen})
+        notes.append(f"{len(partly)} partly named (unseen {','.join(unseen)})")
+    if waiting:
+        notes.append(f"{len(waiting)} waiting: {_short(waiting[0].message, 60)}")
+    return text + (" " + "; ".join(notes) if notes else "")
+
+
+def summary(results: Sequence[CaseResult]) -> str:
+    """One line per rig: does the rig pass every case?"""
+    out = []
+    for rig in dict.fromkeys(r.rig for r in results):
+        rr = [r for r in results if r.rig == rig]
+        ref = [r for r in rr if not r.wrong_pose]
+        bad = [r for r in rr if r.wrong_pose]
+        wrong = sum(bool(r.wrong) for r in rr)
+        verdict = "PASS" if all(r.passed for r in rr) else "FAIL"
+        out.append(f"{rig}: {verdict}  reference poses named right {sum(r.passed for r in ref)}/{len(ref)}, "
+                   f"partly named {sum(r.identified and bool(r.unseen) and not r.wrong for r in ref)}, "
+                   f"wrong names {wrong}, wrong poses explained {sum(r.passed for r in bad)}/{len(bad)}")
+    return "\n".join(out)
+
+
+def main(argv: Iterable[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m tracking.sim.identify_sweep", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rig", action="append", default=None, help="rig name or YAML (repeat; default: every built-in rig)")
+    parser.add_argument("--size", default="640x480", help="image size WxH (default: %(default)s)")
+    parser.add_argument("--frames", type=int, default=3, help="frames tracked per case (default: %(default)s)")
+    parser.add_argument("--corners", type=int, default=6, help="corner perturbations per body (default: %(default)s)")
+    parser.add_argument("--random", type=int, default=4, help="random perturbations per body (default: %(default)s)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--quick", action="store_true", help="bodies p5 female and p95 male, 2 corners, 1 random")
+    args = parser.parse_args(list(argv) if argv is not None else None)
+    try:
+        w, h = (int(v) for v in args.size.lower().split("x"))
+    except ValueError:
+        parser.error(f"--size {args.size}: give WxH, e.g. 640x480")
+    rigs = args.rig or available("rigs")
+    bodies = ((5, "female"), (95, "male")) if args.quick else BODIES
+    corners, rand = (2, 1) if args.quick else (args.corners, args.random)
+    poses = perturbed_poses(corners, rand, seed=args.seed) + wrong_poses()
+    results = []
+    total = len(rigs) * len(bodies) * len(poses)
+    for n, r in enumerate(sweep(rigs, bodies, poses, size_px=(w, h), frames=args.frames), 1):
+        results.append(r)
+        print(f"\r{n}/{total} {r.rig} {r.body} {r.pose}".ljust(70), end="", file=sys.stderr, flush=True)
+    print("", file=sys.stderr)
+    print(table_markdown(results))
+    print()
+    print(summary(results))
+    return 0 if all(r.passed for r in results) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
