@@ -356,9 +356,11 @@ class Identifier:
 
         Each unseen marker gets a stand-in point that satisfies every rule, so the search names
         the seen points and says which markers are unseen. The names are given only when they
-        are certain: at most ``max_unseen`` markers unseen, and for every named point no other
-        naming comes within half a rule margin of satisfying the rules (a missing point can make
-        two namings fit, e.g. an elbow marker and a wrist marker of one colour on one side).
+        are certain: at most ``max_unseen`` markers unseen, every rule kept by twice its margin
+        (a rule with an unseen marker checks nothing, so the others must hold clearly), and for
+        every named point no other naming comes within half a rule margin of satisfying the rules
+        (a missing point can make two namings fit, e.g. an elbow marker and a wrist marker of one
+        colour on one side).
 
         Returns:
             The identification, ``index`` -1 for the unseen markers; None while it is not
@@ -390,6 +392,11 @@ class Identifier:
         found = self._best(pts, col)  # raises when the seen points break the rules
         if n_unseen > self.max_unseen or found.nodes > self.max_nodes:
             return None
+        # a rule with an unseen marker checks nothing, so the others must hold clearly (a wrong
+        # pose, hands on the thighs with the inner wrist markers hidden, kept every rule within
+        # 4 mm with the elbow and wrist markers swapped)
+        if self._rule_margins(found.slack_m).min() < self.min_order_margin_m:
+            return None
         bar = -0.5 * self.min_order_margin_m
         n_seen = len(keep)
         for m, q in enumerate(found.index):
@@ -397,6 +404,32 @@ class Identifier:
                 log.debug("identification with %d unseen markers is ambiguous for %s", n_unseen, self.markerset.names[m])
                 return None
         return self._result(found, np.append(keep, np.full(n_unseen, -1)))
+
+    def distance_fit_m(self, marker: int, p_cand_m: np.ndarray, positions_m: np.ndarray, known: np.ndarray
+                       ) -> np.ndarray:
+        """How well each candidate point fits the distance rules of ``marker`` to the known markers.
+
+        The distance rules (markers on one bone) hold in any pose, so they place a marker that
+        was unseen at identification once it shows up (the tracker's re-acquisition).
+
+        Args:
+            marker: marker index (marker-set order).
+            p_cand_m: (N, 3) float64 candidate points, world metres.
+            positions_m: (M, 3) float64 marker positions, world metres.
+            known: (M,) bool, markers whose position is trusted (measured this frame).
+
+        Returns:
+            (N,) float64 worst slack of the rules (metres, >= 0: every rule holds); +inf for all
+            when no distance rule links ``marker`` to a known marker.
+        """
+        known = np.asarray(known, dtype=bool)
+        rows = self.c_dist & (((self.c_a == marker) & known[self.c_b]) | ((self.c_b == marker) & known[self.c_a]))
+        p_cand_m = np.asarray(p_cand_m, dtype=np.float64).reshape(-1, 3)
+        if not rows.any():
+            return np.full(len(p_cand_m), np.inf)
+        other = np.where(self.c_a[rows] == marker, self.c_b[rows], self.c_a[rows])
+        d = np.linalg.norm(p_cand_m[:, None, :] - positions_m[other][None, :, :], axis=-1)
+        return np.minimum(d - self.c_lo[rows], self.c_hi[rows] - d).min(axis=1)
 
     @staticmethod
     def _checked(p_world_m: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
