@@ -35,6 +35,7 @@ from tracking.sim.body import (
     REFERENCE_SUPINATION_DEG,
     ArmPose,
     BodyDimensions,
+    BodyModel,
     Pose,
     reference_arm,
 )
@@ -49,8 +50,23 @@ BODIES: tuple[tuple[float, str], ...] = ((5, "female"), (50, "female"), (50, "ma
 #: A named marker is right when it lies this near to its own true position.
 NAME_TOLERANCE_M = 0.015
 
-#: The perturbed arm angles, in :class:`ArmDelta` order.
-ARM_ANGLES = ("flexion", "abduction", "rotation", "elbow")
+#: The chair seat of the simulated room (tracking/sim/room.py): top height and half width/depth.
+SEAT_TOP_M = 0.45
+SEAT_HALF_SIZE_M = 0.23
+
+
+def seat_clash(body: BodyModel, pose: Pose, markerset: MarkerSet) -> tuple[str, ...]:
+    """Markers whose ball would be inside the chair seat (the body model does not stop the hand).
+
+    A small body with the arm hanging close to the side, straight and slightly back puts the wrist
+    beside the hip at seat level: the hand would rest on the seat instead, so the pose cannot be
+    taken as perturbed.
+    """
+    p = body.markers_m(pose)
+    r = markerset.radius_m
+    inside = ((np.abs(p[:, 0]) < SEAT_HALF_SIZE_M + r) & (np.abs(p[:, 2]) < SEAT_HALF_SIZE_M + r)
+              & (p[:, 1] - r < SEAT_TOP_M))
+    return tuple(n for n, k in zip(markerset.names, inside) if k)
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +147,8 @@ class CaseResult:
         unseen: names of markers left unnamed (lost) after the last frame.
         message: the tracker's last message while waiting ("" once identified).
         rule_message: the message is one of the marker set's rule messages (a therapist message).
+        clash: markers that would be inside the chair seat: the pose cannot be taken and the case
+            was not run (counted apart).
     """
 
     rig: str
@@ -143,6 +161,7 @@ class CaseResult:
     unseen: tuple[str, ...]
     message: str
     rule_message: bool
+    clash: tuple[str, ...] = ()
 
     @property
     def identified(self) -> bool:
@@ -164,6 +183,9 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
              noise_sigma: float = 1.5, seed: int = 0) -> CaseResult:
     """Render ``case.pose`` ``frames`` times (fresh noise each) and track it from a reset tracker."""
     ms = studio.markerset
+    clash = seat_clash(studio.body, case.pose, ms)
+    if clash:
+        return CaseResult(rig, body, case.name, case.wrong, -1, 0, (), (), "", False, clash)
     tracker.reset()
     identified_frame, message, sample, truth = -1, "", None, None
     for k in range(frames):
@@ -209,8 +231,9 @@ def _short(text: str, n: int = 90) -> str:
 
 def table_markdown(results: Sequence[CaseResult]) -> str:
     """Two markdown tables: reference poses (rig x body) and wrong poses (rig x pose)."""
-    ref = [r for r in results if not r.wrong_pose]
-    bad = [r for r in results if r.wrong_pose]
+    skipped = [r for r in results if r.clash]
+    ref = [r for r in results if not r.wrong_pose and not r.clash]
+    bad = [r for r in results if r.wrong_pose and not r.clash]
     lines = []
     if ref:
         bodies = list(dict.fromkeys(r.body for r in ref))
@@ -223,7 +246,12 @@ def table_markdown(results: Sequence[CaseResult]) -> str:
             lines.append(f"| {rig} | " + " | ".join(cells) + " |")
         lines.append("")
         lines.append("Cell: poses with every marker named right / poses; then what happened in the others "
-                     "(partly named: the unseen markers; waiting: the tracker's message; WRONG: misnamed markers).")
+                     "(partly named: names given are right, the unseen markers are left for re-acquisition; "
+                     "waiting: the tracker's message; WRONG: misnamed markers).")
+    if skipped:
+        cases = sorted({(r.body, r.pose) for r in skipped})
+        lines.append(f"Not run ({len(cases)} body-pose cases, in every rig): a wrist ball would be inside the chair "
+                     "seat: " + "; ".join(f"{b} {p}" for b, p in cases) + ".")
     if bad:
         lines += ["", "| rig | pose | " + " | ".join(dict.fromkeys(r.body for r in bad)) + " |",
                   "| --- | --- |" + " --- |" * len(dict.fromkeys(r.body for r in bad))]
@@ -256,18 +284,27 @@ def _cell(cases: Sequence[CaseResult]) -> str:
 
 
 def summary(results: Sequence[CaseResult]) -> str:
-    """One line per rig: does the rig pass every case?"""
+    """One line per rig: PASS (every reference pose fully named right, no wrong pose named),
+    PASS-PARTLY (some reference poses named without their unseen markers, every name right) or FAIL."""
     out = []
     for rig in dict.fromkeys(r.rig for r in results):
-        rr = [r for r in results if r.rig == rig]
+        rr = [r for r in results if r.rig == rig and not r.clash]
         ref = [r for r in rr if not r.wrong_pose]
         bad = [r for r in rr if r.wrong_pose]
+        full = sum(r.passed for r in ref)
+        partly = sum(r.identified and bool(r.unseen) and not r.wrong for r in ref)
+        waiting = sum(not r.identified for r in ref)
         wrong = sum(bool(r.wrong) for r in rr)
-        verdict = "PASS" if all(r.passed for r in rr) else "FAIL"
-        out.append(f"{rig}: {verdict}  reference poses named right {sum(r.passed for r in ref)}/{len(ref)}, "
-                   f"partly named {sum(r.identified and bool(r.unseen) and not r.wrong for r in ref)}, "
-                   f"wrong names {wrong}, wrong poses not named {sum(r.passed for r in bad)}/{len(bad)} "
-                   f"(by a broken rule {sum(r.passed and r.rule_message for r in bad)})")
+        bad_ok = all(r.passed for r in bad)
+        if full == len(ref) and bad_ok:
+            verdict = "PASS"
+        elif full + partly == len(ref) and bad_ok:
+            verdict = "PASS-PARTLY"
+        else:
+            verdict = "FAIL"
+        out.append(f"{rig}: {verdict}  reference poses: every marker named right {full}/{len(ref)}, partly named "
+                   f"{partly}, waiting {waiting}, wrong names {wrong}; wrong poses not named "
+                   f"{sum(r.passed for r in bad)}/{len(bad)} (by a broken rule {sum(r.passed and r.rule_message for r in bad)})")
     return "\n".join(out)
 
 
@@ -298,7 +335,7 @@ def main(argv: Iterable[str] | None = None) -> int:
     print(table_markdown(results))
     print()
     print(summary(results))
-    return 0 if all(r.passed for r in results) else 1
+    return 0 if all(r.passed for r in results if not r.clash) else 1
 
 
 if __name__ == "__main__":
