@@ -202,6 +202,7 @@ class Identifier:
         self.rules = rules
         self.max_nodes = max_nodes
         self.max_unseen = max_unseen
+        self._last_slack: tuple[object, np.ndarray | None] = (None, None)
         self.max_explained_unseen = max_explained_unseen
         self.colour = np.asarray(markerset.colour_index, dtype=np.int64)
         self.words = palette_words(markerset.palette)
@@ -312,7 +313,10 @@ class Identifier:
         point) forbids that one naming.
         """
         c_pat = (p_world_m - np.nanmean(p_world_m, axis=0)) @ patient_axes(yaw)
-        slack = self._pair_slack(p_world_m, c_pat, hard_distances)
+        key = (p_world_m.tobytes(), yaw, hard_distances)
+        if self._last_slack[0] != key:  # the uniqueness checks search the same frame many times
+            self._last_slack = (key, self._pair_slack(p_world_m, c_pat, hard_distances))
+        slack = self._last_slack[1]
         domains = [0] * len(self.colour)
         for m, c in enumerate(self.colour):
             for q in np.flatnonzero(colour == c):
