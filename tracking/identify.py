@@ -192,7 +192,7 @@ class Identifier:
     """
 
     def __init__(self, markerset: MarkerSet, rules: IdentificationRules | None = None, *, max_nodes: int = 200_000,
-                 max_unseen: int = 2, max_explained_unseen: int = 4):
+                 max_unseen: int = 3, max_explained_unseen: int = 4):
         rules = rules if rules is not None else markerset.identification
         if rules is None:
             raise ContentError(

@@ -49,6 +49,9 @@ BODIES: tuple[tuple[float, str], ...] = ((5, "female"), (50, "female"), (50, "ma
 
 #: A named marker is right when it lies this near to its own true position.
 NAME_TOLERANCE_M = 0.015
+#: A named marker farther than NAME_TOLERANCE_M from its ball but nearer to it than to any other
+#: marker and within this distance is badly measured (a ball seen only partly), not misnamed.
+MEASURE_TOLERANCE_M = 0.04
 
 #: The chair seat of the simulated room (tracking/sim/room.py): top height and half width/depth.
 SEAT_TOP_M = 0.45
@@ -143,7 +146,9 @@ class CaseResult:
         wrong_pose: the pose breaks the rules on purpose.
         identified_frame: frame of identification, -1 if the tracker kept waiting.
         named: markers named (measured or estimated) after the last frame.
-        wrong: names of markers placed on something else than their ball (> NAME_TOLERANCE_M).
+        wrong: names of markers placed on something else than their ball (another marker's ball,
+            or farther than MEASURE_TOLERANCE_M).
+        inaccurate: names of markers on their own ball but measured more than NAME_TOLERANCE_M off.
         unseen: names of markers left unnamed (lost) after the last frame.
         message: the tracker's last message while waiting ("" once identified).
         rule_message: the message is one of the marker set's rule messages (a therapist message).
@@ -162,6 +167,7 @@ class CaseResult:
     message: str
     rule_message: bool
     clash: tuple[str, ...] = ()
+    inaccurate: tuple[str, ...] = ()
 
     @property
     def identified(self) -> bool:
@@ -185,7 +191,7 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
     ms = studio.markerset
     clash = seat_clash(studio.body, case.pose, ms)
     if clash:
-        return CaseResult(rig, body, case.name, case.wrong, -1, 0, (), (), "", False, clash)
+        return CaseResult(rig, body, case.name, case.wrong, -1, 0, (), (), "", False, clash=clash)
     tracker.reset()
     identified_frame, message, sample, truth = -1, "", None, None
     for k in range(frames):
@@ -200,12 +206,17 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
             message = sample.message
     named_mask = sample.status != MarkerStatus.LOST
     d = np.linalg.norm(sample.positions_m - truth, axis=1)
-    wrong = tuple(n for n, ok, dist in zip(ms.names, named_mask, d) if ok and not dist < NAME_TOLERANCE_M)
+    to_all = np.linalg.norm(sample.positions_m[:, None, :] - truth[None, :, :], axis=-1)
+    own_ball = np.nan_to_num(to_all, nan=np.inf).argmin(axis=1) == np.arange(len(d))
+    off = named_mask & ~(d < NAME_TOLERANCE_M)
+    near = own_ball & (d < MEASURE_TOLERANCE_M)
+    wrong = tuple(n for n, k in zip(ms.names, off & ~near) if k)
+    inaccurate = tuple(n for n, k in zip(ms.names, off & near) if k)
     unseen = tuple(n for n, ok in zip(ms.names, named_mask) if not ok) if identified_frame >= 0 else ()
     rules = ms.identification.rules if ms.identification is not None else ()
     rule_message = any(message.startswith(r.message) for r in rules)
     return CaseResult(rig, body, case.name, case.wrong, identified_frame, int(named_mask.sum()), wrong, unseen,
-                      message if identified_frame < 0 else "", rule_message)
+                      message if identified_frame < 0 else "", rule_message, inaccurate=inaccurate)
 
 
 def sweep(rigs: Sequence[str], bodies: Sequence[tuple[float, str]] = BODIES,
@@ -247,7 +258,8 @@ def table_markdown(results: Sequence[CaseResult]) -> str:
         lines.append("")
         lines.append("Cell: poses with every marker named right / poses; then what happened in the others "
                      "(partly named: names given are right, the unseen markers are left for re-acquisition; "
-                     "waiting: the tracker's message; WRONG: misnamed markers).")
+                     "waiting: the tracker's message; WRONG: misnamed markers; measured off: named right but "
+                     "the point is more than 15 mm from the ball, a partly hidden ball).")
     if skipped:
         cases = sorted({(r.body, r.pose) for r in skipped})
         lines.append(f"Not run ({len(cases)} body-pose cases, in every rig): a wrist ball would be inside the chair "
@@ -280,6 +292,9 @@ def _cell(cases: Sequence[CaseResult]) -> str:
         notes.append(f"{len(partly)} partly named (unseen {','.join(unseen)})")
     if waiting:
         notes.append(f"{len(waiting)} waiting: {_short(waiting[0].message, 60)}")
+    inaccurate = sorted({n for c in cases for n in c.inaccurate})
+    if inaccurate:
+        notes.append(f"measured > {NAME_TOLERANCE_M * 1000:.0f} mm off: {','.join(inaccurate)}")
     return text + (" " + "; ".join(notes) if notes else "")
 
 

@@ -10,8 +10,8 @@ fraction per candidate, and scores layouts made of the candidates:
 - a marker is *seen* by a layout when one camera sees >= ``whole`` of its ball and another
   >= ``part`` (what the two-camera gates of the measurement accept), or three cameras see
   >= ``part``; a camera whose disc of the marker touches another ball of its colour sees neither;
-- identification names the markers with up to two unseen (the tracker finds those later), so a
-  layout's cost is the number of cases (body and pose) with more than two markers not seen, then
+- identification names the markers with up to three unseen (the tracker finds those later), so a
+  layout's cost is the number of cases (body and pose) with more than three markers not seen, then
   the number of (case, marker) not seen, then the worst second-best visible fraction.
 
 Four-camera layouts are two pairs mirrored about the patient's midline, three-camera layouts a
@@ -88,7 +88,7 @@ def visibility(places: Sequence[Place], poses: Sequence[SweepPose], bodies: Sequ
     return np.stack(out)
 
 
-def layout_cost(vis: np.ndarray, *, whole: float = 0.9, part: float = 0.8, max_unseen: int = 2
+def layout_cost(vis: np.ndarray, *, whole: float = 0.9, part: float = 0.8, max_unseen: int = 3
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Cost of layouts.
 
@@ -188,7 +188,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         for limit in args.max_azimuth or (180.0, 100.0):
             print(f"# {n} cameras, |azimuth| <= {limit:g}")
             for over, missed, second, idx in best_layouts(vis, places, n, max_abs_azimuth=limit, top=args.top):
-                print(f"#   {over} cases with more than 2 markers unseen, {missed} markers unseen in all")
+                print(f"#   {over} cases with more than 3 markers unseen, {missed} markers unseen in all")
                 for k, i in enumerate(idx, 1):
                     print(places[i].yaml(f"cam{k}"))
     return 0
