@@ -202,8 +202,8 @@ class Identifier:
         self.rules = rules
         self.max_nodes = max_nodes
         self.max_unseen = max_unseen
-        self._last_slack: tuple[object, np.ndarray | None] = (None, None)
         self.max_explained_unseen = max_explained_unseen
+        self._last_slack: tuple[object, np.ndarray | None] = (None, None)  # (frame key, pair slacks)
         self.colour = np.asarray(markerset.colour_index, dtype=np.int64)
         self.words = palette_words(markerset.palette)
         idx = {n: i for i, n in enumerate(markerset.names)}

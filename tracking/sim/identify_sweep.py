@@ -337,6 +337,8 @@ def main(argv: Iterable[str] | None = None) -> int:
         w, h = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         parser.error(f"--size {args.size}: give WxH, e.g. 640x480")
+    if args.frames < 1:
+        parser.error(f"--frames {args.frames}: give 1 or more")
     rigs = args.rig or available("rigs")
     bodies = ((5, "female"), (95, "male")) if args.quick else BODIES
     corners, rand = (2, 1) if args.quick else (args.corners, args.random)
