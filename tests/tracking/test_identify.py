@@ -346,9 +346,12 @@ def test_measured_points_are_identified_or_the_missing_colour_is_named(measured,
             result = try_identify(points, identifier)
             if result is not None:  # named without the unseen markers: every name given is right
                 named = result.index >= 0
-                d = np.linalg.norm(points.p_world_m[result.index[named]] - truth_m[named], axis=1)
-                assert d.max() < 0.010, (rig, p, sex, MS.names[int(np.flatnonzero(named)[np.argmax(d)])])
-                assert (~named == ~seen).all(), (rig, p, sex)
+                pts_named = points.p_world_m[result.index[named]]
+                nearest = np.linalg.norm(pts_named[:, None] - truth_m[None], axis=-1).argmin(axis=1)
+                assert (nearest == np.flatnonzero(named)).all(), (rig, p, sex)
+                # on its own ball (a partly hidden ball's point may be more than 10 mm off)
+                assert np.linalg.norm(pts_named - truth_m[named], axis=1).max() < 0.02, (rig, p, sex)
+                assert not seen[~named].any(), (rig, p, sex)
             with pytest.raises(IdentificationError) as err:
                 identifier.identify(points.p_world_m, points.colour)
             missing_colours = {identifier.words[c] for c in MS.colour_index[~seen]}
