@@ -12,8 +12,11 @@ names; the message should be the broken rule's therapist message (it is the poin
 the pose hides markers and the seen ones keep the rules).
 
 A case *passes* when the tracker names every marker and every name is right. A case in which
-some markers are named and the others are left for re-acquisition (seen by one camera only) is
-counted apart, and so is a case that stays waiting; a wrong name is a failure whatever else.
+some markers are named right and the others (seen by one camera only) are left for re-acquisition
+is *partly named*; a case that stays waiting is counted apart too; a wrong name is a failure
+whatever else. A rig is PASS when every case passes, PASS-PARTLY when every case is named (some
+partly) without a wrong name and no wrong pose is named, FAIL otherwise. Poses a body cannot take
+(a wrist ball inside the chair seat) are not run.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ from tracking.sim.body import (
     reference_arm,
 )
 from tracking.sim.rigs import load_rig
+from tracking.sim.room import SEAT_TOP_M
 from tracking.sim.studio import Studio
 from tracking.status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
@@ -53,8 +57,7 @@ NAME_TOLERANCE_M = 0.015
 #: marker and within this distance is badly measured (a ball seen only partly), not misnamed.
 MEASURE_TOLERANCE_M = 0.04
 
-#: The chair seat of the simulated room (tracking/sim/room.py): top height and half width/depth.
-SEAT_TOP_M = 0.45
+#: Half width and depth of the chair seat of the simulated room (tracking/sim/room.py).
 SEAT_HALF_SIZE_M = 0.23
 
 
