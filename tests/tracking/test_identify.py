@@ -299,7 +299,7 @@ def test_the_tracker_waits_for_certain_names_and_is_told_about_a_wrong_pose():
 # --------------------------------------------------------------------------- measured points
 
 
-RIGS = ["ring4", "front4", "corners4", "tri3", "front3"]
+RIGS = ["ring4", "front4", "corners4", "tri3", "front3", "wall3"]
 MEASURED_BODIES = [(5, "female"), (50, "female"), (95, "male")]
 
 
