@@ -37,9 +37,17 @@ The patient's frame
     patient turned beyond ``max_turn_deg`` (the rules hold in their own frame) is told to turn
     the chair. Coordinates are relative to the points' centroid: nothing depends on the origin.
 
-For the tracker: :func:`try_identify` returns None while the point counts per colour do not fit
-the marker set (a marker hidden for a moment: wait for the next frame) and raises
-:class:`IdentificationError` when they fit but the pose breaks the rules.
+Unseen markers
+    In some camera layouts a marker of the reference pose is seen by one camera only (the inner
+    elbow marker, half hidden by the trunk) and gets no 3D point. Each unseen marker then gets a
+    stand-in point that satisfies every rule: the search names the seen points, and the names
+    are given when no other naming comes near satisfying the rules (the tracker's re-acquisition
+    finds the unseen marker later, by the rules' distances to its named neighbours). A wrong pose
+    often hides markers too: the stand-ins let the explanation name the broken rule anyway.
+
+For the tracker: :func:`try_identify` returns None while the names are not certain (too many
+markers unseen, a stray point: wait for the next frame) and raises :class:`IdentificationError`
+when the pose breaks the rules.
 """
 
 from __future__ import annotations
@@ -79,7 +87,8 @@ class Identification:
 
     Attributes:
         index: (M,) int64 index into the points for each marker of the marker set (marker-set
-            order), -1 for none (never -1 from :func:`identify`, which needs every marker).
+            order), -1 for an unseen marker (only from :meth:`Identifier.identify_with_unseen`;
+            :func:`identify` needs every marker).
         margin_m: the worst rule margin: min over rules of (separation - the rule's min margin),
             metres; >= 0 when every rule holds.
         rule_margins_m: (R,) float64 margin of each rule of ``markerset.identification.rules``.
@@ -147,10 +156,15 @@ def _bitsets(ok: np.ndarray) -> list[list[int]]:
     return [[int.from_bytes(row.tobytes(), "little") for row in m] for m in packed]
 
 
-def _yaw_from_pairs(p_world_m: np.ndarray, pairs: np.ndarray) -> float:
-    """Yaw (radians) from the mean horizontal left -> right direction of (left, right) points."""
+def _yaw_from_pairs(p_world_m: np.ndarray, pairs: np.ndarray, default: float = 0.0) -> float:
+    """Yaw (radians) from the mean horizontal left -> right direction of (left, right) points.
+
+    Pairs with a stand-in (NaN) point are left out; ``default`` when none is left.
+    """
     d = p_world_m[pairs[:, 1]] - p_world_m[pairs[:, 0]]
-    d = d[:, [0, 2]]
+    d = d[np.isfinite(d).all(axis=1)][:, [0, 2]]
+    if len(d) == 0:
+        return default
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     vx, vz = d.sum(axis=0)
     return math.atan2(-vz, vx)
@@ -172,9 +186,13 @@ class Identifier:
         rules: other rules (e.g. for a different reference pose).
         max_nodes: search-node budget per search (a safety bound for the live tracker; a search
             under the rules' bar needs a few hundred).
+        max_unseen: :meth:`identify_with_unseen` names the markers with at most this many unseen.
+        max_explained_unseen: with up to this many unseen, a pose that breaks the rules is still
+            explained (a wrong pose often hides markers); with more, the point counts are reported.
     """
 
-    def __init__(self, markerset: MarkerSet, rules: IdentificationRules | None = None, *, max_nodes: int = 200_000):
+    def __init__(self, markerset: MarkerSet, rules: IdentificationRules | None = None, *, max_nodes: int = 200_000,
+                 max_unseen: int = 3, max_explained_unseen: int = 4):
         rules = rules if rules is not None else markerset.identification
         if rules is None:
             raise ContentError(
@@ -183,6 +201,9 @@ class Identifier:
         self.markerset = markerset
         self.rules = rules
         self.max_nodes = max_nodes
+        self.max_unseen = max_unseen
+        self.max_explained_unseen = max_explained_unseen
+        self._last_slack: tuple[object, np.ndarray | None] = (None, None)  # (frame key, pair slacks)
         self.colour = np.asarray(markerset.colour_index, dtype=np.int64)
         self.words = palette_words(markerset.palette)
         idx = {n: i for i, n in enumerate(markerset.names)}
@@ -203,6 +224,8 @@ class Identifier:
         self.c_dist = np.array(cols[3], bool)
         self.c_axis = np.array(cols[4], np.int64)
         self.c_sign, self.c_margin, self.c_lo, self.c_hi = (np.array(c, np.float64) for c in cols[5:])
+        orders = self.c_margin[~self.c_dist]
+        self.min_order_margin_m = float(orders.min()) if orders.size else 0.0
         # unordered marker pairs (i < j) with at least one constraint, and which constraints
         lo_hi = np.sort(np.stack([self.c_a, self.c_b], axis=1), axis=1)
         self.pairs, self.c_pair = np.unique(lo_hi, axis=0, return_inverse=True)
@@ -262,6 +285,9 @@ class Identifier:
         order = self.c_sign * (c_pat[pb, ax] - c_pat[pa, ax]) - self.c_margin
         d = np.linalg.norm(p_m[pb] - p_m[pa], axis=-1)
         dist = np.minimum(d - self.c_lo, self.c_hi - d)
+        # an unseen marker's stand-in point (NaN) satisfies every constraint
+        order = np.where(np.isnan(order), np.inf, order)
+        dist = np.where(np.isnan(dist), np.inf, dist)
         if hard_distances:
             dist = np.where(dist >= 0, np.inf, -np.inf)
         return np.where(self.c_dist, dist, order)
@@ -278,18 +304,25 @@ class Identifier:
         return s
 
     def _search(self, p_world_m: np.ndarray, colour: np.ndarray, yaw: float, bars_m: Iterable[float],
-                hard_distances: bool = False) -> _Found | None:
+                hard_distances: bool = False, exclude: tuple[int, int] | None = None) -> _Found | None:
         """The assignment with the largest worst slack, in the frame of ``yaw``.
 
         ``bars_m`` are lower and lower bars on the worst slack: the search stops at the first
-        bar above which an assignment exists, so a good bar keeps the tree small.
+        bar above which an assignment exists, so a good bar keeps the tree small. Rows of NaN are
+        stand-ins for unseen markers (they satisfy every constraint). ``exclude`` = (marker,
+        point) forbids that one naming.
         """
-        c_pat = (p_world_m - p_world_m.mean(axis=0)) @ patient_axes(yaw)
-        slack = self._pair_slack(p_world_m, c_pat, hard_distances)
+        c_pat = (p_world_m - np.nanmean(p_world_m, axis=0)) @ patient_axes(yaw)
+        key = (p_world_m.tobytes(), yaw, hard_distances)
+        if self._last_slack[0] != key:  # the uniqueness checks search the same frame many times
+            self._last_slack = (key, self._pair_slack(p_world_m, c_pat, hard_distances))
+        slack = self._last_slack[1]
         domains = [0] * len(self.colour)
         for m, c in enumerate(self.colour):
             for q in np.flatnonzero(colour == c):
                 domains[m] |= 1 << int(q)
+        if exclude is not None:
+            domains[exclude[0]] &= ~(1 << exclude[1])
 
         def slack_of(index: np.ndarray, hard: bool = hard_distances) -> np.ndarray:
             return self._slack(p_world_m, c_pat, index[self.c_a], index[self.c_b], hard)
@@ -313,18 +346,111 @@ class Identifier:
 
     def identify(self, p_world_m: np.ndarray, colour: np.ndarray) -> Identification:
         """Label the points of one frame; see :func:`identify`."""
-        p_world_m = np.asarray(p_world_m, dtype=np.float64)
-        colour = np.asarray(colour, dtype=np.int64)
-        if p_world_m.ndim != 2 or p_world_m.shape[1] != 3 or colour.shape != (p_world_m.shape[0],):
-            raise ValueError(f"expected points (P, 3) and colours (P,), got {p_world_m.shape} and {colour.shape}")
+        p_world_m, colour = self._checked(p_world_m, colour)
         finite = np.isfinite(p_world_m).all(axis=1)
         problem = self.count_problem(colour[finite])
         if problem is not None:
             raise IdentificationError(problem)
         keep = np.flatnonzero(finite)
-        pts, col = p_world_m[keep], colour[keep]
+        found = self._best(p_world_m[keep], colour[keep])
+        return self._result(found, keep)
+
+    def identify_with_unseen(self, p_world_m: np.ndarray, colour: np.ndarray) -> Identification | None:
+        """Label a frame in which some markers have no point (hidden, or seen by one camera only).
+
+        Each unseen marker gets a stand-in point that satisfies every rule, so the search names
+        the seen points and says which markers are unseen. The names are given only when they
+        are certain: at most ``max_unseen`` markers unseen, every rule kept by twice its margin
+        (a rule with an unseen marker checks nothing, so the others must hold clearly), and for
+        every named point no other naming comes within half a rule margin of satisfying the rules
+        (a missing point can make two namings fit, e.g. an elbow marker and a wrist marker of one
+        colour on one side).
+
+        Returns:
+            The identification, ``index`` -1 for the unseen markers; None while it is not
+            certain, or when some colour has more points than markers (wait for the next frame).
+
+        Raises:
+            IdentificationError: no naming of the seen points satisfies the rules (the pose is
+                wrong: the message says which rule, in plain words), or the patient sits turned
+                too far.
+        """
+        p_world_m, colour = self._checked(p_world_m, colour)
+        finite = np.isfinite(p_world_m).all(axis=1)
+        keep = np.flatnonzero(finite)
+        n_col = len(self.words)
+        col = colour[keep]
+        if np.any((col < 0) | (col >= n_col)):
+            return None
+        deficit = np.bincount(self.colour, minlength=n_col) - np.bincount(col, minlength=n_col)
+        if np.any(deficit < 0):
+            return None
+        n_unseen = int(deficit.sum())
+        if n_unseen == 0:
+            return self._result(self._best(p_world_m[keep], col), keep)
+        if n_unseen > self.max_explained_unseen:
+            return None
+        stand_in = np.repeat(np.arange(n_col), deficit)
+        pts = np.vstack([p_world_m[keep], np.full((n_unseen, 3), np.nan)])
+        col = np.concatenate([col, stand_in])
+        found = self._best(pts, col)  # raises when the seen points break the rules
+        if n_unseen > self.max_unseen or found.nodes > self.max_nodes:
+            return None
+        # a rule with an unseen marker checks nothing, so the others must hold clearly (a wrong
+        # pose, hands on the thighs with the inner wrist markers hidden, kept every rule within
+        # 4 mm with the elbow and wrist markers swapped)
+        if self._rule_margins(found.slack_m).min() < self.min_order_margin_m:
+            return None
+        bar = -0.5 * self.min_order_margin_m
+        n_seen = len(keep)
+        for m, q in enumerate(found.index):
+            if q < n_seen and self._search(pts, col, found.yaw, [bar], exclude=(m, int(q))) is not None:
+                log.debug("identification with %d unseen markers is ambiguous for %s", n_unseen, self.markerset.names[m])
+                return None
+        return self._result(found, np.append(keep, np.full(n_unseen, -1)))
+
+    def distance_fit_m(self, marker: int, p_cand_m: np.ndarray, positions_m: np.ndarray, known: np.ndarray
+                       ) -> np.ndarray:
+        """How well each candidate point fits the distance rules of ``marker`` to the known markers.
+
+        The distance rules (markers on one bone) hold in any pose, so they place a marker that
+        was unseen at identification once it shows up (the tracker's re-acquisition).
+
+        Args:
+            marker: marker index (marker-set order).
+            p_cand_m: (N, 3) float64 candidate points, world metres.
+            positions_m: (M, 3) float64 marker positions, world metres.
+            known: (M,) bool, markers whose position is trusted (measured this frame).
+
+        Returns:
+            (N,) float64 worst slack of the rules (metres, >= 0: every rule holds); +inf for all
+            when no distance rule links ``marker`` to a known marker.
+        """
+        known = np.asarray(known, dtype=bool)
+        rows = self.c_dist & (((self.c_a == marker) & known[self.c_b]) | ((self.c_b == marker) & known[self.c_a]))
+        p_cand_m = np.asarray(p_cand_m, dtype=np.float64).reshape(-1, 3)
+        if not rows.any():
+            return np.full(len(p_cand_m), np.inf)
+        other = np.where(self.c_a[rows] == marker, self.c_b[rows], self.c_a[rows])
+        d = np.linalg.norm(p_cand_m[:, None, :] - positions_m[other][None, :, :], axis=-1)
+        return np.minimum(d - self.c_lo[rows], self.c_hi[rows] - d).min(axis=1)
+
+    @staticmethod
+    def _checked(p_world_m: np.ndarray, colour: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        p_world_m = np.asarray(p_world_m, dtype=np.float64)
+        colour = np.asarray(colour, dtype=np.int64)
+        if p_world_m.ndim != 2 or p_world_m.shape[1] != 3 or colour.shape != (p_world_m.shape[0],):
+            raise ValueError(f"expected points (P, 3) and colours (P,), got {p_world_m.shape} and {colour.shape}")
+        return p_world_m, colour
+
+    def _best(self, pts: np.ndarray, col: np.ndarray) -> _Found:
+        """The naming that satisfies the rules with the largest worst margin, in the patient's frame.
+
+        Raises:
+            IdentificationError: no naming satisfies the rules, or the patient is turned too far.
+        """
         limit = math.radians(self.rules.max_turn_deg)
-        seen = yaw_from_points(pts)
+        seen = yaw_from_points(pts[np.isfinite(pts).all(axis=1)])
         guess = float(np.clip(seen, -limit, limit))
         found = None
         for yaw in dict.fromkeys((guess, 0.0)):
@@ -335,14 +461,18 @@ class Identifier:
             if abs(seen) > limit:  # the spread says turned too far: do the rules hold in that frame?
                 turned = self._settle(pts, col, seen)
                 if turned is not None:
-                    raise IdentificationError(self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs])))
+                    raise IdentificationError(self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs], seen)))
             raise IdentificationError(self._explain(pts, col, guess))
-        turn = _yaw_from_pairs(pts, found.index[self.lr_pairs])
+        turn = _yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)
         if abs(turn) > limit:
             raise IdentificationError(self._turned(turn))
+        return found
+
+    def _result(self, found: _Found, point_of_row: np.ndarray) -> Identification:
+        """The public result; ``point_of_row`` maps the searched rows to the caller's points (-1: none)."""
         margins = self._rule_margins(found.slack_m)
-        index = keep[found.index]
-        return Identification(index.astype(np.int64), float(margins.min()), margins, math.degrees(found.yaw))
+        index = np.asarray(point_of_row, dtype=np.int64)[found.index]
+        return Identification(index, float(margins.min()), margins, math.degrees(found.yaw))
 
     def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float) -> _Found | None:
         """Search in the frame of ``yaw``, then in the frame of the identified left-right pairs."""
@@ -350,7 +480,7 @@ class Identifier:
         for _ in range(_MAX_REFINE):
             if found is None:
                 break
-            new_yaw = _yaw_from_pairs(pts, found.index[self.lr_pairs])
+            new_yaw = _yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)
             if abs(math.degrees(new_yaw - found.yaw)) < _REFINE_TOL_DEG:
                 break
             again = self._search(pts, colour, new_yaw, [_SATISFIED])
@@ -383,13 +513,13 @@ class Identifier:
                     break
             if near is None:  # only with a spent node budget
                 return f"the markers cannot be identified: {self.rules.reference_pose}"
-            turn = _yaw_from_pairs(pts, near.index[self.lr_pairs])
+            turn = _yaw_from_pairs(pts, near.index[self.lr_pairs], yaw)
             if abs(turn) > limit:
                 # a patient turned too far, or a wrong pose that mislabels a pair: the rules hold
                 # in the turned frame only in the first case
                 turned = self._settle(pts, colour, turn)
                 if turned is not None:
-                    return self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs]))
+                    return self._turned(_yaw_from_pairs(pts, turned.index[self.lr_pairs], turn))
                 break
             if abs(math.degrees(turn - yaw)) < _REFINE_TOL_DEG:
                 break
@@ -423,26 +553,26 @@ def identify(p_world_m: np.ndarray, colour: np.ndarray, markerset: MarkerSet) ->
 def try_identify(points: Points3D, identifier: Identifier) -> Identification | None:
     """For the tracker, once per frame until it succeeds.
 
-    Returns None while the point counts per colour do not fit the marker set (a marker hidden or
-    a stray point for a moment: wait for the next frame); raises :class:`IdentificationError`
-    when they fit but the pose breaks the rules (tell the therapist).
+    With every marker seen, the names of :meth:`Identifier.identify`. With a few unseen (a marker
+    seen by one camera only in the reference pose), the names of the seen ones when the rules
+    still decide them beyond doubt (:meth:`Identifier.identify_with_unseen`; index -1 for the
+    unseen, which the tracker's re-acquisition finds later). Returns None while that is not
+    possible (too many unseen, a stray point, an ambiguous naming: wait for the next frame);
+    raises :class:`IdentificationError` when the pose breaks the rules (tell the therapist).
     """
-    finite = np.isfinite(points.p_world_m).all(axis=1)
-    if identifier.count_problem(np.asarray(points.colour)[finite]) is not None:
-        return None
-    return identifier.identify(points.p_world_m, points.colour)
+    return identifier.identify_with_unseen(points.p_world_m, points.colour)
 
 
 def identify_over_frames(frames: Iterable[Points3D], markerset: MarkerSet, max_frames: int = 30
                          ) -> tuple[int, Identification]:
-    """Identify on the first of the first ``max_frames`` frames whose point counts fit.
+    """Identify on the first of the first ``max_frames`` frames that :func:`try_identify` names.
 
     Returns:
-        (frame number counted from 0, identification).
+        (frame number counted from 0, identification; index -1 for markers unseen in that frame).
 
     Raises:
-        IdentificationError: no frame fits (the message of the last frame's counts), or the first
-            frame that fits breaks the rules.
+        IdentificationError: no frame is named (the message of the last frame's counts), or a
+            frame breaks the rules.
     """
     identifier = Identifier(markerset)
     last = "no frames"
@@ -509,7 +639,8 @@ def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[li
                 new[u] &= ~low
             for u, k, forward in neighbours[v]:
                 new[u] &= masks[k][0 if forward else 1][q]
-            if any(new[u] == 0 for u in rest):
+            # assigned neighbours too: after the bar rose, an earlier pair may no longer pass
+            if not all(new):
                 continue
             if not descend(new, rest):
                 return False

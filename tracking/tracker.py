@@ -496,6 +496,12 @@ class Tracker:
         last = self._last_seen
         for m in np.flatnonzero(~measured & (self.status == MarkerStatus.LOST)):
             cands = np.flatnonzero(~taken & (points.colour == self.colour[m]))
+            if not np.isfinite(last[m]).all():  # unseen since identification: the rules' distances decide
+                fit = self.identifier.distance_fit_m(m, points.p_world_m[cands], new_pos, measured)
+                fits = cands[np.isfinite(fit) & (fit >= 0.0)]
+                if len(fits) == 1:
+                    new_pos[m], measured[m], taken[fits[0]] = points.p_world_m[fits[0]], True, True
+                continue
             nb = np.flatnonzero(self._same_segment[m] & measured & np.isfinite(self.seg_length[m]))
             best, best_dev = -1, np.inf
             for i in cands:
