@@ -1,0 +1,420 @@
+"""The game's handle on the tracker process: :class:`LiveTracker`.
+
+It creates the shared memory (so that it can release it whatever happens to the process),
+spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
+reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
+that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and starts a new one
+without waiting for it: the game keeps drawing, the samples resume when the new process is
+ready.
+
+Cleanup: :meth:`LiveTracker.close` (also at interpreter exit) stops the process (killing it if it
+does not stop in time) and unlinks the shared memory. Blocks are named
+``rehab_live_<game pid>_<random>_<part>``, so that a later game can unlink what a crashed game
+left behind (:func:`remove_stale_blocks`).
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import math
+import multiprocessing
+import os
+import secrets
+import time
+from dataclasses import replace
+from multiprocessing import shared_memory
+from pathlib import Path
+
+import numpy as np
+
+from tracking.live.process import ProcessArgs, tracker_main
+from tracking.live.protocol import (LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
+                                    SetMotion, SetPatientInput, SourceConfig, Stop)
+from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingReader, RingWriter, decode_line
+from tracking.live.source import angle_names_for, source_geometry
+
+log = logging.getLogger(__name__)
+
+#: Prefix of every shared-memory block of the live tracker.
+BLOCK_PREFIX = "rehab_live_"
+#: A running process whose heartbeat is older than this is taken as hung and restarted.
+STALE_HEARTBEAT_S = 1.0
+#: A starting process has this long to report ready (imports, GL context, rig).
+START_TIMEOUT_S = 30.0
+#: Time a process gets to stop on request before it is killed.
+STOP_TIMEOUT_S = 2.0
+#: After a restart whose process could not start, wait this long before trying again.
+RETRY_AFTER_S = 2.0
+_SHM_DIR = Path("/dev/shm")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+def remove_stale_blocks() -> list[str]:
+    """Unlink the shared-memory blocks of live trackers whose game process is gone.
+
+    Returns the names removed. Only Linux lists its blocks (``/dev/shm``); elsewhere this does
+    nothing.
+    """
+    removed = []
+    if not _SHM_DIR.is_dir():
+        return removed
+    for path in _SHM_DIR.glob(f"{BLOCK_PREFIX}*"):
+        try:
+            pid = int(path.name[len(BLOCK_PREFIX):].split("_", 1)[0])
+        except ValueError:
+            continue
+        if pid != os.getpid() and not _pid_alive(pid):
+            try:
+                path.unlink()
+                removed.append(path.name)
+            except OSError as exc:
+                log.warning("cannot remove the stale shared-memory block %s: %s", path, exc)
+    if removed:
+        log.info("removed %d shared-memory blocks left by a crashed game: %s", len(removed), ", ".join(removed))
+    return removed
+
+
+def _exit_reason(exitcode: int | None) -> str:
+    if exitcode is None:
+        return "stopped answering (no heartbeat)"
+    if exitcode < 0:
+        import signal
+
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = f"signal {-exitcode}"
+        return f"was killed ({name})"
+    return f"exited with code {exitcode}"
+
+
+class LiveTracker:
+    """The tracker process as the game sees it (a context manager).
+
+    Args:
+        source: what to measure.
+        ring_size: samples kept in the ring (how far the game may fall behind without losing any).
+        auto_restart: :meth:`status` restarts a process that died or hangs.
+
+    After :meth:`start`: ``cameras``, ``markerset`` and ``angle_names`` describe the samples.
+    """
+
+    def __init__(self, source: SourceConfig = SourceConfig(), *, ring_size: int = 256, auto_restart: bool = True) -> None:
+        self.source = source
+        self.ring_size = int(ring_size)
+        self.auto_restart = auto_restart
+        self.cameras: tuple = ()
+        self.markerset = None
+        self.angle_names: tuple[str, ...] = ()
+        self.restarts = 0
+        self._ctx = multiprocessing.get_context("spawn")
+        self._proc = None
+        self._conn = None
+        self._ready = False
+        self._started_at = 0.0
+        self._retry_at = 0.0
+        self._shm: list[shared_memory.SharedMemory] = []
+        self._reader: RingReader | None = None
+        self._images: ImageSlot | None = None
+        self._args: ProcessArgs | None = None
+        self._motion = source.motion
+        self._input = PatientInput()
+        self._paused = False
+        self._last_error = ""  # the newest of: why a process ended, the process's error line
+        self._errors_seen = 0
+        self._closed = True
+
+    # ------------------------------------------------------------------ life cycle
+    def start(self, timeout_s: float = START_TIMEOUT_S) -> None:
+        """Create the shared memory, spawn the process and wait until it is ready.
+
+        Raises:
+            LiveError: the source cannot be opened (the message says why) or the process did not
+                become ready within ``timeout_s``.
+        """
+        if not self._closed:
+            return
+        remove_stale_blocks()
+        cameras, markerset = source_geometry(self.source)
+        self.cameras, self.markerset = cameras, markerset
+        self.angle_names = angle_names_for(markerset)
+        ring = RingLayout(markerset.n_markers, len(cameras), len(self.angle_names), self.ring_size)
+        images = ImageLayout(len(cameras), tuple(self.source.size))
+        stem = f"{BLOCK_PREFIX}{os.getpid()}_{secrets.token_hex(4)}"
+        self._closed = False
+        atexit.register(self.close)
+        try:
+            sample_shm = shared_memory.SharedMemory(f"{stem}_samples", create=True, size=ring.nbytes)
+            self._shm.append(sample_shm)
+            image_shm = shared_memory.SharedMemory(f"{stem}_images", create=True, size=images.nbytes)
+            self._shm.append(image_shm)
+            RingWriter(sample_shm.buf, ring, initialize=True).release()
+            ImageSlot(image_shm.buf, images, initialize=True).release()
+            self._reader = RingReader(sample_shm.buf, ring)
+            self._images = ImageSlot(image_shm.buf, images)
+            self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid())
+            self._spawn()
+            self._wait_ready(timeout_s)
+        except BaseException:
+            self.close()
+            raise
+
+    def _spawn(self) -> None:
+        args = replace(self._args, config=replace(self.source, motion=self._motion), patient_input=self._input,
+                       paused=self._paused)
+        parent_conn, child_conn = self._ctx.Pipe(duplex=True)
+        self._reader.header["state"] = ProcessState.STARTING
+        proc = self._ctx.Process(target=tracker_main, args=(args, child_conn), name="rehab-tracker", daemon=True)
+        proc.start()
+        child_conn.close()
+        self._proc, self._conn = proc, parent_conn
+        self._ready = False
+        self._started_at = time.perf_counter()
+        log.info("tracker process %d started", proc.pid)
+
+    def _wait_ready(self, timeout_s: float) -> None:
+        deadline = time.perf_counter() + timeout_s
+        while not self._ready:
+            left = deadline - time.perf_counter()
+            if left <= 0:
+                raise LiveError(f"the tracker process did not start within {timeout_s:g} s: the machine may be "
+                                "overloaded; try a smaller camera size")
+            if self._conn.poll(min(left, 0.1)):
+                self._receive()
+            if not self._ready and not self._proc.is_alive():
+                raise LiveError(f"the tracker process {_exit_reason(self._proc.exitcode)} while starting; "
+                                "see the log above")
+
+    def _receive(self) -> None:
+        """Read the process's messages: ("ready", pid) or ("failed", line)."""
+        try:
+            while self._conn.poll():
+                kind, value = self._conn.recv()
+                if kind == "ready":
+                    self._ready = True
+                    log.info("tracker process %d ready in %.2f s", value, time.perf_counter() - self._started_at)
+                elif kind == "failed":
+                    self._last_error = f"the tracker process cannot start: {value}"
+                    self._reap()
+                    raise LiveError(self._last_error)
+        except (EOFError, OSError):
+            pass  # the process is gone; status() sees it
+
+    def _reap(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
+        """Stop the current process: ask, then terminate, then kill; always join it."""
+        proc, conn = self._proc, self._conn
+        self._proc = self._conn = None
+        self._ready = False
+        if proc is None:
+            return
+        if proc.is_alive() and conn is not None:
+            try:
+                conn.send(Stop())
+            except (OSError, ValueError):
+                pass
+            proc.join(timeout_s)
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(0.5)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
+        if conn is not None:
+            conn.close()
+        if proc.exitcode is not None:
+            proc.close()
+
+    def close(self) -> None:
+        """Stop the process (killing it if it does not stop in time), release the shared memory.
+
+        Idempotent; also runs at interpreter exit.
+        """
+        if self._closed:
+            return
+        self._closed = True
+        atexit.unregister(self.close)
+        try:
+            self._reap()
+        finally:
+            for part in (self._reader, self._images):
+                if part is not None:
+                    part.release()
+            self._reader = self._images = None
+            for shm in self._shm:
+                shm.close()
+                try:
+                    shm.unlink()
+                except FileNotFoundError:
+                    pass
+            self._shm = []
+
+    def __enter__(self) -> "LiveTracker":
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ health
+    def _heartbeat_age_s(self) -> float:
+        hb = float(self._reader.header["heartbeat_s"])
+        return time.perf_counter() - hb if hb > 0 else math.inf
+
+    def _check(self) -> None:
+        """Notice a dead or hung process; restart it when ``auto_restart``."""
+        if self._closed:
+            return
+        now = time.perf_counter()
+        if self._proc is None:  # an earlier restart failed: try again later
+            if self.auto_restart and now >= self._retry_at:
+                self._restart("")
+            return
+        if not self._ready:
+            try:
+                self._receive()
+            except LiveError:  # the new process cannot start: retry later
+                self._retry_at = now + RETRY_AFTER_S
+                return
+        alive = self._proc.is_alive()
+        if alive and self._ready:
+            state = int(self._reader.header["state"])
+            hung = state in (ProcessState.RUNNING, ProcessState.PAUSED) and self._heartbeat_age_s() > STALE_HEARTBEAT_S
+            if not hung:
+                return
+        elif alive and now - self._started_at < START_TIMEOUT_S:
+            return  # still starting
+        reason = f"the tracker process {_exit_reason(None if alive else self._proc.exitcode)}"
+        log.error("%s", reason)
+        self._last_error = reason
+        if self.auto_restart:
+            self._restart(reason)
+        else:
+            self._reap(0.2)
+
+    def _restart(self, reason: str) -> None:
+        self._reap(0.2)
+        self.restarts += 1
+        if reason:
+            self._last_error = f"{reason}; restarted"
+        self._spawn()
+
+    def status(self) -> LiveStatus:
+        """The process's health; restarts a dead or hung process when ``auto_restart``."""
+        if self._closed or self._reader is None:
+            return LiveStatus(False, math.inf, self.restarts, self._last_error or "not started", math.nan, math.nan, 0)
+        self._check()
+        h = self._reader.header
+        age = self._heartbeat_age_s()
+        alive = self._proc is not None and self._ready and self._proc.is_alive() and age <= STALE_HEARTBEAT_S
+        errors = int(h["errors"])
+        if errors > self._errors_seen:
+            self._errors_seen = errors
+            self._last_error = self._reader.error_line()
+        return LiveStatus(
+            alive=alive,
+            heartbeat_age_s=age,
+            restarts=self.restarts,
+            last_error=self._last_error,
+            source_fps=float(h["source_fps"]) if alive else 0.0,
+            tracker_ms=float(h["step_ms"]),
+            dropped=self._reader.dropped,
+            errors=errors,
+            state=int(h["state"]) if self._proc is not None else int(ProcessState.STOPPED),
+            samples=int(h["written"]),
+        )
+
+    @property
+    def pid(self) -> int | None:
+        """The tracker process's id (None when none runs)."""
+        return None if self._proc is None else self._proc.pid
+
+    # ------------------------------------------------------------------ samples
+    def _sample(self, rec: np.ndarray) -> LiveSample:
+        return LiveSample(
+            frame_index=int(rec["frame_index"]),
+            time_s=float(rec["time_s"]),
+            t_frame_ready_s=float(rec["t_frame_ready_s"]),
+            t_published_s=float(rec["t_published_s"]),
+            state=int(rec["state"]),
+            positions_m=rec["positions_m"],
+            status=rec["status"],
+            angles_deg=rec["angles_deg"],
+            message=decode_line(rec["message"]),
+            windows_px=rec["windows_px"],
+            uv_px=rec["uv_px"],
+            truth_m=rec["truth_m"],
+            step_ms=float(rec["step_ms"]),
+            source_ms=float(rec["source_ms"]),
+            number=int(rec["number"]),
+            angle_names=self.angle_names,
+        )
+
+    def poll(self) -> list[LiveSample]:
+        """Every sample published since the last poll, oldest first (gaps only if ``dropped``)."""
+        if self._reader is None:
+            return []
+        return [self._sample(rec) for rec in self._reader.read_new()]
+
+    def poll_records(self) -> list[np.ndarray]:
+        """Like :meth:`poll`, as raw shared-memory records (copies): cheaper for tight loops."""
+        return [] if self._reader is None else self._reader.read_new()
+
+    def latest(self) -> LiveSample | None:
+        """The newest sample (None before the first)."""
+        rec = None if self._reader is None else self._reader.latest()
+        return None if rec is None else self._sample(rec)
+
+    def latest_images(self) -> list[np.ndarray] | None:
+        """BGR images of the latest frame set, one per camera (None before the first)."""
+        got = None if self._images is None else self._images.read()
+        return None if got is None else got[1]
+
+    # ------------------------------------------------------------------ commands
+    def _send(self, command) -> None:
+        if self._conn is None:
+            return  # restarting: the new process gets the state in its arguments
+        try:
+            self._conn.send(command)
+        except (OSError, ValueError, BrokenPipeError):
+            log.warning("the tracker process did not take %r (it is restarting)", command)
+
+    def reidentify(self) -> None:
+        """Identify the markers again (the simulated patient takes the reference pose)."""
+        self._send(Reidentify())
+
+    def set_motion(self, name: str | None) -> None:
+        """Play a scripted motion in a loop from its start, or None for the interactive patient.
+
+        Raises:
+            LiveError: ``name`` is neither a built-in motion nor an existing motion file.
+        """
+        if name is not None:
+            from tracking.sim.motions import available_motions
+
+            if name not in available_motions() and not Path(name).is_file():
+                raise LiveError(f"unknown motion {name!r}: choose one of {available_motions()} or give a motion file")
+        self._motion = name
+        self._send(SetMotion(name))
+
+    def set_patient_input(self, value: PatientInput) -> None:
+        """Drive the interactive patient (used when no scripted motion plays)."""
+        self._input = value
+        self._send(SetPatientInput(value))
+
+    def pause(self) -> None:
+        self._paused = True
+        self._send(Pause())
+
+    def resume(self) -> None:
+        self._paused = False
+        self._send(Resume())
