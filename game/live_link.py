@@ -17,6 +17,7 @@ import enum
 import logging
 import math
 import threading
+import time
 from typing import Callable
 
 from calibration.errors import RehabError
@@ -54,6 +55,7 @@ class LiveLink:
         self.samples_received = 0
         self._thread: threading.Thread | None = None
         self._started = threading.Event()
+        self._closing = threading.Event()
         self._start_error: str | None = None
         self._pending: dict[str, tuple] = {}
 
@@ -77,22 +79,36 @@ class LiveLink:
             self._start_error = f"the tracker did not start: {exc}"
         finally:
             self._started.set()
+        # The tracker process dies with the thread that spawned it (Linux PR_SET_PDEATHSIG
+        # follows the thread, not the process): this thread lives until the link closes.
+        self._closing.wait()
 
-    def wait_ready(self, timeout_s: float) -> bool:
-        """Block until the start finished (tests, headless runs); True when running."""
+    def wait_ready(self, timeout_s: float, *, first_sample: bool = True) -> bool:
+        """Block until the tracker runs (and, with ``first_sample``, has published a sample).
+
+        For headless runs and tests; the window never blocks. Returns whether it got there.
+        """
+        deadline = time.perf_counter() + timeout_s
         if self._thread is not None:
             self._started.wait(timeout_s)
-        self.tick()
-        return self.state is LinkState.RUNNING
+        while True:
+            self.tick()
+            done = self.state is LinkState.RUNNING and (self.latest is not None or not first_sample)
+            if done or self.state in (LinkState.FAILED, LinkState.CLOSED) or time.perf_counter() >= deadline:
+                return done
+            time.sleep(0.02)
 
     def close(self) -> None:
         """Stop the tracker process (idempotent)."""
         if self.state is LinkState.CLOSED:
             return
         if self._thread is not None:
-            self._thread.join(self._start_timeout_s)
+            self._started.wait(self._start_timeout_s)
         if self.tracker is not None:
             self.tracker.close()
+        self._closing.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
         self.state = LinkState.CLOSED
 
     # ------------------------------------------------------------------ per frame
