@@ -1,0 +1,527 @@
+"""The avatar drawn with moderngl: shaded solids, soft light, a floor with contact shadows.
+
+:class:`AvatarRenderer` draws a :class:`SkeletonPose` (dressed by :func:`body_shapes`) into
+whatever framebuffer is bound, with any view and projection; :func:`mirror_view` gives the view
+a patient expects (the avatar faces them and moves like their mirror image). It needs an
+OpenGL 3.3 core context and nothing of pygame, so the game's window and headless tests (EGL)
+use it alike.
+
+Geometry: ellipsoids are instanced icospheres (a finer one for the trunk, head and chair back),
+tapered capsules an instanced band tangent to two instanced end spheres (the simulator's band,
+``tracking.sim.meshes.cone_band``). About 10k triangles in all: llvmpipe spends ~0.3 us per
+triangle, so the body costs a few milliseconds on a CPU-only machine.
+
+Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
+key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
+body against the background, and a little Blinn-Phong sheen. The lights are fixed relative to
+the camera, so every view is lit from the front. The floor disc carries a faint grid and soft
+contact shadows (Gaussian blobs under the chair, the feet and the hands) and fades out at its
+edge into the background gradient.
+
+Segment states (:class:`tracking.status.MarkerStatus` from the skeleton):
+- MEASURED: the normal skin and clothes colours;
+- ESTIMATED: tinted amber with a glowing amber outline (the tracker guessed these markers);
+- LOST: desaturated grey and translucent (the segment shows its last known pose).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from game.avatar.shapes import BodyShapes, body_shapes
+from game.avatar.skeleton import SkeletonPose
+from tracking.sim.meshes import cone_band, icosphere
+from tracking.status import MarkerStatus
+
+_MAX_BLOBS = 12
+
+
+@dataclass(frozen=True, slots=True)
+class AvatarStyle:
+    """Colours (sRGB 0..1) and strengths of the avatar's look.
+
+    Attributes:
+        estimated_rgb: tint and outline of estimated segments.
+        estimated_tint: how far an estimated segment's colour moves towards ``estimated_rgb``.
+        lost_alpha: opacity of lost segments.
+        background_top_rgb, background_bottom_rgb: the gradient of :meth:`AvatarRenderer.render_background`.
+        floor_rgb: the floor disc.
+        floor_radius_m: its radius around the chair.
+    """
+
+    estimated_rgb: tuple[float, float, float] = (1.0, 0.66, 0.0)
+    estimated_tint: float = 0.45
+    lost_alpha: float = 0.38
+    background_top_rgb: tuple[float, float, float] = (0.80, 0.87, 0.94)
+    background_bottom_rgb: tuple[float, float, float] = (0.96, 0.95, 0.92)
+    floor_rgb: tuple[float, float, float] = (0.90, 0.88, 0.84)
+    floor_radius_m: float = 1.3
+
+
+# ----------------------------------------------------------------------------- camera helpers
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> np.ndarray:
+    """(4, 4) float64 view matrix (OpenGL: the camera looks down its -z) from world points."""
+    f = np.asarray(target, float) - np.asarray(eye, float)
+    f /= np.linalg.norm(f)
+    s = np.cross(f, up)
+    s /= np.linalg.norm(s)
+    u = np.cross(s, f)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = s, u, -f
+    view[:3, 3] = -view[:3, :3] @ np.asarray(eye, float)
+    return view
+
+
+def perspective(fov_y_deg: float, aspect: float, near_m: float = 0.1, far_m: float = 50.0) -> np.ndarray:
+    """(4, 4) float64 OpenGL projection (depth -1..1), vertical field of view in degrees."""
+    f = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
+    p = np.zeros((4, 4))
+    p[0, 0], p[1, 1] = f / aspect, f
+    p[2, 2] = (far_m + near_m) / (near_m - far_m)
+    p[2, 3] = 2.0 * far_m * near_m / (near_m - far_m)
+    p[3, 2] = -1.0
+    return p
+
+
+def mirror_view(
+    pose: SkeletonPose,
+    aspect: float,
+    *,
+    yaw_deg: float = 0.0,
+    pitch_deg: float = 8.0,
+    fov_y_deg: float = 30.0,
+    margin: float = 1.05,
+    mirror: bool = True,
+) -> tuple[np.ndarray, np.ndarray]:
+    """View and projection showing the whole seated avatar from the front, as in a mirror.
+
+    The camera stands in front of the patient (along the pelvis's forward direction), turned by
+    ``yaw_deg`` about the vertical (+ towards the patient's right), looking down by ``pitch_deg``,
+    far enough for the body from the floor to a raised hand (about the stature) to fit with
+    ``margin``. With ``mirror`` the image is flipped left-right, so the patient's right hand is on
+    the right of the screen and moves like their reflection. The framing depends only on the
+    pelvis and the stature, which barely move, so the camera stays still while the arms move.
+
+    Returns:
+        view: (4, 4) float64; proj: (4, 4) float64 (mirrored when ``mirror``).
+    """
+    h = pose.proportions.stature_m
+    rp = pose.frame("pelvis")
+    fwd = -rp[:, 2].copy()
+    fwd[1] = 0.0
+    fwd /= max(float(np.linalg.norm(fwd)), 1e-9)
+    yaw = math.radians(yaw_deg)
+    right = np.array([-fwd[2], 0.0, fwd[0]])  # fwd turned -90 degrees about +Y: the patient's right
+    direction = math.cos(yaw) * fwd + math.sin(yaw) * right
+    pelvis = pose.joint("pelvis")
+    # From the floor (~0.36 H below the hip joints) to a raised hand (~0.70 H above them).
+    target = pelvis + np.array([0.0, 0.17 * h, 0.0])
+    half_extent = 0.53 * h * margin
+    fov = math.radians(fov_y_deg)
+    distance = half_extent / math.tan(fov / 2.0) + 0.2 * h
+    pitch = math.radians(pitch_deg)
+    eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
+    view = look_at(eye, target)
+    proj = perspective(fov_y_deg, aspect, near_m=0.1, far_m=distance + 4.0 * h)
+    if mirror:
+        proj = proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
+    return view, proj
+
+
+# ----------------------------------------------------------------------------- shaders
+_LIGHTING = """
+uniform vec3 u_eye;
+uniform vec3 u_key_dir;   // towards the key light, world
+uniform vec3 u_rim_dir;   // towards the rim light, world
+uniform vec3 u_estimated_rgb;  // linear
+uniform float u_estimated_tint;
+const vec3 SKY = vec3(0.62, 0.68, 0.78);
+const vec3 GROUND = vec3(0.34, 0.30, 0.27);
+const vec3 KEY = vec3(1.05, 0.98, 0.90);
+const vec3 RIM = vec3(0.55, 0.65, 0.85);
+
+vec3 to_linear(vec3 c) { return pow(c, vec3(2.2)); }
+vec3 to_srgb(vec3 c) { return pow(c, vec3(1.0 / 2.2)); }
+
+// state: 0 measured or untracked, 1 estimated, 2 lost.
+vec3 shade(vec3 n, vec3 pos, vec3 srgb, float state) {
+    vec3 albedo = to_linear(srgb);
+    if (state > 1.5) {
+        float grey = dot(albedo, vec3(0.30, 0.59, 0.11));
+        albedo = vec3(0.55 * grey + 0.12);
+    } else if (state > 0.5) {
+        albedo = mix(albedo, u_estimated_rgb, u_estimated_tint);
+    }
+    vec3 v = normalize(u_eye - pos);
+    float ndv = max(dot(n, v), 0.0);
+    vec3 ambient = mix(GROUND, SKY, 0.5 + 0.5 * n.y) * 0.55;
+    float wrap = clamp((dot(n, u_key_dir) + 0.25) / 1.25, 0.0, 1.0);
+    vec3 colour = albedo * (ambient + KEY * wrap * 0.85);
+    vec3 hv = normalize(u_key_dir + v);
+    colour += KEY * 0.12 * pow(max(dot(n, hv), 0.0), 28.0) * step(0.0, dot(n, u_key_dir));
+    float fres = pow(1.0 - ndv, 3.0);
+    colour += RIM * fres * (0.25 + 0.55 * max(dot(n, u_rim_dir), 0.0));
+    if (state > 0.5 && state < 1.5) colour += u_estimated_rgb * 1.6 * pow(1.0 - ndv, 2.0);
+    colour = colour / (1.0 + 0.15 * colour);  // soft shoulder instead of a hard clip
+    return to_srgb(colour);
+}
+"""
+
+_VERTEX_ELLIPSOID = """
+#version 330
+uniform mat4 u_clip_from_world;
+in vec3 in_pos;  // unit sphere: position = normal
+in vec3 i_centre;
+in vec3 i_ax0;
+in vec3 i_ax1;
+in vec3 i_ax2;
+in vec3 i_rgb;
+in vec2 i_style;  // state, alpha
+out vec3 v_pos;
+out vec3 v_normal;
+flat out vec3 v_rgb;
+flat out vec2 v_style;
+void main() {
+    mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
+    v_pos = i_centre + axes * in_pos;
+    v_normal = transpose(inverse(axes)) * in_pos;
+    v_rgb = i_rgb;
+    v_style = i_style;
+    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+}
+"""
+
+_VERTEX_BAND = """
+#version 330
+uniform mat4 u_clip_from_world;
+in vec3 in_ring;  // cos(theta), sin(theta), t (0 at p0, 1 at p1)
+in vec3 i_p0;
+in vec3 i_p1;
+in vec2 i_r;
+in vec3 i_rgb;
+in vec2 i_style;
+out vec3 v_pos;
+out vec3 v_normal;
+flat out vec3 v_rgb;
+flat out vec2 v_style;
+void main() {
+    vec3 axis = i_p1 - i_p0;
+    float d = max(length(axis), 1e-6);
+    axis /= d;
+    // The cone tangent to both end spheres: its normal tilts by asin((r0 - r1) / d) towards p1.
+    float s = clamp((i_r.x - i_r.y) / d, -1.0, 1.0);
+    float c = sqrt(max(1.0 - s * s, 0.0));
+    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 u = normalize(cross(helper, axis));
+    vec3 v = cross(axis, u);
+    vec3 n = s * axis + c * (in_ring.x * u + in_ring.y * v);
+    bool at_p1 = in_ring.z > 0.5;
+    v_pos = (at_p1 ? i_p1 : i_p0) + (at_p1 ? i_r.y : i_r.x) * n;
+    v_normal = n;
+    v_rgb = i_rgb;
+    v_style = i_style;
+    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+}
+"""
+
+_FRAGMENT_BODY = """
+#version 330
+in vec3 v_pos;
+in vec3 v_normal;
+flat in vec3 v_rgb;
+flat in vec2 v_style;
+out vec4 f_colour;
+""" + _LIGHTING + """
+void main() {
+    vec3 n = normalize(v_normal);
+    f_colour = vec4(shade(n, v_pos, v_rgb, v_style.x), v_style.y);
+}
+"""
+
+_VERTEX_FLOOR = """
+#version 330
+uniform mat4 u_clip_from_world;
+uniform vec3 u_centre;
+uniform float u_radius;
+out vec3 v_pos;
+void main() {
+    vec2 corner = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1)) * 2.0 - 1.0;
+    v_pos = u_centre + vec3(corner.x * u_radius, 0.0, corner.y * u_radius);
+    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+}
+"""
+
+_FRAGMENT_FLOOR = """
+#version 330
+uniform vec3 u_centre;
+uniform float u_radius;
+uniform vec3 u_floor_rgb;
+uniform vec4 u_blobs[""" + str(_MAX_BLOBS) + """];  // x, z, radius, darkness
+uniform int u_n_blobs;
+in vec3 v_pos;
+out vec4 f_colour;
+void main() {
+    vec2 d = v_pos.xz - u_centre.xz;
+    float r = length(d) / u_radius;
+    if (r > 1.0) discard;
+    vec3 colour = u_floor_rgb * (1.0 - 0.10 * r * r);
+    // A faint 25 cm grid, anti-aliased by the screen-space derivative.
+    vec2 g = abs(fract(v_pos.xz / 0.25 - 0.5) - 0.5) / fwidth(v_pos.xz / 0.25);
+    float line = 1.0 - min(min(g.x, g.y), 1.0);
+    colour *= 1.0 - 0.10 * line;
+    float shadow = 0.0;
+    for (int i = 0; i < u_n_blobs; ++i) {
+        vec2 q = (v_pos.xz - u_blobs[i].xy) / u_blobs[i].z;
+        shadow = max(shadow, u_blobs[i].w * exp(-2.5 * dot(q, q)));
+    }
+    colour *= 1.0 - 0.55 * shadow;
+    float alpha = 1.0 - smoothstep(0.75, 1.0, r);
+    f_colour = vec4(colour, alpha);
+}
+"""
+
+_VERTEX_FULLSCREEN = """
+#version 330
+out vec2 v_uv;
+void main() {
+    vec2 p = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1));
+    v_uv = p;
+    gl_Position = vec4(p * 2.0 - 1.0, 1.0, 1.0);
+}
+"""
+
+_FRAGMENT_BACKGROUND = """
+#version 330
+uniform vec3 u_top;
+uniform vec3 u_bottom;
+in vec2 v_uv;
+out vec4 f_colour;
+void main() {
+    float t = smoothstep(0.0, 1.0, v_uv.y);
+    vec2 c = v_uv - vec2(0.5, 0.55);
+    float vignette = 1.0 - 0.12 * dot(c, c);
+    f_colour = vec4(mix(u_bottom, u_top, t) * vignette, 1.0);
+}
+"""
+
+_ELLIPSOID_FORMAT = "3f 3f 3f 3f 3f 2f/i"
+_ELLIPSOID_NAMES = ("i_centre", "i_ax0", "i_ax1", "i_ax2", "i_rgb", "i_style")
+_BAND_FORMAT = "3f 3f 2f 3f 2f/i"
+_BAND_NAMES = ("i_p0", "i_p1", "i_r", "i_rgb", "i_style")
+
+
+class _Instanced:
+    """One static mesh drawn with a growable per-instance float32 buffer."""
+
+    def __init__(self, ctx: moderngl.Context, program: moderngl.Program, vertices: np.ndarray, triangles: np.ndarray,
+                 vertex_name: str, inst_format: str, inst_names: tuple[str, ...]) -> None:
+        self._ctx, self._program = ctx, program
+        self._vbo = ctx.buffer(np.ascontiguousarray(vertices, np.float32).tobytes())
+        self._ibo = ctx.buffer(np.ascontiguousarray(triangles, np.int32).tobytes())
+        self._vertex_name = vertex_name
+        self._format, self._names = inst_format, inst_names
+        self._floats = sum(int(n) for n in re.findall(r"(\d+)f", inst_format))
+        self._capacity = 0
+        self._buffer: moderngl.Buffer | None = None
+        self._vao: moderngl.VertexArray | None = None
+        self._grow(32)
+
+    def _grow(self, capacity: int) -> None:
+        if self._vao is not None:
+            self._vao.release()
+            self._buffer.release()
+        self._capacity = capacity
+        self._buffer = self._ctx.buffer(reserve=capacity * self._floats * 4, dynamic=True)
+        self._vao = self._ctx.vertex_array(
+            self._program,
+            [(self._vbo, "3f", self._vertex_name), (self._buffer, self._format, *self._names)],
+            index_buffer=self._ibo,
+        )
+
+    def draw(self, rows: np.ndarray) -> None:
+        """rows: (N, floats) float32 instance data."""
+        n = rows.shape[0]
+        if not n:
+            return
+        if n > self._capacity:
+            self._grow(max(n, 2 * self._capacity))
+        self._buffer.write(np.ascontiguousarray(rows, np.float32).tobytes())
+        self._vao.render(moderngl.TRIANGLES, instances=n)
+
+    def release(self) -> None:
+        for obj in (self._vao, self._buffer, self._vbo, self._ibo):
+            if obj is not None:
+                obj.release()
+        self._vao = self._buffer = None
+
+
+class AvatarRenderer:
+    """Draws the avatar into the bound framebuffer of ``ctx`` (needs a depth attachment).
+
+    Args:
+        ctx: a moderngl context, OpenGL 3.3 core or later.
+        style: colours and strengths.
+
+    :meth:`render` enables depth testing, face culling and blending and leaves them enabled; it
+    sets ``ctx.front_face`` to suit the projection's handedness (a mirrored projection flips it).
+    """
+
+    def __init__(self, ctx: moderngl.Context, style: AvatarStyle = AvatarStyle()) -> None:
+        self._ctx = ctx
+        self.style = style
+        self._prog_ellipsoid = ctx.program(vertex_shader=_VERTEX_ELLIPSOID, fragment_shader=_FRAGMENT_BODY)
+        self._prog_band = ctx.program(vertex_shader=_VERTEX_BAND, fragment_shader=_FRAGMENT_BODY)
+        self._prog_floor = ctx.program(vertex_shader=_VERTEX_FLOOR, fragment_shader=_FRAGMENT_FLOOR)
+        self._prog_background = ctx.program(vertex_shader=_VERTEX_FULLSCREEN, fragment_shader=_FRAGMENT_BACKGROUND)
+        fine_v, fine_t = icosphere(3)
+        coarse_v, coarse_t = icosphere(2)
+        band_v, band_t = cone_band(32)
+        self._fine = _Instanced(ctx, self._prog_ellipsoid, fine_v, fine_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
+        self._coarse = _Instanced(ctx, self._prog_ellipsoid, coarse_v, coarse_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
+        self._band = _Instanced(ctx, self._prog_band, band_v, band_t, "in_ring", _BAND_FORMAT, _BAND_NAMES)
+        self._empty_vao = ctx.vertex_array(self._prog_floor, [])
+        self._empty_vao_bg = ctx.vertex_array(self._prog_background, [])
+        est = np.asarray(style.estimated_rgb, np.float32) ** 2.2
+        for prog in (self._prog_ellipsoid, self._prog_band):
+            prog["u_estimated_rgb"].value = tuple(float(x) for x in est)
+            prog["u_estimated_tint"].value = float(style.estimated_tint)
+        self._prog_background["u_top"].value = style.background_top_rgb
+        self._prog_background["u_bottom"].value = style.background_bottom_rgb
+        self._prog_floor["u_floor_rgb"].value = style.floor_rgb
+        self._prog_floor["u_radius"].value = float(style.floor_radius_m)
+
+    # ------------------------------------------------------------------ drawing
+    def render_background(self) -> None:
+        """Fill the bound framebuffer's viewport with the soft background gradient and reset its
+        depth to the far plane (a clear for the avatar's scene)."""
+        ctx = self._ctx
+        ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        # Drawn at the far plane with the depth test always passing: it also resets the depth.
+        ctx.enable(moderngl.DEPTH_TEST)
+        ctx.depth_func = "1"
+        self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
+        ctx.depth_func = "<"
+
+    def render(self, pose: SkeletonPose, view: np.ndarray, proj: np.ndarray, *, floor: bool = True,
+               shapes: BodyShapes | None = None) -> BodyShapes:
+        """Draw the avatar (and the floor) with depth testing into the bound framebuffer.
+
+        Args:
+            pose: the pose to show.
+            view: (4, 4) world -> eye matrix (OpenGL convention, the camera looks down -z).
+            proj: (4, 4) eye -> clip matrix; a left-right mirrored one is fine.
+            floor: draw the floor disc with its grid and contact shadows.
+            shapes: the solids, if already built from ``pose`` (else built here).
+
+        Returns:
+            The solids drawn (for picking or tests).
+        """
+        ctx = self._ctx
+        shapes = body_shapes(pose) if shapes is None else shapes
+        view = np.asarray(view, np.float64)
+        proj = np.asarray(proj, np.float64)
+        clip = proj @ view
+        mirrored = np.linalg.det(proj[:3, :3] @ view[:3, :3]) > 0
+        eye_from_world_inv = np.linalg.inv(view)
+        eye = eye_from_world_inv[:3, 3]
+        # Lights fixed to the camera: key above the viewer's left shoulder, rim from behind.
+        cam = eye_from_world_inv[:3, :3]
+        key = cam @ np.array([-0.45, 0.75, 0.55])
+        rim = cam @ np.array([0.3, 0.45, -0.85])
+        clip_bytes = clip.T.astype(np.float32).tobytes()
+        for prog in (self._prog_ellipsoid, self._prog_band):
+            prog["u_clip_from_world"].write(clip_bytes)
+            prog["u_eye"].value = tuple(float(x) for x in eye)
+            prog["u_key_dir"].value = tuple(float(x) for x in key / np.linalg.norm(key))
+            prog["u_rim_dir"].value = tuple(float(x) for x in rim / np.linalg.norm(rim))
+
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        if floor:
+            self._draw_floor(shapes, clip_bytes)
+        ctx.enable(moderngl.CULL_FACE)
+        ctx.front_face = "cw" if mirrored else "ccw"
+
+        e_rows, e_lost, fine = self._ellipsoid_rows(pose, shapes)
+        c_rows, c_lost = self._capsule_rows(pose, shapes)
+        # Capsule end caps are spheres.
+        caps = self._cap_rows(c_rows)
+        cap_lost = np.concatenate([c_lost, c_lost])
+        fbo = ctx.fbo
+        # Opaque pass, then lost segments translucent: a depth-only pass first, so that a lost
+        # segment shows only its front surface (no inner overlaps), then its colour over it.
+        self._draw_solids(e_rows[~e_lost], fine[~e_lost], c_rows[~c_lost], caps[~cap_lost])
+        if e_lost.any() or c_lost.any():
+            fbo.color_mask = False, False, False, False
+            self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
+            fbo.color_mask = True, True, True, True
+            fbo.depth_mask = False
+            ctx.depth_func = "<="
+            self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
+            ctx.depth_func = "<"
+            fbo.depth_mask = True
+        ctx.front_face = "ccw"
+        return shapes
+
+    def release(self) -> None:
+        for obj in (self._fine, self._coarse, self._band):
+            obj.release()
+        for obj in (self._empty_vao, self._empty_vao_bg, self._prog_ellipsoid, self._prog_band,
+                    self._prog_floor, self._prog_background):
+            obj.release()
+
+    # ------------------------------------------------------------------ internals
+    def _style_of(self, pose: SkeletonPose, parts: np.ndarray) -> np.ndarray:
+        """(N, 2) float32 (state code, alpha) for solids of ``parts``: 0 normal, 1 estimated, 2 lost."""
+        state = np.zeros(len(parts), np.float32)
+        tracked = parts >= 0
+        seg_state = pose.state[parts[tracked]]
+        code = np.where(seg_state == MarkerStatus.ESTIMATED, 1.0, np.where(seg_state == MarkerStatus.LOST, 2.0, 0.0))
+        state[tracked] = code
+        alpha = np.where(state == 2.0, self.style.lost_alpha, 1.0).astype(np.float32)
+        return np.stack([state, alpha], axis=1)
+
+    def _ellipsoid_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        style = self._style_of(pose, s.ellipsoid_part)
+        axes = np.transpose(s.ellipsoid_axes_m, (0, 2, 1)).reshape(-1, 9)  # columns ax0, ax1, ax2
+        rows = np.hstack([s.ellipsoid_centre_m, axes, s.ellipsoid_rgb, style]).astype(np.float32)
+        return rows, style[:, 0] == 2.0, s.ellipsoid_fine
+
+    def _capsule_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
+        style = self._style_of(pose, s.capsule_part)
+        rows = np.hstack([s.capsule_p0_m, s.capsule_p1_m, s.capsule_r0_m[:, None], s.capsule_r1_m[:, None],
+                          s.capsule_rgb, style]).astype(np.float32)
+        return rows, style[:, 0] == 2.0
+
+    @staticmethod
+    def _cap_rows(c: np.ndarray) -> np.ndarray:
+        """Ellipsoid rows of the capsules' end spheres (p0 ends, then p1 ends)."""
+        out = []
+        for p, r in ((c[:, 0:3], c[:, 6]), (c[:, 3:6], c[:, 7])):
+            eye = np.zeros((len(c), 9), np.float32)
+            eye[:, [0, 4, 8]] = r[:, None]
+            out.append(np.hstack([p, eye, c[:, 8:13]]))
+        return np.concatenate(out).astype(np.float32) if len(c) else np.zeros((0, 17), np.float32)
+
+    def _draw_solids(self, e_rows: np.ndarray, fine: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
+        self._fine.draw(e_rows[fine])
+        self._coarse.draw(np.concatenate([e_rows[~fine], caps]))
+        self._band.draw(c_rows)
+
+    def _draw_floor(self, s: BodyShapes, clip_bytes: bytes) -> None:
+        prog = self._prog_floor
+        prog["u_clip_from_world"].write(clip_bytes)
+        centre = np.array([s.shadow_blobs[0, 0], s.floor_y_m, s.shadow_blobs[0, 1]])
+        prog["u_centre"].value = tuple(float(x) for x in centre)
+        blobs = np.zeros((_MAX_BLOBS, 4), np.float32)
+        n = min(len(s.shadow_blobs), _MAX_BLOBS)
+        blobs[:n] = s.shadow_blobs[:n]
+        prog["u_blobs"].write(blobs.tobytes())
+        prog["u_n_blobs"].value = n
+        self._ctx.disable(moderngl.CULL_FACE)
+        self._empty_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
