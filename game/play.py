@@ -52,11 +52,11 @@ class PlayOptions:
     start_timeout_s: float = 60.0
 
 
-def make_avatar(ctx):
-    """The avatar view on ``ctx`` (game.avatar)."""
+def make_avatar(ctx, marker_names):
+    """The avatar view on ``ctx`` (game.avatar) for a marker set's names."""
     from game.scenes.avatar_view import AvatarView
 
-    return AvatarView(ctx)
+    return AvatarView(ctx, marker_names)
 
 
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,

@@ -200,7 +200,8 @@ class LiveScene(BaseScene):
         motions: scripted motion names M cycles through (None in the list: mouse control).
         motion: what plays when the scene opens (None: mouse control).
         open_monitor: makes the camera-check scene for C (None: C does nothing).
-        make_avatar: builds the avatar renderer on the GL context (None: markers only).
+        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar view
+            (:class:`game.scenes.avatar_view.AvatarView`); None: markers only.
         show_markers: draw the measured markers over the avatar.
     """
 
@@ -226,8 +227,6 @@ class LiveScene(BaseScene):
         super().enter(app)
         self.layout = live_layout(app.screen.size_px)
         self.view_m, self.proj_m = mirror_camera(self.layout.view)
-        if self.make_avatar is not None and self.avatar is None:
-            self.avatar = self.make_avatar(app.screen.ctx)
         self.link.set_motion(self.motion)
         if self.motion is None:
             self._send_input(force=True)
@@ -305,9 +304,11 @@ class LiveScene(BaseScene):
             self._send_input()
 
     def _consume_samples(self) -> None:
-        """Feed the samples that arrived this frame to the avatar."""
+        """Feed the samples that arrived this frame to the avatar (made once the marker set is known)."""
         if self.link.new_samples:
             self._sample_clock_s = self.app.clock()
+        if self.avatar is None and self.make_avatar is not None and self.link.markerset is not None:
+            self.avatar = self.make_avatar(self.app.screen.ctx, self.link.markerset.names)
         if self.avatar is not None:
             for sample in self.link.new_samples:
                 self.avatar.push(sample)
@@ -315,12 +316,16 @@ class LiveScene(BaseScene):
     # ------------------------------------------------------------------ drawing
     def render_3d(self, frame: Frame) -> None:
         self._consume_samples()
-        if self.avatar is None or self.link.markerset is None:
+        if self.avatar is None:
             return
+        self.avatar.pose_at(self.app.clock())
+        camera = self.avatar.camera(self.layout.view.aspect)
+        if camera is not None:
+            self.view_m, self.proj_m = camera
         ctx = frame.screen.ctx
         ctx.viewport = self.layout.view.gl(frame.size_px[1])
         try:
-            self.avatar.render(self.app.clock(), self.view_m, self.proj_m)
+            self.avatar.render(self.view_m, self.proj_m)
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
 
@@ -357,9 +362,9 @@ class LiveScene(BaseScene):
 
     def _draw_panel(self, frame: Frame, sample) -> None:
         c, s = frame.canvas, self.layout.scale
+        # The panel is the window's plain background (no large shape to fill: llvmpipe pays per pixel).
         px, py, pw, ph = self.layout.panel
-        c.rect((px, py, pw, ph), theme.PANEL, radius=theme.RADIUS * s)
-        x, y, right = px + 26 * s, py + 20 * s, px + pw - 26 * s
+        x, y, right = px + 26 * s, py + 6 * s, px + pw - 10 * s
         side = self.control.side if self.interactive else None
         title = f"{self.control.side.capitalize()} arm" if side else _humanize(self.motion)
         c.text(title, (x, y), round(theme.LARGE * s), theme.TEXT)
@@ -372,7 +377,7 @@ class LiveScene(BaseScene):
                 for sd in sides for suffix, label, rng in ARM_ROWS]
         if side:
             rows += TRUNK_ROWS
-        row_h = (ph - (y - py) - 70 * s) / max(len(rows), 1)
+        row_h = (ph - (y - py) - 130 * s) / max(len(rows), 1)
         row_h = min(row_h, 74 * s)
         size = round((theme.BODY if row_h >= 60 * s else theme.SMALL) * s)
         value_size = round((theme.MEDIUM if row_h >= 60 * s else theme.BODY) * s)
@@ -388,7 +393,7 @@ class LiveScene(BaseScene):
                 a, b = min(zero, at), max(zero, at)
                 c.rect((a, bar_y, max(b - a, 3 * s), 8 * s), theme.ACCENT, radius=4 * s)
             y += row_h
-        self._draw_marker_counts(frame, sample, (x, py + ph - 44 * s), right)
+        self._draw_marker_counts(frame, sample, (x, py + ph - 112 * s), right)
 
     def _draw_marker_counts(self, frame: Frame, sample, pos, right: float) -> None:
         c, s = frame.canvas, self.layout.scale
@@ -405,7 +410,8 @@ class LiveScene(BaseScene):
             _, _, w, _ = c.text(f"{n} {word}", (x + 20 * s, y), size, theme.TEXT_DIM)
             x += w + 44 * s
 
-    def _banner_text(self, sample) -> tuple[str, tuple] | None:
+    def banner(self, sample) -> tuple[str, tuple] | None:
+        """The line on top of the view and its colour (None: all is well)."""
         state = self.link.state
         if state is LinkState.STARTING:
             return "Starting the tracker...", theme.ATTENTION
@@ -424,7 +430,7 @@ class LiveScene(BaseScene):
         return None
 
     def _draw_banner(self, frame: Frame, sample) -> None:
-        got = self._banner_text(sample)
+        got = self.banner(sample)
         if got is None:
             return
         text, colour = got
@@ -442,15 +448,15 @@ class LiveScene(BaseScene):
 
     def _draw_help(self, frame: Frame) -> None:
         c, s = frame.canvas, self.layout.scale
-        v = self.layout.view
+        px, py, pw, ph = self.layout.panel
         if self.interactive:
-            text = "Mouse: hand   Wheel: nearer/farther   Tab: other arm   Q/E: turn forearm   Arrows: lean"
+            text = "Mouse: hand, wheel: nearer/farther   Tab: other arm   Q/E: turn forearm   Arrows: lean   "
         else:
-            text = "M: next motion / mouse control"
-        text += "   R: find markers   C: cameras   Esc: back"
-        size = round(theme.SMALL * 0.85 * s)
-        lines = c.wrap(text, size, v.w - 2 * theme.MARGIN * s)
-        line_h = c.measure("Ag", size)[1] + 4 * s
-        y = v.y + v.h - theme.MARGIN * s - len(lines) * line_h
+            text = ""
+        text += "M: motions   R: find markers   C: cameras   Esc: back"
+        size = round(theme.SMALL * 0.8 * s)
+        lines = c.wrap(text, size, pw - 36 * s)
+        line_h = c.measure("Ag", size)[1] + 5 * s
+        y = py + ph - len(lines) * line_h
         for k, line in enumerate(lines):
-            c.text(line, (v.x + v.w / 2, y + k * line_h), size, theme.TEXT_FAINT, anchor="midtop")
+            c.text(line, (px + 26 * s, y + k * line_h), size, theme.TEXT_FAINT)
