@@ -185,6 +185,16 @@ def _humanize(name: str | None) -> str:
     return text[:1].upper() + text[1:]
 
 
+def truth_error_mm(positions_m: np.ndarray, truth_m: np.ndarray, status: np.ndarray) -> float:
+    """RMS distance (mm) of the measured markers from the simulator's truth (NaN for real cameras)."""
+    measured = (np.asarray(status) == MARKER_MEASURED) & np.isfinite(truth_m).all(axis=1)
+    measured &= np.isfinite(positions_m).all(axis=1)
+    if not measured.any():
+        return math.nan
+    d = np.linalg.norm(positions_m[measured] - truth_m[measured], axis=1)
+    return float(np.sqrt(np.mean(d**2)) * 1000.0)
+
+
 def format_angle(value_deg: float) -> str:
     """Whole degrees for the live display ("-" when undefined); ROM results round to 5 elsewhere."""
     if not math.isfinite(value_deg):
@@ -409,6 +419,10 @@ class LiveScene(BaseScene):
             c.circle((x + 7 * s, y + 10 * s), 7 * s, colour)
             _, _, w, _ = c.text(f"{n} {word}", (x + 20 * s, y), size, theme.TEXT_DIM)
             x += w + 44 * s
+        error_mm = truth_error_mm(sample.positions_m, sample.truth_m, status)
+        if math.isfinite(error_mm):
+            c.text(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
+                   (pos[0], pos[1] + 34 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT)
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""

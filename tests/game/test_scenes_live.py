@@ -15,7 +15,7 @@ from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState
 from game.scenes.avatar_view import AvatarView
-from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout
+from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
 from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
 from tracking.angles import ANGLE_COLUMNS, joint_angles
 from tracking.live import LiveSample
@@ -278,6 +278,13 @@ def test_format_angle():
     assert format_angle(87.4) == "87\N{DEGREE SIGN}"
     assert format_angle(-0.4) == "0\N{DEGREE SIGN}"
     assert format_angle(math.nan) == "-"
+
+
+def test_truth_error_counts_measured_markers_only():
+    truth = np.zeros((3, 3))
+    measured = truth + [[0.003, 0, 0], [0, 0.004, 0], [0.5, 0, 0]]
+    assert truth_error_mm(measured, truth, np.array([1, 1, 2])) == pytest.approx(math.sqrt((9 + 16) / 2))
+    assert math.isnan(truth_error_mm(measured, np.full((3, 3), np.nan), np.array([1, 1, 1])))
 
 
 def test_grid_and_image_coordinates():
