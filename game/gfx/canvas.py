@@ -115,7 +115,8 @@ def surface_to_texture(ctx: moderngl.Context, surface: pygame.Surface) -> modern
     """
     data = pygame.image.tobytes(surface, "RGBA")
     tex = ctx.texture(surface.get_size(), 4, data)
-    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    # Text is drawn at whole pixels, one texel per pixel: nearest sampling is exact and cheaper.
+    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
     tex.repeat_x = tex.repeat_y = False
     return tex
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import warnings
 from pathlib import Path
 from typing import Mapping
 
@@ -184,7 +185,11 @@ def open_screen(size_px: tuple[int, int], title: str, *, headless: bool, vsync: 
         return _open_offscreen(size_px)
     _set_gl_attributes()
     try:
-        pygame.display.set_mode(size_px, pygame.OPENGL | pygame.DOUBLEBUF, vsync=int(vsync))
+        with warnings.catch_warnings():
+            # pygame warns when the driver ignores the vsync request (Xvfb, some VMs): harmless,
+            # the frame-rate cap of the loop still paces the frames.
+            warnings.simplefilter("ignore")
+            pygame.display.set_mode(size_px, pygame.OPENGL | pygame.DOUBLEBUF, vsync=int(vsync))
     except pygame.error as exc:
         if vsync:  # some drivers refuse vsync; a window without it is still a window
             try:

@@ -450,6 +450,12 @@ class LiveScene(BaseScene):
         text, colour = got
         c, s = frame.canvas, self.layout.scale
         v = self.layout.view
+        if sample is None and self.link.state is not LinkState.FAILED:
+            # Nothing to show yet: say it large in the middle of the empty view.
+            c.text(text, (v.x + v.w / 2, v.y + v.h / 2 - 20 * s), round(theme.MEDIUM * s), theme.TEXT, anchor="center")
+            c.text("The avatar appears as soon as the markers are found.", (v.x + v.w / 2, v.y + v.h / 2 + 28 * s),
+                   round(theme.SMALL * s), theme.TEXT_DIM, anchor="center")
+            return
         width = v.w - 2 * theme.MARGIN * s
         size = round(theme.BODY * s)
         lines = c.wrap(text, size, width - 40 * s)[:3]
