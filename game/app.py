@@ -199,6 +199,8 @@ class RunSummary:
         wall_s: wall time of the run.
         work_ms: mean time to make a frame (without the pacing sleep): 1000 / work_ms is the
             frame rate the machine could sustain uncapped.
+        cpu_ms: CPU time of this process per frame, all threads (llvmpipe rasterizes on
+            threads of its own): what a frame costs on a machine shared with other work.
         screenshot: the PNG written, if any.
     """
 
@@ -206,6 +208,7 @@ class RunSummary:
     updates: int
     wall_s: float
     work_ms: float
+    cpu_ms: float = math.nan
     screenshot: Path | None = None
 
     @property
@@ -216,7 +219,8 @@ class RunSummary:
         shot = f"; screenshot {self.screenshot}" if self.screenshot else ""
         capable = 1000.0 / self.work_ms if self.work_ms > 0 else math.nan
         return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
-                f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible){shot}")
+                f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
+                f"{self.cpu_ms:.1f} ms CPU per frame){shot}")
 
 
 class App:
@@ -350,7 +354,9 @@ class App:
             screenshot: save the last frame drawn there (PNG).
         """
         start_s = self.clock()
+        start_cpu_s = time.process_time()
         first_frame = self.frames
+        work_before_s = self._work_total_s
         period_s = 1.0 / self.settings.max_fps if self.settings.max_fps > 0 else 0.0
         saved = None
         while self.running:
@@ -377,8 +383,9 @@ class App:
             self.screen.save_png(screenshot)
         n = self.frames - first_frame
         wall_s = self.clock() - start_s
-        work_ms = 1000.0 * self._work_total_s / self.frames if self.frames else math.nan
-        return RunSummary(n, self._step.total_steps, wall_s, work_ms, screenshot)
+        work_ms = 1000.0 * (self._work_total_s - work_before_s) / n if n else math.nan
+        cpu_ms = 1000.0 * (time.process_time() - start_cpu_s) / n if n else math.nan
+        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot)
 
     def close(self) -> None:
         """Exit every scene and release the canvas (the screen and services belong to the caller)."""

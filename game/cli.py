@@ -259,7 +259,7 @@ def _cmd_play(args) -> int:
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body)
     options = PlayOptions(
-        settings=Settings(window_px=args.window, max_fps=args.max_fps),
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
         source=source,
         headless=args.headless,
         seconds=seconds,
