@@ -138,6 +138,7 @@ class Scene(Protocol):
 
     def enter(self, app: "App") -> None: ...
     def exit(self) -> None: ...
+    def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None: ...
     def handle(self, event: InputEvent) -> None: ...
     def update(self, dt_s: float) -> None: ...
     def render_3d(self, frame: Frame) -> None: ...
@@ -166,6 +167,13 @@ class BaseScene:
 
     def update(self, dt_s: float) -> None:
         pass
+
+    def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None:
+        """The GL rectangle (x, y from the bottom, w, h) the frame must clear first; None: all.
+
+        A scene whose 3D pass repaints part of the window (colour and depth) leaves it out.
+        """
+        return None
 
     def render_3d(self, frame: Frame) -> None:
         pass
@@ -327,7 +335,7 @@ class App:
     def render(self, scene: BaseScene) -> None:
         """Draw ``scene`` (3D pass, then the 2D layer and the overlay) into the screen's target."""
         frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
-        self.screen.begin(scene.background)
+        self.screen.begin(scene.background, scene.clear_rect(frame))
         scene.render_3d(frame)
         self.canvas.begin()
         scene.render_2d(frame)

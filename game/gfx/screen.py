@@ -91,11 +91,21 @@ class Screen:
     def aspect(self) -> float:
         return self.size_px[0] / self.size_px[1]
 
-    def begin(self, clear_rgb: tuple[float, float, float]) -> None:
-        """Bind the frame's target and clear it (colour and depth)."""
+    def begin(self, clear_rgb: tuple[float, float, float],
+              clear_rect: tuple[int, int, int, int] | None = None) -> None:
+        """Bind the frame's target and clear it (colour and depth).
+
+        Args:
+            clear_rgb: the clear colour, 0..1.
+            clear_rect: clear only this GL rectangle (x, y from the bottom, w, h): a scene whose
+                3D pass repaints the rest saves llvmpipe the work. None: everything.
+        """
         self.target.use()
         self.ctx.viewport = (0, 0, *self.size_px)
+        if clear_rect is not None:
+            self.ctx.scissor = clear_rect
         self.target.clear(*clear_rgb, 1.0, depth=1.0)
+        self.ctx.scissor = None
 
     def present(self) -> None:
         """Show the frame (swap the window's buffers; offscreen, make sure the GPU finished)."""

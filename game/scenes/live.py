@@ -324,6 +324,15 @@ class LiveScene(BaseScene):
                 self.avatar.push(sample)
 
     # ------------------------------------------------------------------ drawing
+    def clear_rect(self, frame: Frame) -> tuple[int, int, int, int] | None:
+        """Only the panel: the avatar's background repaints the view (colour and depth)."""
+        if self.avatar is None:
+            return None
+        v = self.layout.view
+        w, h = frame.size_px
+        x0 = round(v.x + v.w)
+        return (x0, 0, w - x0, h)
+
     def render_3d(self, frame: Frame) -> None:
         self._consume_samples()
         if self.avatar is None:
