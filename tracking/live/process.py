@@ -33,7 +33,7 @@ from typing import Callable
 
 import numpy as np
 
-from tracking.live.protocol import (Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
+from tracking.live.protocol import (Activate, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
                                     Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
 from tracking.live.source import FrameSource, angle_names_for, open_source
@@ -62,6 +62,8 @@ class ProcessArgs:
         parent_pid: the game's process id (the tracker exits when it is gone).
         patient_input: the interactive patient's input to start with.
         paused: start paused.
+        standby: get ready (source, tracker), then wait for :class:`Activate` before publishing:
+            a warm spare that takes over within a frame or two when the running process dies.
     """
 
     config: SourceConfig
@@ -72,6 +74,7 @@ class ProcessArgs:
     parent_pid: int
     patient_input: PatientInput = PatientInput()
     paused: bool = False
+    standby: bool = False
 
 
 def one_line(where: str, frame_index: int, exc: BaseException) -> str:
@@ -152,6 +155,7 @@ class TrackerLoop:
             self._report("source", exc, index)
             return False
         t0 = self.clock()
+        self.writer.header["heartbeat_s"] = t0
         try:
             sample = self.tracker.step(frame.images, time_s)
         except Exception as exc:
@@ -259,9 +263,27 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(0)
 
 
+def _wait_for_activation(conn, parent_pid: int) -> Activate | None:
+    """A standby process waits here until the game activates it (None: stop instead)."""
+    try:
+        while True:
+            if conn.poll(PARENT_CHECK_S):
+                command = conn.recv()
+                if isinstance(command, Activate):
+                    return command
+                if isinstance(command, Stop):
+                    return None
+            elif os.getppid() != parent_pid:
+                return None
+    except (EOFError, OSError):
+        return None
+
+
 def tracker_main(args: ProcessArgs, conn) -> None:
     """Entry of the tracker process (see the module docstring)."""
     from multiprocessing import shared_memory
+
+    from tracking.tracker import Tracker
 
     _die_with_parent(args.parent_pid)
     # Ctrl-C in the terminal reaches the whole process group: the game decides when we stop.
@@ -274,25 +296,43 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     try:
         writer = RingWriter(sample_shm.buf, args.ring)
         h = writer.header
-        h["pid"] = os.getpid()
-        h["state"] = ProcessState.STARTING
-        h["heartbeat_s"] = time.perf_counter()
+        if not args.standby:  # a standby leaves the header to the running process
+            h["pid"] = os.getpid()
+            h["state"] = ProcessState.STARTING
+            h["heartbeat_s"] = time.perf_counter()
         images = ImageSlot(image_shm.buf, args.images)
         try:
             source = open_source(args.config)
             _check_geometry(source, args)
-            loop = TrackerLoop(source, writer, images, fps=args.config.fps)
-            loop.handle(SetPatientInput(args.patient_input))
-            loop.paused = args.paused
+            tracker = Tracker(source.cameras, source.markerset, fps=args.config.fps)
+            _warm_up(source, tracker)
         except Exception as exc:
             line = " ".join(str(exc).split()) or type(exc).__name__
             log.error("the tracker process cannot start: %s", line, exc_info=not _is_user_error(exc))
-            writer.set_error(f"cannot start: {line}")
-            h["state"] = ProcessState.FAILED
+            if not args.standby:
+                writer.set_error(f"cannot start: {line}")
+                h["state"] = ProcessState.FAILED
             conn.send(("failed", line))
             return
+        motion, patient_input, paused = args.config.motion, args.patient_input, args.paused
+        if args.standby:
+            conn.send(("standby", os.getpid()))
+            go = _wait_for_activation(conn, args.parent_pid)
+            if go is None:
+                return
+            h["pid"] = os.getpid()
+            h["heartbeat_s"] = time.perf_counter()
+            patient_input, paused = go.patient_input, go.paused
+            motion = go.motion
+        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker)
+        if motion != args.config.motion:
+            loop.handle(SetMotion(motion))
+        loop.handle(SetPatientInput(patient_input))
+        loop.paused = paused
         conn.send(("ready", os.getpid()))
         loop.run(conn, args.parent_pid)
+    except (EOFError, BrokenPipeError, ConnectionResetError):
+        log.warning("the control pipe closed: the tracker process exits")
     finally:
         if source is not None:
             source.close()
@@ -301,6 +341,18 @@ def tracker_main(args: ProcessArgs, conn) -> None:
                 part.release()
         sample_shm.close()
         image_shm.close()
+
+
+def _warm_up(source: FrameSource, tracker) -> None:
+    """Render and track one frame set before reporting ready, then forget it.
+
+    The first frame set pays one-off costs (shader compilation, first-touch allocations, the
+    full-frame identification) that would otherwise stall the first heartbeats.
+    """
+    frame = source.grab(0, 0.0, False)
+    tracker.step(frame.images, 0.0)
+    tracker.reset()
+    source.handle(Reidentify())  # a motion starts again from its reference pose
 
 
 def _is_user_error(exc: BaseException) -> bool:
