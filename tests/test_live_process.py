@@ -40,7 +40,7 @@ def _wait(predicate, timeout_s: float, poll_s: float = 0.01):
 @pytest.fixture(scope="module")
 def live():
     tracker = LiveTracker(SourceConfig(size=SIZE, fps=15.0, motion=None), ring_size=64)
-    tracker.start()
+    tracker.start(wait=False)  # as a game does: it keeps drawing while the process starts
     yield tracker
     tracker.close()
 
@@ -58,6 +58,7 @@ def _collect(live: LiveTracker, seconds: float) -> list:
 def test_samples_arrive_identified_and_close_to_the_truth(live):
     assert len(live.cameras) == 4 and live.markerset.n_markers == 14
     assert "right_elbow_flexion" in live.angle_names
+    assert _wait(lambda: live.status() and live.ready, 60.0, 0.05), live.status()
     samples = _collect(live, 2.0)
     assert len(samples) >= 5
     numbers = [s.number for s in samples]
@@ -199,6 +200,14 @@ def test_a_source_that_cannot_start_is_one_line(tmp_path):
     with pytest.raises(LiveError, match=r"cannot start: .*bad.yaml") as info:
         LiveTracker(SourceConfig(size=SIZE, motion=str(bad)), warm_standby=False).start()
     assert "\n" not in str(info.value)
+    # without waiting: the reason shows in the status line
+    live = LiveTracker(SourceConfig(size=SIZE, motion=str(bad)), auto_restart=False, warm_standby=False)
+    live.start(wait=False)
+    try:
+        status = _wait(lambda: "cannot start" in (s := live.status()).last_error and s, 30.0, 0.05)
+        assert status and not status.alive and "bad.yaml" in status.last_error
+    finally:
+        live.close()
     assert multiprocessing.active_children() == []
     assert _my_blocks() == []
 

@@ -21,6 +21,7 @@ import math
 import multiprocessing
 import os
 import secrets
+import threading
 import time
 from dataclasses import replace
 from multiprocessing import shared_memory
@@ -44,6 +45,8 @@ STALE_HEARTBEAT_S = 1.0
 START_TIMEOUT_S = 30.0
 #: Time a process gets to stop on request before it is killed.
 STOP_TIMEOUT_S = 2.0
+#: A process that reports it cannot start is tried again this many times (the cause may pass).
+MAX_START_RETRIES = 3
 #: A new standby process is started this long after the running one became ready, so that its
 #: start-up does not compete with a process that is just taking over.
 STANDBY_DELAY_S = 2.0
@@ -197,6 +200,7 @@ class LiveTracker:
         self._spare: _Child | None = None
         self._retry_at = 0.0
         self._spare_due: float | None = None
+        self._failed_starts = 0
         self._shm: list[shared_memory.SharedMemory] = []
         self._reader: RingReader | None = None
         self._images: ImageSlot | None = None
@@ -209,8 +213,13 @@ class LiveTracker:
         self._closed = True
 
     # ------------------------------------------------------------------ life cycle
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> None:
-        """Create the shared memory, spawn the process and wait until it is ready.
+    def start(self, timeout_s: float = START_TIMEOUT_S, *, wait: bool = True) -> None:
+        """Create the shared memory, spawn the process and (``wait``) wait until it is ready.
+
+        ``cameras``, ``markerset`` and ``angle_names`` are set before the process starts, so a
+        game may call ``start(wait=False)`` and keep drawing: :attr:`ready` turns True (and
+        ``status().state`` RUNNING) when the first samples can come, and a process that cannot
+        start shows in ``status().last_error``.
 
         Raises:
             LiveError: the source cannot be opened (the message says why) or the process did not
@@ -239,16 +248,18 @@ class LiveTracker:
             self._images = ImageSlot(image_shm.buf, images)
             self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid())
             self._child = self._spawn(standby=False)
-            self._wait_ready(timeout_s)
-            if self.warm_standby:
-                self._spare = self._spawn(standby=True)
+            if wait:
+                self._wait_ready(timeout_s)
+                if self.warm_standby:
+                    self._spare = self._spawn(standby=True)
         except BaseException:
             self.close()
             raise
 
     def _spawn(self, *, standby: bool) -> _Child:
         args = replace(self._args, config=replace(self.source, motion=self._motion), patient_input=self._input,
-                       paused=self._paused, standby=standby)
+                       paused=self._paused, standby=standby,
+                       die_with_parent=threading.current_thread() is threading.main_thread())
         if not standby:
             self._reader.header["state"] = ProcessState.STARTING
         child = _Child(self._ctx, args)
@@ -316,8 +327,8 @@ class LiveTracker:
         now = time.perf_counter()
         self._tend_spare(now)
         child = self._child
-        if child is None:  # an earlier start failed: try again later
-            if self.auto_restart and now >= self._retry_at:
+        if child is None:  # an earlier start failed: try again later, a few times
+            if self.auto_restart and now >= self._retry_at and self._failed_starts <= MAX_START_RETRIES:
                 self._restart("")
             return
         if not child.ready:
@@ -326,8 +337,11 @@ class LiveTracker:
                 self._last_error = f"the tracker process cannot start: {child.failed}"
                 child.stop(0.0)
                 self._child = None
+                self._failed_starts += 1
                 self._retry_at = now + RETRY_AFTER_S
                 return
+            if child.ready:
+                self._failed_starts = 0
         alive = child.proc.is_alive()
         if alive and child.ready:
             state = int(self._reader.header["state"])
@@ -375,6 +389,13 @@ class LiveTracker:
             log.info("standby tracker process %d takes over", spare.pid)
         else:
             self._child = self._spawn(standby=False)
+
+    @property
+    def ready(self) -> bool:
+        """The running process reported ready (samples flow)."""
+        if self._child is not None and not self._child.ready:
+            self._child.receive()
+        return self._child is not None and self._child.ready
 
     @property
     def standby_ready(self) -> bool:

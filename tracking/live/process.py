@@ -64,6 +64,10 @@ class ProcessArgs:
         paused: start paused.
         standby: get ready (source, tracker), then wait for :class:`Activate` before publishing:
             a warm spare that takes over within a frame or two when the running process dies.
+        die_with_parent: ask Linux to kill this process when the thread that spawned it ends
+            (``PR_SET_PDEATHSIG`` follows the spawning *thread*, so the game sets it only when
+            spawning from its main thread; the parent-pid check and the pipe's end-of-file cover
+            the other cases within half a second).
     """
 
     config: SourceConfig
@@ -75,6 +79,7 @@ class ProcessArgs:
     patient_input: PatientInput = PatientInput()
     paused: bool = False
     standby: bool = False
+    die_with_parent: bool = True
 
 
 def one_line(where: str, frame_index: int, exc: BaseException) -> str:
@@ -250,9 +255,9 @@ class TrackerLoop:
             h["state"] = ProcessState.STOPPED
 
 
-def _die_with_parent(parent_pid: int) -> None:
+def _die_with_parent(parent_pid: int, pdeathsig: bool) -> None:
     """Ask Linux to kill this process when the game dies; exit now if it already has."""
-    if sys.platform.startswith("linux"):
+    if pdeathsig and sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             PR_SET_PDEATHSIG = 1
@@ -285,7 +290,7 @@ def tracker_main(args: ProcessArgs, conn) -> None:
 
     from tracking.tracker import Tracker
 
-    _die_with_parent(args.parent_pid)
+    _die_with_parent(args.parent_pid, args.die_with_parent)
     # Ctrl-C in the terminal reaches the whole process group: the game decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # The game created the blocks and unlinks them; attaching registers them again with the
