@@ -3,9 +3,10 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and starts a new one
-without waiting for it: the game keeps drawing, the samples resume when the new process is
-ready.
+that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and replaces it
+without waiting: a warm standby process (source and tracker already built) takes over, or a new
+process starts; the game keeps drawing, the samples resume when the new process is ready. The
+shared memory stays, so sample numbers and frame indices continue.
 
 Cleanup: :meth:`LiveTracker.close` (also at interpreter exit) stops the process (killing it if it
 does not stop in time) and unlinks the shared memory. Blocks are named

@@ -16,6 +16,12 @@ the shared memory the game created (:mod:`tracking.live.ring`), opens the source
   :mod:`tracking.live.protocol`);
 - the process dies with the game: ``PR_SET_PDEATHSIG`` on Linux, and a check of the parent's pid.
 
+Before reporting ready it renders and tracks one frame set and forgets it (first-frame costs
+such as shader compilation would otherwise stall the first heartbeats). A *standby* process
+(``ProcessArgs.standby``) gets as far as that, reports ``("standby", pid)`` and waits for
+:class:`~tracking.live.protocol.Activate`: the game keeps one so that replacing a dead process
+takes a frame or two instead of a process start.
+
 :meth:`TrackerLoop.step` is the per-frame work; tests call it directly, without a process.
 """
 
@@ -33,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from tracking.live.protocol import (Activate, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
+from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
                                     Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
 from tracking.live.source import FrameSource, angle_names_for, open_source
@@ -122,6 +128,7 @@ class TrackerLoop:
         self._nan_windows = np.full((m, c, 3), np.nan)
         self._nan_uv = np.full((m, c, 2), np.nan)
         self._nan_truth = np.full((m, 3), np.nan)
+        self._shapes = [(cam.size_px[1], cam.size_px[0], 3) for cam in source.cameras]
 
     # ------------------------------------------------------------------ commands
     def handle(self, command: object) -> bool:
@@ -156,6 +163,7 @@ class TrackerLoop:
         time_s = index / self.fps
         try:
             frame = self.source.grab(index, time_s, self.tracker.state == TrackingState.TRACKING)
+            self._check_images(frame.images)
         except Exception as exc:
             self._report("source", exc, index)
             return False
@@ -169,12 +177,19 @@ class TrackerLoop:
         step_ms = (self.clock() - t0) * 1000.0
         self._publish(index, time_s, frame, sample, step_ms)
         if self.images is not None:
-            try:
-                self.images.write(frame.images, index)
-            except ValueError as exc:  # images of the wrong size: the tracker refused them already
-                self._report("images", exc, index)
+            self.images.write(frame.images, index)
         self._rates(frame.t_ready_s, step_ms)
         return True
+
+    def _check_images(self, images) -> None:
+        """The source delivers what the cameras are calibrated for (the tracker trusts it)."""
+        if len(images) != len(self._shapes):
+            raise LiveError(f"the source delivered {len(images)} images for {len(self._shapes)} cameras")
+        for cam, img, shape in zip(self.source.cameras, images, self._shapes):
+            if img.shape != shape or img.dtype != np.uint8:
+                h, w = img.shape[:2]
+                raise LiveError(f"camera {cam.name} delivered {w}x{h} {img.dtype} images but is calibrated for "
+                                f"{shape[1]}x{shape[0]} uint8 BGR: recalibrate or set the camera size")
 
     def _publish(self, index: int, time_s: float, frame, sample, step_ms: float) -> None:
         rec = self.writer.scratch
@@ -367,8 +382,6 @@ def _is_user_error(exc: BaseException) -> bool:
 
 
 def _check_geometry(source: FrameSource, args: ProcessArgs) -> None:
-    from tracking.live.protocol import LiveError
-
     m, c = source.markerset.n_markers, len(source.cameras)
     if (m, c) != (args.ring.n_markers, args.ring.n_cameras):
         raise LiveError(f"the source has {m} markers and {c} cameras but the game expected "
