@@ -3,9 +3,10 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and starts a new one
-without waiting for it: the game keeps drawing, the samples resume when the new process is
-ready.
+that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and replaces it
+without waiting: a warm standby process (source and tracker already built) takes over, or a new
+process starts; the game keeps drawing, the samples resume when the new process is ready. The
+shared memory stays, so sample numbers and frame indices continue.
 
 Cleanup: :meth:`LiveTracker.close` (also at interpreter exit) stops the process (killing it if it
 does not stop in time) and unlinks the shared memory. Blocks are named
@@ -21,6 +22,7 @@ import math
 import multiprocessing
 import os
 import secrets
+import threading
 import time
 from dataclasses import replace
 from multiprocessing import shared_memory
@@ -29,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from tracking.live.process import ProcessArgs, tracker_main
-from tracking.live.protocol import (LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
+from tracking.live.protocol import (Activate, LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
                                     SetMotion, SetPatientInput, SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingReader, RingWriter, decode_line
 from tracking.live.source import angle_names_for, source_geometry
@@ -44,6 +46,11 @@ STALE_HEARTBEAT_S = 1.0
 START_TIMEOUT_S = 30.0
 #: Time a process gets to stop on request before it is killed.
 STOP_TIMEOUT_S = 2.0
+#: A process that reports it cannot start is tried again this many times (the cause may pass).
+MAX_START_RETRIES = 3
+#: A new standby process is started this long after the running one became ready, so that its
+#: start-up does not compete with a process that is just taking over.
+STANDBY_DELAY_S = 2.0
 #: After a restart whose process could not start, wait this long before trying again.
 RETRY_AFTER_S = 2.0
 _SHM_DIR = Path("/dev/shm")
@@ -98,6 +105,72 @@ def _exit_reason(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
+def _check_motion(name: str | None) -> None:
+    """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
+    if name is None:
+        return
+    from tracking.sim.motions import available_motions
+
+    if name not in available_motions() and not Path(name).is_file():
+        raise LiveError(f"unknown motion {name!r}: choose one of {available_motions()} or give a motion file")
+
+
+class _Child:
+    """One tracker process and its end of the control pipe."""
+
+    def __init__(self, ctx, args: ProcessArgs) -> None:
+        self.conn, child_conn = ctx.Pipe(duplex=True)
+        self.proc = ctx.Process(target=tracker_main, args=(args, child_conn), name="rehab-tracker", daemon=True)
+        self.proc.start()
+        child_conn.close()
+        self.standby = args.standby
+        self.started_at = time.perf_counter()
+        self.ready = False  # reported ready (a standby: prepared and waiting)
+        self.failed = ""  # why it could not start
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def receive(self) -> None:
+        """Read its messages: ("ready" | "standby", pid) or ("failed", line)."""
+        try:
+            while self.conn.poll():
+                kind, value = self.conn.recv()
+                if kind in ("ready", "standby"):
+                    self.ready = True
+                    log.info("tracker process %d %s in %.2f s", value, "ready" if kind == "ready" else "standing by",
+                             time.perf_counter() - self.started_at)
+                elif kind == "failed":
+                    self.failed = str(value)
+        except (EOFError, OSError):
+            pass  # it is gone: is_alive() says so
+
+    def send(self, command) -> bool:
+        try:
+            self.conn.send(command)
+            return True
+        except (OSError, ValueError):
+            return False
+
+    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
+        """Ask it to stop, then terminate, then kill; always join it. ``timeout_s`` 0: kill at
+        once (a hung process; the game must not wait for it)."""
+        proc = self.proc
+        if proc.is_alive() and timeout_s > 0:
+            self.send(Stop())
+            proc.join(timeout_s)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(0.5)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
+        self.conn.close()
+        if proc.exitcode is not None:
+            proc.close()
+
+
 class LiveTracker:
     """The tracker process as the game sees it (a context manager).
 
@@ -105,24 +178,30 @@ class LiveTracker:
         source: what to measure.
         ring_size: samples kept in the ring (how far the game may fall behind without losing any).
         auto_restart: :meth:`status` restarts a process that died or hangs.
+        warm_standby: keep a second process prepared (source and tracker built, not publishing),
+            so that a restart takes a frame or two instead of a process start (about 1.5 s on an
+            idle machine, several seconds on a loaded one). Costs the memory of a second process
+            and its start-up CPU shortly after :meth:`start`.
 
     After :meth:`start`: ``cameras``, ``markerset`` and ``angle_names`` describe the samples.
     """
 
-    def __init__(self, source: SourceConfig = SourceConfig(), *, ring_size: int = 256, auto_restart: bool = True) -> None:
+    def __init__(self, source: SourceConfig = SourceConfig(), *, ring_size: int = 256, auto_restart: bool = True,
+                 warm_standby: bool = True) -> None:
         self.source = source
         self.ring_size = int(ring_size)
         self.auto_restart = auto_restart
+        self.warm_standby = warm_standby and auto_restart
         self.cameras: tuple = ()
         self.markerset = None
         self.angle_names: tuple[str, ...] = ()
         self.restarts = 0
         self._ctx = multiprocessing.get_context("spawn")
-        self._proc = None
-        self._conn = None
-        self._ready = False
-        self._started_at = 0.0
+        self._child: _Child | None = None
+        self._spare: _Child | None = None
         self._retry_at = 0.0
+        self._spare_due: float | None = None
+        self._failed_starts = 0
         self._shm: list[shared_memory.SharedMemory] = []
         self._reader: RingReader | None = None
         self._images: ImageSlot | None = None
@@ -135,8 +214,13 @@ class LiveTracker:
         self._closed = True
 
     # ------------------------------------------------------------------ life cycle
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> None:
-        """Create the shared memory, spawn the process and wait until it is ready.
+    def start(self, timeout_s: float = START_TIMEOUT_S, *, wait: bool = True) -> None:
+        """Create the shared memory, spawn the process and (``wait``) wait until it is ready.
+
+        ``cameras``, ``markerset`` and ``angle_names`` are set before the process starts, so a
+        game may call ``start(wait=False)`` and keep drawing: :attr:`ready` turns True (and
+        ``status().state`` RUNNING) when the first samples can come, and a process that cannot
+        start shows in ``status().last_error``.
 
         Raises:
             LiveError: the source cannot be opened (the message says why) or the process did not
@@ -145,6 +229,7 @@ class LiveTracker:
         if not self._closed:
             return
         remove_stale_blocks()
+        _check_motion(self._motion)
         cameras, markerset = source_geometry(self.source)
         self.cameras, self.markerset = cameras, markerset
         self.angle_names = angle_names_for(markerset)
@@ -163,76 +248,40 @@ class LiveTracker:
             self._reader = RingReader(sample_shm.buf, ring)
             self._images = ImageSlot(image_shm.buf, images)
             self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid())
-            self._spawn()
-            self._wait_ready(timeout_s)
+            self._child = self._spawn(standby=False)
+            if wait:
+                self._wait_ready(timeout_s)
+                if self.warm_standby:
+                    self._spare = self._spawn(standby=True)
         except BaseException:
             self.close()
             raise
 
-    def _spawn(self) -> None:
+    def _spawn(self, *, standby: bool) -> _Child:
         args = replace(self._args, config=replace(self.source, motion=self._motion), patient_input=self._input,
-                       paused=self._paused)
-        parent_conn, child_conn = self._ctx.Pipe(duplex=True)
-        self._reader.header["state"] = ProcessState.STARTING
-        proc = self._ctx.Process(target=tracker_main, args=(args, child_conn), name="rehab-tracker", daemon=True)
-        proc.start()
-        child_conn.close()
-        self._proc, self._conn = proc, parent_conn
-        self._ready = False
-        self._started_at = time.perf_counter()
-        log.info("tracker process %d started", proc.pid)
+                       paused=self._paused, standby=standby,
+                       die_with_parent=threading.current_thread() is threading.main_thread())
+        if not standby:
+            self._reader.header["state"] = ProcessState.STARTING
+        child = _Child(self._ctx, args)
+        log.info("tracker process %d started%s", child.pid, " (standby)" if standby else "")
+        return child
 
     def _wait_ready(self, timeout_s: float) -> None:
+        child = self._child
         deadline = time.perf_counter() + timeout_s
-        while not self._ready:
+        while not child.ready:
             left = deadline - time.perf_counter()
             if left <= 0:
                 raise LiveError(f"the tracker process did not start within {timeout_s:g} s: the machine may be "
                                 "overloaded; try a smaller camera size")
-            if self._conn.poll(min(left, 0.1)):
-                self._receive()
-            if not self._ready and not self._proc.is_alive():
-                raise LiveError(f"the tracker process {_exit_reason(self._proc.exitcode)} while starting; "
+            child.conn.poll(min(left, 0.1))
+            child.receive()
+            if child.failed:
+                raise LiveError(f"the tracker process cannot start: {child.failed}")
+            if not child.ready and not child.proc.is_alive():
+                raise LiveError(f"the tracker process {_exit_reason(child.proc.exitcode)} while starting; "
                                 "see the log above")
-
-    def _receive(self) -> None:
-        """Read the process's messages: ("ready", pid) or ("failed", line)."""
-        try:
-            while self._conn.poll():
-                kind, value = self._conn.recv()
-                if kind == "ready":
-                    self._ready = True
-                    log.info("tracker process %d ready in %.2f s", value, time.perf_counter() - self._started_at)
-                elif kind == "failed":
-                    self._last_error = f"the tracker process cannot start: {value}"
-                    self._reap()
-                    raise LiveError(self._last_error)
-        except (EOFError, OSError):
-            pass  # the process is gone; status() sees it
-
-    def _reap(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
-        """Stop the current process: ask, then terminate, then kill; always join it."""
-        proc, conn = self._proc, self._conn
-        self._proc = self._conn = None
-        self._ready = False
-        if proc is None:
-            return
-        if proc.is_alive() and conn is not None:
-            try:
-                conn.send(Stop())
-            except (OSError, ValueError):
-                pass
-            proc.join(timeout_s)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(0.5)
-        if proc.is_alive():
-            proc.kill()
-            proc.join(1.0)
-        if conn is not None:
-            conn.close()
-        if proc.exitcode is not None:
-            proc.close()
 
     def close(self) -> None:
         """Stop the process (killing it if it does not stop in time), release the shared memory.
@@ -244,8 +293,12 @@ class LiveTracker:
         self._closed = True
         atexit.unregister(self.close)
         try:
-            self._reap()
+            if self._spare is not None:
+                self._spare.stop(0.0)  # it publishes nothing: no need to wait for it
+            if self._child is not None:
+                self._child.stop()
         finally:
+            self._child = self._spare = None
             for part in (self._reader, self._images):
                 if part is not None:
                     part.release()
@@ -272,41 +325,85 @@ class LiveTracker:
 
     def _check(self) -> None:
         """Notice a dead or hung process; restart it when ``auto_restart``."""
-        if self._closed:
-            return
         now = time.perf_counter()
-        if self._proc is None:  # an earlier restart failed: try again later
-            if self.auto_restart and now >= self._retry_at:
+        self._tend_spare(now)
+        child = self._child
+        if child is None:  # an earlier start failed: try again later, a few times
+            if self.auto_restart and now >= self._retry_at and self._failed_starts <= MAX_START_RETRIES:
                 self._restart("")
             return
-        if not self._ready:
-            try:
-                self._receive()
-            except LiveError:  # the new process cannot start: retry later
+        if not child.ready:
+            child.receive()
+            if child.failed:
+                self._last_error = f"the tracker process cannot start: {child.failed}"
+                child.stop(0.0)
+                self._child = None
+                self._failed_starts += 1
                 self._retry_at = now + RETRY_AFTER_S
                 return
-        alive = self._proc.is_alive()
-        if alive and self._ready:
+            if child.ready:
+                self._failed_starts = 0
+        alive = child.proc.is_alive()
+        if alive and child.ready:
             state = int(self._reader.header["state"])
             hung = state in (ProcessState.RUNNING, ProcessState.PAUSED) and self._heartbeat_age_s() > STALE_HEARTBEAT_S
             if not hung:
                 return
-        elif alive and now - self._started_at < START_TIMEOUT_S:
+        elif alive and now - child.started_at < START_TIMEOUT_S:
             return  # still starting
-        reason = f"the tracker process {_exit_reason(None if alive else self._proc.exitcode)}"
+        reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
         log.error("%s", reason)
         self._last_error = reason
+        child.stop(0.0)
+        self._child = None
         if self.auto_restart:
             self._restart(reason)
-        else:
-            self._reap(0.2)
+
+    def _tend_spare(self, now: float) -> None:
+        """Keep one standby process (spawned once the running one is ready)."""
+        spare = self._spare
+        if spare is not None:
+            spare.receive()
+            if spare.failed or not spare.proc.is_alive():
+                log.warning("the standby tracker process %d ended: %s", spare.pid,
+                            spare.failed or _exit_reason(spare.proc.exitcode))
+                spare.stop(0.0)
+                self._spare = None
+        elif self.warm_standby and self._child is not None and self._child.ready:
+            if self._spare_due is None:
+                self._spare_due = now + STANDBY_DELAY_S
+            elif now >= self._spare_due:
+                self._spare_due = None
+                self._spare = self._spawn(standby=True)
 
     def _restart(self, reason: str) -> None:
-        self._reap(0.2)
         self.restarts += 1
         if reason:
             self._last_error = f"{reason}; restarted"
-        self._spawn()
+        spare, self._spare = self._spare, None
+        if spare is not None and spare.send(Activate(self._motion, self._input, self._paused)):
+            self._reader.header["state"] = ProcessState.STARTING
+            spare.ready = False  # until it reports ready as the running process
+            spare.standby = False
+            spare.started_at = time.perf_counter()
+            self._child = spare
+            log.info("standby tracker process %d takes over", spare.pid)
+        else:
+            self._child = self._spawn(standby=False)
+
+    @property
+    def ready(self) -> bool:
+        """The running process reported ready (samples flow)."""
+        if self._child is not None and not self._child.ready:
+            self._child.receive()
+        return self._child is not None and self._child.ready
+
+    @property
+    def standby_ready(self) -> bool:
+        """A standby process is prepared to take over."""
+        if self._spare is not None:
+            self._spare.receive()
+        return self._spare is not None and self._spare.ready
 
     def status(self) -> LiveStatus:
         """The process's health; restarts a dead or hung process when ``auto_restart``."""
@@ -315,7 +412,8 @@ class LiveTracker:
         self._check()
         h = self._reader.header
         age = self._heartbeat_age_s()
-        alive = self._proc is not None and self._ready and self._proc.is_alive() and age <= STALE_HEARTBEAT_S
+        child = self._child
+        alive = child is not None and child.ready and child.proc.is_alive() and age <= STALE_HEARTBEAT_S
         errors = int(h["errors"])
         if errors > self._errors_seen:
             self._errors_seen = errors
@@ -329,14 +427,14 @@ class LiveTracker:
             tracker_ms=float(h["step_ms"]),
             dropped=self._reader.dropped,
             errors=errors,
-            state=int(h["state"]) if self._proc is not None else int(ProcessState.STOPPED),
+            state=int(h["state"]) if child is not None else int(ProcessState.STOPPED),
             samples=int(h["written"]),
         )
 
     @property
     def pid(self) -> int | None:
-        """The tracker process's id (None when none runs)."""
-        return None if self._proc is None else self._proc.pid
+        """The running tracker process's id (None when none runs)."""
+        return None if self._child is None else self._child.pid
 
     # ------------------------------------------------------------------ samples
     def _sample(self, rec: np.ndarray) -> LiveSample:
@@ -381,11 +479,9 @@ class LiveTracker:
 
     # ------------------------------------------------------------------ commands
     def _send(self, command) -> None:
-        if self._conn is None:
-            return  # restarting: the new process gets the state in its arguments
-        try:
-            self._conn.send(command)
-        except (OSError, ValueError, BrokenPipeError):
+        # while restarting the command may be lost: the new process gets the state it sets
+        # (motion, patient input, pause) when it starts or takes over
+        if self._child is not None and not self._child.send(command):
             log.warning("the tracker process did not take %r (it is restarting)", command)
 
     def reidentify(self) -> None:
@@ -398,11 +494,7 @@ class LiveTracker:
         Raises:
             LiveError: ``name`` is neither a built-in motion nor an existing motion file.
         """
-        if name is not None:
-            from tracking.sim.motions import available_motions
-
-            if name not in available_motions() and not Path(name).is_file():
-                raise LiveError(f"unknown motion {name!r}: choose one of {available_motions()} or give a motion file")
+        _check_motion(name)
         self._motion = name
         self._send(SetMotion(name))
 

@@ -16,6 +16,12 @@ the shared memory the game created (:mod:`tracking.live.ring`), opens the source
   :mod:`tracking.live.protocol`);
 - the process dies with the game: ``PR_SET_PDEATHSIG`` on Linux, and a check of the parent's pid.
 
+Before reporting ready it renders and tracks one frame set and forgets it (first-frame costs
+such as shader compilation would otherwise stall the first heartbeats). A *standby* process
+(``ProcessArgs.standby``) gets as far as that, reports ``("standby", pid)`` and waits for
+:class:`~tracking.live.protocol.Activate`: the game keeps one so that replacing a dead process
+takes a frame or two instead of a process start.
+
 :meth:`TrackerLoop.step` is the per-frame work; tests call it directly, without a process.
 """
 
@@ -33,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from tracking.live.protocol import (Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
+from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
                                     Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
 from tracking.live.source import FrameSource, angle_names_for, open_source
@@ -62,6 +68,12 @@ class ProcessArgs:
         parent_pid: the game's process id (the tracker exits when it is gone).
         patient_input: the interactive patient's input to start with.
         paused: start paused.
+        standby: get ready (source, tracker), then wait for :class:`Activate` before publishing:
+            a warm spare that takes over within a frame or two when the running process dies.
+        die_with_parent: ask Linux to kill this process when the thread that spawned it ends
+            (``PR_SET_PDEATHSIG`` follows the spawning *thread*, so the game sets it only when
+            spawning from its main thread; the parent-pid check and the pipe's end-of-file cover
+            the other cases within half a second).
     """
 
     config: SourceConfig
@@ -72,6 +84,8 @@ class ProcessArgs:
     parent_pid: int
     patient_input: PatientInput = PatientInput()
     paused: bool = False
+    standby: bool = False
+    die_with_parent: bool = True
 
 
 def one_line(where: str, frame_index: int, exc: BaseException) -> str:
@@ -114,6 +128,7 @@ class TrackerLoop:
         self._nan_windows = np.full((m, c, 3), np.nan)
         self._nan_uv = np.full((m, c, 2), np.nan)
         self._nan_truth = np.full((m, 3), np.nan)
+        self._shapes = [(cam.size_px[1], cam.size_px[0], 3) for cam in source.cameras]
 
     # ------------------------------------------------------------------ commands
     def handle(self, command: object) -> bool:
@@ -148,10 +163,12 @@ class TrackerLoop:
         time_s = index / self.fps
         try:
             frame = self.source.grab(index, time_s, self.tracker.state == TrackingState.TRACKING)
+            self._check_images(frame.images)
         except Exception as exc:
             self._report("source", exc, index)
             return False
         t0 = self.clock()
+        self.writer.header["heartbeat_s"] = t0
         try:
             sample = self.tracker.step(frame.images, time_s)
         except Exception as exc:
@@ -160,12 +177,19 @@ class TrackerLoop:
         step_ms = (self.clock() - t0) * 1000.0
         self._publish(index, time_s, frame, sample, step_ms)
         if self.images is not None:
-            try:
-                self.images.write(frame.images, index)
-            except ValueError as exc:  # images of the wrong size: the tracker refused them already
-                self._report("images", exc, index)
+            self.images.write(frame.images, index)
         self._rates(frame.t_ready_s, step_ms)
         return True
+
+    def _check_images(self, images) -> None:
+        """The source delivers what the cameras are calibrated for (the tracker trusts it)."""
+        if len(images) != len(self._shapes):
+            raise LiveError(f"the source delivered {len(images)} images for {len(self._shapes)} cameras")
+        for cam, img, shape in zip(self.source.cameras, images, self._shapes):
+            if img.shape != shape or img.dtype != np.uint8:
+                h, w = img.shape[:2]
+                raise LiveError(f"camera {cam.name} delivered {w}x{h} {img.dtype} images but is calibrated for "
+                                f"{shape[1]}x{shape[0]} uint8 BGR: recalibrate or set the camera size")
 
     def _publish(self, index: int, time_s: float, frame, sample, step_ms: float) -> None:
         rec = self.writer.scratch
@@ -246,9 +270,9 @@ class TrackerLoop:
             h["state"] = ProcessState.STOPPED
 
 
-def _die_with_parent(parent_pid: int) -> None:
+def _die_with_parent(parent_pid: int, pdeathsig: bool) -> None:
     """Ask Linux to kill this process when the game dies; exit now if it already has."""
-    if sys.platform.startswith("linux"):
+    if pdeathsig and sys.platform.startswith("linux"):
         try:
             libc = ctypes.CDLL(None, use_errno=True)
             PR_SET_PDEATHSIG = 1
@@ -259,11 +283,29 @@ def _die_with_parent(parent_pid: int) -> None:
         os._exit(0)
 
 
+def _wait_for_activation(conn, parent_pid: int) -> Activate | None:
+    """A standby process waits here until the game activates it (None: stop instead)."""
+    try:
+        while True:
+            if conn.poll(PARENT_CHECK_S):
+                command = conn.recv()
+                if isinstance(command, Activate):
+                    return command
+                if isinstance(command, Stop):
+                    return None
+            elif os.getppid() != parent_pid:
+                return None
+    except (EOFError, OSError):
+        return None
+
+
 def tracker_main(args: ProcessArgs, conn) -> None:
     """Entry of the tracker process (see the module docstring)."""
     from multiprocessing import shared_memory
 
-    _die_with_parent(args.parent_pid)
+    from tracking.tracker import Tracker
+
+    _die_with_parent(args.parent_pid, args.die_with_parent)
     # Ctrl-C in the terminal reaches the whole process group: the game decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # The game created the blocks and unlinks them; attaching registers them again with the
@@ -274,25 +316,43 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     try:
         writer = RingWriter(sample_shm.buf, args.ring)
         h = writer.header
-        h["pid"] = os.getpid()
-        h["state"] = ProcessState.STARTING
-        h["heartbeat_s"] = time.perf_counter()
+        if not args.standby:  # a standby leaves the header to the running process
+            h["pid"] = os.getpid()
+            h["state"] = ProcessState.STARTING
+            h["heartbeat_s"] = time.perf_counter()
         images = ImageSlot(image_shm.buf, args.images)
         try:
             source = open_source(args.config)
             _check_geometry(source, args)
-            loop = TrackerLoop(source, writer, images, fps=args.config.fps)
-            loop.handle(SetPatientInput(args.patient_input))
-            loop.paused = args.paused
+            tracker = Tracker(source.cameras, source.markerset, fps=args.config.fps)
+            _warm_up(source, tracker)
         except Exception as exc:
             line = " ".join(str(exc).split()) or type(exc).__name__
             log.error("the tracker process cannot start: %s", line, exc_info=not _is_user_error(exc))
-            writer.set_error(f"cannot start: {line}")
-            h["state"] = ProcessState.FAILED
+            if not args.standby:
+                writer.set_error(f"cannot start: {line}")
+                h["state"] = ProcessState.FAILED
             conn.send(("failed", line))
             return
+        motion, patient_input, paused = args.config.motion, args.patient_input, args.paused
+        if args.standby:
+            conn.send(("standby", os.getpid()))
+            go = _wait_for_activation(conn, args.parent_pid)
+            if go is None:
+                return
+            h["pid"] = os.getpid()
+            h["heartbeat_s"] = time.perf_counter()
+            patient_input, paused = go.patient_input, go.paused
+            motion = go.motion
+        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker)
+        if motion != args.config.motion:
+            loop.handle(SetMotion(motion))
+        loop.handle(SetPatientInput(patient_input))
+        loop.paused = paused
         conn.send(("ready", os.getpid()))
         loop.run(conn, args.parent_pid)
+    except (EOFError, BrokenPipeError, ConnectionResetError):
+        log.warning("the control pipe closed: the tracker process exits")
     finally:
         if source is not None:
             source.close()
@@ -303,6 +363,18 @@ def tracker_main(args: ProcessArgs, conn) -> None:
         image_shm.close()
 
 
+def _warm_up(source: FrameSource, tracker) -> None:
+    """Render and track one frame set before reporting ready, then forget it.
+
+    The first frame set pays one-off costs (shader compilation, first-touch allocations, the
+    full-frame identification) that would otherwise stall the first heartbeats.
+    """
+    frame = source.grab(0, 0.0, False)
+    tracker.step(frame.images, 0.0)
+    tracker.reset()
+    source.handle(Reidentify())  # a motion starts again from its reference pose
+
+
 def _is_user_error(exc: BaseException) -> bool:
     from calibration.errors import RehabError
 
@@ -310,8 +382,6 @@ def _is_user_error(exc: BaseException) -> bool:
 
 
 def _check_geometry(source: FrameSource, args: ProcessArgs) -> None:
-    from tracking.live.protocol import LiveError
-
     m, c = source.markerset.n_markers, len(source.cameras)
     if (m, c) != (args.ring.n_markers, args.ring.n_cameras):
         raise LiveError(f"the source has {m} markers and {c} cameras but the game expected "

@@ -204,4 +204,13 @@ class Resume:
     """Continue after :class:`Pause`."""
 
 
-Command = Stop | Reidentify | SetMotion | SetPatientInput | Pause | Resume
+@dataclass(frozen=True, slots=True)
+class Activate:
+    """Take over (to a standby process): start publishing with this motion, input and pause state."""
+
+    motion: str | None
+    patient_input: PatientInput
+    paused: bool
+
+
+Command = Stop | Reidentify | SetMotion | SetPatientInput | Pause | Resume | Activate

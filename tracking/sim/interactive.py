@@ -4,9 +4,11 @@ The game turns the mouse and keys into a ``PatientInput`` (hand target in the wo
 rotation, trunk leans, which arm); :class:`InteractivePatient` turns the input into a body
 :class:`~tracking.sim.body.Pose` once per frame, as a person would follow it:
 
-- the hand (the wrist centre) moves towards the target at most ``hand_speed_m_s`` (2 m/s), the
-  forearm turns and the trunk leans at bounded rates, so a jump of the mouse never teleports a
-  marker and tracking is not broken by it;
+- the hand (the wrist centre) moves towards the target at most ``hand_speed_m_s`` (2 m/s),
+  speeding up and braking at most ``hand_accel_m_s2`` (a hand does not start at full speed, and
+  the tracker predicts from the last velocity), stopping on the target; the forearm turns and
+  the trunk leans at bounded rates, so a jump of the mouse never teleports a marker and tracking
+  is not broken by it;
 - the arm angles come from an analytic two-bone inverse kinematics (:func:`solve_arm`): the
   shoulder (glenohumeral centre) of the body model, the upper-arm and forearm lengths of
   :class:`~tracking.sim.body.BodyDimensions`, the elbow swivelled as low and as far out as the
@@ -44,6 +46,7 @@ class PatientLimits:
 
     Attributes:
         hand_speed_m_s: largest speed of the active hand.
+        hand_accel_m_s2: largest acceleration (and braking) of the active hand.
         forearm_speed_deg_s: largest forearm rotation speed.
         lean_speed_deg_s: largest trunk lean speed.
         forearm_range_deg: (pronation, supination) limits of the forearm rotation.
@@ -52,7 +55,8 @@ class PatientLimits:
     """
 
     hand_speed_m_s: float = 2.0
-    forearm_speed_deg_s: float = 360.0
+    hand_accel_m_s2: float = 5.0
+    forearm_speed_deg_s: float = 180.0
     lean_speed_deg_s: float = 90.0
     forearm_range_deg: tuple[float, float] = (-90.0, 90.0)
     forward_lean_range_deg: tuple[float, float] = (-20.0, 45.0)
@@ -161,6 +165,40 @@ def _approach(current: float, target: float, max_step: float) -> float:
     return current + max(-max_step, min(max_step, target - current))
 
 
+def hand_step(position: np.ndarray, velocity: np.ndarray, target: np.ndarray, dt_s: float, max_speed: float,
+              max_accel: float) -> tuple[np.ndarray, np.ndarray]:
+    """One step of a hand going to ``target`` with bounded speed and acceleration.
+
+    The wanted velocity points at the target with the speed from which the hand can still brake
+    to a stop on it (``sqrt(2 a d)``, at most ``max_speed``); the velocity turns towards it by at
+    most ``max_accel * dt_s``. The hand lands on the target when the step would pass it.
+
+    Args:
+        position, velocity, target: (3,) metres, metres per second (world).
+        dt_s: step, seconds.
+        max_speed, max_accel: limits, m/s and m/s^2.
+
+    Returns:
+        (new position, new velocity).
+    """
+    to_target = target - position
+    dist = float(np.linalg.norm(to_target))
+    if dist < 1e-9:
+        return target.copy(), np.zeros(3)
+    # brake in time: the speed from which a stop within the remaining distance (less this step) works
+    speed = min(max_speed, math.sqrt(2.0 * max_accel * dist))
+    wanted = to_target / dist * speed
+    dv = wanted - velocity
+    dv_norm = float(np.linalg.norm(dv))
+    if dv_norm > max_accel * dt_s:
+        dv *= max_accel * dt_s / dv_norm
+    velocity = velocity + dv
+    step = velocity * dt_s
+    if float(step @ to_target) >= dist * dist:  # would pass the target: stop on it
+        return target.copy(), np.zeros(3)
+    return position + step, velocity
+
+
 class InteractivePatient:
     """The simulated patient following a ``PatientInput``, one frame at a time.
 
@@ -177,9 +215,12 @@ class InteractivePatient:
         self.model = model
         self.limits = limits
         self.pose = reference_pose()
+        self._hand_velocity = {side: np.zeros(3) for side in ("right", "left")}
 
     def take_reference_pose(self) -> Pose:
         self.pose = reference_pose()
+        for v in self._hand_velocity.values():
+            v[:] = 0.0
         return self.pose
 
     def wrist_m(self, side: str) -> np.ndarray:
@@ -205,14 +246,20 @@ class InteractivePatient:
                         lim.forearm_speed_deg_s * dt_s)
         hand_now = self.model.joint_centres_m(old, side)["wrist"]
         pose = replace(old, trunk_forward_lean_deg=fwd, trunk_lateral_lean_deg=lat)
+        for other in ("right", "left"):
+            if other != side:
+                self._hand_velocity[other][:] = 0.0  # only the active hand moves
         if value.hand_target_m is None:
+            self._hand_velocity[side][:] = 0.0
             pose = pose.with_arm(side, replace(arm, forearm_supination_deg=sup))
         else:
             target = np.asarray(value.hand_target_m, dtype=np.float64)
-            step = target - hand_now
-            dist = float(np.linalg.norm(step))
-            max_step = lim.hand_speed_m_s * dt_s
-            goal = hand_now + step * (max_step / dist) if dist > max_step else target
-            pose = pose.with_arm(side, solve_arm(self.model, pose, side, goal, sup).arm)
+            goal, velocity = hand_step(hand_now, self._hand_velocity[side], target, dt_s, lim.hand_speed_m_s,
+                                       lim.hand_accel_m_s2)
+            solution = solve_arm(self.model, pose, side, goal, sup)
+            if not solution.reachable:  # held back by the arm's reach: no speed builds up against it
+                velocity = (solution.wrist_m - hand_now) / dt_s if dt_s > 0 else np.zeros(3)
+            self._hand_velocity[side] = velocity
+            pose = pose.with_arm(side, solution.arm)
         self.pose = pose
         return pose
