@@ -85,6 +85,10 @@ def test_killing_the_tracker_keeps_the_window_drawing_and_recovers(headless, tmp
         assert isinstance(scene, LiveScene)
         app.run(seconds=1.0)
         assert link.state is LinkState.RUNNING and scene.banner(link.latest) is None
+        # the tracker keeps a warm standby process to take over; kill once it is prepared
+        deadline = time.perf_counter() + 60
+        while not getattr(link.tracker, "standby_ready", True) and time.perf_counter() < deadline:
+            app.run(seconds=0.2)
         pids.append(link.tracker.pid)
         received = link.samples_received
         os.kill(pids[0], signal.SIGKILL)
@@ -105,7 +109,9 @@ def test_killing_the_tracker_keeps_the_window_drawing_and_recovers(headless, tmp
                 break
             time.sleep(1 / 60)
         assert recovered_s is not None, f"samples did not resume; banners seen: {banners}"
-        assert "The tracker stopped: restarting..." in banners
+        assert recovered_s < 2.0, f"samples resumed only after {recovered_s:.2f} s"
+        if recovered_s > 0.2:  # a handover slower than a few frames is shown while it happens
+            assert "The tracker stopped: restarting..." in banners
         assert link.samples_received > received
         gaps = np.diff([killed_s, *frame_times])
         # the window never froze while the process was replaced (generous for a loaded machine)
@@ -118,7 +124,7 @@ def test_killing_the_tracker_keeps_the_window_drawing_and_recovers(headless, tmp
             app.close()
         link.close()
         screen.close()
-    assert len(pids) == 2
+    assert len(pids) >= 2
     deadline = time.perf_counter() + 5
     while not all(_gone(p) for p in pids) and time.perf_counter() < deadline:
         time.sleep(0.05)
