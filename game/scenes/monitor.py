@@ -79,8 +79,9 @@ class MonitorScene(BaseScene):
             if sample is not None and markerset is not None:
                 self._overlay(c, sample, markerset, j, rect, (iw, ih), s)
             name = cameras[j].name if j < len(cameras) else f"camera {j + 1}"
-            seen = 0 if sample is None else int(np.isfinite(sample.uv_px[:, j, 0]).sum())
-            label = f"{name}: {seen} markers"
+            label = name
+            if sample is not None and np.isfinite(sample.uv_px).any():  # a source that reports centroids
+                label = f"{name}: {int(np.isfinite(sample.uv_px[:, j, 0]).sum())} markers"
             tw, th = c.measure(label, round(theme.SMALL * s))
             c.rect((rect[0] + 8 * s, rect[1] + 8 * s, tw + 20 * s, th + 10 * s), theme.OVERLAY, radius=8 * s)
             c.text(label, (rect[0] + 18 * s, rect[1] + 13 * s), round(theme.SMALL * s), theme.TEXT)
