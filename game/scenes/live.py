@@ -42,6 +42,8 @@ FOVY_DEG = 34.0
 NEAR_M, FAR_M = 0.1, 20.0
 #: Share of the window's width the 3D view takes (the panel takes the rest).
 VIEW_SHARE = 0.62
+#: Shortest interval between two patient inputs sent to the tracker process.
+INPUT_PERIOD_S = 1.0 / 60.0
 #: A sample older than this while the process runs means the source has stalled.
 STALE_SAMPLE_S = 1.0
 
@@ -231,7 +233,8 @@ class LiveScene(BaseScene):
         self.avatar = None
         self._sent_input = None
         self._sample_clock_s = math.nan   # app clock when the newest sample arrived
-        self._pointer = None
+        self._since_sent_s = 0.0
+        self._last_shoulder_m: dict[str, np.ndarray] = {}   # per side
 
     # ------------------------------------------------------------------ life cycle
     def enter(self, app) -> None:
@@ -281,8 +284,6 @@ class LiveScene(BaseScene):
             k = self.motions.index(self.motion)
             self.motion = self.motions[(k + 1) % len(self.motions)]
             self.link.set_motion(self.motion)
-            if self.avatar is not None and hasattr(self.avatar, "reset"):
-                self.avatar.reset()
         elif action is Action.REIDENTIFY:
             self.link.reidentify()
         elif action is Action.MONITOR and self.open_monitor is not None:
@@ -292,15 +293,15 @@ class LiveScene(BaseScene):
 
     def _shoulder_m(self) -> np.ndarray:
         """The active shoulder marker's last position (a typical seated one before any sample)."""
+        side = self.control.side
         sample, markerset = self.link.latest, self.link.markerset
-        name = "MRS" if self.control.side == "right" else "MLS"
+        name = "MRS" if side == "right" else "MLS"
         if sample is not None and markerset is not None and name in markerset.names:
             p = sample.positions_m[markerset.names.index(name)]
             if np.isfinite(p).all():
-                self._last_shoulder = np.array(p, dtype=np.float64)
-        default = np.array([0.19 if self.control.side == "right" else -0.19, 1.05, 0.0])
-        last = getattr(self, "_last_shoulder", None)
-        return last if last is not None else default
+                self._last_shoulder_m[side] = np.array(p, dtype=np.float64)
+        default = np.array([0.19 if side == "right" else -0.19, 1.05, 0.0])
+        return self._last_shoulder_m.get(side, default)
 
     def _pointer_event(self, event: Pointer) -> None:
         if event.kind is PointerKind.WHEEL:
@@ -310,7 +311,6 @@ class LiveScene(BaseScene):
         v = self.layout.view
         if not (v.x <= x_px < v.x + v.w and v.y <= y_px < v.y + v.h):
             return
-        self._pointer = (x_px, y_px)
         if self.interactive:
             origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
             self.control.aim(origin, direction, self._shoulder_m())
@@ -324,7 +324,10 @@ class LiveScene(BaseScene):
     # ------------------------------------------------------------------ update
     def update(self, dt_s: float) -> None:
         self.control.update(dt_s)
-        if self.interactive:
+        self._since_sent_s += dt_s
+        # At most 60 messages a second to the tracker process (its camera runs at 30).
+        if self.interactive and self._since_sent_s >= INPUT_PERIOD_S - 1e-9:
+            self._since_sent_s = 0.0
             self._send_input()
 
     def _consume_samples(self) -> None:
