@@ -236,6 +236,9 @@ class LiveTracker:
         ring = RingLayout(markerset.n_markers, len(cameras), len(self.angle_names), self.ring_size)
         images = ImageLayout(len(cameras), tuple(self.source.size))
         stem = f"{BLOCK_PREFIX}{os.getpid()}_{secrets.token_hex(4)}"
+        self._errors_seen = self._failed_starts = 0
+        self._last_error = ""
+        self._spare_due = None
         self._closed = False
         atexit.register(self.close)
         try:
@@ -497,6 +500,26 @@ class LiveTracker:
         _check_motion(name)
         self._motion = name
         self._send(SetMotion(name))
+
+    def set_source(self, source: SourceConfig, *, wait: bool = False) -> None:
+        """Measure another source (rig, image size, body, kind...).
+
+        The shared-memory layout depends on the cameras and the marker set, so the process and
+        the blocks are replaced: samples start again from number 0, and ``cameras``, ``markerset``
+        and ``angle_names`` change. A motion or patient input change needs only :meth:`set_motion`
+        or :meth:`set_patient_input`.
+
+        Raises:
+            LiveError: as :meth:`start` (the configuration is checked before the running process
+                is stopped, so a bad one leaves it running).
+        """
+        source.check()
+        _check_motion(source.motion)
+        source_geometry(source)
+        self.close()
+        self.source = source
+        self._motion = source.motion
+        self.start(wait=wait)
 
     def set_patient_input(self, value: PatientInput) -> None:
         """Drive the interactive patient (used when no scripted motion plays)."""
