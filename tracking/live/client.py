@@ -355,11 +355,16 @@ class LiveTracker:
         elif alive and now - child.started_at < START_TIMEOUT_S:
             return  # still starting
         reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
+        if not child.ready:
+            reason += " while starting"
         log.error("%s", reason)
         self._last_error = reason
         child.stop(0.0)
         self._child = None
-        if self.auto_restart:
+        if not child.ready:  # it never ran: retry later, a few times, not once per frame
+            self._failed_starts += 1
+            self._retry_at = now + RETRY_AFTER_S
+        elif self.auto_restart:
             self._restart(reason)
 
     def _tend_spare(self, now: float) -> None:
