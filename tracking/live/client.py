@@ -165,7 +165,9 @@ class _Child:
                 proc.join(0.5)
         if proc.is_alive():
             proc.kill()
-            proc.join(1.0)
+            # a killed process is gone within milliseconds, unless stuck in the kernel (a driver):
+            # then it is left to multiprocessing to reap later rather than freezing the game
+            proc.join(1.0 if timeout_s > 0 else 0.2)
         self.conn.close()
         if proc.exitcode is not None:
             proc.close()
