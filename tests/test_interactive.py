@@ -80,9 +80,29 @@ def test_the_hand_moves_at_most_2_m_per_s_and_arrives(model):
         steps.append(np.linalg.norm(now - prev))
         prev = now
     assert max(steps) <= 2.0 * DT + 0.002
+    # it speeds up and brakes gradually (5 m/s^2): no jump from rest to full speed
+    assert steps[0] <= 5.0 * DT * DT + 0.002
+    assert np.abs(np.diff(steps)).max() <= 5.0 * DT * DT + 0.003
     assert np.linalg.norm(prev - target) < 0.005
     # the other arm did not move
     np.testing.assert_allclose(patient.wrist_m("left"), InteractivePatient(model).wrist_m("left"))
+
+
+def test_hand_step_brakes_onto_the_target():
+    from tracking.sim.interactive import hand_step
+
+    p, v = np.zeros(3), np.zeros(3)
+    target = np.array([0.5, 0.0, 0.0])
+    speeds = []
+    for _ in range(200):
+        p, v = hand_step(p, v, target, DT, 2.0, 5.0)
+        speeds.append(np.linalg.norm(v))
+    np.testing.assert_allclose(p, target)
+    assert max(speeds) <= 2.0 + 1e-9 and speeds[-1] == 0.0
+    # a target behind the moving hand: it brakes first, then comes back
+    p, v = np.zeros(3), np.array([2.0, 0.0, 0.0])
+    p, v2 = hand_step(p, v, np.array([-0.5, 0.0, 0.0]), DT, 2.0, 5.0)
+    assert np.linalg.norm(v2 - v) == pytest.approx(5.0 * DT)
 
 
 def test_forearm_and_trunk_follow_the_input_at_bounded_rates(model):

@@ -194,6 +194,18 @@ def test_a_tracker_exception_reaches_the_game_as_a_status_line():
         assert samples and samples[-1].state == TrackingState.TRACKING
         assert live.status().restarts == 0
 
+        # another source replaces the process and the blocks; a bad one leaves them alone
+        first = live.pid
+        with pytest.raises(LiveError, match="source size"):
+            live.set_source(SourceConfig(size=(8, 8)))
+        assert live.pid == first
+        live.set_source(SourceConfig(rig="front4", size=(160, 120), fps=15.0, motion="reference"), wait=True)
+        assert live.pid != first and not os.path.exists(f"/proc/{first}")
+        assert live.cameras[0].size_px == (160, 120) and len(_my_blocks()) == 2
+        assert _wait(lambda: live.poll(), 10.0, 0.05)
+        assert live.latest_images()[0].shape == (120, 160, 3)
+        assert live.status().errors == 0 and live.status().last_error == ""
+
 
 def test_a_source_that_cannot_start_is_one_line(tmp_path):
     with pytest.raises(LiveError, match="unknown motion 'no_such_motion'"):
@@ -228,3 +240,4 @@ def test_stale_blocks_of_a_dead_game_are_removed():
     resource_tracker.unregister(shm._name, "shared_memory")  # we play the crashed game: it never unlinks
     assert f"{BLOCK_PREFIX}{dead_pid}_abcd_samples" in remove_stale_blocks()
     assert not Path(f"/dev/shm/{BLOCK_PREFIX}{dead_pid}_abcd_samples").exists()
+

@@ -165,7 +165,9 @@ class _Child:
                 proc.join(0.5)
         if proc.is_alive():
             proc.kill()
-            proc.join(1.0)
+            # a killed process is gone within milliseconds, unless stuck in the kernel (a driver):
+            # then it is left to multiprocessing to reap later rather than freezing the game
+            proc.join(1.0 if timeout_s > 0 else 0.2)
         self.conn.close()
         if proc.exitcode is not None:
             proc.close()
@@ -236,6 +238,9 @@ class LiveTracker:
         ring = RingLayout(markerset.n_markers, len(cameras), len(self.angle_names), self.ring_size)
         images = ImageLayout(len(cameras), tuple(self.source.size))
         stem = f"{BLOCK_PREFIX}{os.getpid()}_{secrets.token_hex(4)}"
+        self._errors_seen = self._failed_starts = 0
+        self._last_error = ""
+        self._spare_due = None
         self._closed = False
         atexit.register(self.close)
         try:
@@ -352,11 +357,16 @@ class LiveTracker:
         elif alive and now - child.started_at < START_TIMEOUT_S:
             return  # still starting
         reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
+        if not child.ready:
+            reason += " while starting"
         log.error("%s", reason)
         self._last_error = reason
         child.stop(0.0)
         self._child = None
-        if self.auto_restart:
+        if not child.ready:  # it never ran: retry later, a few times, not once per frame
+            self._failed_starts += 1
+            self._retry_at = now + RETRY_AFTER_S
+        elif self.auto_restart:
             self._restart(reason)
 
     def _tend_spare(self, now: float) -> None:
@@ -497,6 +507,26 @@ class LiveTracker:
         _check_motion(name)
         self._motion = name
         self._send(SetMotion(name))
+
+    def set_source(self, source: SourceConfig, *, wait: bool = False) -> None:
+        """Measure another source (rig, image size, body, kind...).
+
+        The shared-memory layout depends on the cameras and the marker set, so the process and
+        the blocks are replaced: samples start again from number 0, and ``cameras``, ``markerset``
+        and ``angle_names`` change. A motion or patient input change needs only :meth:`set_motion`
+        or :meth:`set_patient_input`.
+
+        Raises:
+            LiveError: as :meth:`start` (the configuration is checked before the running process
+                is stopped, so a bad one leaves it running).
+        """
+        source.check()
+        _check_motion(source.motion)
+        source_geometry(source)
+        self.close()
+        self.source = source
+        self._motion = source.motion
+        self.start(wait=wait)
 
     def set_patient_input(self, value: PatientInput) -> None:
         """Drive the interactive patient (used when no scripted motion plays)."""

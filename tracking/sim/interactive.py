@@ -170,7 +170,7 @@ def hand_step(position: np.ndarray, velocity: np.ndarray, target: np.ndarray, dt
     """One step of a hand going to ``target`` with bounded speed and acceleration.
 
     The wanted velocity points at the target with the speed from which the hand can still brake
-    to a stop on it (``sqrt(2 a d)``, at most ``max_speed``); the velocity turns towards it by at
+    to a stop on it (about ``sqrt(2 a d)``, at most ``max_speed``); the velocity turns towards it by at
     most ``max_accel * dt_s``. The hand lands on the target when the step would pass it.
 
     Args:
@@ -185,8 +185,9 @@ def hand_step(position: np.ndarray, velocity: np.ndarray, target: np.ndarray, dt
     dist = float(np.linalg.norm(to_target))
     if dist < 1e-9:
         return target.copy(), np.zeros(3)
-    # brake in time: the speed from which a stop within the remaining distance (less this step) works
-    speed = min(max_speed, math.sqrt(2.0 * max_accel * dist))
+    # brake in time: the speed from which braking by max_accel * dt_s per step stops within the
+    # distance left (v^2 / 2a + v dt / 2 = d for the stepped motion)
+    speed = min(max_speed, max_accel * (math.sqrt(dt_s * dt_s / 4.0 + 2.0 * dist / max_accel) - dt_s / 2.0))
     wanted = to_target / dist * speed
     dv = wanted - velocity
     dv_norm = float(np.linalg.norm(dv))
