@@ -34,6 +34,7 @@ TROUSERS_RGB = (58, 66, 96)
 SHOES_RGB = (70, 70, 78)
 HAIR_RGB = (96, 66, 46)
 EYES_RGB = (40, 40, 52)
+MOUTH_RGB = (178, 92, 92)
 CHAIR_RGB = (206, 170, 126)
 
 _SEG = {name: i for i, name in enumerate(SEGMENTS)}
@@ -122,11 +123,13 @@ def body_shapes(pose: SkeletonPose) -> BodyShapes:
     head = pose.joint("head")
     head_axes = rt @ np.diag([0.047, 0.064, 0.056]) * h
     b.ellipsoid(head, head_axes, skin, trunk, True)
-    b.ellipsoid(head + rt @ np.array([0.0, 0.012, 0.009]) * h, rt @ np.diag([0.050, 0.060, 0.058]) * h,
+    b.ellipsoid(head + rt @ np.array([0.0, 0.018, 0.015]) * h, rt @ np.diag([0.0495, 0.057, 0.057]) * h,
                 _rgb(HAIR_RGB), trunk, True)
     for sgn in (1.0, -1.0):
         b.sphere(head + rt @ np.array([sgn * 0.017, 0.004, -0.050]) * h, 0.0065 * h, _rgb(EYES_RGB), trunk)
     b.sphere(head + rt @ np.array([0.0, -0.008, -0.057]) * h, 0.008 * h, skin, trunk)  # nose
+    b.ellipsoid(head + rt @ np.array([0.0, -0.027, -0.050]) * h, rt @ np.diag([0.012, 0.0032, 0.006]) * h,
+                _rgb(MOUTH_RGB), trunk)
 
     # Shoulder line: a capsule across the top of the chest between the two shoulders.
     gh = {s: pose.joint(f"{s}_shoulder") for s in SIDE_SIGN}
@@ -147,7 +150,7 @@ def body_shapes(pose: SkeletonPose) -> BodyShapes:
         palm = -sgn * rf[:, 2]
         along, radial = -rf[:, 1], rf[:, 0]
         hand_c = pose.joint(f"{side}_hand")
-        b.ellipsoid(hand_c, np.stack([radial * 0.029 * h, along * 0.055 * h, rf[:, 2] * 0.014 * h], axis=1), skin, fa)
+        b.ellipsoid(hand_c, np.stack([radial * 0.029 * h, along * 0.055 * h, rf[:, 2] * 0.014 * h], axis=1), skin, fa, True)
         t0 = wrist + along * 0.012 * h + radial * 0.018 * h + palm * 0.004 * h
         t1 = wrist + along * 0.046 * h + radial * 0.036 * h + palm * 0.014 * h
         b.capsule(t0, t1, 0.0105 * h, 0.0085 * h, skin, fa)
@@ -179,7 +182,7 @@ def body_shapes(pose: SkeletonPose) -> BodyShapes:
     side_ax = rp[:, 0] - rp[1, 0] * np.array([0.0, 1.0, 0.0])
     side_ax /= max(float(np.linalg.norm(side_ax)), 1e-9)
     b.ellipsoid(seat_c, np.stack([side_ax * 0.15 * h, np.array([0.0, 0.016 * h, 0.0]), fwd * 0.15 * h], axis=1),
-                wood, PART_CHAIR)
+                wood, PART_CHAIR, True)
     for sx in (1.0, -1.0):
         for sz in (1.0, -1.0):
             top = seat_c + side_ax * (sx * 0.12 * h) + fwd * (sz * 0.12 * h)
@@ -201,14 +204,13 @@ def _halfway(r0: np.ndarray, r1: np.ndarray) -> np.ndarray:
 
 
 def _shadow_blobs(pose: SkeletonPose, seat_c: np.ndarray, feet: list[np.ndarray], floor_y: float, h: float) -> np.ndarray:
-    """Soft contact shadows under the chair, the feet and the hands (x, z, radius, darkness)."""
+    """Soft shadows under the chair, the feet and the hands (x, z, radius, darkness): (5, 4)."""
     rows = [(seat_c, 0.2 * h, 0.85)]
     rows += [(f, 0.07 * h, 0.6) for f in feet]
     for side in SIDE_SIGN:
-        for joint, r in ((f"{side}_hand", 0.05 * h), (f"{side}_elbow", 0.05 * h)):
-            p = pose.joint(joint)
-            height = max(p[1] - floor_y, 0.0)
-            rows.append((p, r * (1.0 + height / h), 0.35 / (1.0 + 3.0 * height / h)))
+        p = pose.joint(f"{side}_hand")
+        height = max(p[1] - floor_y, 0.0)
+        rows.append((p, 0.06 * h * (1.0 + height / h), 0.4 / (1.0 + 3.0 * height / h)))
     return np.array([(c[0], c[2], r, s) for c, r, s in rows], dtype=np.float64)
 
 
