@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -45,6 +46,26 @@ def demo_poses(n: int = 60, markerset: str = "upper_limb_seated") -> list[Skelet
     return out
 
 
+@dataclass(frozen=True, slots=True)
+class AvatarBench:
+    """Result of :func:`bench_avatar`.
+
+    Attributes:
+        fps: frames per second (wall clock; shares the machine with whatever else runs).
+        cpu_ms_per_frame: CPU time of this process per frame, all threads (llvmpipe renders on
+            one thread per core), so ``1000 / cpu_ms_per_frame`` is the rate one free core gives.
+        frames: frames timed.
+        size: (width, height).
+        msaa: samples.
+    """
+
+    fps: float
+    cpu_ms_per_frame: float
+    frames: int
+    size: tuple[int, int]
+    msaa: int
+
+
 def avatar_fps(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msaa: int = 0,
                ctx: moderngl.Context | None = None) -> float:
     """Frames per second of the avatar scene rendered offscreen at ``size`` (width, height).
@@ -58,6 +79,12 @@ def avatar_fps(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msa
     Raises:
         tracking.sim.renderer.OffscreenGLUnavailable: no OpenGL 3.3 offscreen context.
     """
+    return bench_avatar(size, seconds, msaa=msaa, ctx=ctx).fps
+
+
+def bench_avatar(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msaa: int = 0,
+                 ctx: moderngl.Context | None = None) -> AvatarBench:
+    """:func:`avatar_fps` with the CPU time per frame as well (same arguments)."""
     own = ctx is None
     ctx = create_context() if ctx is None else ctx
     w, h = size
@@ -78,7 +105,7 @@ def avatar_fps(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msa
         interp = PoseInterpolator()
         pixels = bytearray(w * h * 3)
         frames = 0
-        t_start = None
+        t_start = c_start = None
         warmup = 5
         t0 = time.perf_counter()
         next_sample = 0
@@ -96,12 +123,12 @@ def avatar_fps(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msa
             target.read_into(pixels, components=3)
             frames += 1
             if t_start is None and frames == warmup:
-                t_start, frames = time.perf_counter(), 0
+                t_start, c_start, frames = time.perf_counter(), time.process_time(), 0
             elif t_start is not None and time.perf_counter() - t_start >= seconds:
                 break
-        fps = frames / (time.perf_counter() - t_start)
+        wall, cpu = time.perf_counter() - t_start, time.process_time() - c_start
         renderer.release()
-        return fps
+        return AvatarBench(frames / wall, 1000.0 * cpu / frames, frames, (w, h), msaa)
     finally:
         for obj in reversed(objs):
             obj.release()
@@ -111,4 +138,6 @@ def avatar_fps(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, msa
 
 if __name__ == "__main__":
     for samples in (0, 4):
-        print(f"avatar 1280x720 msaa {samples}: {avatar_fps(msaa=samples):.1f} frames/s")
+        b = bench_avatar(msaa=samples)
+        print(f"avatar {b.size[0]}x{b.size[1]} msaa {samples}: {b.fps:.1f} frames/s, "
+              f"{b.cpu_ms_per_frame:.1f} ms CPU per frame ({b.frames} frames)")

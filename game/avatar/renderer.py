@@ -8,8 +8,8 @@ use it alike.
 
 Geometry: ellipsoids are instanced icospheres (a finer one for the trunk, head and chair back),
 tapered capsules an instanced band tangent to two instanced end spheres (the simulator's band,
-``tracking.sim.meshes.cone_band``). About 10k triangles in all: llvmpipe spends ~0.3 us per
-triangle, so the body costs a few milliseconds on a CPU-only machine.
+``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are not drawn. About
+5k triangles in all.
 
 Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
@@ -417,7 +417,9 @@ class AvatarRenderer:
         # within half a pixel of the true ellipse.
         fine_v, fine_t = icosphere(2)
         coarse_v, coarse_t = icosphere(1)
-        band_v, band_t = cone_band(32)
+        # 16 sides: a limb's outline is within half a pixel of round at its on-screen size, and
+        # the band's long thin triangles are what llvmpipe spends the most on (32 sides: +2.4 ms).
+        band_v, band_t = cone_band(16)
         self._fine = _Instanced(ctx, self._prog_ellipsoid, fine_v, fine_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         self._coarse = _Instanced(ctx, self._prog_ellipsoid, coarse_v, coarse_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         self._band = _Instanced(ctx, self._prog_band, band_v, band_t, "in_ring", _BAND_FORMAT, _BAND_NAMES)
@@ -437,6 +439,7 @@ class AvatarRenderer:
         ctx = self._ctx
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         # Drawn at the far plane with the depth test always passing: it also resets the depth.
+        # (Framebuffer.color_mask is not used anywhere here: moderngl applies it only on use().)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "1"
         self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
@@ -477,9 +480,7 @@ class AvatarRenderer:
 
         e_rows, e_lost, fine = self._ellipsoid_rows(pose, shapes)
         c_rows, c_lost = self._capsule_rows(pose, shapes)
-        caps = self._cap_rows(c_rows)  # capsule end caps are spheres
-        cap_lost = np.concatenate([c_lost, c_lost])
-        fbo = ctx.fbo
+        caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
         ctx.front_face = "cw" if mirrored else "ccw"
@@ -492,14 +493,12 @@ class AvatarRenderer:
         # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
         # its front surface (no inner overlaps), then its colour over it.
         if e_lost.any() or c_lost.any():
-            fbo.color_mask = False, False, False, False
+            ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
             self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
-            fbo.color_mask = True, True, True, True
-            fbo.depth_mask = False
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "<="
             self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
             ctx.depth_func = "<"
-            fbo.depth_mask = True
         ctx.front_face = "ccw"
         return shapes
 
@@ -535,16 +534,18 @@ class AvatarRenderer:
         return rows, style[:, 0] == 2.0
 
     @staticmethod
-    def _cap_rows(c: np.ndarray) -> np.ndarray:
-        """Ellipsoid rows of the capsules' end spheres (p0 ends, then p1 ends)."""
-        out = []
-        for p, r in ((c[:, 0:3], c[:, 6]), (c[:, 3:6], c[:, 7])):
-            axes = np.zeros((len(c), 9), np.float32)
-            axes[:, [0, 4, 8]] = r[:, None]
-            normal = np.zeros((len(c), 9), np.float32)
-            normal[:, [0, 4, 8]] = 1.0 / r[:, None]
-            out.append(np.hstack([p, axes, normal, c[:, 8:13]]))
-        return np.concatenate(out).astype(np.float32) if len(c) else np.zeros((0, 26), np.float32)
+    def _cap_rows(c: np.ndarray, lost: np.ndarray, caps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ellipsoid rows of the capsules' drawn end spheres, and which are lost."""
+        rows, flags = [], []
+        for end, (p, r) in enumerate(((c[:, 0:3], c[:, 6]), (c[:, 3:6], c[:, 7]))):
+            keep = caps[:, end]
+            axes = np.zeros((int(keep.sum()), 9), np.float32)
+            axes[:, [0, 4, 8]] = r[keep, None]
+            normal = np.zeros_like(axes)
+            normal[:, [0, 4, 8]] = 1.0 / r[keep, None]
+            rows.append(np.hstack([p[keep], axes, normal, c[keep, 8:13]]))
+            flags.append(lost[keep])
+        return np.concatenate(rows).astype(np.float32), np.concatenate(flags)
 
     def _draw_solids(self, e_rows: np.ndarray, fine: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
         self._fine.draw(e_rows[fine])
