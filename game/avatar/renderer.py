@@ -91,7 +91,7 @@ def mirror_view(
     aspect: float,
     *,
     yaw_deg: float = 0.0,
-    pitch_deg: float = 8.0,
+    pitch_deg: float = 12.0,
     fov_y_deg: float = 30.0,
     margin: float = 1.05,
     mirror: bool = True,

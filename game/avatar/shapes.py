@@ -28,6 +28,7 @@ PART_CHAIR = -2
 
 # sRGB 0-255: a friendly, well-separated palette (none of the marker hues matter here).
 SKIN_RGB = (236, 184, 152)
+PALM_RGB = (252, 214, 196)
 SHIRT_RGB = (70, 132, 196)
 TROUSERS_RGB = (58, 66, 96)
 SHOES_RGB = (70, 70, 78)
@@ -155,9 +156,12 @@ def body_shapes(pose: SkeletonPose) -> BodyShapes:
         along, radial = -rf[:, 1], rf[:, 0]
         hand_c = pose.joint(f"{side}_hand")
         b.ellipsoid(hand_c, np.stack([radial * 0.029 * h, along * 0.055 * h, rf[:, 2] * 0.014 * h], axis=1), skin, fa, True)
+        # A lighter palm, showing only on the palm side: palm up and palm down look different.
+        b.ellipsoid(hand_c + palm * 0.0045 * h + along * 0.004 * h,
+                    np.stack([radial * 0.024 * h, along * 0.047 * h, rf[:, 2] * 0.0115 * h], axis=1), _rgb(PALM_RGB), fa)
         t0 = wrist + along * 0.012 * h + radial * 0.018 * h + palm * 0.004 * h
         t1 = wrist + along * 0.046 * h + radial * 0.036 * h + palm * 0.014 * h
-        b.capsule(t0, t1, 0.0105 * h, 0.0085 * h, skin, fa, caps=(False, True))
+        b.capsule(t0, t1, 0.0115 * h, 0.0095 * h, skin, fa, caps=(False, True))
 
     # Seated legs (untracked): thighs forward from the hips, lower legs down to the floor.
     fwd = -rp[:, 2]
