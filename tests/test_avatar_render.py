@@ -182,3 +182,18 @@ def test_bench_reports_a_frame_rate(gl):
 
     fps = avatar_fps((160, 120), seconds=0.2, ctx=gl[0])
     assert 0.5 < fps < 10_000
+
+
+@pytest.mark.parametrize("p, sex", [(5, "female"), (95, "male")])
+def test_mirror_view_frames_the_whole_body_from_the_floor_to_a_raised_hand(p, sex):
+    sk = skeleton(Pose(right=ArmPose.clinical(flexion_deg=180), left=ArmPose.clinical(abduction_deg=90)), p, sex)
+    shapes = body_shapes(sk)
+    for aspect in (16 / 9, 4 / 3):
+        view, proj = mirror_view(sk, aspect, yaw_deg=20.0)
+        top = sk.joint("right_hand") + np.array([0.0, 0.06, 0.0])
+        pts = np.vstack([sk.joints_m, top[None], shapes.ellipsoid_centre_m])
+        clip = (proj @ view @ np.hstack([pts, np.ones((len(pts), 1))]).T).T
+        ndc = clip[:, :2] / clip[:, 3:4]
+        assert (np.abs(ndc) < 1.0).all()
+        # Not lost in the frame either: the body spans most of the height.
+        assert np.ptp(ndc[:, 1]) > 1.3
