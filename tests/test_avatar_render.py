@@ -188,7 +188,7 @@ def test_bench_reports_a_frame_rate(gl):
 def test_mirror_view_frames_the_whole_body_from_the_floor_to_a_raised_hand(p, sex):
     sk = skeleton(Pose(right=ArmPose.clinical(flexion_deg=180), left=ArmPose.clinical(abduction_deg=90)), p, sex)
     shapes = body_shapes(sk)
-    for aspect in (16 / 9, 4 / 3):
+    for aspect in (16 / 9, 4 / 3, 3 / 4):
         view, proj = mirror_view(sk, aspect, yaw_deg=20.0)
         top = sk.joint("right_hand") + np.array([0.0, 0.06, 0.0])
         pts = np.vstack([sk.joints_m, top[None], shapes.ellipsoid_centre_m])

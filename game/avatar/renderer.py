@@ -117,9 +117,10 @@ def mirror_view(
     right = np.array([-fwd[2], 0.0, fwd[0]])  # fwd turned -90 degrees about +Y: the patient's right
     direction = math.cos(yaw) * fwd + math.sin(yaw) * right
     pelvis = pose.joint("pelvis")
-    # From the floor (~0.36 H below the hip joints) to a hand raised straight up (~0.75 H above).
+    # From the floor (~0.36 H below the hip joints) to a hand raised straight up (~0.75 H above),
+    # and sideways to a hand held out to the side (~0.58 H from the midline) on narrow screens.
     target = pelvis + np.array([0.0, 0.20 * h, 0.0])
-    half_extent = 0.56 * h * margin
+    half_extent = max(0.56, 0.58 / aspect) * h * margin
     fov = math.radians(fov_y_deg)
     distance = half_extent / math.tan(fov / 2.0) + 0.2 * h
     pitch = math.radians(pitch_deg)
