@@ -8,15 +8,14 @@ use it alike.
 
 Geometry: ellipsoids are instanced icospheres (a finer one for the trunk, head and chair back),
 tapered capsules an instanced band tangent to two instanced end spheres (the simulator's band,
-``tracking.sim.meshes.cone_band``). About 10k triangles in all: llvmpipe spends ~0.3 us per
-triangle, so the body costs a few milliseconds on a CPU-only machine.
+``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are not drawn. About
+5k triangles in all.
 
 Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
 body against the background, and a little Blinn-Phong sheen. The lights are fixed relative to
-the camera, so every view is lit from the front. The floor disc carries a faint grid and soft
-contact shadows (Gaussian blobs under the chair, the feet and the hands) and fades out at its
-edge into the background gradient.
+the camera, so every view is lit from the front. The floor disc carries soft contact shadows
+(blobs under the chair, the feet and the hands) and fades out at its edge into the background.
 
 Segment states (:class:`tracking.status.MarkerStatus` from the skeleton):
 - MEASURED: the normal skin and clothes colours;
@@ -38,7 +37,6 @@ from game.avatar.skeleton import SkeletonPose
 from tracking.sim.meshes import cone_band, icosphere
 from tracking.status import MarkerStatus
 
-_MAX_BLOBS = 12
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,7 +91,7 @@ def mirror_view(
     aspect: float,
     *,
     yaw_deg: float = 0.0,
-    pitch_deg: float = 8.0,
+    pitch_deg: float = 12.0,
     fov_y_deg: float = 30.0,
     margin: float = 1.05,
     mirror: bool = True,
@@ -119,9 +117,10 @@ def mirror_view(
     right = np.array([-fwd[2], 0.0, fwd[0]])  # fwd turned -90 degrees about +Y: the patient's right
     direction = math.cos(yaw) * fwd + math.sin(yaw) * right
     pelvis = pose.joint("pelvis")
-    # From the floor (~0.36 H below the hip joints) to a raised hand (~0.70 H above them).
-    target = pelvis + np.array([0.0, 0.17 * h, 0.0])
-    half_extent = 0.53 * h * margin
+    # From the floor (~0.36 H below the hip joints) to a hand raised straight up (~0.75 H above),
+    # and sideways to a hand held out to the side (~0.58 H from the midline) on narrow screens.
+    target = pelvis + np.array([0.0, 0.20 * h, 0.0])
+    half_extent = max(0.56, 0.58 / aspect) * h * margin
     fov = math.radians(fov_y_deg)
     distance = half_extent / math.tan(fov / 2.0) + 0.2 * h
     pitch = math.radians(pitch_deg)
@@ -145,8 +144,10 @@ const vec3 GROUND = vec3(0.34, 0.30, 0.27);
 const vec3 KEY = vec3(1.05, 0.98, 0.90);
 const vec3 RIM = vec3(0.55, 0.65, 0.85);
 
-vec3 to_linear(vec3 c) { return pow(c, vec3(2.2)); }
-vec3 to_srgb(vec3 c) { return pow(c, vec3(1.0 / 2.2)); }
+// Gamma 2 instead of the sRGB curve: squares and square roots are much cheaper than pow() on
+// llvmpipe, and the difference does not show.
+vec3 to_linear(vec3 c) { return c * c; }
+vec3 to_srgb(vec3 c) { return sqrt(c); }
 
 // state: 0 measured or untracked, 1 estimated, 2 lost.
 vec3 shade(vec3 n, vec3 pos, vec3 srgb, float state) {
@@ -163,10 +164,12 @@ vec3 shade(vec3 n, vec3 pos, vec3 srgb, float state) {
     float wrap = clamp((dot(n, u_key_dir) + 0.25) / 1.25, 0.0, 1.0);
     vec3 colour = albedo * (ambient + KEY * wrap * 0.85);
     vec3 hv = normalize(u_key_dir + v);
-    colour += KEY * 0.12 * pow(max(dot(n, hv), 0.0), 28.0) * step(0.0, dot(n, u_key_dir));
-    float fres = pow(1.0 - ndv, 3.0);
-    colour += RIM * fres * (0.25 + 0.55 * max(dot(n, u_rim_dir), 0.0));
-    if (state > 0.5 && state < 1.5) colour += u_estimated_rgb * 1.6 * pow(1.0 - ndv, 2.0);
+    float sp = max(dot(n, hv), 0.0);
+    sp *= sp; sp *= sp; sp *= sp; sp *= sp; sp *= sp;  // ^32
+    colour += KEY * 0.12 * sp * step(0.0, dot(n, u_key_dir));
+    float edge = 1.0 - ndv;
+    colour += RIM * (edge * edge * edge) * (0.25 + 0.55 * max(dot(n, u_rim_dir), 0.0));
+    if (state > 0.5 && state < 1.5) colour += u_estimated_rgb * 1.6 * edge * edge;
     colour = colour / (1.0 + 0.15 * colour);  // soft shoulder instead of a hard clip
     return to_srgb(colour);
 }
@@ -180,6 +183,9 @@ in vec3 i_centre;
 in vec3 i_ax0;
 in vec3 i_ax1;
 in vec3 i_ax2;
+in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
+in vec3 i_nrm1;
+in vec3 i_nrm2;
 in vec3 i_rgb;
 in vec2 i_style;  // state, alpha
 out vec3 v_pos;
@@ -189,7 +195,7 @@ flat out vec2 v_style;
 void main() {
     mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
     v_pos = i_centre + axes * in_pos;
-    v_normal = transpose(inverse(axes)) * in_pos;
+    v_normal = mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos;
     v_rgb = i_rgb;
     v_style = i_style;
     gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
@@ -243,74 +249,55 @@ void main() {
 }
 """
 
-_VERTEX_FLOOR = """
+# The floor is a polar mesh whose vertex colours carry the radial fade and the contact shadows
+# (computed on the CPU per vertex): a per-pixel floor shader (Gaussian blobs, an anti-aliased
+# grid) cost ~3 ms more per frame at 1280x720 on llvmpipe.
+_VERTEX_COLOURED = """
 #version 330
 uniform mat4 u_clip_from_world;
-uniform vec3 u_centre;
-uniform float u_radius;
-out vec3 v_pos;
+in vec3 in_pos;
+in vec4 in_rgba;
+out vec4 v_rgba;
 void main() {
-    vec2 corner = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1)) * 2.0 - 1.0;
-    v_pos = u_centre + vec3(corner.x * u_radius, 0.0, corner.y * u_radius);
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    v_rgba = in_rgba;
+    gl_Position = u_clip_from_world * vec4(in_pos, 1.0);
 }
 """
 
-_FRAGMENT_FLOOR = """
+_FRAGMENT_COLOURED = """
 #version 330
-uniform vec3 u_centre;
-uniform float u_radius;
-uniform vec3 u_floor_rgb;
-uniform vec4 u_blobs[""" + str(_MAX_BLOBS) + """];  // x, z, radius, darkness
-uniform int u_n_blobs;
-in vec3 v_pos;
+in vec4 v_rgba;
 out vec4 f_colour;
 void main() {
-    vec2 d = v_pos.xz - u_centre.xz;
-    float r = length(d) / u_radius;
-    if (r > 1.0) discard;
-    vec3 colour = u_floor_rgb * (1.0 - 0.10 * r * r);
-    // A faint 25 cm grid, anti-aliased by the screen-space derivative.
-    vec2 g = abs(fract(v_pos.xz / 0.25 - 0.5) - 0.5) / fwidth(v_pos.xz / 0.25);
-    float line = 1.0 - min(min(g.x, g.y), 1.0);
-    colour *= 1.0 - 0.10 * line;
-    float shadow = 0.0;
-    for (int i = 0; i < u_n_blobs; ++i) {
-        vec2 q = (v_pos.xz - u_blobs[i].xy) / u_blobs[i].z;
-        shadow = max(shadow, u_blobs[i].w * exp(-2.5 * dot(q, q)));
-    }
-    colour *= 1.0 - 0.55 * shadow;
-    float alpha = 1.0 - smoothstep(0.75, 1.0, r);
-    f_colour = vec4(colour, alpha);
+    f_colour = v_rgba;
 }
 """
 
+# The gradient is interpolated per vertex: a full-screen fragment shader doing anything more
+# costs several milliseconds per frame at 1280x720 on llvmpipe.
 _VERTEX_FULLSCREEN = """
 #version 330
-out vec2 v_uv;
+uniform vec3 u_top;
+uniform vec3 u_bottom;
+out vec3 v_colour;
 void main() {
     vec2 p = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1));
-    v_uv = p;
+    v_colour = mix(u_bottom, u_top, p.y);
     gl_Position = vec4(p * 2.0 - 1.0, 1.0, 1.0);
 }
 """
 
 _FRAGMENT_BACKGROUND = """
 #version 330
-uniform vec3 u_top;
-uniform vec3 u_bottom;
-in vec2 v_uv;
+in vec3 v_colour;
 out vec4 f_colour;
 void main() {
-    float t = smoothstep(0.0, 1.0, v_uv.y);
-    vec2 c = v_uv - vec2(0.5, 0.55);
-    float vignette = 1.0 - 0.12 * dot(c, c);
-    f_colour = vec4(mix(u_bottom, u_top, t) * vignette, 1.0);
+    f_colour = vec4(v_colour, 1.0);
 }
 """
 
-_ELLIPSOID_FORMAT = "3f 3f 3f 3f 3f 2f/i"
-_ELLIPSOID_NAMES = ("i_centre", "i_ax0", "i_ax1", "i_ax2", "i_rgb", "i_style")
+_ELLIPSOID_FORMAT = "3f 3f 3f 3f 3f 3f 3f 3f 2f/i"
+_ELLIPSOID_NAMES = ("i_centre", "i_ax0", "i_ax1", "i_ax2", "i_nrm0", "i_nrm1", "i_nrm2", "i_rgb", "i_style")
 _BAND_FORMAT = "3f 3f 2f 3f 2f/i"
 _BAND_NAMES = ("i_p0", "i_p1", "i_r", "i_rgb", "i_style")
 
@@ -360,6 +347,55 @@ class _Instanced:
         self._vao = self._buffer = None
 
 
+class _Floor:
+    """The floor disc, vertex-coloured per frame (radial fade, contact shadows).
+
+    A polar mesh of ``rings`` x ``segments``: vertices dense enough (~10 cm) for the shadow blobs
+    to look smooth, few enough triangles (llvmpipe pays per triangle and per tile it touches).
+    """
+
+    def __init__(self, ctx: moderngl.Context, program: moderngl.Program, radius_m: float, rgb: tuple[float, float, float],
+                 rings: int = 12, segments: int = 48) -> None:
+        self._radius, self._rgb = radius_m, np.asarray(rgb, np.float64)
+        # Centre vertex, then ring k (1..rings) of `segments` vertices.
+        theta = 2.0 * np.pi * np.arange(segments) / segments
+        radii = np.arange(1, rings + 1) / rings
+        ring_xz = np.stack([np.outer(radii, np.cos(theta)), np.outer(radii, np.sin(theta))], axis=-1).reshape(-1, 2)
+        self._unit = np.vstack([[0.0, 0.0], ring_xz])  # (V, 2) in units of the radius
+        r = np.linalg.norm(self._unit, axis=1)
+        edge = np.clip((r - 0.7) / 0.3, 0.0, 1.0)
+        self._alpha = 1.0 - edge * edge * (3.0 - 2.0 * edge)  # smooth fade into the background
+        self._shade = 1.0 - 0.10 * r * r
+        j = np.arange(segments)
+        jn = (j + 1) % segments
+        tris = [np.stack([np.zeros(segments, int), 1 + j, 1 + jn], axis=1)]
+        for k in range(rings - 1):
+            a, b = 1 + k * segments, 1 + (k + 1) * segments
+            tris += [np.stack([a + j, b + j, b + jn], axis=1), np.stack([a + j, b + jn, a + jn], axis=1)]
+        self._vbo = ctx.buffer(reserve=len(self._unit) * 7 * 4, dynamic=True)
+        self._ibo = ctx.buffer(np.concatenate(tris).astype(np.int32).tobytes())
+        self._vao = ctx.vertex_array(program, [(self._vbo, "3f 4f", "in_pos", "in_rgba")], index_buffer=self._ibo)
+
+    def draw(self, centre: np.ndarray, floor_y: float, blobs: np.ndarray) -> None:
+        """centre: (3,) world point the disc is centred on (its y is ignored); blobs: (B, 4) x, z, radius, darkness."""
+        xz = centre[[0, 2]] + self._radius * self._unit
+        shadow = np.zeros(len(xz))
+        for bx, bz, br, dark in blobs:
+            f = np.maximum(1.0 - ((xz[:, 0] - bx) ** 2 + (xz[:, 1] - bz) ** 2) / (br * br), 0.0)
+            shadow = np.maximum(shadow, dark * f * f)
+        rows = np.empty((len(xz), 7), np.float32)
+        rows[:, 0] = xz[:, 0]
+        rows[:, 1] = floor_y
+        rows[:, 2] = xz[:, 1]
+        rows[:, 3:6] = self._rgb[None, :] * (self._shade * (1.0 - 0.55 * shadow))[:, None]
+        rows[:, 6] = self._alpha
+        self._vbo.write(rows.tobytes())
+        self._vao.render(moderngl.TRIANGLES)
+
+    def release(self) -> None:
+        for obj in (self._vao, self._vbo, self._ibo):
+            obj.release()
+
 class AvatarRenderer:
     """Draws the avatar into the bound framebuffer of ``ctx`` (needs a depth attachment).
 
@@ -376,15 +412,19 @@ class AvatarRenderer:
         self.style = style
         self._prog_ellipsoid = ctx.program(vertex_shader=_VERTEX_ELLIPSOID, fragment_shader=_FRAGMENT_BODY)
         self._prog_band = ctx.program(vertex_shader=_VERTEX_BAND, fragment_shader=_FRAGMENT_BODY)
-        self._prog_floor = ctx.program(vertex_shader=_VERTEX_FLOOR, fragment_shader=_FRAGMENT_FLOOR)
+        self._prog_floor = ctx.program(vertex_shader=_VERTEX_COLOURED, fragment_shader=_FRAGMENT_COLOURED)
         self._prog_background = ctx.program(vertex_shader=_VERTEX_FULLSCREEN, fragment_shader=_FRAGMENT_BACKGROUND)
-        fine_v, fine_t = icosphere(3)
-        coarse_v, coarse_t = icosphere(2)
-        band_v, band_t = cone_band(32)
+        # 320 and 80 triangles: at the sizes the avatar appears on screen their outlines stay
+        # within half a pixel of the true ellipse.
+        fine_v, fine_t = icosphere(2)
+        coarse_v, coarse_t = icosphere(1)
+        # 16 sides: a limb's outline is within half a pixel of round at its on-screen size, and
+        # the band's long thin triangles are what llvmpipe spends the most on (32 sides: +2.4 ms).
+        band_v, band_t = cone_band(16)
         self._fine = _Instanced(ctx, self._prog_ellipsoid, fine_v, fine_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         self._coarse = _Instanced(ctx, self._prog_ellipsoid, coarse_v, coarse_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         self._band = _Instanced(ctx, self._prog_band, band_v, band_t, "in_ring", _BAND_FORMAT, _BAND_NAMES)
-        self._empty_vao = ctx.vertex_array(self._prog_floor, [])
+        self._floor = _Floor(ctx, self._prog_floor, style.floor_radius_m, style.floor_rgb)
         self._empty_vao_bg = ctx.vertex_array(self._prog_background, [])
         est = np.asarray(style.estimated_rgb, np.float32) ** 2.2
         for prog in (self._prog_ellipsoid, self._prog_band):
@@ -392,8 +432,6 @@ class AvatarRenderer:
             prog["u_estimated_tint"].value = float(style.estimated_tint)
         self._prog_background["u_top"].value = style.background_top_rgb
         self._prog_background["u_bottom"].value = style.background_bottom_rgb
-        self._prog_floor["u_floor_rgb"].value = style.floor_rgb
-        self._prog_floor["u_radius"].value = float(style.floor_radius_m)
 
     # ------------------------------------------------------------------ drawing
     def render_background(self) -> None:
@@ -402,6 +440,7 @@ class AvatarRenderer:
         ctx = self._ctx
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         # Drawn at the far plane with the depth test always passing: it also resets the depth.
+        # (Framebuffer.color_mask is not used anywhere here: moderngl applies it only on use().)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "1"
         self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
@@ -415,7 +454,7 @@ class AvatarRenderer:
             pose: the pose to show.
             view: (4, 4) world -> eye matrix (OpenGL convention, the camera looks down -z).
             proj: (4, 4) eye -> clip matrix; a left-right mirrored one is fine.
-            floor: draw the floor disc with its grid and contact shadows.
+            floor: draw the floor disc with its contact shadows.
             shapes: the solids, if already built from ``pose`` (else built here).
 
         Returns:
@@ -440,38 +479,34 @@ class AvatarRenderer:
             prog["u_key_dir"].value = tuple(float(x) for x in key / np.linalg.norm(key))
             prog["u_rim_dir"].value = tuple(float(x) for x in rim / np.linalg.norm(rim))
 
-        ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
-        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        if floor:
-            self._draw_floor(shapes, clip_bytes)
-        ctx.enable(moderngl.CULL_FACE)
-        ctx.front_face = "cw" if mirrored else "ccw"
-
         e_rows, e_lost, fine = self._ellipsoid_rows(pose, shapes)
         c_rows, c_lost = self._capsule_rows(pose, shapes)
-        # Capsule end caps are spheres.
-        caps = self._cap_rows(c_rows)
-        cap_lost = np.concatenate([c_lost, c_lost])
-        fbo = ctx.fbo
-        # Opaque pass, then lost segments translucent: a depth-only pass first, so that a lost
-        # segment shows only its front surface (no inner overlaps), then its colour over it.
+        caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
+        ctx.front_face = "cw" if mirrored else "ccw"
         self._draw_solids(e_rows[~e_lost], fine[~e_lost], c_rows[~c_lost], caps[~cap_lost])
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        if floor:  # after the body, so that the depth test skips the floor hidden behind it
+            self._draw_floor(shapes, clip_bytes)
+            ctx.enable(moderngl.CULL_FACE)
+        # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
+        # its front surface (no inner overlaps), then its colour over it.
         if e_lost.any() or c_lost.any():
-            fbo.color_mask = False, False, False, False
+            ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
             self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
-            fbo.color_mask = True, True, True, True
-            fbo.depth_mask = False
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "<="
             self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
             ctx.depth_func = "<"
-            fbo.depth_mask = True
         ctx.front_face = "ccw"
         return shapes
 
     def release(self) -> None:
-        for obj in (self._fine, self._coarse, self._band):
+        for obj in (self._fine, self._coarse, self._band, self._floor):
             obj.release()
-        for obj in (self._empty_vao, self._empty_vao_bg, self._prog_ellipsoid, self._prog_band,
+        for obj in (self._empty_vao_bg, self._prog_ellipsoid, self._prog_band,
                     self._prog_floor, self._prog_background):
             obj.release()
 
@@ -489,7 +524,8 @@ class AvatarRenderer:
     def _ellipsoid_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         style = self._style_of(pose, s.ellipsoid_part)
         axes = np.transpose(s.ellipsoid_axes_m, (0, 2, 1)).reshape(-1, 9)  # columns ax0, ax1, ax2
-        rows = np.hstack([s.ellipsoid_centre_m, axes, s.ellipsoid_rgb, style]).astype(np.float32)
+        normal = np.linalg.inv(s.ellipsoid_axes_m).reshape(-1, 9)  # columns of inv(A)^T = rows of inv(A)
+        rows = np.hstack([s.ellipsoid_centre_m, axes, normal, s.ellipsoid_rgb, style]).astype(np.float32)
         return rows, style[:, 0] == 2.0, s.ellipsoid_fine
 
     def _capsule_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
@@ -499,14 +535,18 @@ class AvatarRenderer:
         return rows, style[:, 0] == 2.0
 
     @staticmethod
-    def _cap_rows(c: np.ndarray) -> np.ndarray:
-        """Ellipsoid rows of the capsules' end spheres (p0 ends, then p1 ends)."""
-        out = []
-        for p, r in ((c[:, 0:3], c[:, 6]), (c[:, 3:6], c[:, 7])):
-            eye = np.zeros((len(c), 9), np.float32)
-            eye[:, [0, 4, 8]] = r[:, None]
-            out.append(np.hstack([p, eye, c[:, 8:13]]))
-        return np.concatenate(out).astype(np.float32) if len(c) else np.zeros((0, 17), np.float32)
+    def _cap_rows(c: np.ndarray, lost: np.ndarray, caps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Ellipsoid rows of the capsules' drawn end spheres, and which are lost."""
+        rows, flags = [], []
+        for end, (p, r) in enumerate(((c[:, 0:3], c[:, 6]), (c[:, 3:6], c[:, 7]))):
+            keep = caps[:, end]
+            axes = np.zeros((int(keep.sum()), 9), np.float32)
+            axes[:, [0, 4, 8]] = r[keep, None]
+            normal = np.zeros_like(axes)
+            normal[:, [0, 4, 8]] = 1.0 / r[keep, None]
+            rows.append(np.hstack([p[keep], axes, normal, c[keep, 8:13]]))
+            flags.append(lost[keep])
+        return np.concatenate(rows).astype(np.float32), np.concatenate(flags)
 
     def _draw_solids(self, e_rows: np.ndarray, fine: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
         self._fine.draw(e_rows[fine])
@@ -514,14 +554,7 @@ class AvatarRenderer:
         self._band.draw(c_rows)
 
     def _draw_floor(self, s: BodyShapes, clip_bytes: bytes) -> None:
-        prog = self._prog_floor
-        prog["u_clip_from_world"].write(clip_bytes)
-        centre = np.array([s.shadow_blobs[0, 0], s.floor_y_m, s.shadow_blobs[0, 1]])
-        prog["u_centre"].value = tuple(float(x) for x in centre)
-        blobs = np.zeros((_MAX_BLOBS, 4), np.float32)
-        n = min(len(s.shadow_blobs), _MAX_BLOBS)
-        blobs[:n] = s.shadow_blobs[:n]
-        prog["u_blobs"].write(blobs.tobytes())
-        prog["u_n_blobs"].value = n
+        self._prog_floor["u_clip_from_world"].write(clip_bytes)
         self._ctx.disable(moderngl.CULL_FACE)
-        self._empty_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+        centre = np.array([s.shadow_blobs[0, 0], s.floor_y_m, s.shadow_blobs[0, 1]])
+        self._floor.draw(centre, s.floor_y_m, s.shadow_blobs)

@@ -85,8 +85,13 @@ _DEFAULT_LAYOUT_H = {
 _STATURE_RATIOS = {"shoulder_width_m": 0.230, "trunk_height_m": 0.226, "upper_arm_m": 0.222, "forearm_m": 0.146}
 DEFAULT_STATURE_M = 1.70
 _STATURE_LIMITS_M = (1.30, 2.10)
-# Glenohumeral centre relative to the acromion marker, trunk frame, stature units (medial, down).
-_GH_FROM_ACROMION_H = (-0.0068, -0.0381, 0.0076)
+# Glenohumeral centre relative to the acromion marker, trunk frame: at 0.0381 stature below it,
+# 10 degrees medial of the trunk axis with the arm down; the scapula's upward rotation turns the
+# acromion medially over the humeral head by half the humerus elevation beyond 30 degrees (the
+# simulator's scapulohumeral rhythm), so a raised arm's centre lies lateral of the marker.
+_GH_DISTANCE_H = 0.0381
+_GH_TILT_DEG = 10.0
+_GH_FORWARD_H = 0.0076
 # Neck base and head centre relative to MB, trunk frame, stature units (the marker sits ~2.5 cm
 # in front of the sternum skin). Same source as the layout.
 _NECK_FROM_MB_H = (0.0, 0.0, 0.078)
@@ -193,6 +198,18 @@ def _kabsch(local: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarra
     d = np.sign(np.linalg.det(vt.T @ u.T))
     r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
     return r, wc - r @ lc
+
+
+def _gh_offset(upper_arm_trunk: np.ndarray, sgn: float, stature_m: float) -> np.ndarray:
+    """Glenohumeral centre minus acromion marker in the trunk frame (3,), metres.
+
+    upper_arm_trunk: (3,) acromion -> elbow in the trunk frame; sgn: +1 right, -1 left.
+    """
+    u = _unit(upper_arm_trunk)
+    elevation = 0.0 if u is None else float(np.degrees(np.arccos(np.clip(-u[1], -1.0, 1.0))))
+    tilt = np.radians(_GH_TILT_DEG - 0.5 * np.clip(elevation - 30.0, 0.0, 120.0))
+    d = _GH_DISTANCE_H * stature_m
+    return np.array([-sgn * d * np.sin(tilt), -d * np.cos(tilt), _GH_FORWARD_H * stature_m])
 
 
 # ----------------------------------------------------------------------------- proportions
@@ -397,11 +414,11 @@ class SkeletonTracker:
         for side, sgn in SIDE_SIGN.items():
             s = "R" if side == "right" else "L"
             acromion = q[f"M{s}S"]
-            gh = acromion + rt @ (np.array(_GH_FROM_ACROMION_H) * np.array([sgn, 1.0, 1.0]) * h)
             dflt = {n: o + rt @ self._default_local_trunk(n, h) for n in (f"M{s}E1", f"M{s}E2", f"M{s}W1", f"M{s}W2")}
             e1 = self._fill(f"M{s}E1", p, finite, acromion, rt, h, dflt[f"M{s}E1"])
             e2 = self._fill(f"M{s}E2", p, finite, acromion, rt, h, dflt[f"M{s}E2"])
             elbow = 0.5 * (e1 + e2)
+            gh = acromion + rt @ _gh_offset(rt.T @ (elbow - acromion), sgn, h)
             # Upper arm: along shoulder -> elbow, x from the medial to the lateral epicondyle.
             rua = frame_from_axes(gh - elbow, e1 - e2, self._ua_frames[side])
             self._ua_frames[side] = rua
