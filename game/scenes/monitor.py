@@ -1,13 +1,21 @@
 """The camera check: every camera's latest image with what the tracker made of it.
 
 For a therapist setting up (or a reviewer checking the simulated studio): the images in a grid,
-each marker's centroid used this frame circled in the marker's colour, its search window drawn
-as a thin square, and per camera how many markers it sees. C or Esc goes back.
+each drawn by :func:`game.monitor.overlay_cameras` with the pixels the colour table takes for
+marker colours painted in those colours over the dimmed picture, each marker's search window
+and name at the centroid used, the markers a camera does not see, and the tracking state. The
+overlays are redrawn when a new sample arrives (30 times a second), not every display frame.
+C or Esc goes back.
+
+The colour table (a 2^24-entry lookup, about half a second to build) is built on a helper thread
+when the scene opens; until it is ready the images are shown without the painted colours.
 """
 
 from __future__ import annotations
 
+import logging
 import math
+import threading
 
 import numpy as np
 
@@ -15,6 +23,9 @@ from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Press
 from game.live_link import LiveLink
+from game.monitor import overlay_cameras
+
+log = logging.getLogger(__name__)
 
 Rect = tuple[float, float, float, float]
 
@@ -47,62 +58,76 @@ class MonitorScene(BaseScene):
 
     Args:
         link: the live tracker link.
+        paint_colours: paint the colour table's marker pixels (builds the table once).
     """
 
-    def __init__(self, link: LiveLink) -> None:
+    def __init__(self, link: LiveLink, *, paint_colours: bool = True) -> None:
         self.link = link
+        self.paint_colours = paint_colours
+        self.colour_table = None
+        self.overlays: list[np.ndarray] = []
+        self._shown = None          # (sample number, table ready) the overlays were made for
+        self._builder: threading.Thread | None = None
+
+    def enter(self, app) -> None:
+        super().enter(app)
+        if self.paint_colours and self.colour_table is None and self._builder is None:
+            self._builder = threading.Thread(target=self._build_table, name="rehab-colour-table", daemon=True)
+            self._builder.start()
+
+    def _build_table(self) -> None:
+        from tracking.colour_table import ColourTable
+
+        markerset = self.link.markerset
+        if markerset is None:
+            from tracking.markerset import load_markerset
+
+            markerset = load_markerset(getattr(getattr(self.link.tracker, "source", None), "markerset",
+                                               "upper_limb_seated"))
+        self.colour_table = ColourTable.build(markerset.palette)
 
     def handle(self, event: InputEvent) -> None:
         if isinstance(event, Press) and event.down and event.action in (Action.BACK, Action.MONITOR):
             self.app.pop()
+
+    def _refresh(self) -> None:
+        """Redraw the overlays when a new sample (or the colour table) arrived."""
+        sample, markerset = self.link.latest, self.link.markerset
+        key = (None if sample is None else sample.number, self.colour_table is not None)
+        if key == self._shown:
+            return
+        images = self.link.latest_images()
+        if not images:
+            return
+        self._shown = key
+        if sample is None or markerset is None:
+            self.overlays = list(images)
+            return
+        marker_rgb = np.asarray(markerset.palette)[markerset.colour_index]
+        cameras = self.link.cameras
+        # A sample without any centroid comes from a tracker that does not report them (yet):
+        # no "not seen here" list built from that.
+        reported = bool(np.isfinite(sample.uv_px).any())
+        self.overlays = overlay_cameras(
+            images, markerset.names, marker_rgb, windows_px=sample.windows_px if reported else None,
+            uv_px=sample.uv_px if reported else None,
+            status=sample.status, state=sample.state, message=sample.message,
+            camera_names=[cam.name for cam in cameras] if len(cameras) == len(images) else None,
+            colour_table=self.colour_table)
 
     def render_2d(self, frame: Frame) -> None:
         c = frame.canvas
         w, h = frame.size_px
         s = min(w / 1280.0, h / 720.0)
         c.text("Camera check", (theme.MARGIN * s, 18 * s), round(theme.MEDIUM * s), theme.TEXT)
-        c.text("Circles: markers found this frame   Squares: where the tracker looks   Esc: back",
-               (w / 2, h - 8 * s), round(theme.SMALL * 0.85 * s), theme.TEXT_FAINT, anchor="midbottom")
-        images = self.link.latest_images()
-        if not images:
+        legend = "Marker colours painted where the colour table finds them   Squares: where the tracker looks   Esc: back"
+        c.text(legend, (w / 2, h - 8 * s), round(theme.SMALL * 0.85 * s), theme.TEXT_FAINT, anchor="midbottom")
+        self._refresh()
+        if not self.overlays:
             c.text(self.link.summary() or "Waiting for the cameras...", (w / 2, h / 2), round(theme.BODY * s),
                    theme.ATTENTION, anchor="center")
             return
-        ih, iw = images[0].shape[:2]
+        ih, iw = self.overlays[0].shape[:2]
         area = (theme.MARGIN * s, 66 * s, w - 2 * theme.MARGIN * s, h - 100 * s)
-        rects = grid_rects(area, len(images), iw / ih, 12 * s)
-        sample = self.link.latest
-        markerset = self.link.markerset
-        cameras = self.link.cameras
-        for j, (img, rect) in enumerate(zip(images, rects)):
+        for j, (img, rect) in enumerate(zip(self.overlays, grid_rects(area, len(self.overlays), iw / ih, 12 * s))):
             c.image(f"camera{j}", img, rect)
-            if sample is not None and markerset is not None:
-                self._overlay(c, sample, markerset, j, rect, (iw, ih), s)
-            name = cameras[j].name if j < len(cameras) else f"camera {j + 1}"
-            label = name
-            if sample is not None and np.isfinite(sample.uv_px).any():  # a source that reports centroids
-                label = f"{name}: {int(np.isfinite(sample.uv_px[:, j, 0]).sum())} markers"
-            tw, th = c.measure(label, round(theme.SMALL * s))
-            c.rect((rect[0] + 8 * s, rect[1] + 8 * s, tw + 20 * s, th + 10 * s), theme.OVERLAY, radius=8 * s)
-            c.text(label, (rect[0] + 18 * s, rect[1] + 13 * s), round(theme.SMALL * s), theme.TEXT)
-
-    @staticmethod
-    def _overlay(c, sample, markerset, j: int, rect: Rect, image_px: tuple[int, int], s: float) -> None:
-        scale = rect[2] / image_px[0]
-        palette = np.asarray(markerset.palette)
-        colours = [tuple(int(v) for v in palette[k]) for k in markerset.colour_index]
-        windows = sample.windows_px[:, j]
-        ok = np.isfinite(windows).all(axis=1)
-        centres = image_to_screen(windows[:, :2], rect, image_px)
-        for m in np.flatnonzero(ok):
-            half = windows[m, 2] * scale
-            x, y = centres[m]
-            c.rect((x - half, y - half, 2 * half, 2 * half), (0, 0, 0, 0), border=1.5 * s,
-                   border_colour=(*colours[m], 170))
-        uv = sample.uv_px[:, j]
-        ok = np.isfinite(uv).all(axis=1)
-        xy = image_to_screen(uv, rect, image_px)
-        radius = 7.0 * s
-        for m in np.flatnonzero(ok):
-            c.circle(tuple(xy[m]), radius + 1.5 * s, (0, 0, 0, 0), border=4 * s, border_colour=(15, 18, 24, 200))
-            c.circle(tuple(xy[m]), radius, (0, 0, 0, 0), border=2.5 * s, border_colour=colours[m])

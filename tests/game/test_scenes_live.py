@@ -297,12 +297,11 @@ def test_grid_and_image_coordinates():
     assert xy == pytest.approx(np.array([[10, 20], [650, 500]]))
 
 
-def test_camera_check_draws_images_centroids_and_windows(screen):
+def test_camera_check_draws_the_overlays_of_each_camera(screen):
     app, scene, link, clock = make_app(screen, avatar=False)
     images = [np.full((240, 320, 3), (40 * k, 80, 160), np.uint8) for k in range(4)]
     link.latest_images = lambda: images
     sample = link.feed(reference_pose())
-    sample.uv_px[:] = np.nan
     uv = np.full((14, 4, 2), np.nan)
     uv[0, 1] = (100.0, 60.0)                       # MB's centroid in camera 2
     win = np.full((14, 4, 3), np.nan)
@@ -310,15 +309,23 @@ def test_camera_check_draws_images_centroids_and_windows(screen):
     link._queue[-1] = type(sample)(**{**{f: getattr(sample, f) for f in sample.__dataclass_fields__},
                                       "uv_px": uv, "windows_px": win})
     app.dispatch(Press(Action.MONITOR))
+    monitor = app.scene
+    assert isinstance(monitor, MonitorScene)
+    monitor._builder.join(30)                      # the colour table, built off the main thread
     run_frames(app, clock, 2)
+    assert monitor.colour_table is not None and len(monitor.overlays) == 4
     rgb = app.screen.read_rgb().astype(int)
     w, h = SIZE
     s = min(w / 1280, h / 720)
     rects = grid_rects((28 * s, 66 * s, w - 56 * s, h - 100 * s), 4, 320 / 240, 12 * s)
     x, y, rw, rh = rects[3]
-    assert np.abs(rgb[int(y + rh * 0.7), int(x + rw * 0.7)] - (160, 80, 120)).max() <= 2   # BGR (120, 80, 160) shown
-    cx, cy = image_to_screen(uv[0, 1][None], rects[1], (320, 240))[0]
+    # camera 4's image (BGR (120, 80, 160), no marker colour in it): dimmed by the overlay, as RGB
+    assert np.abs(rgb[int(y + rh * 0.6), int(x + rw * 0.6)] - np.array([160, 80, 120]) * 0.55).max() <= 3
+    # camera 2 shows MB's search window in MB's colour around the centroid
     yellow = np.array(link.markerset.palette[link.markerset.colour_index[0]], dtype=int)
-    ring = rgb[int(cy) - 6:int(cy) + 7, int(cx) - 6:int(cx) + 7].reshape(-1, 3)
-    assert (np.abs(ring - yellow).max(axis=1) < 60).sum() > 8                        # the centroid's circle
-    assert np.abs(rgb[int(cy), int(cx)] - rgb[int(cy), int(cx) - 30]).max() < 30     # hollow, image inside
+    cx, cy = image_to_screen(uv[0, 1][None], rects[1], (320, 240))[0]
+    half = 20 * rects[1][2] / 320
+    edge = rgb[int(cy - half) - 2:int(cy - half) + 3, int(cx - half / 2):int(cx + half / 2)].reshape(-1, 3)
+    assert (np.abs(edge - yellow).max(axis=1) < 80).sum() >= 3
+    app.dispatch(Press(Action.BACK))
+    assert app.scene is scene
