@@ -47,8 +47,6 @@ class Settings:
         max_frame_s: longest frame time the logic catches up on (a stall is not replayed).
         show_fps: draw the frame rate in the corner.
         title: window caption.
-        render_scale: fraction (per axis) of a 3D view's pixels rendered, then stretched; None:
-            chosen from the measured frame time (:class:`game.gfx.offscreen.DynamicScale`).
     """
 
     window_px: tuple[int, int] = (1280, 720)
@@ -57,18 +55,10 @@ class Settings:
     max_frame_s: float = 0.25
     show_fps: bool = True
     title: str = "rehab: motion capture for rehabilitation"
-    render_scale: float | None = None
 
     def __post_init__(self) -> None:
         if self.update_hz <= 0 or self.max_fps < 0 or self.max_frame_s <= 0:
             raise ValueError("Settings: update_hz and max_frame_s must be positive, max_fps >= 0")
-        if self.render_scale is not None and not 0.1 <= self.render_scale <= 1.0:
-            raise ValueError("Settings: render_scale must be between 0.1 and 1")
-
-    @property
-    def frame_budget_ms(self) -> float:
-        """The time one frame may take: at the frame-rate cap, or at 60 frames/s uncapped."""
-        return 1000.0 / (self.max_fps if self.max_fps > 0 else 60.0)
 
 
 class FixedStep:

@@ -228,8 +228,6 @@ def _add_play(sub) -> None:
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=float, default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
-    p.add_argument("--render-scale", type=float, default=None,
-                   help="fraction of the 3D view's pixels to render, 0.1-1 (default: chosen from the frame rate)")
     p.add_argument("--scene", choices=("home", "live", "cameras"), default=None,
                    help="first screen (default: home; live with --headless)")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
@@ -258,13 +256,10 @@ def _cmd_play(args) -> int:
                          "or give a motion YAML file")
     if args.max_fps < 0:
         raise RehabError(f"--max-fps {args.max_fps:g}: give 0 (no cap) or a positive rate")
-    if args.render_scale is not None and not 0.1 <= args.render_scale <= 1.0:
-        raise RehabError(f"--render-scale {args.render_scale:g}: give a fraction between 0.1 and 1")
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body)
     options = PlayOptions(
-        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless,
-                          render_scale=args.render_scale),
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
         source=source,
         headless=args.headless,
         seconds=seconds,

@@ -307,20 +307,9 @@ class Canvas:
         self._quad(tex, rect, (0.0, 0.0, 1.0, 1.0), tint)
 
     def texture(self, texture: moderngl.Texture, rect: tuple[float, float, float, float], *,
-                uv: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0), tint: Colour = (255, 255, 255),
-                opaque: bool = False) -> None:
-        """Draw a texture whose v = 0 row is the top (pass ``uv=(0, 1, 1, 0)`` for GL's bottom-up ones).
-
-        ``opaque`` copies the texels, alpha ignored (a rendered view whose alpha is not coverage).
-        """
-        if not opaque:
-            self._quad(texture, rect, uv, tint)
-            return
-        self.ctx.disable(moderngl.BLEND)
-        try:
-            self._quad(texture, rect, uv, tint)
-        finally:
-            self.ctx.enable(moderngl.BLEND)
+                uv: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0), tint: Colour = (255, 255, 255)) -> None:
+        """Draw a texture whose v = 0 row is the top (pass ``uv=(0, 1, 1, 0)`` for GL's bottom-up ones)."""
+        self._quad(texture, rect, uv, tint)
 
     def _quad(self, texture: moderngl.Texture, rect, uv, tint: Colour) -> None:
         self.flush()

@@ -28,7 +28,6 @@ import numpy as np
 
 from game.app import BaseScene, Frame
 from game.gfx import theme
-from game.gfx.offscreen import DynamicScale, ScaledTarget
 from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspective, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LinkState, LiveLink
@@ -240,11 +239,6 @@ class LiveScene(BaseScene):
     def enter(self, app) -> None:
         super().enter(app)
         self.layout = live_layout(app.screen.size_px)
-        fixed = app.settings.render_scale
-        self._scale = None if fixed is not None else DynamicScale(app.settings.frame_budget_ms)
-        self._fixed_scale = fixed
-        self._target = None
-        self._stretched = False
         self.view_m, self.proj_m = mirror_camera(self.layout.view)
         self.link.set_motion(self.motion)
         if self.motion is None:
@@ -254,14 +248,6 @@ class LiveScene(BaseScene):
         if self.avatar is not None:
             self.avatar.release()
             self.avatar = None
-        if self._target is not None:
-            self._target.release()
-            self._target = None
-
-    @property
-    def render_scale(self) -> float:
-        """The fraction (per axis) of the view's pixels the avatar is rendered at."""
-        return self._fixed_scale if self._scale is None else self._scale.scale
 
     # ------------------------------------------------------------------ input
     @property
@@ -358,30 +344,15 @@ class LiveScene(BaseScene):
         camera = self.avatar.camera(self.layout.view.aspect)
         if camera is not None:
             self.view_m, self.proj_m = camera
-        if self._scale is not None:
-            self._scale.update(self.app.rate.work_ms)
-        scale = self.render_scale
         ctx = frame.screen.ctx
-        v = self.layout.view
-        self._stretched = scale < 0.999
+        ctx.viewport = self.layout.view.gl(frame.size_px[1])
         try:
-            if self._stretched:
-                # Fewer pixels, drawn stretched over the view by the 2D layer (render_2d).
-                if self._target is None:
-                    self._target = ScaledTarget(ctx)
-                self._target.use((round(v.w * scale), round(v.h * scale)))
-            else:
-                ctx.viewport = v.gl(frame.size_px[1])
             self.avatar.render(self.view_m, self.proj_m)
         finally:
-            frame.screen.target.use()
             ctx.viewport = (0, 0, *frame.size_px)
 
     def render_2d(self, frame: Frame) -> None:
         c, s = frame.canvas, self.layout.scale
-        if self._stretched and self._target is not None:
-            v = self.layout.view
-            c.texture(self._target.texture, (v.x, v.y, v.w, v.h), uv=(0.0, 1.0, 1.0, 0.0), opaque=True)
         sample = self.link.latest
         if self.show_markers and sample is not None:
             self._draw_markers(frame, sample)

@@ -194,21 +194,3 @@ def test_pointer_and_keys_are_mapped_once(monkeypatch):
 )
 def test_has_display(environ, platform, expected):
     assert has_display(environ, platform) is expected
-
-
-def test_dynamic_scale_follows_the_frame_time():
-    from game.gfx.offscreen import DynamicScale
-
-    d = DynamicScale(16.7, lowest=0.5, highest=1.0, step=0.125, every=10)
-    for _ in range(9):
-        assert d.update(30.0) == 1.0           # decides every 10 frames
-    assert d.update(30.0) == 0.875
-    for _ in range(100):
-        d.update(30.0)
-    assert d.scale == 0.5                      # never below the lowest
-    for _ in range(10):
-        d.update(12.0)                         # within the budget but not far below: stays
-    assert d.scale == 0.5
-    for _ in range(100):
-        d.update(5.0)
-    assert d.scale == 1.0
