@@ -153,7 +153,8 @@ class TrackerLoop:
                 self.source.handle(command)
             except Exception as exc:  # a bad motion name must not stop the tracker
                 self._report("source", exc)
-            if isinstance(command, SetMotion):
+                return True
+            if isinstance(command, SetMotion):  # the new motion starts from the reference pose
                 self.tracker.reidentify()
         else:
             log.warning("unknown command %r ignored", command)
@@ -237,7 +238,7 @@ class TrackerLoop:
     def _report(self, where: str, exc: BaseException, index: int | None = None) -> None:
         line = one_line(where, self.frame_index - 1 if index is None else index, exc)
         self.writer.set_error(line)
-        key = f"{where}:{type(exc).__name__}:{exc}"
+        key = f"{where}:{type(exc).__name__}"  # not the text: it may name the frame
         n = self._error_counts.get(key, 0)
         self._error_counts[key] = n + 1
         if n % LOG_EVERY == 0:
