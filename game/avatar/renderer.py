@@ -21,6 +21,8 @@ Segment states (:class:`tracking.status.MarkerStatus` from the skeleton):
 - MEASURED: the normal skin and clothes colours;
 - ESTIMATED: tinted amber with a glowing amber outline (the tracker guessed these markers);
 - LOST: desaturated grey and translucent (the segment shows its last known pose).
+The looks are amounts 0..1 per segment, so a caller can fade them
+(:class:`game.avatar.interpolate.LookFader`).
 """
 
 from __future__ import annotations
@@ -32,10 +34,10 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from tracking.sim.meshes import cone_band, icosphere
-from tracking.status import MarkerStatus
 
 
 
@@ -59,6 +61,9 @@ class AvatarStyle:
     background_bottom_rgb: tuple[float, float, float] = (0.96, 0.95, 0.92)
     floor_rgb: tuple[float, float, float] = (0.90, 0.88, 0.84)
     floor_radius_m: float = 1.3
+
+
+_TRANSLUCENT = 0.01  # lost-look amount above which a solid is drawn in the translucent pass
 
 
 # ----------------------------------------------------------------------------- camera helpers
@@ -139,6 +144,7 @@ uniform vec3 u_key_dir;   // towards the key light, world
 uniform vec3 u_rim_dir;   // towards the rim light, world
 uniform vec3 u_estimated_rgb;  // linear
 uniform float u_estimated_tint;
+uniform float u_lost_alpha;
 const vec3 SKY = vec3(0.62, 0.68, 0.78);
 const vec3 GROUND = vec3(0.34, 0.30, 0.27);
 const vec3 KEY = vec3(1.05, 0.98, 0.90);
@@ -149,15 +155,12 @@ const vec3 RIM = vec3(0.55, 0.65, 0.85);
 vec3 to_linear(vec3 c) { return c * c; }
 vec3 to_srgb(vec3 c) { return sqrt(c); }
 
-// state: 0 measured or untracked, 1 estimated, 2 lost.
-vec3 shade(vec3 n, vec3 pos, vec3 srgb, float state) {
+// look: how much of the estimated (x) and of the lost (y) look, 0..1 each (faded by the caller).
+vec3 shade(vec3 n, vec3 pos, vec3 srgb, vec2 look) {
     vec3 albedo = to_linear(srgb);
-    if (state > 1.5) {
-        float grey = dot(albedo, vec3(0.30, 0.59, 0.11));
-        albedo = vec3(0.55 * grey + 0.12);
-    } else if (state > 0.5) {
-        albedo = mix(albedo, u_estimated_rgb, u_estimated_tint);
-    }
+    albedo = mix(albedo, u_estimated_rgb, u_estimated_tint * look.x);
+    float grey = dot(albedo, vec3(0.30, 0.59, 0.11));
+    albedo = mix(albedo, vec3(0.55 * grey + 0.12), look.y);
     vec3 v = normalize(u_eye - pos);
     float ndv = max(dot(n, v), 0.0);
     vec3 ambient = mix(GROUND, SKY, 0.5 + 0.5 * n.y) * 0.55;
@@ -169,7 +172,7 @@ vec3 shade(vec3 n, vec3 pos, vec3 srgb, float state) {
     colour += KEY * 0.12 * sp * step(0.0, dot(n, u_key_dir));
     float edge = 1.0 - ndv;
     colour += RIM * (edge * edge * edge) * (0.25 + 0.55 * max(dot(n, u_rim_dir), 0.0));
-    if (state > 0.5 && state < 1.5) colour += u_estimated_rgb * 1.6 * edge * edge;
+    colour += u_estimated_rgb * (1.6 * look.x * (1.0 - look.y)) * edge * edge;  // amber outline
     colour = colour / (1.0 + 0.15 * colour);  // soft shoulder instead of a hard clip
     return to_srgb(colour);
 }
@@ -187,7 +190,7 @@ in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
 in vec3 i_nrm1;
 in vec3 i_nrm2;
 in vec3 i_rgb;
-in vec2 i_style;  // state, alpha
+in vec2 i_style;  // estimated and lost look amounts
 out vec3 v_pos;
 out vec3 v_normal;
 flat out vec3 v_rgb;
@@ -245,7 +248,7 @@ out vec4 f_colour;
 """ + _LIGHTING + """
 void main() {
     vec3 n = normalize(v_normal);
-    f_colour = vec4(shade(n, v_pos, v_rgb, v_style.x), v_style.y);
+    f_colour = vec4(shade(n, v_pos, v_rgb, v_style), mix(1.0, u_lost_alpha, v_style.y));
 }
 """
 
@@ -430,6 +433,7 @@ class AvatarRenderer:
         for prog in (self._prog_ellipsoid, self._prog_band):
             prog["u_estimated_rgb"].value = tuple(float(x) for x in est)
             prog["u_estimated_tint"].value = float(style.estimated_tint)
+            prog["u_lost_alpha"].value = float(style.lost_alpha)
         self._prog_background["u_top"].value = style.background_top_rgb
         self._prog_background["u_bottom"].value = style.background_bottom_rgb
 
@@ -447,7 +451,7 @@ class AvatarRenderer:
         ctx.depth_func = "<"
 
     def render(self, pose: SkeletonPose, view: np.ndarray, proj: np.ndarray, *, floor: bool = True,
-               shapes: BodyShapes | None = None) -> BodyShapes:
+               shapes: BodyShapes | None = None, looks: np.ndarray | None = None) -> BodyShapes:
         """Draw the avatar (and the floor) with depth testing into the bound framebuffer.
 
         Args:
@@ -456,6 +460,9 @@ class AvatarRenderer:
             proj: (4, 4) eye -> clip matrix; a left-right mirrored one is fine.
             floor: draw the floor disc with its contact shadows.
             shapes: the solids, if already built from ``pose`` (else built here).
+            looks: (len(SEGMENTS), 2) amounts 0..1 of the estimated and the lost look per
+                segment, e.g. faded by :class:`game.avatar.interpolate.LookFader`; by default
+                :func:`state_looks` of ``pose.state`` (all or nothing).
 
         Returns:
             The solids drawn (for picking or tests).
@@ -479,8 +486,9 @@ class AvatarRenderer:
             prog["u_key_dir"].value = tuple(float(x) for x in key / np.linalg.norm(key))
             prog["u_rim_dir"].value = tuple(float(x) for x in rim / np.linalg.norm(rim))
 
-        e_rows, e_lost, fine = self._ellipsoid_rows(pose, shapes)
-        c_rows, c_lost = self._capsule_rows(pose, shapes)
+        looks = state_looks(pose.state) if looks is None else np.asarray(looks, np.float32)
+        e_rows, e_lost, fine = self._ellipsoid_rows(looks, shapes)
+        c_rows, c_lost = self._capsule_rows(looks, shapes)
         caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
@@ -511,28 +519,26 @@ class AvatarRenderer:
             obj.release()
 
     # ------------------------------------------------------------------ internals
-    def _style_of(self, pose: SkeletonPose, parts: np.ndarray) -> np.ndarray:
-        """(N, 2) float32 (state code, alpha) for solids of ``parts``: 0 normal, 1 estimated, 2 lost."""
-        state = np.zeros(len(parts), np.float32)
+    @staticmethod
+    def _style_of(looks: np.ndarray, parts: np.ndarray) -> np.ndarray:
+        """(N, 2) float32 look amounts (estimated, lost) of solids of ``parts`` (untracked: 0)."""
+        out = np.zeros((len(parts), 2), np.float32)
         tracked = parts >= 0
-        seg_state = pose.state[parts[tracked]]
-        code = np.where(seg_state == MarkerStatus.ESTIMATED, 1.0, np.where(seg_state == MarkerStatus.LOST, 2.0, 0.0))
-        state[tracked] = code
-        alpha = np.where(state == 2.0, self.style.lost_alpha, 1.0).astype(np.float32)
-        return np.stack([state, alpha], axis=1)
+        out[tracked] = looks[parts[tracked]]
+        return out
 
-    def _ellipsoid_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        style = self._style_of(pose, s.ellipsoid_part)
+    def _ellipsoid_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        style = self._style_of(looks, s.ellipsoid_part)
         axes = np.transpose(s.ellipsoid_axes_m, (0, 2, 1)).reshape(-1, 9)  # columns ax0, ax1, ax2
         normal = np.linalg.inv(s.ellipsoid_axes_m).reshape(-1, 9)  # columns of inv(A)^T = rows of inv(A)
         rows = np.hstack([s.ellipsoid_centre_m, axes, normal, s.ellipsoid_rgb, style]).astype(np.float32)
-        return rows, style[:, 0] == 2.0, s.ellipsoid_fine
+        return rows, style[:, 1] > _TRANSLUCENT, s.ellipsoid_fine
 
-    def _capsule_rows(self, pose: SkeletonPose, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
-        style = self._style_of(pose, s.capsule_part)
+    def _capsule_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
+        style = self._style_of(looks, s.capsule_part)
         rows = np.hstack([s.capsule_p0_m, s.capsule_p1_m, s.capsule_r0_m[:, None], s.capsule_r1_m[:, None],
                           s.capsule_rgb, style]).astype(np.float32)
-        return rows, style[:, 0] == 2.0
+        return rows, style[:, 1] > _TRANSLUCENT
 
     @staticmethod
     def _cap_rows(c: np.ndarray, lost: np.ndarray, caps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
