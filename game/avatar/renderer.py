@@ -375,12 +375,22 @@ class _Floor:
         for k in range(rings - 1):
             a, b = 1 + k * segments, 1 + (k + 1) * segments
             tris += [np.stack([a + j, b + j, b + jn], axis=1), np.stack([a + j, b + jn, a + jn], axis=1)]
+        tris = np.concatenate(tris)
+        # Opaque triangles first (drawn without blending, which costs a read per pixel), then
+        # the fading rim.
+        opaque = (self._alpha[tris] >= 1.0).all(axis=1)
+        self._n_opaque = 3 * int(opaque.sum())
+        self._n_rim = 3 * int((~opaque).sum())
         self._vbo = ctx.buffer(reserve=len(self._unit) * 7 * 4, dynamic=True)
-        self._ibo = ctx.buffer(np.concatenate(tris).astype(np.int32).tobytes())
+        self._ibo = ctx.buffer(np.concatenate([tris[opaque], tris[~opaque]]).astype(np.int32).tobytes())
         self._vao = ctx.vertex_array(program, [(self._vbo, "3f 4f", "in_pos", "in_rgba")], index_buffer=self._ibo)
 
     def draw(self, centre: np.ndarray, floor_y: float, blobs: np.ndarray) -> None:
-        """centre: (3,) world point the disc is centred on (its y is ignored); blobs: (B, 4) x, z, radius, darkness."""
+        """Draw over what is there, without depth (the floor is behind everything on it).
+
+        centre: (3,) world point the disc is centred on (its y is ignored); blobs: (B, 4) x, z,
+        radius, darkness. Leaves blending enabled.
+        """
         xz = centre[[0, 2]] + self._radius * self._unit
         shadow = np.zeros(len(xz))
         for bx, bz, br, dark in blobs:
@@ -393,7 +403,12 @@ class _Floor:
         rows[:, 3:6] = self._rgb[None, :] * (self._shade * (1.0 - 0.55 * shadow))[:, None]
         rows[:, 6] = self._alpha
         self._vbo.write(rows.tobytes())
-        self._vao.render(moderngl.TRIANGLES)
+        ctx = self._vao.ctx
+        ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
+        self._vao.render(moderngl.TRIANGLES, vertices=self._n_opaque)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        self._vao.render(moderngl.TRIANGLES, vertices=self._n_rim, first=self._n_opaque)
 
     def release(self) -> None:
         for obj in (self._vao, self._vbo, self._ibo):
@@ -490,15 +505,14 @@ class AvatarRenderer:
         e_rows, e_lost, fine = self._ellipsoid_rows(looks, shapes)
         c_rows, c_lost = self._capsule_rows(looks, shapes)
         caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
+        if floor:  # first, without depth: everything else stands on it
+            self._draw_floor(shapes, clip_bytes)
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
         ctx.front_face = "cw" if mirrored else "ccw"
         self._draw_solids(e_rows[~e_lost], fine[~e_lost], c_rows[~c_lost], caps[~cap_lost])
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        if floor:  # after the body, so that the depth test skips the floor hidden behind it
-            self._draw_floor(shapes, clip_bytes)
-            ctx.enable(moderngl.CULL_FACE)
         # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
         # its front surface (no inner overlaps), then its colour over it.
         if e_lost.any() or c_lost.any():
@@ -561,6 +575,5 @@ class AvatarRenderer:
 
     def _draw_floor(self, s: BodyShapes, clip_bytes: bytes) -> None:
         self._prog_floor["u_clip_from_world"].write(clip_bytes)
-        self._ctx.disable(moderngl.CULL_FACE)
         centre = np.array([s.shadow_blobs[0, 0], s.floor_y_m, s.shadow_blobs[0, 1]])
         self._floor.draw(centre, s.floor_y_m, s.shadow_blobs)
