@@ -228,3 +228,27 @@ def test_live_avatar_draws_the_interpolated_patient_from_a_still_camera(gl):
     moved = avatar.render((W, H), 1.5, background=False)
     assert not np.array_equal(avatar.camera(moved, W / H)[0], cameras[-1])
     avatar.release()
+
+
+@pytest.mark.parametrize("gradient", [True, False])
+def test_background_resets_colour_and_depth(gl, gradient):
+    from game.avatar.renderer import AvatarStyle
+
+    ctx, fbo, _ = gl
+    style = AvatarStyle(background_gradient=gradient)
+    renderer = AvatarRenderer(ctx, style)
+    sk = skeleton(reference_pose())
+    view, proj = mirror_view(sk, W / H)
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 1.0, depth=0.0)  # a depth buffer that would hide everything
+    renderer.render_background()
+    renderer.render(sk, view, proj, floor=False)
+    img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(H, W, 3)[::-1].astype(int)
+    top, bottom = np.array(style.background_top_rgb), np.array(style.background_bottom_rgb)
+    if gradient:
+        assert np.abs(img[0, 0] - 255 * top).max() <= 3 and np.abs(img[-1, 0] - 255 * bottom).max() <= 3
+    else:
+        assert np.abs(img[0, 0] - 255 * (top + bottom) / 2).max() <= 1
+    head = project(view, proj, sk.joint("head")[None])[0].astype(int)
+    assert np.abs(img[head[1], head[0]] - img[head[1], 0]).sum() > 30  # the body shows
+    renderer.release()

@@ -50,6 +50,8 @@ class AvatarStyle:
         estimated_tint: how far an estimated segment's colour moves towards ``estimated_rgb``.
         lost_alpha: opacity of lost segments.
         background_top_rgb, background_bottom_rgb: the gradient of :meth:`AvatarRenderer.render_background`.
+        background_gradient: draw that gradient; False clears to the mean colour instead (a
+            full-screen pass less: ~1.5-2 ms per 1280x720 frame on llvmpipe).
         floor_rgb: the floor disc.
         floor_radius_m: its radius around the chair.
     """
@@ -59,6 +61,7 @@ class AvatarStyle:
     lost_alpha: float = 0.38
     background_top_rgb: tuple[float, float, float] = (0.80, 0.87, 0.94)
     background_bottom_rgb: tuple[float, float, float] = (0.96, 0.95, 0.92)
+    background_gradient: bool = True
     floor_rgb: tuple[float, float, float] = (0.90, 0.88, 0.84)
     floor_radius_m: float = 1.3
 
@@ -457,6 +460,10 @@ class AvatarRenderer:
         """Fill the bound framebuffer's viewport with the soft background gradient and reset its
         depth to the far plane (a clear for the avatar's scene)."""
         ctx = self._ctx
+        if not self.style.background_gradient:
+            rgb = 0.5 * (np.asarray(self.style.background_top_rgb) + np.asarray(self.style.background_bottom_rgb))
+            ctx.clear(*(float(c) for c in rgb), 1.0, depth=1.0, viewport=ctx.viewport)
+            return
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
         # Drawn at the far plane with the depth test always passing: it also resets the depth.
         # (Framebuffer.color_mask is not used anywhere here: moderngl applies it only on use().)
