@@ -211,22 +211,33 @@ def _cmd_validate(args) -> int:
 def _add_play(sub) -> None:
     p = sub.add_parser(
         "play",
-        help="watch the simulated patient being measured live (interim viewer)",
-        description="Render the simulated patient from the virtual cameras, measure the markers live and "
-        "show the camera images with the detected markers, a front and side view of the measured points "
-        "and the speed. Keys: Space pause, Right arrow next motion, R restart, Esc/Q quit.",
+        help="start the application: the live avatar of the (simulated) patient",
+        description="Open the application window: the home screen, the live avatar mirroring the patient "
+        "with joint angles, the camera check. With no cameras configured the tracker runs on the simulated "
+        "patient, whom the mouse and keys move (mouse: the hand; Tab: other arm; Q/E: forearm; arrows: lean; "
+        "M: scripted motions). --headless runs offscreen for --seconds and saves --screenshot.",
     )
-    p.add_argument("--motion", default="right_external_rotation",
-                   help="built-in motion name, or a motion YAML file (default: %(default)s)")
-    p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
+    p.add_argument("--motion", default=None,
+                   help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
+                   f"patient (headless: {_HEADLESS_MOTION})")
+    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
     p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=_positive_float, default=15.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--headless", action="store_true",
-                   help="render offscreen without a window, one frame set per 1/fps of motion")
+    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--body", default="p50_male",
+                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
+    p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
+    p.add_argument("--max-fps", type=float, default=60.0,
+                   help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
+    p.add_argument("--scene", choices=("home", "live", "cameras"), default=None,
+                   help="first screen (default: home; live with --headless)")
+    p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
     p.add_argument("--seconds", type=_positive_float, default=None,
-                   help="stop after this much motion time (default: until quit; 5 with --headless)")
-    p.add_argument("--screenshot", type=Path, default=None, help="save the last frame shown as a PNG")
+                   help="stop after this many seconds (default: until quit; 5 with --headless)")
+    p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
     p.set_defaults(func=_cmd_play)
+
+
+_HEADLESS_MOTION = "shoulder_abduction"
 
 
 def _cmd_play(args) -> int:
@@ -234,12 +245,29 @@ def _cmd_play(args) -> int:
 
     # pygame greets on import; keep the command's output to its one summary line.
     os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
-    from game.viewer import PlayOptions, run_viewer
+    from game.app import Settings
+    from game.play import PlayOptions, run_play
+    from tracking.live import SourceConfig
+    from tracking.sim.motions import available_motions
 
+    motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
+    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
+        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
+                         "or give a motion YAML file")
+    if args.max_fps < 0:
+        raise RehabError(f"--max-fps {args.max_fps:g}: give 0 (no cap) or a positive rate")
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
-    options = PlayOptions(motion=args.motion, rig=args.rig, size_px=args.size, fps=args.fps,
-                          headless=args.headless, seconds=seconds, screenshot=args.screenshot)
-    summary = run_viewer(options)
+    source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body)
+    options = PlayOptions(
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
+        source=source,
+        headless=args.headless,
+        seconds=seconds,
+        screenshot=args.screenshot,
+        scene=args.scene or ("live" if args.headless else "home"),
+        motion=motion,
+    )
+    summary = run_play(options)
     print(f"rehab play: {summary.line()}")
     return 0
 

@@ -1,0 +1,402 @@
+"""The application: a scene stack driven by a fixed-timestep loop with interpolated rendering.
+
+One :class:`App` owns the screen, the 2D canvas, the input mapper and the scenes; nothing here is
+global. The clock is a callable handed in (tests pass a fake one), settings are a frozen
+:class:`Settings` passed down, and whatever the scenes share (the tracker link; later scores) is
+an explicit :class:`Services` object.
+
+Per frame (:meth:`App.frame`): pygame events -> :class:`game.input.InputMapper` -> the top
+scene's :meth:`Scene.handle`; then :class:`FixedStep` says how many fixed updates of
+``1 / update_hz`` seconds fit in the time elapsed (the frame time is capped, so a stall never
+triggers a burst of catch-up steps); each calls :meth:`Scene.update`; finally
+:meth:`Scene.render` draws with ``alpha``, the fraction of an update step elapsed since the last
+one, so that motion is drawn between the last two updates rather than jumping at update rate.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Protocol
+
+import pygame
+
+from game.gfx.canvas import Canvas
+from game.gfx.screen import Screen
+from game.gfx import theme
+from game.input import Action, InputEvent, InputMapper, Press
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+
+@dataclass(frozen=True, slots=True)
+class Settings:
+    """How the application runs (passed down; never a module global).
+
+    Attributes:
+        window_px: window or offscreen framebuffer (width, height).
+        update_hz: fixed update rate of the game logic.
+        max_fps: frames drawn per second at most (0: as many as possible); the window's vsync
+            may cap lower.
+        max_frame_s: longest frame time the logic catches up on (a stall is not replayed).
+        show_fps: draw the frame rate in the corner.
+        title: window caption.
+    """
+
+    window_px: tuple[int, int] = (1280, 720)
+    update_hz: float = 120.0
+    max_fps: float = 60.0
+    max_frame_s: float = 0.25
+    show_fps: bool = True
+    title: str = "rehab: motion capture for rehabilitation"
+
+    def __post_init__(self) -> None:
+        if self.update_hz <= 0 or self.max_fps < 0 or self.max_frame_s <= 0:
+            raise ValueError("Settings: update_hz and max_frame_s must be positive, max_fps >= 0")
+
+
+class FixedStep:
+    """Fixed-timestep accounting: how many updates a frame runs, and the leftover fraction.
+
+    Args:
+        step_s: the update period.
+        max_frame_s: elapsed time beyond this per frame is dropped.
+        now_s: the clock's current reading.
+    """
+
+    def __init__(self, step_s: float, max_frame_s: float, now_s: float) -> None:
+        self.step_s = float(step_s)
+        self.max_frame_s = float(max_frame_s)
+        self._last_s = float(now_s)
+        self._accumulated_s = 0.0
+        self.total_steps = 0
+
+    def advance(self, now_s: float) -> int:
+        """Account for the time since the last call; returns the updates to run now."""
+        frame_s = min(max(now_s - self._last_s, 0.0), self.max_frame_s)
+        self._last_s = now_s
+        self._accumulated_s += frame_s
+        steps = int(self._accumulated_s / self.step_s + 1e-9)
+        self._accumulated_s = max(self._accumulated_s - steps * self.step_s, 0.0)
+        self.total_steps += steps
+        return steps
+
+    @property
+    def alpha(self) -> float:
+        """Fraction (0..1) of an update step elapsed since the last update."""
+        return min(self._accumulated_s / self.step_s, 1.0)
+
+
+class RateMeter:
+    """Frames per second over a sliding window of recent frame intervals."""
+
+    def __init__(self, window: int = 60) -> None:
+        self._intervals: deque[float] = deque(maxlen=window)
+        self._work: deque[float] = deque(maxlen=window)
+
+    def add(self, interval_s: float, work_s: float) -> None:
+        self._intervals.append(interval_s)
+        self._work.append(work_s)
+
+    @property
+    def fps(self) -> float:
+        """Frames shown per second."""
+        total = sum(self._intervals)
+        return len(self._intervals) / total if total > 0 else math.nan
+
+    @property
+    def work_ms(self) -> float:
+        """Mean time spent making a frame (events, updates, drawing; not the pacing sleep)."""
+        return 1000.0 * sum(self._work) / len(self._work) if self._work else math.nan
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    """What a scene draws with.
+
+    Attributes:
+        screen: the GL context and target (3D passes use ``screen.ctx``).
+        canvas: the 2D layer (between ``canvas.begin()`` and ``canvas.end()``, done by the app).
+        alpha: fraction of an update step since the last update, for interpolation.
+        size_px: (width, height) of the frame.
+    """
+
+    screen: Screen
+    canvas: Canvas
+    alpha: float
+    size_px: tuple[int, int]
+
+
+class Scene(Protocol):
+    """What the app calls on the scene at the top of its stack (see :class:`BaseScene`)."""
+
+    def enter(self, app: "App") -> None: ...
+    def exit(self) -> None: ...
+    def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None: ...
+    def handle(self, event: InputEvent) -> None: ...
+    def update(self, dt_s: float) -> None: ...
+    def render_3d(self, frame: Frame) -> None: ...
+    def render_2d(self, frame: Frame) -> None: ...
+
+
+class BaseScene:
+    """A scene that does nothing; subclasses override what they need.
+
+    ``self.app`` is set by :meth:`enter`. ``render_3d`` draws into the cleared frame before the
+    2D layer; ``render_2d`` draws with ``frame.canvas``.
+    """
+
+    app: "App"
+    #: Clear colour of the frame, 0..1 linear-ish RGB.
+    background = theme.BACKGROUND_GL
+
+    def enter(self, app: "App") -> None:
+        self.app = app
+
+    def exit(self) -> None:
+        pass
+
+    def handle(self, event: InputEvent) -> None:
+        pass
+
+    def update(self, dt_s: float) -> None:
+        pass
+
+    def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None:
+        """The GL rectangle (x, y from the bottom, w, h) the frame must clear first; None: all.
+
+        A scene whose 3D pass repaints part of the window (colour and depth) leaves it out.
+        """
+        return None
+
+    def render_3d(self, frame: Frame) -> None:
+        pass
+
+    def render_2d(self, frame: Frame) -> None:
+        pass
+
+
+class Services:
+    """What scenes share beyond the screen: the live tracker link (None when not running).
+
+    Owned by whoever built the app (closed by them, not by the app).
+    """
+
+    def __init__(self, tracker=None) -> None:
+        self.tracker = tracker
+
+    def tick(self) -> None:
+        """Once per frame: let the tracker link notice a dead process, restart it, read samples."""
+        if self.tracker is not None:
+            self.tracker.tick()
+
+
+@dataclass(frozen=True, slots=True)
+class RunSummary:
+    """What :meth:`App.run` did.
+
+    Attributes:
+        frames: frames drawn.
+        updates: fixed updates run.
+        wall_s: wall time of the run.
+        work_ms: mean time to make a frame (without the pacing sleep): 1000 / work_ms is the
+            frame rate the machine could sustain uncapped.
+        cpu_ms: CPU time of this process per frame, all threads (llvmpipe rasterizes on
+            threads of its own): what a frame costs on a machine shared with other work.
+        screenshot: the PNG written, if any.
+    """
+
+    frames: int
+    updates: int
+    wall_s: float
+    work_ms: float
+    cpu_ms: float = math.nan
+    screenshot: Path | None = None
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.wall_s if self.wall_s > 0 else math.nan
+
+    def line(self) -> str:
+        shot = f"; screenshot {self.screenshot}" if self.screenshot else ""
+        capable = 1000.0 / self.work_ms if self.work_ms > 0 else math.nan
+        return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
+                f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
+                f"{self.cpu_ms:.1f} ms CPU per frame){shot}")
+
+
+class App:
+    """The scene stack and the loop.
+
+    Args:
+        screen: where frames go (:func:`game.gfx.screen.open_screen`).
+        settings: how to run.
+        clock: seconds, monotonic (``time.perf_counter`` in the program, a fake in tests).
+        sleep: waits that many seconds (frame pacing).
+        services: what the scenes share.
+        events: returns the pygame events since the last call.
+    """
+
+    def __init__(self, screen: Screen, settings: Settings = Settings(), *, clock: Clock = time.perf_counter,
+                 sleep: Callable[[float], None] = time.sleep, services: Services | None = None,
+                 events: Callable[[], Iterable[pygame.event.Event]] = pygame.event.get) -> None:
+        self.screen = screen
+        self.settings = settings
+        self.clock = clock
+        self._sleep = sleep
+        self._events = events
+        self.services = services or Services()
+        self.canvas = Canvas(screen.ctx, screen.size_px)
+        self.input = InputMapper(screen.size_px)
+        self.stack: list[BaseScene] = []
+        self.running = True
+        self.show_fps = settings.show_fps
+        self.rate = RateMeter()
+        self.frames = 0
+        self._step = FixedStep(1.0 / settings.update_hz, settings.max_frame_s, clock())
+        self._last_frame_s = clock()
+        self._work_total_s = 0.0
+
+    # ------------------------------------------------------------------ scenes
+    @property
+    def scene(self) -> BaseScene | None:
+        return self.stack[-1] if self.stack else None
+
+    def push(self, scene: BaseScene) -> None:
+        """Put ``scene`` on top; the one below stays as it is, to come back to."""
+        self.stack.append(scene)
+        scene.enter(self)
+
+    def pop(self) -> None:
+        """Leave the top scene; with none left the app stops."""
+        if self.stack:
+            self.stack.pop().exit()
+        if not self.stack:
+            self.running = False
+
+    def replace(self, scene: BaseScene) -> None:
+        """Swap the top scene for ``scene``."""
+        if self.stack:
+            self.stack.pop().exit()
+        self.push(scene)
+
+    def quit(self) -> None:
+        self.running = False
+
+    # ------------------------------------------------------------------ input
+    def dispatch(self, event: InputEvent) -> None:
+        """Route one input event: quitting and the frame-rate overlay are the app's, the rest the scene's."""
+        if isinstance(event, Press) and event.down and event.action is Action.QUIT:
+            self.quit()
+        elif isinstance(event, Press) and event.down and event.action is Action.TOGGLE_FPS:
+            self.show_fps = not self.show_fps
+        elif self.scene is not None:
+            self.scene.handle(event)
+
+    # ------------------------------------------------------------------ loop
+    def frame(self, screenshot: Path | None = None) -> bool:
+        """One frame: events, fixed updates, drawing, (``screenshot``: saving it,) presenting.
+
+        Returns:
+            Whether a frame was drawn (not when the events quit the app or left no scene).
+        """
+        start_s = self.clock()
+        for event in self.input.map(self._events()):
+            self.dispatch(event)
+            if not self.running:
+                return False
+        self.services.tick()
+        scene = self.scene
+        if scene is None:
+            self.running = False
+            return False
+        steps = self._step.advance(self.clock())
+        dt_s = self._step.step_s
+        for _ in range(steps):
+            scene.update(dt_s)
+        self.render(scene)
+        if screenshot is not None:
+            # A window's back buffer is undefined after the swap: read it before presenting.
+            self.screen.save_png(screenshot)
+        self.screen.present()
+        end_s = self.clock()
+        self.rate.add(end_s - self._last_frame_s, end_s - start_s)
+        self._work_total_s += end_s - start_s
+        self._last_frame_s = end_s
+        self.frames += 1
+        return True
+
+    def render(self, scene: BaseScene) -> None:
+        """Draw ``scene`` (3D pass, then the 2D layer and the overlay) into the screen's target."""
+        frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+        self.screen.begin(scene.background, scene.clear_rect(frame))
+        scene.render_3d(frame)
+        self.canvas.begin()
+        scene.render_2d(frame)
+        if self.show_fps:
+            self._draw_fps()
+        self.canvas.end()
+
+    def _draw_fps(self) -> None:
+        fps = self.rate.fps
+        text = f"{fps:.0f} frames/s" if math.isfinite(fps) else "- frames/s"
+        w, _ = self.screen.size_px
+        size = theme.SMALL
+        tw, th = self.canvas.measure(text, size)
+        self.canvas.rect((w - tw - 28, 10, tw + 18, th + 10), theme.OVERLAY, radius=8)
+        self.canvas.text(text, (w - 19, 15), size, theme.TEXT_DIM, anchor="topright")
+
+    def run(self, *, seconds: float | None = None, frames: int | None = None,
+            screenshot: Path | None = None) -> RunSummary:
+        """Run frames until quit (or ``seconds`` of clock time or ``frames`` frames).
+
+        Args:
+            seconds: stop after this much clock time.
+            frames: stop after this many frames.
+            screenshot: save the last frame drawn there (PNG).
+        """
+        start_s = self.clock()
+        start_cpu_s = time.process_time()
+        first_frame = self.frames
+        work_before_s = self._work_total_s
+        period_s = 1.0 / self.settings.max_fps if self.settings.max_fps > 0 else 0.0
+        saved = None
+        while self.running:
+            frame_start_s = self.clock()
+            elapsed_s = frame_start_s - start_s
+            done = self.frames - first_frame
+            if (seconds is not None and elapsed_s >= seconds - 1e-9) or (frames is not None and done >= frames):
+                break
+            # The last frame of the run is the one saved (read before the window swaps buffers).
+            last = (frames is not None and done + 1 >= frames) or (
+                seconds is not None and elapsed_s + max(period_s, 1e-3) >= seconds - 1e-9)
+            if screenshot is not None and last:
+                if self.frame(screenshot=screenshot):
+                    saved = screenshot
+                break
+            self.frame()
+            if period_s:
+                wait_s = frame_start_s + period_s - self.clock()
+                if wait_s > 0:
+                    self._sleep(wait_s)
+        if screenshot is not None and saved is None:  # quit early: save what the scene shows now
+            if self.scene is not None:
+                self.render(self.scene)
+            self.screen.save_png(screenshot)
+        n = self.frames - first_frame
+        wall_s = self.clock() - start_s
+        work_ms = 1000.0 * (self._work_total_s - work_before_s) / n if n else math.nan
+        cpu_ms = 1000.0 * (time.process_time() - start_cpu_s) / n if n else math.nan
+        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot)
+
+    def close(self) -> None:
+        """Exit every scene and release the canvas (the screen and services belong to the caller)."""
+        while self.stack:
+            self.stack.pop().exit()
+        self.canvas.release()

@@ -1,0 +1,123 @@
+"""``rehab play``: the application put together (screen, tracker, scenes) and run.
+
+Window mode opens on the home screen; headless mode (offscreen, no window) opens the live avatar
+directly, plays a scripted motion on the simulated patient for a given time and saves the last
+frame, which is how tests and reviewers see the whole application work.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable
+
+from calibration.errors import RehabError
+from game.app import App, RunSummary, Services, Settings
+from game.gfx.screen import open_screen
+from game.live_link import LiveLink
+from game.scenes.home import HomeScene, MenuEntry
+from game.scenes.live import LiveScene
+
+if TYPE_CHECKING:
+    from tracking.live import SourceConfig
+
+log = logging.getLogger(__name__)
+
+#: What headless runs play when no motion is named.
+DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
+SCENES = ("home", "live", "cameras")
+
+
+@dataclass(frozen=True, slots=True)
+class PlayOptions:
+    """What ``rehab play`` was asked for.
+
+    Attributes:
+        settings: window size, update rate, frame-rate cap.
+        source: what the tracker process measures (None: the simulated patient's defaults).
+        headless: draw offscreen for ``seconds`` and stop.
+        seconds: run time (None: until quit).
+        screenshot: save the last frame there (PNG).
+        scene: the first scene: ``home``, ``live`` or ``cameras``.
+        motion: the scripted motion playing at the start (None: the patient follows the mouse).
+        start_timeout_s: how long the tracker may take to start.
+    """
+
+    settings: Settings = field(default_factory=Settings)
+    source: "SourceConfig | None" = None
+    headless: bool = False
+    seconds: float | None = None
+    screenshot: Path | None = None
+    scene: str = "home"
+    motion: str | None = None
+    start_timeout_s: float = 60.0
+
+
+def make_avatar(ctx, marker_names):
+    """The patient's avatar on ``ctx`` for a marker set's names (:mod:`game.avatar`)."""
+    from game.avatar.live import LiveAvatar
+
+    return LiveAvatar(ctx, marker_names)
+
+
+def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,
+              sleep: Callable[[float], None] = time.sleep) -> App:
+    """The application with its scenes on ``screen``, reading ``link``."""
+    from tracking.sim.motions import available_motions
+
+    app = App(screen, options.settings, clock=clock, sleep=sleep, services=Services(link))
+    motions = [None, *available_motions()]
+
+    def open_monitor():
+        from game.scenes.monitor import MonitorScene
+
+        return MonitorScene(link)
+
+    def open_live():
+        return LiveScene(link, motions=motions, motion=options.motion, open_monitor=open_monitor,
+                         make_avatar=make_avatar)
+
+    home = HomeScene([
+        MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
+        MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
+        MenuEntry("Quit", "", None),
+    ], status=link.summary)
+    app.push(home)
+    if options.scene == "live":
+        app.push(open_live())
+    elif options.scene == "cameras":
+        app.push(open_monitor())
+    return app
+
+
+def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,
+             sleep: Callable[[float], None] = time.sleep) -> RunSummary:
+    """Open the screen, start the tracker, run the scenes; everything is closed on the way out.
+
+    Raises:
+        game.gfx.screen.NoDisplayError: no display and not headless.
+        RehabError: the tracker cannot start (headless), unwritable screenshot, bad options.
+    """
+    from tracking.live import LiveTracker, SourceConfig
+
+    source = options.source or SourceConfig()
+    source.check()
+    screen = open_screen(options.settings.window_px, options.settings.title, headless=options.headless,
+                         vsync=options.settings.max_fps > 0)
+    link = LiveLink(lambda: LiveTracker(source), start_timeout_s=options.start_timeout_s)
+    app = None
+    try:
+        link.start()
+        if options.headless:
+            # Offscreen there is nobody to watch "Starting...": the run's seconds begin with the tracker.
+            if not link.wait_ready(options.start_timeout_s):
+                raise RehabError(link.error or "the tracker did not start")
+        app = build_app(screen, options, link, clock=clock, sleep=sleep)
+        return app.run(seconds=options.seconds, screenshot=options.screenshot)
+    finally:
+        if app is not None:
+            app.close()
+        link.close()
+        screen.close()

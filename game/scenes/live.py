@@ -1,0 +1,498 @@
+"""The live mirror: the avatar follows the patient, with the active arm's joint angles in large
+text and the tracker's state in plain words.
+
+What the scene shows, left to right: the avatar seen from the front as in a mirror (the
+patient's right hand on the screen's right), the measured markers as small dots on it (teal
+measured, amber estimated), and the hand target of the interactive patient; on the right a panel
+with the active arm's angles (value and a bar over the normal range), the trunk's lean and how
+many markers are measured, estimated or lost. A banner on top says what to do or what is wrong:
+the tracker's one-line message while it waits for the reference pose, "The tracker stopped:
+restarting..." while its process is replaced (the last pose stays on the screen, the window
+keeps drawing).
+
+The interactive simulated patient (no scripted motion playing) is driven from here
+(:class:`PatientControl`): the mouse moves the active hand on a plane in front of its shoulder
+(the pointer ray meets the plane; the wheel moves the plane forward and back), Tab switches the
+arm, Q/E turn the forearm, the arrows lean the trunk while held. M cycles the scripted motions
+and back to the mouse, R re-identifies the markers, C opens the camera check, Esc goes back.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from game.app import BaseScene, Frame
+from game.gfx import theme
+from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspective, pointer_ray, project_px
+from game.input import Action, InputEvent, Pointer, PointerKind
+from game.live_link import LinkState, LiveLink
+
+log = logging.getLogger(__name__)
+
+#: The mirror camera: in front of the seated patient (who faces -Z), at chest height.
+EYE_M = (0.0, 1.0, -3.0)
+LOOK_AT_M = (0.0, 0.93, 0.0)
+FOVY_DEG = 34.0
+NEAR_M, FAR_M = 0.1, 20.0
+#: Share of the window's width the 3D view takes (the panel takes the rest).
+VIEW_SHARE = 0.62
+#: A sample with fewer known markers (the tracker waiting for the reference pose) moves no avatar.
+MIN_KNOWN_MARKERS = 4
+#: Shortest interval between two patient inputs sent to the tracker process.
+INPUT_PERIOD_S = 1.0 / 60.0
+#: A sample older than this while the process runs means the source has stalled.
+STALE_SAMPLE_S = 1.0
+
+MARKER_LOST, MARKER_MEASURED, MARKER_ESTIMATED = 0, 1, 2
+TRACKING = 1
+
+#: Angle rows of the panel: (suffix after ``<side>_`` or full name, label, bar range in degrees).
+ARM_ROWS = (
+    ("shoulder_flexion", "Shoulder flexion", (-50.0, 180.0)),
+    ("shoulder_abduction", "Shoulder abduction", (-30.0, 180.0)),
+    ("elbow_flexion", "Elbow flexion", (0.0, 150.0)),
+    ("forearm_supination", "Forearm rotation", (-90.0, 90.0)),
+)
+TRUNK_ROWS = (
+    ("trunk_forward_lean", "Trunk forward", (-30.0, 45.0)),
+    ("trunk_lateral_lean", "Trunk sideways", (-30.0, 30.0)),
+)
+
+
+@dataclass(frozen=True, slots=True)
+class LiveLayout:
+    """Where things go: the 3D view on the left, the panel on the right (window pixels)."""
+
+    view: Viewport
+    panel: tuple[float, float, float, float]
+    scale: float
+
+
+def live_layout(size_px: tuple[int, int]) -> LiveLayout:
+    w, h = size_px
+    scale = min(w / 1280.0, h / 720.0)
+    view_w = round(w * VIEW_SHARE)
+    margin = theme.MARGIN * scale
+    panel = (view_w, margin, w - view_w - margin, h - 2 * margin)
+    return LiveLayout(Viewport(0, 0, view_w, h), panel, scale)
+
+
+def mirror_camera(viewport: Viewport) -> tuple[np.ndarray, np.ndarray]:
+    """(view, projection) of the mirror view for ``viewport`` (the projection is mirrored)."""
+    view = look_at(EYE_M, LOOK_AT_M)
+    proj = mirrored(perspective(FOVY_DEG, viewport.aspect, NEAR_M, FAR_M))
+    return view, proj
+
+
+# ============================================================================ patient control
+@dataclass(frozen=True, slots=True)
+class ControlLimits:
+    """How the keys move the interactive patient.
+
+    Attributes:
+        forearm_speed_deg_s: forearm turning speed while Q or E is held.
+        forearm_range_deg: (pronation, supination) limits.
+        lean_speed_deg_s: trunk lean speed while an arrow is held, and back to upright after.
+        forward_range_deg: (back, forward) lean limits.
+        lateral_range_deg: (left, right) lean limits.
+        depth_range_m: how far in front of the shoulder the hand's plane may be.
+        depth_step_m: plane movement per wheel click.
+    """
+
+    forearm_speed_deg_s: float = 90.0
+    forearm_range_deg: tuple[float, float] = (-85.0, 85.0)
+    lean_speed_deg_s: float = 30.0
+    forward_range_deg: tuple[float, float] = (-15.0, 35.0)
+    lateral_range_deg: tuple[float, float] = (-25.0, 25.0)
+    depth_range_m: tuple[float, float] = (0.0, 0.55)
+    depth_step_m: float = 0.05
+
+
+def _approach(value: float, target: float, step: float) -> float:
+    return min(value + step, target) if value < target else max(value - step, target)
+
+
+class PatientControl:
+    """Keys and pointer -> the interactive patient's input (pure state, no I/O).
+
+    Args:
+        limits: speeds and ranges.
+        depth_m: starting distance of the hand's plane in front of the shoulder.
+    """
+
+    def __init__(self, limits: ControlLimits = ControlLimits(), depth_m: float = 0.25) -> None:
+        self.limits = limits
+        self.side = "right"
+        self.hand_target_m: tuple[float, float, float] | None = None
+        self.forearm_deg = 0.0
+        self.forward_lean_deg = 0.0
+        self.lateral_lean_deg = 0.0
+        self.depth_m = depth_m
+        self.held: set[Action] = set()
+
+    def switch_arm(self) -> None:
+        self.side = "left" if self.side == "right" else "right"
+        self.hand_target_m = None  # the newly active arm stays where it is until the pointer moves
+        self.forearm_deg = 0.0
+
+    def wheel(self, clicks: float) -> None:
+        lo, hi = self.limits.depth_range_m
+        self.depth_m = min(hi, max(lo, self.depth_m + clicks * self.limits.depth_step_m))
+
+    def aim(self, origin_m: np.ndarray, direction: np.ndarray, shoulder_m: np.ndarray) -> bool:
+        """Point the hand where the pointer ray meets the plane ``depth_m`` in front of the shoulder.
+
+        Returns:
+            Whether the ray meets the plane (a target was set).
+        """
+        plane_point = np.asarray(shoulder_m, dtype=np.float64) + np.array([0.0, 0.0, -self.depth_m])
+        hit = intersect_plane(origin_m, direction, plane_point, (0.0, 0.0, 1.0))
+        if hit is None:
+            return False
+        self.hand_target_m = (float(hit[0]), float(hit[1]), float(hit[2]))
+        return True
+
+    def update(self, dt_s: float) -> None:
+        """Advance the held keys' effects by ``dt_s``; the trunk returns upright when no arrow is held."""
+        lim, held = self.limits, self.held
+        turn = (Action.ROTATE_OUT in held) - (Action.ROTATE_IN in held)
+        lo, hi = lim.forearm_range_deg
+        self.forearm_deg = min(hi, max(lo, self.forearm_deg + turn * lim.forearm_speed_deg_s * dt_s))
+        step = lim.lean_speed_deg_s * dt_s
+        forward = (Action.UP in held) - (Action.DOWN in held)
+        target = {1: lim.forward_range_deg[1], -1: lim.forward_range_deg[0], 0: 0.0}[forward]
+        self.forward_lean_deg = _approach(self.forward_lean_deg, target, step)
+        # Mirror view: the left arrow leans the avatar to the screen's left, the patient's left (-).
+        lateral = (Action.RIGHT in held) - (Action.LEFT in held)
+        target = {1: lim.lateral_range_deg[1], -1: lim.lateral_range_deg[0], 0: 0.0}[lateral]
+        self.lateral_lean_deg = _approach(self.lateral_lean_deg, target, step)
+
+    def patient_input(self):
+        """The :class:`tracking.live.PatientInput` for the current state."""
+        from tracking.live import PatientInput
+
+        return PatientInput(side=self.side, hand_target_m=self.hand_target_m, forearm_rotation_deg=self.forearm_deg,
+                            trunk_forward_lean_deg=self.forward_lean_deg,
+                            trunk_lateral_lean_deg=self.lateral_lean_deg)
+
+
+# ============================================================================ the scene
+def _humanize(name: str | None) -> str:
+    if name is None:
+        return "Mouse control"
+    text = name.replace("_", " ").strip()
+    return text[:1].upper() + text[1:]
+
+
+def truth_error_mm(positions_m: np.ndarray, truth_m: np.ndarray, status: np.ndarray) -> float:
+    """RMS distance (mm) of the measured markers from the simulator's truth (NaN for real cameras)."""
+    measured = (np.asarray(status) == MARKER_MEASURED) & np.isfinite(truth_m).all(axis=1)
+    measured &= np.isfinite(positions_m).all(axis=1)
+    if not measured.any():
+        return math.nan
+    d = np.linalg.norm(positions_m[measured] - truth_m[measured], axis=1)
+    return float(np.sqrt(np.mean(d**2)) * 1000.0)
+
+
+def format_angle(value_deg: float) -> str:
+    """Whole degrees for the live display ("-" when undefined); ROM results round to 5 elsewhere."""
+    if not math.isfinite(value_deg):
+        return "-"
+    return f"{round(value_deg):d}\N{DEGREE SIGN}"
+
+
+class LiveScene(BaseScene):
+    """The avatar mirror.
+
+    Args:
+        link: the live tracker link (started by the application).
+        motions: scripted motion names M cycles through (None in the list: mouse control).
+        motion: what plays when the scene opens (None: mouse control).
+        open_monitor: makes the camera-check scene for C (None: C does nothing).
+        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar
+            (:class:`game.avatar.live.LiveAvatar`); None: markers only.
+        show_markers: draw the measured markers over the avatar.
+    """
+
+    def __init__(self, link: LiveLink, *, motions: Sequence[str | None] = (None,), motion: str | None = None,
+                 open_monitor: Callable[[], BaseScene] | None = None,
+                 make_avatar: Callable | None = None, show_markers: bool = True) -> None:
+        self.link = link
+        self.motions = list(motions) if motions else [None]
+        if motion not in self.motions:
+            self.motions.insert(0, motion)
+        self.motion = motion
+        self.open_monitor = open_monitor
+        self.make_avatar = make_avatar
+        self.show_markers = show_markers
+        self.control = PatientControl()
+        self.avatar = None
+        self._sent_input = None
+        self._sample_clock_s = math.nan   # app clock when the newest sample arrived
+        self._since_sent_s = 0.0
+        self._last_shoulder_m: dict[str, np.ndarray] = {}   # per side
+
+    # ------------------------------------------------------------------ life cycle
+    def enter(self, app) -> None:
+        super().enter(app)
+        self.layout = live_layout(app.screen.size_px)
+        self.view_m, self.proj_m = mirror_camera(self.layout.view)
+        self.link.set_motion(self.motion)
+        if self.motion is None:
+            self._send_input(force=True)
+
+    def exit(self) -> None:
+        if self.avatar is not None:
+            self.avatar.release()
+            self.avatar = None
+
+    # ------------------------------------------------------------------ input
+    @property
+    def interactive(self) -> bool:
+        return self.motion is None
+
+    def handle(self, event: InputEvent) -> None:
+        if isinstance(event, Pointer):
+            self._pointer_event(event)
+            return
+        action = event.action
+        if not event.down:
+            self.control.held.discard(action)
+            return
+        if action in (Action.UP, Action.DOWN, Action.LEFT, Action.RIGHT, Action.ROTATE_IN, Action.ROTATE_OUT):
+            self.control.held.add(action)
+        elif action is Action.SWITCH_ARM:
+            self.control.switch_arm()
+        elif action is Action.NEXT_MOTION:
+            k = self.motions.index(self.motion)
+            self.motion = self.motions[(k + 1) % len(self.motions)]
+            self.link.set_motion(self.motion)
+        elif action is Action.REIDENTIFY:
+            self.link.reidentify()
+        elif action is Action.MONITOR and self.open_monitor is not None:
+            self.app.push(self.open_monitor())
+        elif action is Action.BACK:
+            self.app.pop()
+
+    def _shoulder_m(self) -> np.ndarray:
+        """The active shoulder marker's last position (a typical seated one before any sample)."""
+        side = self.control.side
+        sample, markerset = self.link.latest, self.link.markerset
+        name = "MRS" if side == "right" else "MLS"
+        if sample is not None and markerset is not None and name in markerset.names:
+            p = sample.positions_m[markerset.names.index(name)]
+            if np.isfinite(p).all():
+                self._last_shoulder_m[side] = np.array(p, dtype=np.float64)
+        default = np.array([0.19 if side == "right" else -0.19, 1.05, 0.0])
+        return self._last_shoulder_m.get(side, default)
+
+    def _pointer_event(self, event: Pointer) -> None:
+        if event.kind is PointerKind.WHEEL:
+            self.control.wheel(event.wheel)
+        w, h = self.app.screen.size_px
+        x_px, y_px = event.x * w, event.y * h
+        v = self.layout.view
+        if not (v.x <= x_px < v.x + v.w and v.y <= y_px < v.y + v.h):
+            return
+        if self.interactive:
+            origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
+            self.control.aim(origin, direction, self._shoulder_m())
+
+    def _send_input(self, force: bool = False) -> None:
+        value = self.control.patient_input()
+        if force or value != self._sent_input:
+            self.link.set_patient_input(value)
+            self._sent_input = value
+
+    # ------------------------------------------------------------------ update
+    def update(self, dt_s: float) -> None:
+        self.control.update(dt_s)
+        self._since_sent_s += dt_s
+        # At most 60 messages a second to the tracker process (its camera runs at 30).
+        if self.interactive and self._since_sent_s >= INPUT_PERIOD_S - 1e-9:
+            self._since_sent_s = 0.0
+            self._send_input()
+
+    def _consume_samples(self) -> None:
+        """Feed the samples that arrived this frame to the avatar (made once the marker set is known)."""
+        if self.link.new_samples:
+            self._sample_clock_s = self.app.clock()
+        if self.avatar is None and self.make_avatar is not None and self.link.markerset is not None:
+            self.avatar = self.make_avatar(self.app.screen.ctx, self.link.markerset.names)
+        if self.avatar is not None:
+            for sample in self.link.new_samples:
+                # A tracker still waiting for the reference pose knows too few markers to pose a body.
+                if np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                    self.avatar.push_sample(sample)
+
+    # ------------------------------------------------------------------ drawing
+    def clear_rect(self, frame: Frame) -> tuple[int, int, int, int] | None:
+        """Only the panel: the avatar's background repaints the view (colour and depth)."""
+        if self.avatar is None:
+            return None
+        v = self.layout.view
+        w, h = frame.size_px
+        x0 = round(v.x + v.w)
+        return (x0, 0, w - x0, h)
+
+    def render_3d(self, frame: Frame) -> None:
+        self._consume_samples()
+        if self.avatar is None:
+            return
+        ctx = frame.screen.ctx
+        v = self.layout.view
+        ctx.viewport = v.gl(frame.size_px[1])
+        try:
+            pose = self.avatar.render((v.w, v.h), self.app.clock())
+        finally:
+            ctx.viewport = (0, 0, *frame.size_px)
+        if pose is not None:
+            # The avatar's still mirror camera: markers, the hand target and the pointer use it too.
+            self.view_m, self.proj_m = self.avatar.camera(pose, v.aspect)
+
+    def render_2d(self, frame: Frame) -> None:
+        c, s = frame.canvas, self.layout.scale
+        sample = self.link.latest
+        if self.show_markers and sample is not None:
+            self._draw_markers(frame, sample)
+        if self.interactive and self.control.hand_target_m is not None:
+            xy = project_px(np.array([self.control.hand_target_m]), self.proj_m @ self.view_m, self.layout.view)[0]
+            if np.isfinite(xy).all():
+                c.circle(tuple(xy), 13 * s, (0, 0, 0, 0), border=3 * s, border_colour=(*theme.TEXT, 150))
+        self._draw_panel(frame, sample)
+        self._draw_banner(frame, sample)
+        self._draw_help(frame)
+
+    def _draw_markers(self, frame: Frame, sample) -> None:
+        c, s = frame.canvas, self.layout.scale
+        xy = project_px(sample.positions_m, self.proj_m @ self.view_m, self.layout.view)
+        for (x, y), st in zip(xy, sample.status):
+            if not (math.isfinite(x) and math.isfinite(y)) or st == MARKER_LOST:
+                continue
+            colour = theme.STATUS_COLOURS.get(int(st), theme.TEXT)
+            if st == MARKER_ESTIMATED:
+                c.circle((x, y), 7 * s, (0, 0, 0, 0), border=3 * s, border_colour=colour)
+            else:
+                c.circle((x, y), 5.5 * s, colour, border=1.5 * s, border_colour=(20, 24, 30))
+
+    def _angle(self, sample, name: str) -> float:
+        names = self.link.angle_names
+        if sample is None or name not in names:
+            return math.nan
+        return float(sample.angles_deg[names.index(name)])
+
+    def _draw_panel(self, frame: Frame, sample) -> None:
+        c, s = frame.canvas, self.layout.scale
+        # The panel is the window's plain background (no large shape to fill: llvmpipe pays per pixel).
+        px, py, pw, ph = self.layout.panel
+        x, y, right = px + 26 * s, py + 6 * s, px + pw - 10 * s
+        side = self.control.side if self.interactive else None
+        title = f"{self.control.side.capitalize()} arm" if side else _humanize(self.motion)
+        c.text(title, (x, y), round(theme.LARGE * s), theme.TEXT)
+        y += 58 * s
+        mode = "Mouse moves the hand" if self.interactive else "Scripted motion, M for the next"
+        c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
+        y += 40 * s
+        sides = (self.control.side,) if side else ("right", "left")
+        rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
+                for sd in sides for suffix, label, rng in ARM_ROWS]
+        if side:
+            rows += TRUNK_ROWS
+        row_h = (ph - (y - py) - 150 * s) / max(len(rows), 1)
+        row_h = min(row_h, 74 * s)
+        size = round((theme.BODY if row_h >= 60 * s else theme.SMALL) * s)
+        value_size = round((theme.MEDIUM if row_h >= 60 * s else theme.BODY) * s)
+        for name, label, (lo, hi) in rows:
+            value = self._angle(sample, name)
+            c.text(label, (x, y + 4 * s), size, theme.TEXT_DIM)
+            c.text(format_angle(value), (right, y), value_size, theme.TEXT, anchor="topright")
+            bar_y = y + row_h - 22 * s
+            c.rect((x, bar_y, right - x, 8 * s), (255, 255, 255, 22), radius=4 * s)
+            if math.isfinite(value):
+                zero = x + (right - x) * (0.0 - lo) / (hi - lo)
+                at = x + (right - x) * (min(max(value, lo), hi) - lo) / (hi - lo)
+                a, b = min(zero, at), max(zero, at)
+                c.rect((a, bar_y, max(b - a, 3 * s), 8 * s), theme.ACCENT, radius=4 * s)
+            y += row_h
+        self._draw_marker_counts(frame, sample, (x, py + ph - 142 * s), right)
+
+    def _draw_marker_counts(self, frame: Frame, sample, pos, right: float) -> None:
+        c, s = frame.canvas, self.layout.scale
+        if sample is None:
+            return
+        status = np.asarray(sample.status)
+        counts = ((int((status == MARKER_MEASURED).sum()), "measured", theme.ACCENT),
+                  (int((status == MARKER_ESTIMATED).sum()), "estimated", theme.ATTENTION),
+                  (int((status == MARKER_LOST).sum()), "lost", theme.FAILURE))
+        x, y = pos
+        size = round(theme.SMALL * s)
+        for n, word, colour in counts:
+            c.circle((x + 7 * s, y + 10 * s), 7 * s, colour)
+            _, _, w, _ = c.text(f"{n} {word}", (x + 20 * s, y), size, theme.TEXT_DIM)
+            x += w + 44 * s
+        error_mm = truth_error_mm(sample.positions_m, sample.truth_m, status)
+        if math.isfinite(error_mm):
+            c.text(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
+                   (pos[0], pos[1] + 34 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT)
+
+    def banner(self, sample) -> tuple[str, tuple] | None:
+        """The line on top of the view and its colour (None: all is well)."""
+        state = self.link.state
+        if state is LinkState.STARTING:
+            return "Starting the tracker...", theme.ATTENTION
+        if state is LinkState.FAILED:
+            return f"The tracker is not running: {self.link.error}", theme.FAILURE
+        if state is LinkState.RESTARTING:
+            return "The tracker stopped: restarting...", theme.ATTENTION
+        if state is LinkState.CLOSED:
+            return "The tracker is off", theme.FAILURE
+        if sample is None:
+            return "Waiting for the first images...", theme.ATTENTION
+        if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:
+            return "No new images from the cameras...", theme.ATTENTION
+        if sample.state != TRACKING:
+            return sample.message or "Finding the markers...", theme.ATTENTION
+        return None
+
+    def _draw_banner(self, frame: Frame, sample) -> None:
+        got = self.banner(sample)
+        if got is None:
+            return
+        text, colour = got
+        c, s = frame.canvas, self.layout.scale
+        v = self.layout.view
+        if sample is None and self.link.state is not LinkState.FAILED:
+            # Nothing to show yet: say it large in the middle of the empty view.
+            c.text(text, (v.x + v.w / 2, v.y + v.h / 2 - 20 * s), round(theme.MEDIUM * s), theme.TEXT, anchor="center")
+            c.text("The avatar appears as soon as the markers are found.", (v.x + v.w / 2, v.y + v.h / 2 + 28 * s),
+                   round(theme.SMALL * s), theme.TEXT_DIM, anchor="center")
+            return
+        width = v.w - 2 * theme.MARGIN * s
+        size = round(theme.BODY * s)
+        lines = c.wrap(text, size, width - 40 * s)[:3]
+        line_h = c.measure("Ag", size)[1] + 6 * s
+        h = len(lines) * line_h + 28 * s
+        x, y = v.x + theme.MARGIN * s, theme.MARGIN * s
+        c.rect((x, y, width, h), theme.OVERLAY, radius=14 * s, border=3 * s, border_colour=colour)
+        for k, line in enumerate(lines):
+            c.text(line, (x + 20 * s, y + 14 * s + k * line_h), size, theme.TEXT)
+
+    def _draw_help(self, frame: Frame) -> None:
+        c, s = frame.canvas, self.layout.scale
+        px, py, pw, ph = self.layout.panel
+        if self.interactive:
+            text = "Mouse: hand, wheel: nearer/farther   Tab: other arm   Q/E: turn forearm   Arrows: lean   "
+        else:
+            text = ""
+        text += "M: motions   R: find markers   C: cameras   Esc: back"
+        size = round(theme.SMALL * 0.8 * s)
+        lines = c.wrap(text, size, pw - 36 * s)
+        line_h = c.measure("Ag", size)[1] + 5 * s
+        y = py + ph - len(lines) * line_h
+        for k, line in enumerate(lines):
+            c.text(line, (px + 26 * s, y + k * line_h), size, theme.TEXT_FAINT)

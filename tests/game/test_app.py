@@ -1,0 +1,221 @@
+"""The loop (fixed steps and interpolation alpha under a fake clock), input mapping, the scene
+stack, and headless frames with pixels checked. SDL dummy driver, EGL (llvmpipe)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pygame
+import pytest
+
+from game.app import App, BaseScene, FixedStep, Frame, Settings
+from game.gfx import theme
+from game.gfx.screen import GraphicsUnavailable, has_display, open_screen
+from game.input import Action, InputMapper, Pointer, PointerKind, Press
+
+
+class FakeClock:
+    """A clock the test moves by hand; ``sleep`` moves it too."""
+
+    def __init__(self, now_s: float = 50.0) -> None:
+        self.now_s = now_s
+
+    def __call__(self) -> float:
+        return self.now_s
+
+    def sleep(self, dt_s: float) -> None:
+        self.now_s += dt_s
+
+
+@pytest.fixture
+def screen(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        s = open_screen((320, 180), "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+    yield s
+    s.close()
+
+
+# ---------------------------------------------------------------------------- fixed step
+def test_fixed_step_counts_updates_and_keeps_the_leftover_as_alpha():
+    step = FixedStep(1 / 120, 0.25, now_s=10.0)
+    assert step.advance(10.0 + 0.05) == 6
+    assert step.alpha == pytest.approx(0.0, abs=1e-6)
+    assert step.advance(10.05 + 1 / 240) == 0
+    assert step.alpha == pytest.approx(0.5)
+    assert step.advance(10.05 + 1 / 240 + 1 / 240) == 1
+    assert step.alpha == pytest.approx(0.0, abs=1e-6)
+    assert step.total_steps == 7
+
+
+def test_fixed_step_drops_a_stall_beyond_the_cap():
+    step = FixedStep(0.01, 0.25, now_s=0.0)
+    assert step.advance(5.0) == 25
+    assert step.advance(5.0) == 0
+    assert step.advance(4.0) == 0  # a clock going backwards never makes negative time
+
+
+class Recorder(BaseScene):
+    """Records what the app asks of it."""
+
+    def __init__(self, colour=(255, 0, 0)) -> None:
+        self.colour = colour
+        self.updates = 0
+        self.alphas: list[float] = []
+        self.events: list = []
+        self.entered = self.exited = 0
+
+    def enter(self, app):
+        super().enter(app)
+        self.entered += 1
+
+    def exit(self):
+        self.exited += 1
+
+    def handle(self, event):
+        self.events.append(event)
+
+    def update(self, dt_s):
+        assert dt_s == pytest.approx(1 / 120)
+        self.updates += 1
+
+    def render_2d(self, frame: Frame):
+        self.alphas.append(frame.alpha)
+        w, h = frame.size_px
+        frame.canvas.rect((0, 0, w / 2, h), self.colour)
+
+
+def test_app_runs_two_updates_per_60_hz_frame_and_interpolates(screen):
+    clock = FakeClock()
+    # each frame takes 1/60 s of work on the fake clock (a 0.5-step offset shows in alpha)
+    scene = Recorder()
+    app = App(screen, Settings(update_hz=120, max_fps=0, show_fps=False), clock=clock, sleep=clock.sleep,
+              events=lambda: [])
+    app.push(scene)
+    clock.now_s += 1 / 240
+    for _ in range(10):
+        app.frame()
+        clock.now_s += 1 / 60
+    assert scene.updates == 18  # 1/240 + 9/60 s elapsed before the 10th frame: 18.5 steps
+    assert scene.alphas == pytest.approx([0.5] * 10)
+
+
+def test_run_paces_frames_to_max_fps_and_stops_after_seconds(screen):
+    clock = FakeClock()
+    app = App(screen, Settings(max_fps=30, show_fps=False), clock=clock, sleep=clock.sleep, events=lambda: [])
+    app.push(Recorder())
+    summary = app.run(seconds=1.0)
+    assert summary.frames == pytest.approx(30, abs=1)
+    assert summary.updates == pytest.approx(120, abs=4)
+
+
+def test_scene_stack_push_pop_replace_and_quit(screen):
+    clock = FakeClock()
+    app = App(screen, Settings(), clock=clock, events=lambda: [])
+    a, b, c = Recorder(), Recorder(), Recorder()
+    app.push(a)
+    app.push(b)
+    assert app.scene is b and a.exited == 0
+    app.replace(c)
+    assert app.scene is c and b.exited == 1
+    app.dispatch(Press(Action.SELECT))
+    assert c.events == [Press(Action.SELECT)] and a.events == []
+    app.pop()
+    assert app.scene is a and app.running
+    app.pop()
+    assert not app.running
+    app2 = App(screen, Settings(), clock=clock, events=lambda: [])
+    app2.push(Recorder())
+    app2.dispatch(Press(Action.QUIT))
+    assert not app2.running
+
+
+def test_headless_frame_pixels_and_screenshot(screen, tmp_path):
+    clock = FakeClock()
+    app = App(screen, Settings(show_fps=True), clock=clock, sleep=clock.sleep, events=lambda: [])
+    app.push(Recorder(colour=(200, 40, 30)))
+    out = tmp_path / "shot.png"
+    summary = app.run(frames=3, screenshot=out)
+    assert summary.frames == 3 and summary.screenshot == out
+    rgb = screen.read_rgb()
+    assert rgb.shape == (180, 320, 3)
+    assert tuple(rgb[90, 40]) == (200, 40, 30)                    # the scene's left half
+    assert tuple(rgb[170, 300]) == theme.BACKGROUND               # cleared right half
+    corner = rgb[8:40, 200:318].reshape(-1, 3)                     # the frame-rate overlay's text
+    assert (corner.max(axis=1) > 120).sum() > 30
+    import cv2
+
+    saved = cv2.imread(str(out))[:, :, ::-1]
+    assert np.array_equal(saved, rgb)
+
+
+def test_pointer_and_keys_are_mapped_once(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    mapper = InputMapper((800, 400))
+    E = pygame.event.Event
+    events = [
+        E(pygame.KEYDOWN, key=pygame.K_TAB),
+        E(pygame.KEYDOWN, key=pygame.K_q),
+        E(pygame.KEYDOWN, key=pygame.K_q),          # auto-repeat: dropped
+        E(pygame.KEYDOWN, key=pygame.K_F12),        # not mapped
+        E(pygame.MOUSEMOTION, pos=(200, 100), rel=(0, 0), buttons=(0, 0, 0)),
+        E(pygame.MOUSEBUTTONDOWN, pos=(400, 300), button=1),
+        E(pygame.MOUSEWHEEL, x=0, y=-1),
+        E(pygame.KEYUP, key=pygame.K_q),
+        E(pygame.QUIT),
+    ]
+    out = mapper.map(events)
+    assert out == [
+        Press(Action.SWITCH_ARM),
+        Press(Action.ROTATE_IN),
+        Pointer(PointerKind.MOVE, 0.25, 0.25),
+        Pointer(PointerKind.PRESS, 0.5, 0.75, button=1),
+        Pointer(PointerKind.WHEEL, 0.5, 0.75, wheel=-1.0),
+        Press(Action.ROTATE_IN, down=False),
+        Press(Action.QUIT),
+    ]
+    assert mapper.held == {Action.SWITCH_ARM}
+    out = mapper.map([E(pygame.WINDOWFOCUSLOST)])
+    assert out == [Press(Action.SWITCH_ARM, down=False)] and not mapper.held
+
+
+@pytest.mark.parametrize(
+    "environ, platform, expected",
+    [
+        ({}, "linux", False),
+        ({"DISPLAY": ":0"}, "linux", True),
+        ({"WAYLAND_DISPLAY": "wayland-0"}, "linux", True),
+        ({"DISPLAY": ":0", "SDL_VIDEODRIVER": "dummy"}, "linux", False),
+        ({"SDL_VIDEODRIVER": "kmsdrm"}, "linux", True),
+        ({}, "win32", True),
+        ({}, "darwin", True),
+    ],
+)
+def test_has_display(environ, platform, expected):
+    assert has_display(environ, platform) is expected
+
+
+def test_text_atlas_starts_afresh_when_full_without_losing_queued_text(screen):
+    from game.gfx.canvas import Canvas
+
+    canvas = Canvas(screen.ctx, screen.size_px, atlas_px=(256, 48))
+    screen.begin((0.0, 0.0, 0.0))
+    canvas.begin()
+    boxes = []
+    for k in range(24):   # far more strings than the atlas holds at once
+        x, y = 8 + (k % 4) * 78, 8 + (k // 4) * 28
+        boxes.append(canvas.text(f"n{k:02d}", (x, y), 24, (255, 255, 255)))
+    canvas.end()
+    assert canvas.atlas.resets >= 1
+    rgb = screen.read_rgb()
+    for x, y, w, h in boxes:
+        patch = rgb[int(y):int(y + h), int(x):int(x + w)]
+        assert (patch.max(axis=2) > 128).sum() > 20, (x, y)
+    # the same string drawn again uses the atlas entry (no new reset)
+    resets = canvas.atlas.resets
+    canvas.begin()
+    canvas.text("n23", (8, 8), 24, (255, 255, 255))
+    canvas.end()
+    assert canvas.atlas.resets == resets
+    canvas.release()

@@ -1,0 +1,107 @@
+"""The home screen driven through actions and pointer events, and what it draws."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from game.app import App, BaseScene, Settings
+from game.gfx import theme
+from game.gfx.screen import GraphicsUnavailable, open_screen
+from game.input import Action, Pointer, PointerKind, Press
+from game.scenes.home import HomeScene, MenuEntry, hit, menu_rects
+
+SIZE = (640, 360)
+
+
+@pytest.fixture
+def app(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        screen = open_screen(SIZE, "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+    a = App(screen, Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    yield a
+    a.close()
+    screen.close()
+
+
+class Mode(BaseScene):
+    def __init__(self, name):
+        self.name = name
+
+    def handle(self, event):
+        if isinstance(event, Press) and event.down and event.action is Action.BACK:
+            self.app.pop()
+
+
+def home_for(app) -> HomeScene:
+    home = HomeScene([
+        MenuEntry("Live avatar", "See yourself move", lambda: Mode("live")),
+        MenuEntry("Camera check", "What the cameras see", lambda: Mode("cameras")),
+        MenuEntry("Quit", "", None),
+    ], status=lambda: "Simulated patient: tracking")
+    app.push(home)
+    return home
+
+
+def test_keyboard_navigation_opens_modes_and_comes_back(app):
+    home = home_for(app)
+    app.dispatch(Press(Action.UP))
+    assert home.selected == 2                       # wraps around
+    app.dispatch(Press(Action.DOWN))
+    app.dispatch(Press(Action.DOWN))
+    app.dispatch(Press(Action.DOWN, down=False))    # releases do nothing
+    assert home.selected == 1
+    app.dispatch(Press(Action.SELECT))
+    assert isinstance(app.scene, Mode) and app.scene.name == "cameras"
+    app.dispatch(Press(Action.BACK))
+    assert app.scene is home and app.running
+    app.dispatch(Press(Action.DOWN))
+    app.dispatch(Press(Action.SELECT))              # "Quit"
+    assert not app.running
+
+
+def test_escape_on_home_quits(app):
+    home_for(app)
+    app.dispatch(Press(Action.BACK))
+    assert not app.running
+
+
+def test_mouse_hover_selects_and_click_opens(app):
+    home = home_for(app)
+    rects = menu_rects(SIZE, 3)
+    x, y, w, h = rects[1]
+    centre = ((x + w / 2) / SIZE[0], (y + h / 2) / SIZE[1])
+    app.dispatch(Pointer(PointerKind.MOVE, *centre))
+    assert home.selected == 1 and app.scene is home
+    app.dispatch(Pointer(PointerKind.MOVE, 0.01, 0.01))   # outside every button: selection stays
+    assert home.selected == 1
+    x, y, w, h = rects[0]
+    app.dispatch(Pointer(PointerKind.PRESS, (x + 5) / SIZE[0], (y + 5) / SIZE[1], button=1))
+    assert isinstance(app.scene, Mode) and app.scene.name == "live"
+
+
+def test_hit():
+    rects = [(0, 0, 10, 10), (0, 20, 10, 10)]
+    assert hit(rects, 5, 5) == 0 and hit(rects, 5, 25) == 1 and hit(rects, 5, 15) is None
+
+
+def test_home_draws_the_selected_button_highlighted(app):
+    home = home_for(app)
+    app.dispatch(Press(Action.DOWN))
+    app.run(frames=3)
+    rgb = app.screen.read_rgb().astype(int)
+    rects = menu_rects(SIZE, 3)
+
+    def border_pixel(i):
+        x, y, w, h = rects[i]
+        return rgb[int(y + h / 2), int(x + 1)]
+
+    assert np.abs(border_pixel(1) - theme.ACCENT).max() < 40          # selected: accent border
+    assert np.abs(border_pixel(0) - theme.ACCENT).max() > 60
+    x, y, w, h = rects[0]
+    label = rgb[int(y + 8):int(y + h / 2), int(x + 20):int(x + w / 2)]
+    assert (label.max(axis=2) > 130).sum() > 100                       # the label's text is drawn
+    assert home.selected == 1

@@ -1,0 +1,329 @@
+"""The live mirror on synthetic samples (the simulator's exact markers, no tracker process):
+keys and pointer -> the interactive patient's input, the mirror (the patient's right on the
+screen's right, in pixels), angle readouts, the tracker's states, the camera grid."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from game.app import App, BaseScene, Services, Settings
+from game.gfx.screen import GraphicsUnavailable, open_screen
+from game.gfx.view3d import project_px
+from game.input import Action, Pointer, PointerKind, Press
+from game.live_link import LinkState
+from game.avatar.live import LiveAvatar
+from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
+from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
+from tracking.angles import ANGLE_COLUMNS, joint_angles
+from tracking.live import LiveSample
+from tracking.markerset import load_markerset
+from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, reference_pose
+
+SIZE = (640, 360)
+
+
+class BodyLink:
+    """Stands in for :class:`game.live_link.LiveLink`: samples of the simulated body's exact
+    markers for the poses the test sets, and a record of the commands sent."""
+
+    def __init__(self, clock) -> None:
+        self.markerset = load_markerset("upper_limb_seated")
+        self.body = BodyModel(BodyDimensions.from_percentile(50, "male"), self.markerset)
+        self.angle_names = tuple(ANGLE_COLUMNS)
+        self.cameras = ()
+        self.clock = clock
+        self.state = LinkState.RUNNING
+        self.error = ""
+        self.latest = None
+        self.new_samples: list = []
+        self.sent: list = []
+        self.motions: list = []
+        self.reidentified = 0
+        self._queue: list = []
+        self._n = 0
+
+    def feed(self, pose, *, state: int = 1, message: str = "", status=None) -> LiveSample:
+        truth = self.body.markers_m(pose)
+        m = len(truth)
+        status = np.ones(m, np.uint8) if status is None else np.asarray(status, np.uint8)
+        p = np.where((status == 0)[:, None], np.nan, truth)   # lost markers have no position
+        angles = joint_angles(p, self.markerset.names)
+        sample = LiveSample(
+            frame_index=self._n, time_s=self._n / 30, t_frame_ready_s=self.clock() - 0.001 * (10 - self._n % 10),
+            t_published_s=self.clock(), state=state, positions_m=p,
+            status=status,
+            angles_deg=np.array([angles[n] for n in self.angle_names], dtype=np.float64), message=message,
+            windows_px=np.full((m, 1, 3), np.nan), uv_px=np.full((m, 1, 2), np.nan), truth_m=truth,
+            number=self._n, angle_names=self.angle_names)
+        self._n += 1
+        self._queue.append(sample)
+        return sample
+
+    def tick(self) -> None:
+        self.new_samples, self._queue = self._queue, []
+        if self.new_samples:
+            self.latest = self.new_samples[-1]
+
+    def summary(self) -> str:
+        return "test link"
+
+    def latest_images(self):
+        return None
+
+    def set_patient_input(self, value) -> None:
+        self.sent.append(value)
+
+    def set_motion(self, name) -> None:
+        self.motions.append(name)
+
+    def reidentify(self) -> None:
+        self.reidentified += 1
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now_s = 1000.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+@pytest.fixture
+def screen(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        s = open_screen(SIZE, "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+    yield s
+    s.close()
+
+
+def make_app(screen, *, motion=None, avatar=True):
+    clock = Clock()
+    link = BodyLink(clock)
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=clock, sleep=lambda s: None,
+              services=Services(link), events=lambda: [])
+    app.push(BaseScene())
+    scene = LiveScene(link, motions=[None, "shoulder_flexion", "reach"], motion=motion,
+                      open_monitor=lambda: MonitorScene(link),
+                      make_avatar=(lambda ctx, names: LiveAvatar(ctx, names)) if avatar else None)
+    app.push(scene)
+    return app, scene, link, clock
+
+
+def run_frames(app, clock, n=3, dt=1 / 60):
+    for _ in range(n):
+        app.frame()
+        clock.now_s += dt
+
+
+# ---------------------------------------------------------------------------- patient control
+def test_held_keys_turn_the_forearm_and_lean_the_trunk_back_to_upright():
+    c = PatientControl(ControlLimits(forearm_speed_deg_s=90, lean_speed_deg_s=30))
+    c.held = {Action.ROTATE_OUT, Action.UP}
+    for _ in range(60):
+        c.update(1 / 120)
+    assert c.forearm_deg == pytest.approx(45.0)
+    assert c.forward_lean_deg == pytest.approx(15.0)
+    c.held = {Action.LEFT}
+    for _ in range(120):
+        c.update(1 / 120)
+    assert c.forearm_deg == pytest.approx(45.0)            # stays where it was turned
+    assert c.forward_lean_deg == pytest.approx(0.0)        # back upright
+    assert c.lateral_lean_deg == pytest.approx(-25.0)      # left arrow: the patient's left, at the limit
+    c.held = {Action.ROTATE_IN}
+    for _ in range(600):
+        c.update(1 / 120)
+    assert c.forearm_deg == pytest.approx(-85.0)
+    c.switch_arm()
+    assert c.side == "left" and c.hand_target_m is None and c.forearm_deg == 0.0
+    c.wheel(100)
+    assert c.depth_m == pytest.approx(0.55)
+
+
+def test_pointer_moves_the_hand_like_a_mirror(screen):
+    app, scene, link, clock = make_app(screen)
+    link.feed(reference_pose())
+    run_frames(app, clock)
+    view = live_layout(SIZE).view
+    shoulder = link.body.markers_m(reference_pose())[link.markerset.names.index("MRS")]
+
+    def aim(fx, fy):
+        app.dispatch(Pointer(PointerKind.MOVE, (view.x + fx * view.w) / SIZE[0], (view.y + fy * view.h) / SIZE[1]))
+        return np.array(scene.control.hand_target_m)
+
+    right, left, up = aim(0.8, 0.5), aim(0.2, 0.5), aim(0.5, 0.1)
+    assert right[0] > shoulder[0] + 0.2 > left[0]          # screen right = the patient's right (+X)
+    assert up[1] > shoulder[1] + 0.2                        # screen up = world up
+    assert right[2] == pytest.approx(shoulder[2] - scene.control.depth_m)
+    # the target lies under the pointer
+    xy = project_px(right[None], scene.proj_m @ scene.view_m, view)[0]
+    assert xy == pytest.approx([view.x + 0.8 * view.w, view.y + 0.5 * view.h], abs=0.5)
+    # the wheel moves the hand's plane forward (and re-aims at the pointer)
+    app.dispatch(Pointer(PointerKind.WHEEL, (view.x + 0.5 * view.w) / SIZE[0], (view.y + 0.1 * view.h) / SIZE[1],
+                         wheel=2))
+    assert scene.control.depth_m == pytest.approx(0.35)
+    run_frames(app, clock, 2)
+    assert link.sent[-1].side == "right"
+    target = np.array(link.sent[-1].hand_target_m)
+    assert target[2] == pytest.approx(shoulder[2] - 0.35)
+    assert target[1] > shoulder[1] + 0.2
+    # keys reach the patient input; Tab switches the arm
+    app.dispatch(Press(Action.ROTATE_OUT))
+    run_frames(app, clock, 30, dt=1 / 60)
+    app.dispatch(Press(Action.ROTATE_OUT, down=False))
+    app.dispatch(Press(Action.SWITCH_ARM))
+    run_frames(app, clock, 2)
+    assert any(v.forearm_rotation_deg > 20 and v.side == "right" for v in link.sent)
+    assert link.sent[-1].side == "left"
+
+
+def test_motions_reidentify_camera_check_and_back(screen):
+    app, scene, link, clock = make_app(screen, avatar=False)
+    assert link.motions == [None]                 # entering sets mouse control
+    app.dispatch(Press(Action.NEXT_MOTION))
+    app.dispatch(Press(Action.NEXT_MOTION))
+    assert scene.motion == "reach" and link.motions[-2:] == ["shoulder_flexion", "reach"]
+    n_sent = len(link.sent)
+    app.dispatch(Pointer(PointerKind.MOVE, 0.3, 0.5))
+    run_frames(app, clock, 2)
+    assert len(link.sent) == n_sent                # a scripted motion ignores the mouse
+    app.dispatch(Press(Action.NEXT_MOTION))
+    assert scene.motion is None
+    app.dispatch(Press(Action.REIDENTIFY))
+    assert link.reidentified == 1
+    app.dispatch(Press(Action.MONITOR))
+    assert isinstance(app.scene, MonitorScene)
+    run_frames(app, clock, 2)                       # no images yet: draws the waiting line
+    app.dispatch(Press(Action.BACK))
+    assert app.scene is scene
+    app.dispatch(Press(Action.BACK))
+    assert app.scene is not scene and app.running
+
+
+def _render(app, clock, link, pose, n=4):
+    for _ in range(n):
+        link.feed(pose)
+        app.frame()
+        clock.now_s += 1 / 30
+    return app.screen.read_rgb().astype(np.int32)
+
+
+def test_the_avatar_is_a_mirror_image_in_pixels(screen):
+    app, scene, link, clock = make_app(screen, motion="shoulder_flexion")
+    rest = reference_pose()
+    raised = rest.with_arm("right", ArmPose.clinical(abduction_deg=90.0))
+    a = _render(app, clock, link, rest)
+    b = _render(app, clock, link, raised)
+    view = live_layout(SIZE).view
+    changed = np.abs(a - b).sum(axis=2) > 60
+    ys, xs = np.nonzero(changed[:, : int(view.w)])
+    assert len(xs) > 400                                    # the arm moved on the screen
+    centre = project_px(link.body.markers_m(rest)[[link.markerset.names.index("MB")]],
+                        scene.proj_m @ scene.view_m, view)[0][0]
+    assert np.mean(xs > centre) > 0.9                       # and it is on the screen's right
+
+
+def test_banners_say_what_the_tracker_is_doing(screen):
+    app, scene, link, clock = make_app(screen, avatar=False)
+    assert scene.banner(None)[0].startswith("Waiting for the first images")
+    link.feed(reference_pose(), state=0, message="Stand in the reference pose: arms slightly away from the body")
+    run_frames(app, clock, 1)
+    assert scene.banner(link.latest)[0].startswith("Stand in the reference pose")
+    link.feed(reference_pose())
+    run_frames(app, clock, 1)
+    assert scene.banner(link.latest) is None
+    clock.now_s += 2.0                                       # no sample for 2 s
+    assert "No new images" in scene.banner(link.latest)[0]
+    link.state = LinkState.RESTARTING
+    text, colour = scene.banner(link.latest)
+    assert text == "The tracker stopped: restarting..."
+    link.state = LinkState.STARTING
+    assert scene.banner(None)[0] == "Starting the tracker..."
+    link.state, link.error = LinkState.FAILED, "no camera"
+    assert scene.banner(None)[0] == "The tracker is not running: no camera"
+    # the banner is drawn: its text makes bright pixels in the top band of the view
+    link.state = LinkState.RESTARTING
+    app.frame()
+    rgb = app.screen.read_rgb()
+    top = rgb[15:60, 20: int(live_layout(SIZE).view.w) - 20]
+    assert (top.max(axis=2) > 200).sum() > 100
+
+
+def test_marker_counts_and_estimated_markers_are_drawn(screen):
+    app, scene, link, clock = make_app(screen, avatar=False)
+    status = np.ones(14, np.uint8)
+    status[[6, 7]] = 2
+    status[12] = 0
+    link.feed(reference_pose(), status=status)
+    run_frames(app, clock, 2)
+    rgb = app.screen.read_rgb().astype(int)
+    xy = project_px(link.latest.positions_m, scene.proj_m @ scene.view_m, live_layout(SIZE).view)
+    amber, teal = np.array([242, 190, 92]), np.array([94, 200, 190])
+
+    def near(colour, x, y, r=7):
+        patch = rgb[int(y) - r:int(y) + r + 1, int(x) - r:int(x) + r + 1].reshape(-1, 3)
+        return (np.abs(patch - colour).max(axis=1) < 50).sum()
+
+    assert near(amber, *xy[6]) > 5 and near(teal, *xy[0]) > 5
+    lost = project_px(link.latest.truth_m[[12]], scene.proj_m @ scene.view_m, live_layout(SIZE).view)[0]
+    assert near(teal, *lost, r=2) == 0 and near(amber, *lost, r=2) == 0
+
+
+def test_format_angle():
+    assert format_angle(87.4) == "87\N{DEGREE SIGN}"
+    assert format_angle(-0.4) == "0\N{DEGREE SIGN}"
+    assert format_angle(math.nan) == "-"
+
+
+def test_truth_error_counts_measured_markers_only():
+    truth = np.zeros((3, 3))
+    measured = truth + [[0.003, 0, 0], [0, 0.004, 0], [0.5, 0, 0]]
+    assert truth_error_mm(measured, truth, np.array([1, 1, 2])) == pytest.approx(math.sqrt((9 + 16) / 2))
+    assert math.isnan(truth_error_mm(measured, np.full((3, 3), np.nan), np.array([1, 1, 1])))
+
+
+def test_grid_and_image_coordinates():
+    rects = grid_rects((0, 0, 1000, 500), 4, 4 / 3, 10)
+    assert len(rects) == 4 and rects[0][2] / rects[0][3] == pytest.approx(4 / 3)
+    assert rects[1][0] > rects[0][0] and rects[2][1] > rects[0][1]
+    xy = image_to_screen(np.array([[-0.5, -0.5], [319.5, 239.5]]), (10, 20, 640, 480), (320, 240))
+    assert xy == pytest.approx(np.array([[10, 20], [650, 500]]))
+
+
+def test_camera_check_draws_the_overlays_of_each_camera(screen):
+    app, scene, link, clock = make_app(screen, avatar=False)
+    images = [np.full((240, 320, 3), (40 * k, 80, 160), np.uint8) for k in range(4)]
+    link.latest_images = lambda: images
+    sample = link.feed(reference_pose())
+    uv = np.full((14, 4, 2), np.nan)
+    uv[0, 1] = (100.0, 60.0)                       # MB's centroid in camera 2
+    win = np.full((14, 4, 3), np.nan)
+    win[0, 1] = (100.0, 60.0, 20.0)
+    link._queue[-1] = type(sample)(**{**{f: getattr(sample, f) for f in sample.__dataclass_fields__},
+                                      "uv_px": uv, "windows_px": win})
+    app.dispatch(Press(Action.MONITOR))
+    monitor = app.scene
+    assert isinstance(monitor, MonitorScene)
+    monitor._builder.join(30)                      # the colour table, built off the main thread
+    run_frames(app, clock, 2)
+    assert monitor.colour_table is not None and len(monitor.overlays) == 4
+    rgb = app.screen.read_rgb().astype(int)
+    w, h = SIZE
+    s = min(w / 1280, h / 720)
+    rects = grid_rects((28 * s, 66 * s, w - 56 * s, h - 100 * s), 4, 320 / 240, 12 * s)
+    x, y, rw, rh = rects[3]
+    # camera 4's image (BGR (120, 80, 160), no marker colour in it): dimmed by the overlay, as RGB
+    assert np.abs(rgb[int(y + rh * 0.6), int(x + rw * 0.6)] - np.array([160, 80, 120]) * 0.55).max() <= 3
+    # camera 2 shows MB's search window in MB's colour around the centroid
+    yellow = np.array(link.markerset.palette[link.markerset.colour_index[0]], dtype=int)
+    cx, cy = image_to_screen(uv[0, 1][None], rects[1], (320, 240))[0]
+    half = 20 * rects[1][2] / 320
+    edge = rgb[int(cy - half) - 2:int(cy - half) + 3, int(cx - half / 2):int(cx + half / 2)].reshape(-1, 3)
+    assert (np.abs(edge - yellow).max(axis=1) < 80).sum() >= 3
+    app.dispatch(Press(Action.BACK))
+    assert app.scene is scene

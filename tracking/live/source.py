@@ -1,0 +1,165 @@
+"""Frame sources of the tracker process: where the synchronized camera images come from.
+
+A source delivers one frame set per call of :meth:`FrameSource.grab`. The simulated patient
+(:class:`SimSource`) renders it with the studio of :mod:`tracking.sim.studio`: a scripted motion
+played in a loop, or the interactive patient of :mod:`tracking.sim.interactive` driven by the
+game's ``PatientInput``. It hands the tracker only the images; the true marker centres travel
+beside them for tests and benchmarks.
+
+Video files and real cameras are later kinds with the same interface.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import time
+from dataclasses import dataclass
+from typing import Protocol, Sequence
+
+import numpy as np
+
+from calibration.camera import Camera
+from tracking.angles import ANGLE_COLUMNS, missing_markers
+from tracking.markerset import MarkerSet, load_markerset
+from tracking.live.protocol import LiveError, PatientInput, Reidentify, SetMotion, SetPatientInput, SourceConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, slots=True)
+class SourceFrame:
+    """One synchronized frame set.
+
+    Attributes:
+        images: one (H, W, 3) uint8 BGR image per camera, calibration order.
+        truth_m: (M, 3) float64 true marker centres (world metres), or None (real cameras).
+        t_ready_s: ``time.perf_counter()`` when the images were complete.
+        source_ms: time the source took to deliver them.
+    """
+
+    images: Sequence[np.ndarray]
+    truth_m: np.ndarray | None
+    t_ready_s: float
+    source_ms: float
+
+
+class FrameSource(Protocol):
+    """What the tracker process needs from a source."""
+
+    cameras: tuple[Camera, ...]
+    markerset: MarkerSet
+
+    def grab(self, frame_index: int, time_s: float, identified: bool) -> SourceFrame:
+        """The frame set of ``frame_index`` at source time ``time_s``; ``identified`` tells a
+        simulated patient whether the tracker has identified the markers (a patient waiting to be
+        identified holds the reference pose)."""
+
+    def handle(self, command: object) -> None:
+        """Apply a source command (``SetMotion``, ``SetPatientInput``, ``Reidentify``)."""
+
+    def close(self) -> None:
+        """Release devices and GL resources."""
+
+
+def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet]:
+    """Cameras and marker set of a source, without opening it (cheap: content files only).
+
+    The game sizes the shared memory from them before the tracker process starts.
+    """
+    from tracking.sim.rigs import load_rig
+
+    config.check()
+    return tuple(load_rig(config.rig, tuple(config.size))), load_markerset(config.markerset)
+
+
+def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:
+    """The joint angles the tracker reports for a marker set (none if it lacks their markers)."""
+    return tuple(ANGLE_COLUMNS) if not missing_markers(markerset.names) else ()
+
+
+def open_source(config: SourceConfig) -> FrameSource:
+    """The source that ``config`` names (``"sim"``, or a ``"module:function"`` factory)."""
+    if config.kind == "sim":
+        return SimSource(config)
+    module_name, _, attr = config.kind.partition(":")
+    try:
+        factory = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        raise LiveError(f"source kind {config.kind!r}: cannot import it ({exc}); give 'sim' or module:function") from None
+    return factory(config)
+
+
+class SimSource:
+    """The simulated patient rendered by the studio's virtual cameras.
+
+    Args:
+        config: rig, size, frame rate, body, marker set, motion (None: interactive), noise.
+    """
+
+    def __init__(self, config: SourceConfig) -> None:
+        from tracking.sim.body import BodyDimensions
+        from tracking.sim.interactive import InteractivePatient
+        from tracking.sim.studio import Studio
+
+        self.config = config
+        cameras, markerset = source_geometry(config)
+        percentile, sex = config.body_percentile_sex()
+        dims = BodyDimensions.from_percentile(percentile, sex)
+        self.studio = Studio(cameras, markerset, dims)
+        self.cameras = self.studio.cameras
+        self.markerset = markerset
+        self.patient = InteractivePatient(self.studio.body)
+        self.patient_input = PatientInput()
+        self.motion = None
+        self._motion_start_s = 0.0
+        self._last_time_s = 0.0
+        self._restart_motion = True
+        if config.motion is not None:
+            self.set_motion(config.motion)
+
+    def set_motion(self, name: str | None) -> None:
+        """Play ``name`` from its start (None: the interactive patient). Raises on unknown names."""
+        from tracking.sim.motions import load_motion
+
+        self.motion = None if name is None else load_motion(name, self.studio.body.dims)
+        self._restart_motion = True
+        self.patient.take_reference_pose()
+
+    def handle(self, command: object) -> None:
+        if isinstance(command, SetMotion):
+            self.set_motion(command.name)
+        elif isinstance(command, SetPatientInput):
+            self.patient_input = command.value
+        elif isinstance(command, Reidentify):
+            # the patient is asked to take the reference pose: a motion starts again from it
+            self._restart_motion = True
+            self.patient.take_reference_pose()
+
+    def pose_at(self, time_s: float, identified: bool):
+        """The body pose of the frame at source time ``time_s``."""
+        dt = time_s - self._last_time_s
+        self._last_time_s = time_s
+        if self.motion is not None:
+            if self._restart_motion:
+                self._motion_start_s = time_s
+                self._restart_motion = False
+            duration = self.motion.duration_s
+            t = (time_s - self._motion_start_s) % duration if duration > 0 else 0.0
+            return self.motion.pose_at(t)
+        if not identified:
+            return self.patient.take_reference_pose()
+        return self.patient.step(self.patient_input, min(max(dt, 0.0), 0.2))
+
+    def grab(self, frame_index: int, time_s: float, identified: bool) -> SourceFrame:
+        t0 = time.perf_counter()
+        pose = self.pose_at(time_s, identified)
+        cfg = self.config
+        sim = self.studio.render(pose, frame_index, time_s, noise_sigma=cfg.noise_sigma,
+                                 seed=cfg.seed * 1_000_003 + frame_index, with_visibility=False)
+        t1 = time.perf_counter()
+        return SourceFrame(sim.frames.images, sim.markers_m, t1, (t1 - t0) * 1000.0)
+
+    def close(self) -> None:
+        self.studio.close()
+
