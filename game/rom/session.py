@@ -384,9 +384,9 @@ class RomTestSession:
                     self._note(i, size - c.limit, f"{c.words} {size:.0f} degrees {_lean_words(dfw, dlat, self.side)} "
                                                    f"(limit {c.limit:g}): keep the trunk upright")
             elif c.kind == "shoulder_hiking":
-                rise = self._smooth("hike", ch["hiking_m"] - s["hiking_m"])
+                # the normal rise at this elevation is subtracted frame by frame, then smoothed
                 normal = _rhythm(c, ch["elevation"]) - _rhythm(c, s["elevation"])
-                excess = rise - normal
+                excess = self._smooth("hike", ch["hiking_m"] - s["hiking_m"] - normal)
                 if excess > c.limit:
                     self._note(i, excess, f"{c.words} {1000 * excess:.0f} mm more than the arm's normal rise "
                                           f"(limit {1000 * c.limit:.0f} mm): keep the shoulder down")
@@ -432,9 +432,9 @@ class RomTestSession:
 
 
 def _rhythm(c: Compensation, elevation_deg: float) -> float:
-    """The normal rise of the acromion marker (m) at a shoulder elevation (deg)."""
+    """The normal rise of the acromion marker (m) at a shoulder elevation (deg); NaN if unknown."""
     if not math.isfinite(elevation_deg):
-        return 0.0
+        return math.nan
     return min(c.rhythm_max_m, c.rhythm_m_per_deg * max(0.0, elevation_deg - c.rhythm_from_deg))
 
 
