@@ -113,7 +113,7 @@ def rom_plot_png(title: str, rows: Sequence[RomRow], order: dict[str, int], norm
     ax.set_xlabel("session")
     ax.set_ylabel("maximum (deg, active ROM)")
     ax.set_title(title)
-    ax.legend(fontsize=8, loc="lower right")
+    ax.legend(fontsize=8, loc="best", framealpha=0.85)
     fig.tight_layout()
     return _png(fig)
 
