@@ -241,3 +241,34 @@ def test_bad_side_standard_or_marker_set_is_one_line():
         RomTestSession(test, "right", "who", NAMES)
     with pytest.raises(RehabError, match="lacks MRE1"):
         RomTestSession(test, "right", "jarm", [n for n in NAMES if n != "MRE1"])
+
+
+def test_a_lost_hip_marker_is_held_and_the_reading_marked_estimated():
+    """A hand in front of the hip hides MRH: the shoulder angles need it (trunk frame)."""
+    from tracking.angles import joint_angles
+    from tracking.markerset import load_markerset
+    from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, reference_pose
+
+    ms = load_markerset("upper_limb_seated")
+    model = BodyModel(BodyDimensions.from_percentile(50, "female"), ms)
+    base = reference_pose()
+    s = RomTestSession(load_rom_test("shoulder_internal_rotation"), "right", "jarm", ms.names)
+    rh = ms.names.index("MRH")
+    seen = []
+    for k in range(int(5.0 * FPS)):
+        t = k / FPS
+        er = -50.0 * math.sin(math.pi * min(max(t - 1.0, 0.0) / 3.0, 1.0))
+        abduction = model.elbow_at_side_abduction_deg(base.with_arm("right", ArmPose.clinical(0.0, 5.0, er, 90.0, 0.0)))
+        pose = base.with_arm("right", ArmPose.clinical(0.0, abduction, er, 90.0, 0.0))
+        p = model.markers_m(pose)
+        status = np.full(ms.n_markers, MarkerStatus.MEASURED, dtype=np.uint8)
+        if er < -10.0:  # the hand covers the hip marker
+            p[rh] = np.nan
+            status[rh] = MarkerStatus.LOST
+        angles = {n: float(v) for n, v in joint_angles(p, ms.names).items()}
+        seen.append(angles["right_shoulder_external_rotation"])
+        s.feed(FakeSample(t, angles, p, status))
+    assert np.isnan(seen).any()  # the tracker's own angles were undefined while MRH was lost
+    r = s.result
+    assert r is not None and r.max_deg == pytest.approx(50.0, abs=1.5)
+    assert "MRH" in r.estimated_markers

@@ -17,7 +17,9 @@
   scene asks to repeat; the therapist may still accept it (it stays flagged).
 
 Readings that rest on estimated (hidden) markers are marked: the result names the markers of the
-test's angle that were estimated in the samples that gave the maximum.
+test's angle that were estimated in the samples that gave the maximum. A lost hip marker (a hand
+in front of the hip) is held where it was last measured, since the seated pelvis does not move;
+such readings count as estimated too.
 
 No pygame, GL, files or clocks: time comes from the samples.
 """
@@ -34,6 +36,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.rom.spec import MODE_ACTIVE, Compensation, RomTest, check_side, check_standard
+from tracking.angles import joint_angles
 from tracking.status import MarkerStatus
 
 #: Markers each arm angle rests on (spec/JOINT_ANGLES.md); ``*`` is L or R. The trunk frame needs
@@ -220,6 +223,10 @@ class RomTestSession:
         self._angle_idx = np.array([index[m] for m in angle_markers(test.angle, side)])
         self._angle_names = angle_markers(test.angle, side)
         self._mb, self._mp, self._shoulder = index["MB"], index["MP"], index[f"M{side[0].upper()}S"]
+        self._names = tuple(names)
+        self._hip_idx = [index[h] for h in ("MLH", "MRH") if h in index]
+        self._hips_seen: list[np.ndarray | None] = [None] * len(self._hip_idx)
+        self._held: tuple[str, ...] = ()
         self.angle_name = test.angle_name(side)
         self.restart()
 
@@ -267,28 +274,55 @@ class RomTestSession:
         self.restart()
 
     # ------------------------------------------------------------------ feeding
-    def _channels_of(self, sample: Any) -> dict[str, float]:
+    def _view(self, sample: Any):
+        """(angle getter, names of hip markers held) for one sample.
+
+        The trunk frame needs both hip markers, and a hand in front of the hip (internal rotation)
+        hides one: then every shoulder angle is undefined. The seated pelvis does not move during an
+        upper-limb test, so a lost hip marker is held where it was last measured and the angles are
+        recomputed (spec/JOINT_ANGLES.md, :func:`tracking.angles.joint_angles`); the reading counts
+        as resting on an estimated marker.
+        """
+        p = np.asarray(sample.positions_m, dtype=np.float64)
+        st = np.asarray(sample.status)
+        held = []
+        for k, i in enumerate(self._hip_idx):
+            if st[i] == MarkerStatus.MEASURED and np.isfinite(p[i]).all():
+                self._hips_seen[k] = p[i].copy()
+            elif not np.isfinite(p[i]).all() and self._hips_seen[k] is not None:
+                held.append(k)
+        if not held:
+            return (lambda name: _angle(sample, name)), ()
+        q = p.copy()
+        for k in held:
+            q[self._hip_idx[k]] = self._hips_seen[k]
+        angles = joint_angles(q, self._names)
+        return (lambda name: float(angles[name]) if name in angles else math.nan), \
+            tuple(self._names[self._hip_idx[k]] for k in held)
+
+    def _channels_of(self, sample: Any, get) -> dict[str, float]:
         """Every number the checks need from one sample (NaN where unknown)."""
-        ch = {"value": self.test.direction * _angle(sample, self.angle_name)}
+        ch = {"value": self.test.direction * get(self.angle_name)}
         for name in self.test.start_angles:
-            ch[f"start:{name}"] = _angle(sample, name if name.startswith("trunk_") else f"{self.side}_{name}")
+            ch[f"start:{name}"] = get(name if name.startswith("trunk_") else f"{self.side}_{name}")
         for c in self.test.compensations:
             if c.kind == "trunk_lean":
-                ch["trunk_forward_lean"] = _angle(sample, "trunk_forward_lean")
-                ch["trunk_lateral_lean"] = _angle(sample, "trunk_lateral_lean")
+                ch["trunk_forward_lean"] = get("trunk_forward_lean")
+                ch["trunk_lateral_lean"] = get("trunk_lateral_lean")
             elif c.kind == "shoulder_hiking":
                 p = np.asarray(sample.positions_m, dtype=np.float64)
                 y_t = p[self._mb] - p[self._mp]
                 n = float(np.linalg.norm(y_t))
                 ch["hiking_m"] = float((p[self._shoulder] - p[self._mb]) @ y_t / n) if n > 1e-9 else math.nan
-                ch["elevation"] = _angle(sample, f"{self.side}_shoulder_elevation")
+                ch["elevation"] = get(f"{self.side}_shoulder_elevation")
             else:
-                ch[f"angle:{c.angle}"] = _angle(sample, f"{self.side}_{c.angle}")
+                ch[f"angle:{c.angle}"] = get(f"{self.side}_{c.angle}")
         return ch
 
     def _estimated_now(self, sample: Any) -> tuple[str, ...]:
         st = np.asarray(sample.status)[self._angle_idx]
-        return tuple(n for n, s in zip(self._angle_names, st) if s == MarkerStatus.ESTIMATED)
+        est = {n for n, s in zip(self._angle_names, st) if s == MarkerStatus.ESTIMATED}
+        return tuple(n for n in self._angle_names if n in est or n in self._held)
 
     def feed(self, sample: Any) -> RomProgress:
         """Process one tracker sample; returns what to show."""
@@ -303,7 +337,8 @@ class RomTestSession:
             msg = getattr(sample, "message", "") or "waiting for the reference pose"
             self._last = RomProgress(self.state, f"waiting for the tracker: {msg}", math.nan, math.nan, math.nan, 0.0, (), False)
             return self._last
-        ch = self._channels_of(sample)
+        get, self._held = self._view(sample)
+        ch = self._channels_of(sample, get)
         if self.state in (RomState.WAITING_TRACKER, RomState.CHECKING_START):
             return self._check_start(t, ch, sample)
         return self._record(t, ch, sample)
