@@ -272,3 +272,16 @@ def test_a_lost_hip_marker_is_held_and_the_reading_marked_estimated():
     r = s.result
     assert r is not None and r.max_deg == pytest.approx(50.0, abs=1.5)
     assert "MRH" in r.estimated_markers
+
+
+def test_the_start_position_must_be_held_still():
+    s = RomTestSession(load_rom_test("shoulder_flexion"), "right", "jarm", NAMES)
+    p = Patient()
+
+    def drifting(tr, patient):  # the arm still coming down through the start range
+        patient.angles["right_shoulder_flexion"] = 30.0 - 40.0 * tr
+    t, prog = feed_for(s, p, 0.0, 1.0, drifting)
+    assert prog.state == RomState.CHECKING_START
+    t, prog = feed_for(s, p, t, 0.6)  # now still: the start value is where the arm came to rest
+    assert prog.state == RomState.RECORDING
+    assert prog.start_deg == pytest.approx(p.angles["right_shoulder_flexion"])

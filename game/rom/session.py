@@ -5,9 +5,9 @@
     WAITING_TRACKER -> CHECKING_START -> RECORDING -> DONE -> accept() (ACCEPTED) | discard() (CHECKING_START)
 
 - **Checking the start position**: the test's start angles (content) must be within their ranges
-  for ``start_hold_s``; the medians over that hold are the start values that the range and the
-  compensation checks are measured from (spec/JOINT_ANGLES.md: compensation is judged as the change
-  from the start position).
+  for ``start_hold_s``, held still (the test value within ``START_STILL_DEG``); the medians over
+  that hold are the start values that the range and the compensation checks are measured from
+  (spec/JOINT_ANGLES.md: compensation is judged as the change from the start position).
 - **Recording**: the test value (``direction * angle``, 3-sample median against single-frame
   spikes) is followed; its maximum, the range from the start and the compensations seen are kept.
   The recording ends when the value has come back at least half-way from its maximum towards the
@@ -62,6 +62,10 @@ def angle_markers(angle: str, side: str) -> tuple[str, ...]:
 def round_to_5(value_deg: float) -> int:
     """Clinical recording: the nearest multiple of 5 degrees (halves away from zero)."""
     return int(math.copysign(math.floor(abs(value_deg) / 5.0 + 0.5) * 5, value_deg)) if math.isfinite(value_deg) else 0
+
+
+#: The start position must be held still: the test value may drift at most this much during the hold.
+START_STILL_DEG = 5.0
 
 
 class RomState(enum.IntEnum):
@@ -366,6 +370,8 @@ class RomTestSession:
             self._last = RomProgress(self.state, f"take the start position: {self.test.position_words.rstrip('.')} ({why})",
                                      ch["value"], math.nan, math.nan, 0.0, (), bool(self._estimated_now(sample)))
             return self._last
+        if self._hold and abs(ch["value"] - self._hold[0]["value"]) > START_STILL_DEG:
+            self._hold.clear()  # still moving (e.g. coming down from the last attempt): hold again
         if not self._hold:
             self._hold_t0 = t
         self._hold.append(ch)

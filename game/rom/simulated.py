@@ -76,7 +76,7 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     """
     from tracking.angles import joint_angles
     from tracking.sim.studio import SimulationSettings, studio_from_settings
-    from tracking.tracker import Tracker, TrackingState
+    from tracking.tracker import Tracker
 
     name = motion or test.simulated_motion.get(side)
     if not name:
