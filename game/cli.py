@@ -303,6 +303,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_validate(sub)
     _add_bench(sub)
     _add_play(sub)
+    from game.cli_clinic import add_commands  # clinic commands: rom-test, patients, export, import, backup, report
+
+    add_commands(sub)
     return parser
 
 
