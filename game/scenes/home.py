@@ -44,6 +44,10 @@ def menu_rects(size_px: tuple[int, int], n: int) -> list[Rect]:
     scale = min(w / 1280.0, h / 720.0)
     bw, bh, gap = BUTTON_W * scale, BUTTON_H * scale, BUTTON_GAP * scale
     total = n * bh + (n - 1) * gap
+    room = h - 210 * scale - 90 * scale  # below the title, above the footer and status lines
+    if total > room:  # many entries: shorter buttons rather than off the screen
+        bh, gap = bh * room / total, gap * room / total
+        total = room
     top = max(210 * scale, (h - total) / 2 + 60 * scale)
     x = (w - bw) / 2
     return [(x, top + i * (bh + gap), bw, bh) for i in range(n)]
