@@ -3,22 +3,22 @@
 Coordinates are window pixels, origin at the top-left corner, x right, y down (as pygame and
 OpenCV count them). Colours are sRGB ``(r, g, b)`` or ``(r, g, b, a)`` in 0..255.
 
-llvmpipe (the CPU rasteriser this must run on) pays per draw call and per pixel shaded, so:
+llvmpipe (the CPU rasteriser this must run on) pays per draw call, and Python pays per call
+into moderngl, so every shape and every string of a frame goes into ONE instanced draw:
 
-- rectangles, rounded panels, outlines and circles are one signed-distance shader, queued and
-  drawn as one instanced call per run of consecutive shapes;
-- text is rendered by pygame.font once per (string, size) into a white texture kept in a small
-  LRU cache and tinted when drawn (:func:`surface_to_texture` is the one pygame -> GL bridge);
-- images (camera frames) go into textures reused frame after frame (:meth:`Canvas.image`).
+- rectangles, rounded panels, outlines and circles are a signed-distance shape per instance;
+- text is rendered by pygame.font once per (string, size) into a shared white atlas texture
+  (:class:`TextAtlas`, shelf-packed, started afresh when full) and drawn as tinted atlas quads
+  by the same shader (:func:`surface_to_texture` is the pygame -> GL bridge for other surfaces);
+- images (camera frames) go into textures reused frame after frame (:meth:`Canvas.image`);
+  they end the batch and are drawn on their own.
 
-Drawing order is call order: a shape queued before a text is drawn before it.
+Drawing order is call order.
 """
 
 from __future__ import annotations
 
 import struct
-from collections import OrderedDict
-from dataclasses import dataclass
 
 import moderngl
 import numpy as np
@@ -26,47 +26,58 @@ import pygame
 
 Colour = tuple[int, int, int] | tuple[int, int, int, int]
 
-_RECT_VS = """
+_BATCH_VS = """
 #version 330
 uniform vec2 u_screen;
 in vec2 in_corner;              // 0..1 unit quad
 in vec4 in_rect;                // x, y, w, h in pixels
-in vec4 in_fill;
+in vec4 in_fill;                // shape fill or text colour
 in vec4 in_edge;
-in vec2 in_shape;               // corner radius, border width (pixels)
+in vec2 in_shape;               // corner radius, border width (pixels); radius < 0: text
+in vec4 in_uv;                  // text: atlas u0, v0, u1, v1
 out vec2 v_px;
+out vec2 v_uv;
 flat out vec4 v_rect;
 flat out vec4 v_fill;
 flat out vec4 v_edge;
 flat out vec2 v_shape;
 void main() {
-    // one pixel of margin so that the anti-aliased edge is not cut
-    vec2 px = in_rect.xy - 1.0 + in_corner * (in_rect.zw + 2.0);
-    v_px = px; v_rect = in_rect; v_fill = in_fill; v_edge = in_edge; v_shape = in_shape;
+    // shapes get one pixel of margin so that the anti-aliased edge is not cut
+    float margin = in_shape.x < 0.0 ? 0.0 : 1.0;
+    vec2 px = in_rect.xy - margin + in_corner * (in_rect.zw + 2.0 * margin);
+    v_px = px;
+    v_uv = mix(in_uv.xy, in_uv.zw, in_corner);
+    v_rect = in_rect; v_fill = in_fill; v_edge = in_edge; v_shape = in_shape;
     gl_Position = vec4(px.x / u_screen.x * 2.0 - 1.0, 1.0 - px.y / u_screen.y * 2.0, 0.0, 1.0);
 }
 """
 
-_RECT_FS = """
+_BATCH_FS = """
 #version 330
+uniform sampler2D u_atlas;
 in vec2 v_px;
+in vec2 v_uv;
 flat in vec4 v_rect;
 flat in vec4 v_fill;
 flat in vec4 v_edge;
 flat in vec2 v_shape;
 out vec4 f_colour;
 void main() {
-    vec2 half_size = 0.5 * v_rect.zw;
-    float r = min(v_shape.x, min(half_size.x, half_size.y));
-    vec2 q = abs(v_px - (v_rect.xy + half_size)) - half_size + r;
-    float d = length(max(q, 0.0)) + min(max(q.x, q.y), 0.0) - r;   // signed distance to the outline
-    float cover = clamp(0.5 - d, 0.0, 1.0);
-    vec4 colour = v_fill;
-    if (v_shape.y > 0.0) {
-        float inside = clamp(0.5 - (d + v_shape.y), 0.0, 1.0);
-        colour = mix(v_edge, v_fill, inside);
+    if (v_shape.x < 0.0) {
+        f_colour = vec4(v_fill.rgb, v_fill.a * texture(u_atlas, v_uv).a);
+    } else {
+        vec2 half_size = 0.5 * v_rect.zw;
+        float r = min(v_shape.x, min(half_size.x, half_size.y));
+        vec2 q = abs(v_px - (v_rect.xy + half_size)) - half_size + r;
+        float d = length(max(q, 0.0)) + min(max(q.x, q.y), 0.0) - r;   // signed distance to the outline
+        float cover = clamp(0.5 - d, 0.0, 1.0);
+        vec4 colour = v_fill;
+        if (v_shape.y > 0.0) {
+            float inside = clamp(0.5 - (d + v_shape.y), 0.0, 1.0);
+            colour = mix(v_edge, v_fill, inside);
+        }
+        f_colour = vec4(colour.rgb, colour.a * cover);
     }
-    f_colour = vec4(colour.rgb, colour.a * cover);
     if (f_colour.a <= 0.0) discard;
 }
 """
@@ -96,7 +107,9 @@ void main() {
 }
 """
 
-_FLOATS_PER_SHAPE = 14
+_FLOATS = 18                     # per instance: rect 4, fill 4, edge 4, shape 2, uv 4
+_NO_UV = (0.0, 0.0, 0.0, 0.0)
+_NO_EDGE = (0.0, 0.0, 0.0, 0.0)
 _ANCHORS = ("topleft", "midtop", "topright", "midleft", "center", "midright", "bottomleft", "midbottom",
             "bottomright")
 
@@ -110,38 +123,41 @@ def _rgba(colour: Colour) -> tuple[float, float, float, float]:
 def surface_to_texture(ctx: moderngl.Context, surface: pygame.Surface) -> moderngl.Texture:
     """A pygame Surface as an RGBA texture whose first row is the surface's top row.
 
-    The one bridge from pygame to GL: the quad shader samples v = 0 at the top of the quad, so
+    The bridge from pygame to GL: the quad shaders sample v = 0 at the top of the quad, so
     neither side flips anything.
     """
     data = pygame.image.tobytes(surface, "RGBA")
     tex = ctx.texture(surface.get_size(), 4, data)
-    # Text is drawn at whole pixels, one texel per pixel: nearest sampling is exact and cheaper.
-    tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     tex.repeat_x = tex.repeat_y = False
     return tex
 
 
-@dataclass(frozen=True, slots=True)
-class Text:
-    """A rendered string: its texture and size in pixels."""
+class TextAtlas:
+    """Strings rendered by pygame.font into one white texture, packed in shelves.
 
-    texture: moderngl.Texture
-    size_px: tuple[int, int]
-
-
-class TextCache:
-    """Strings rendered by pygame.font into white textures, least recently used dropped first.
+    When the atlas is full it starts afresh (the strings in use come back on their next draw),
+    which bounds memory without bookkeeping; changing readouts (angles, rates) fill it slowly.
 
     Args:
-        ctx: the GL context owning the textures.
-        capacity: strings kept; changing readouts (angles, rates) churn through a few per frame.
+        ctx: the GL context owning the texture.
+        size_px: atlas (width, height).
     """
 
-    def __init__(self, ctx: moderngl.Context, capacity: int = 384) -> None:
-        self._ctx = ctx
-        self._capacity = capacity
+    def __init__(self, ctx: moderngl.Context, size_px: tuple[int, int] = (2048, 1024)) -> None:
+        self.size_px = size_px
+        self.texture = ctx.texture(size_px, 4)
+        # Text is drawn at whole pixels, one texel per pixel: nearest sampling is exact and cheaper.
+        self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self._fonts: dict[int, pygame.font.Font] = {}
-        self._cache: OrderedDict[tuple[str, int], Text] = OrderedDict()
+        self._entries: dict[tuple[str, int], tuple[tuple[float, float, float, float], tuple[int, int]]] = {}
+        self._sizes: dict[tuple[str, int], tuple[int, int]] = {}
+        self.resets = 0
+        self._reset_shelves()
+
+    def _reset_shelves(self) -> None:
+        self._entries.clear()
+        self._x = self._y = self._shelf_h = 0
 
     def font(self, size: int) -> pygame.font.Font:
         """pygame's bundled font (nothing is read from the system) at ``size`` pixels."""
@@ -152,28 +168,41 @@ class TextCache:
     def measure(self, text: str, size: int) -> tuple[int, int]:
         """(width, height) in pixels that ``text`` takes at ``size``."""
         key = (text, size)
-        if key in self._cache:
-            return self._cache[key].size_px
-        return self.font(size).size(text)
+        got = self._sizes.get(key)
+        if got is None:
+            got = self._sizes[key] = self.font(size).size(text)
+            if len(self._sizes) > 4096:
+                self._sizes.clear()
+        return got
 
-    def get(self, text: str, size: int) -> Text:
+    def get(self, text: str, size: int, before_reset) -> tuple[tuple[float, float, float, float], tuple[int, int]]:
+        """Atlas uv rectangle and pixel size of ``text``; ``before_reset()`` runs if the atlas must
+        start afresh (the caller draws what it queued with the old contents first)."""
         key = (text, size)
-        hit = self._cache.get(key)
+        hit = self._entries.get(key)
         if hit is not None:
-            self._cache.move_to_end(key)
             return hit
         surface = self.font(size).render(text, True, (255, 255, 255))
-        entry = Text(surface_to_texture(self._ctx, surface), surface.get_size())
-        self._cache[key] = entry
-        while len(self._cache) > self._capacity:
-            _, old = self._cache.popitem(last=False)
-            old.texture.release()
+        aw, ah = self.size_px
+        if surface.get_width() > aw or surface.get_height() > ah:
+            surface = surface.subsurface((0, 0, min(surface.get_width(), aw), min(surface.get_height(), ah)))
+        w, h = surface.get_size()
+        if self._x + w > aw:
+            self._x, self._y, self._shelf_h = 0, self._y + self._shelf_h + 1, 0
+        if self._y + h > ah:
+            before_reset()
+            self._reset_shelves()
+            self.resets += 1
+        x, y = self._x, self._y
+        self.texture.write(pygame.image.tobytes(surface, "RGBA"), viewport=(x, y, w, h))
+        self._x += w + 1
+        self._shelf_h = max(self._shelf_h, h)
+        entry = ((x / aw, y / ah, (x + w) / aw, (y + h) / ah), (w, h))
+        self._entries[key] = entry
         return entry
 
     def release(self) -> None:
-        for entry in self._cache.values():
-            entry.texture.release()
-        self._cache.clear()
+        self.texture.release()
 
 
 class Canvas:
@@ -182,27 +211,29 @@ class Canvas:
     Args:
         ctx: the GL context.
         size_px: (width, height) of the drawing area.
+        atlas_px: size of the text atlas.
     """
 
-    def __init__(self, ctx: moderngl.Context, size_px: tuple[int, int]) -> None:
+    def __init__(self, ctx: moderngl.Context, size_px: tuple[int, int], *,
+                 atlas_px: tuple[int, int] = (2048, 1024)) -> None:
         self.ctx = ctx
         self.size_px = (int(size_px[0]), int(size_px[1]))
-        self.texts = TextCache(ctx)
+        self.atlas = TextAtlas(ctx, atlas_px)
         corners = np.array([0, 0, 1, 0, 0, 1, 1, 1], dtype="f4")
         self._corners = ctx.buffer(corners.tobytes())
-        self._rect_prog = ctx.program(vertex_shader=_RECT_VS, fragment_shader=_RECT_FS)
+        self._batch_prog = ctx.program(vertex_shader=_BATCH_VS, fragment_shader=_BATCH_FS)
         self._quad_prog = ctx.program(vertex_shader=_QUAD_VS, fragment_shader=_QUAD_FS)
-        self._capacity = 256
-        self._shapes = ctx.buffer(reserve=self._capacity * _FLOATS_PER_SHAPE * 4, dynamic=True)
-        self._rect_vao = self._make_rect_vao()
+        self._capacity = 512
+        self._instances = ctx.buffer(reserve=self._capacity * _FLOATS * 4, dynamic=True)
+        self._batch_vao = self._make_batch_vao()
         self._quad_vao = ctx.vertex_array(self._quad_prog, [(self._corners, "2f", "in_corner")])
         self._pending: list[float] = []
         self._images: dict[str, moderngl.Texture] = {}
 
-    def _make_rect_vao(self) -> moderngl.VertexArray:
-        return self.ctx.vertex_array(self._rect_prog, [
+    def _make_batch_vao(self) -> moderngl.VertexArray:
+        return self.ctx.vertex_array(self._batch_prog, [
             (self._corners, "2f", "in_corner"),
-            (self._shapes, "4f 4f 4f 2f/i", "in_rect", "in_fill", "in_edge", "in_shape"),
+            (self._instances, "4f 4f 4f 2f 4f/i", "in_rect", "in_fill", "in_edge", "in_shape", "in_uv"),
         ])
 
     # ------------------------------------------------------------------ frame
@@ -212,22 +243,23 @@ class Canvas:
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         screen = struct.pack("2f", *self.size_px)
-        self._rect_prog["u_screen"].write(screen)
+        self._batch_prog["u_screen"].write(screen)
         self._quad_prog["u_screen"].write(screen)
 
     def flush(self) -> None:
-        """Draw the queued shapes."""
+        """Draw everything queued, in order, with one instanced call."""
         if not self._pending:
             return
-        n = len(self._pending) // _FLOATS_PER_SHAPE
+        n = len(self._pending) // _FLOATS
         if n > self._capacity:
             while self._capacity < n:
                 self._capacity *= 2
-            self._shapes.orphan(self._capacity * _FLOATS_PER_SHAPE * 4)
-            self._rect_vao.release()
-            self._rect_vao = self._make_rect_vao()
-        self._shapes.write(np.asarray(self._pending, dtype="f4").tobytes())
-        self._rect_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            self._instances.orphan(self._capacity * _FLOATS * 4)
+            self._batch_vao.release()
+            self._batch_vao = self._make_batch_vao()
+        self._instances.write(np.asarray(self._pending, dtype="f4").tobytes())
+        self.atlas.texture.use(0)
+        self._batch_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
         self._pending.clear()
 
     def end(self) -> None:
@@ -240,7 +272,7 @@ class Canvas:
              border: float = 0.0, border_colour: Colour = (0, 0, 0, 0)) -> None:
         """A rectangle ``(x, y, w, h)``, optionally with rounded corners and a border inside it."""
         x, y, w, h = rect
-        self._pending.extend((x, y, w, h, *_rgba(fill), *_rgba(border_colour), radius, border))
+        self._pending.extend((x, y, w, h, *_rgba(fill), *_rgba(border_colour), max(radius, 0.0), border, *_NO_UV))
 
     def circle(self, centre: tuple[float, float], radius: float, fill: Colour, *, border: float = 0.0,
                border_colour: Colour = (0, 0, 0, 0)) -> None:
@@ -252,7 +284,7 @@ class Canvas:
     # ------------------------------------------------------------------ text
     def measure(self, text: str, size: int) -> tuple[int, int]:
         """(width, height) of ``text`` at font ``size`` pixels."""
-        return self.texts.measure(text, size)
+        return self.atlas.measure(text, size)
 
     def text(self, text: str, pos: tuple[float, float], size: int, colour: Colour, *,
              anchor: str = "topleft") -> tuple[float, float, float, float]:
@@ -263,12 +295,11 @@ class Canvas:
         """
         if not text:
             return pos[0], pos[1], 0.0, 0.0
-        entry = self.texts.get(text, size)
-        w, h = entry.size_px
+        uv, (w, h) = self.atlas.get(text, size, self.flush)
         x, y = _anchored(pos, (w, h), anchor)
-        # Whole pixels keep the glyphs crisp (no resampling between texels).
+        # Whole pixels keep the glyphs crisp (one texel per pixel).
         x, y = round(x), round(y)
-        self._quad(entry.texture, (x, y, w, h), (0.0, 0.0, 1.0, 1.0), colour)
+        self._pending.extend((x, y, w, h, *_rgba(colour), *_NO_EDGE, -1.0, 0.0, *uv))
         return x, y, w, h
 
     def wrap(self, text: str, size: int, width: float) -> list[str]:
@@ -321,11 +352,12 @@ class Canvas:
         self._quad_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
 
     def release(self) -> None:
-        self.texts.release()
+        self.atlas.release()
         for tex in self._images.values():
             tex.release()
         self._images.clear()
-        for obj in (self._rect_vao, self._quad_vao, self._shapes, self._corners, self._rect_prog, self._quad_prog):
+        for obj in (self._batch_vao, self._quad_vao, self._instances, self._corners, self._batch_prog,
+                    self._quad_prog):
             obj.release()
 
 

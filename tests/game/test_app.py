@@ -194,3 +194,28 @@ def test_pointer_and_keys_are_mapped_once(monkeypatch):
 )
 def test_has_display(environ, platform, expected):
     assert has_display(environ, platform) is expected
+
+
+def test_text_atlas_starts_afresh_when_full_without_losing_queued_text(screen):
+    from game.gfx.canvas import Canvas
+
+    canvas = Canvas(screen.ctx, screen.size_px, atlas_px=(256, 48))
+    screen.begin((0.0, 0.0, 0.0))
+    canvas.begin()
+    boxes = []
+    for k in range(24):   # far more strings than the atlas holds at once
+        x, y = 8 + (k % 4) * 78, 8 + (k // 4) * 28
+        boxes.append(canvas.text(f"n{k:02d}", (x, y), 24, (255, 255, 255)))
+    canvas.end()
+    assert canvas.atlas.resets >= 1
+    rgb = screen.read_rgb()
+    for x, y, w, h in boxes:
+        patch = rgb[int(y):int(y + h), int(x):int(x + w)]
+        assert (patch.max(axis=2) > 128).sum() > 20, (x, y)
+    # the same string drawn again uses the atlas entry (no new reset)
+    resets = canvas.atlas.resets
+    canvas.begin()
+    canvas.text("n23", (8, 8), 24, (255, 255, 255))
+    canvas.end()
+    assert canvas.atlas.resets == resets
+    canvas.release()
