@@ -122,7 +122,7 @@ def reference_line(test: RomTest, standard: str) -> str:
         return f"{standard.upper()}: no normal value for this test"
     if not ref.comparable:
         return f"{standard.upper()} {ref.value_deg:g} was measured {ref.position_words}: another position, not comparable"
-    return f"{standard.upper()} normal {ref.value_deg:g}\N{DEGREE SIGN}"
+    return f"{standard.upper()} normal {ref.value_deg:g}\N{DEGREE SIGN} ({test.position_id.replace('_', ' ')})"
 
 
 def previous_line(row) -> str:
@@ -475,15 +475,15 @@ class RomTestScene(BaseScene):
         if state is LinkState.RESTARTING:
             return "The tracker stopped: restarting...", theme.ATTENTION
         p = self.progress
+        if self.notice[0]:
+            return self.notice
         if p is None:
             return "Waiting for the tracker...", theme.ATTENTION
-        if p.state == RomState.DONE:
+        if self.state == RomState.DONE:
             r = self.session.result
             if r.compensated:
                 return "Compensation seen: please repeat the test.", theme.ATTENTION
             return "Done: accept or discard the result.", theme.ACCENT
-        if p.state == RomState.ACCEPTED:
-            return self.notice
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT
@@ -514,7 +514,8 @@ class RomTestScene(BaseScene):
         y = self._draw_compensation(c, x, y, width)
         c.text(reference_line(self.test, self.visit.standard), (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 32 * s
-        self._draw_previous(c, x, y, width)
+        buttons_top = self._button_rects(1)[0][1]
+        self._draw_previous(c, x, y, buttons_top - 12 * s)
         self._draw_buttons(c)
         if self.demo:
             v = self.view
@@ -555,10 +556,11 @@ class RomTestScene(BaseScene):
         c.text("Maximum", (mx, y), round(theme.SMALL * s), theme.TEXT_DIM)
         if result is not None:
             c.text(f"raw {result.max_deg:.1f}\N{DEGREE SIGN}", (mx, y + 30 * s), round(theme.MEDIUM * s), theme.TEXT)
-            c.text(f"from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s), round(theme.SMALL * s),
-                   theme.TEXT_DIM)
+            c.text(f"active ROM, from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s),
+                   round(theme.SMALL * s), theme.TEXT_DIM)
         elif math.isfinite(best):
-            c.text(f"{round_to_5(best)}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)
+            # whole degrees while moving (never below "now"); the result is rounded to 5
+            c.text(f"{round(best):d}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)
         else:
             c.text("-", (mx, y + 24 * s), round(theme.TITLE * s), theme.TEXT_FAINT)
         estimated = result.estimated if result is not None else (p is not None and p.estimated)
@@ -586,15 +588,21 @@ class RomTestScene(BaseScene):
             c.text(line, (x + 15 * s, y + 10 * s + k * 30 * s), size, theme.TEXT)
         return y + h + 12 * s
 
-    def _draw_previous(self, c, x: float, y: float, width: float) -> None:
+    def _draw_previous(self, c, x: float, y: float, bottom: float) -> None:
+        """The latest previous results that fit above ``bottom`` (at most :data:`PREVIOUS_SHOWN`)."""
         s = self.scale
         size = round(theme.SMALL * s)
         if not self.previous:
             c.text("No previous results for this test and side.", (x, y), size, theme.TEXT_FAINT)
             return
-        c.text("Previous results", (x, y), size, theme.TEXT_DIM)
+        fit = min(PREVIOUS_SHOWN, int((bottom - y - 30 * s) // (28 * s)))
+        if fit < 1:
+            return
+        more = len(self.previous) - fit
+        c.text("Previous results" + (f" (latest {fit} of {len(self.previous)})" if more > 0 else ""), (x, y), size,
+               theme.TEXT_DIM)
         y += 30 * s
-        for row in self.previous[-PREVIOUS_SHOWN:]:
+        for row in self.previous[-fit:]:
             c.text(previous_line(row), (x + 12 * s, y), size, theme.TEXT)
             y += 28 * s
 
