@@ -61,10 +61,10 @@ class PlayOptions:
 
 
 def make_avatar(ctx, marker_names):
-    """The avatar view on ``ctx`` (game.avatar) for a marker set's names."""
-    from game.scenes.avatar_view import AvatarView
+    """The patient's avatar on ``ctx`` for a marker set's names (:mod:`game.avatar`)."""
+    from game.avatar.live import LiveAvatar
 
-    return AvatarView(ctx, marker_names)
+    return LiveAvatar(ctx, marker_names)
 
 
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,
