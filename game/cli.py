@@ -260,10 +260,11 @@ def _cmd_play(args) -> int:
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
     if args.scene == "rom" and args.motion is None:
+        from game.play import DEFAULT_ROM_TEST
         from game.rom.spec import load_rom_test
 
         # the ROM scene plays the test's own motion (its demo); start the tracker on it
-        motion = load_rom_test(args.test or "shoulder_flexion").simulated_motion.get(args.side)
+        motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
                          "or give a motion YAML file")
@@ -285,6 +286,10 @@ def _cmd_play(args) -> int:
         side=args.side,
         standard=args.standard,
     )
+    if options.scene in ("rom", "progress"):
+        from game.play import check_scene_options
+
+        check_scene_options(options)   # one line before anything starts
     summary = run_play(options)
     print(f"rehab play: {summary.line()}")
     return 0

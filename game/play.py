@@ -25,6 +25,8 @@ log = logging.getLogger(__name__)
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
 SCENES = ("home", "live", "cameras", "rom", "progress")
+#: The test ``--scene rom`` opens when none is named.
+DEFAULT_ROM_TEST = "shoulder_flexion"
 
 
 @dataclass(frozen=True, slots=True)
@@ -117,28 +119,35 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
     elif options.scene == "cameras":
         app.push(open_monitor())
     elif options.scene in ("rom", "progress"):
-        _check_patient(db_path, options.patient)
+        check_scene_options(options)
         if options.scene == "progress":
             app.push(ProgressScene(db_path, options.patient, standard=options.standard))
         else:
-            from game.rom.spec import check_side, load_rom_test
+            from game.rom.spec import load_rom_test
 
-            test = load_rom_test(options.test or "shoulder_flexion")
-            check_side(test, options.side)
+            test = load_rom_test(options.test or DEFAULT_ROM_TEST)
             visit = RomVisit(db_path, options.patient, options.standard, source_kind)
             app.push(ChooseTestScene(visit, open_test, side=options.side))
             app.push(open_test(visit, test, options.side, demo=True))
     return app
 
 
-def _check_patient(db_path: Path, patient: str | None) -> None:
-    """The ``rom`` and ``progress`` scenes open on an existing patient (one line otherwise)."""
-    from game.db import Database
+def check_scene_options(options: PlayOptions) -> None:
+    """The ``rom`` and ``progress`` scenes open on an existing patient (and a test for the side).
 
-    if not patient:
-        raise RehabError("give --patient ID with --scene rom or progress (see rehab patients)")
-    with Database(db_path) as db:
-        db.require_patient(patient)
+    Raises:
+        RehabError: one line saying what to give or fix.
+    """
+    from game.db import Database, default_db_path
+
+    if not options.patient:
+        raise RehabError(f"give --patient ID with --scene {options.scene} (see rehab patients)")
+    if options.scene == "rom":
+        from game.rom.spec import check_side, load_rom_test
+
+        check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
+    with Database(options.db_path or default_db_path()) as db:
+        db.require_patient(options.patient)
 
 
 def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,

@@ -6,7 +6,7 @@ Two scenes over one :class:`RomVisit` (the patient, the database, the standard):
   position and the patient's instructions in large type, the normal value of the standard.
   Up/Down choose, Left/Right or Tab switch the side, Enter starts, Esc goes back; mouse: hover and
   click (the standard chip switches JARM/AAOS for the whole visit: the tables are never mixed).
-- :class:`RomTestScene`: the avatar (mirror view) beside a big live readout of the test value,
+- :class:`RomTestScene`: the avatar (:class:`game.avatar.live.LiveAvatar`, mirror view) beside a big live readout of the test value,
   the steps (start position -> hold still -> move -> done), the maximum so far, compensation
   warnings in plain words, the standard's reference value with its position, the patient's
   previous results of this test and side. The tracker's samples (``LiveLink.new_samples``,
@@ -30,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
 from game.gfx import theme
@@ -38,6 +40,7 @@ from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LinkState
 from game.rom.session import RomProgress, RomResult, RomState, RomTestSession, round_to_5
 from game.rom.spec import RomTest, load_all_rom_tests
+from game.scenes.live import MIN_KNOWN_MARKERS
 
 log = logging.getLogger(__name__)
 
@@ -278,7 +281,7 @@ class RomTestScene(BaseScene):
             samples' markers; ``set_motion`` plays the demo motion).
         visit: the patient, database and standard.
         test: the test; side: ``right`` or ``left``.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.scenes.avatar_view.AvatarView`
+        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`
             (None: no avatar, e.g. unit tests of the logic).
         demo: play the test's scripted motion on the simulated patient from the start.
     """
@@ -343,8 +346,9 @@ class RomTestScene(BaseScene):
         for sample in self.link.new_samples:
             was = self.session.state
             self.progress = self.session.feed(sample)
-            if self.avatar is not None:
-                self.avatar.push(sample)
+            # a tracker still waiting for the reference pose knows too few markers to pose a body
+            if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                self.avatar.push_sample(sample)
             if was != RomState.DONE and self.session.state == RomState.DONE:
                 # compensation: the scene asks to repeat (Repeat is chosen first); else Accept
                 self.selected = 1 if self.session.result.compensated else 0
@@ -454,14 +458,11 @@ class RomTestScene(BaseScene):
         self.consume()
         if self.avatar is None:
             return
-        self.avatar.pose_at(self.app.clock())
-        camera = self.avatar.camera(self.view.aspect)
-        if camera is None:
-            return
         ctx = frame.screen.ctx
-        ctx.viewport = self.view.gl(frame.size_px[1])
+        v = self.view
+        ctx.viewport = v.gl(frame.size_px[1])
         try:
-            self.avatar.render(*camera)
+            self.avatar.render((v.w, v.h), self.app.clock())
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
 

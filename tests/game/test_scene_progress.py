@@ -122,3 +122,26 @@ def test_no_games_yet_and_unknown_patient(screen, tmp_path):
     app.frame()
     assert "no patient 'P404'" in unknown.error
     app.close()
+
+
+def test_play_command_opens_the_progress_scene_and_refuses_an_unknown_patient(screen, tmp_path, capsys):
+    import cv2
+
+    from game.cli import main
+
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=False)
+    assert main(["play", "--headless", "--scene", "progress", "--db", str(path)]) == 1
+    assert main(["play", "--headless", "--scene", "rom", "--patient", "P404", "--db", str(path)]) == 1
+    assert main(["play", "--headless", "--scene", "rom", "--patient", "P001", "--test", "no_such_test",
+                 "--db", str(path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "give --patient ID" in err[0] and "no patient 'P404'" in err[1] and "no_such_test" in err[2]
+    out = tmp_path / "progress.png"
+    assert main(["play", "--headless", "--scene", "progress", "--patient", "P001", "--db", str(path),
+                 "--seconds", "0.5", "--screenshot", str(out), "--window", "1280x720"]) == 0
+    rgb = cv2.imread(str(out))[:, :, ::-1].astype(int)
+    background = np.array([27, 33, 43])
+    expected = background + 0.3 * (band_rgb() - background)
+    assert ((np.abs(rgb - expected).sum(axis=2) < 14).sum(axis=1) > 200).sum() >= 5   # the normal band
