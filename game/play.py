@@ -108,8 +108,8 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
-        MenuEntry("ROM test", "Measure a range of motion, store it for the patient", open_rom),
-        MenuEntry("Progress", "A patient's results over the sessions", open_progress),
+        MenuEntry("ROM test", "Measure a range of motion", open_rom),
+        MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
         MenuEntry("Quit", "", None),
     ], status=link.summary)

@@ -106,7 +106,8 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
     ax.set_ylabel("maximum, degrees (active ROM)", fontsize=13)
     ax.set_title(title, color=_TEXT, fontsize=17, loc="left")
-    legend = ax.legend(fontsize=12, loc="best", facecolor=_BG, edgecolor=_GRID, framealpha=0.9)
+    # beside the axes: over the plot it would hide the band or the points
+    legend = ax.legend(fontsize=12, loc="upper left", bbox_to_anchor=(1.01, 1.0), facecolor=_BG, edgecolor=_GRID)
     for text in legend.get_texts():
         text.set_color(_TEXT)
     fig.tight_layout()
