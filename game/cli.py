@@ -228,8 +228,16 @@ def _add_play(sub) -> None:
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=float, default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
-    p.add_argument("--scene", choices=("home", "live", "cameras"), default=None,
-                   help="first screen (default: home; live with --headless)")
+    p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress"), default=None,
+                   help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
+                   "--test playing its demo motion; progress: the progress review of --patient")
+    p.add_argument("--db", type=Path, default=None,
+                   help="database of patients and results (default: the user's data directory)")
+    p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress")
+    p.add_argument("--test", default=None, help="ROM test for --scene rom (default: shoulder_flexion)")
+    p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom")
+    p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
+                   help="reference standard of the ROM tests and the progress band (default: %(default)s)")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
     p.add_argument("--seconds", type=_positive_float, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
@@ -251,6 +259,12 @@ def _cmd_play(args) -> int:
     from tracking.sim.motions import available_motions
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
+    if args.scene == "rom" and args.motion is None:
+        from game.play import DEFAULT_ROM_TEST
+        from game.rom.spec import load_rom_test
+
+        # the ROM scene plays the test's own motion (its demo); start the tracker on it
+        motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
                          "or give a motion YAML file")
@@ -266,7 +280,16 @@ def _cmd_play(args) -> int:
         screenshot=args.screenshot,
         scene=args.scene or ("live" if args.headless else "home"),
         motion=motion,
+        db_path=args.db,
+        patient=args.patient,
+        test=args.test,
+        side=args.side,
+        standard=args.standard,
     )
+    if options.scene in ("rom", "progress"):
+        from game.play import check_scene_options
+
+        check_scene_options(options)   # one line before anything starts
     summary = run_play(options)
     print(f"rehab play: {summary.line()}")
     return 0
@@ -304,8 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench(sub)
     _add_play(sub)
     from game import cli_calibrate  # calibrate, simulate-calibration
+    from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
 
     cli_calibrate.add_commands(sub)
+    cli_clinic.add_commands(sub)
     return parser
 
 

@@ -27,7 +27,9 @@ log = logging.getLogger(__name__)
 
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
-SCENES = ("home", "live", "cameras")
+SCENES = ("home", "live", "cameras", "rom", "progress")
+#: The test ``--scene rom`` opens when none is named.
+DEFAULT_ROM_TEST = "shoulder_flexion"
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,9 +42,12 @@ class PlayOptions:
         headless: draw offscreen for ``seconds`` and stop.
         seconds: run time (None: until quit).
         screenshot: save the last frame there (PNG).
-        scene: the first scene: ``home``, ``live`` or ``cameras``.
+        scene: the first scene: ``home``, ``live``, ``cameras``, ``rom`` (the ROM test of ``patient``,
+            ``test``, ``side``, playing its demo motion) or ``progress`` (of ``patient``).
         motion: the scripted motion playing at the start (None: the patient follows the mouse).
         start_timeout_s: how long the tracker may take to start.
+        db_path: the database of patients and results (None: the user's data directory).
+        patient, test, side, standard: what ``rom`` and ``progress`` open on.
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -53,6 +58,11 @@ class PlayOptions:
     scene: str = "home"
     motion: str | None = None
     start_timeout_s: float = 60.0
+    db_path: Path | None = None
+    patient: str | None = None
+    test: str | None = None
+    side: str = "right"
+    standard: str = "jarm"
 
 
 def make_avatar(ctx, marker_names):
@@ -79,8 +89,30 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return LiveScene(link, motions=motions, motion=options.motion, open_monitor=open_monitor,
                          make_avatar=make_avatar)
 
+    from game.db import default_db_path
+    from game.scenes.patients import PatientsScene
+    from game.scenes.progress import ProgressScene
+    from game.scenes.rom_test import RomTestScene, RomVisit, ChooseTestScene
+
+    db_path = options.db_path or default_db_path()
+    source_kind = getattr(options.source, "kind", "sim") or "sim"
+
+    def open_test(visit, test, side, demo=False):
+        return RomTestScene(link, visit, test, side, make_avatar=make_avatar, demo=demo)
+
+    def open_rom():
+        return PatientsScene(db_path, lambda pid: ChooseTestScene(RomVisit(db_path, pid, options.standard, source_kind),
+                                                                  open_test),
+                             title="ROM test: choose the patient")
+
+    def open_progress():
+        return PatientsScene(db_path, lambda pid: ProgressScene(db_path, pid, standard=options.standard),
+                             title="Progress: choose the patient", allow_new=False)
+
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
+        MenuEntry("ROM test", "Measure a range of motion", open_rom),
+        MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
@@ -89,7 +121,36 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         app.push(open_live())
     elif options.scene == "cameras":
         app.push(open_monitor())
+    elif options.scene in ("rom", "progress"):
+        check_scene_options(options)
+        if options.scene == "progress":
+            app.push(ProgressScene(db_path, options.patient, standard=options.standard))
+        else:
+            from game.rom.spec import load_rom_test
+
+            test = load_rom_test(options.test or DEFAULT_ROM_TEST)
+            visit = RomVisit(db_path, options.patient, options.standard, source_kind)
+            app.push(ChooseTestScene(visit, open_test, side=options.side))
+            app.push(open_test(visit, test, options.side, demo=True))
     return app
+
+
+def check_scene_options(options: PlayOptions) -> None:
+    """The ``rom`` and ``progress`` scenes open on an existing patient (and a test for the side).
+
+    Raises:
+        RehabError: one line saying what to give or fix.
+    """
+    from game.db import Database, default_db_path
+
+    if not options.patient:
+        raise RehabError(f"give --patient ID with --scene {options.scene} (see rehab patients)")
+    if options.scene == "rom":
+        from game.rom.spec import check_side, load_rom_test
+
+        check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
+    with Database(options.db_path or default_db_path()) as db:
+        db.require_patient(options.patient)
 
 
 def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,

@@ -1,0 +1,253 @@
+"""Progress report of one patient for the clinic record (``rehab report PATIENT --out report.html``).
+
+One self-contained HTML file: per ROM test a plot of the recorded maximum over the sessions (in
+session order, both sides, with the normal band of the chosen standard and the 5-degree recording
+grid), the table of every ROM result (raw and rounded, labelled active ROM with the test position
+and the standard it was recorded with), and the games' repetitions and session durations. Plots
+are PNG (matplotlib, Agg, no pyplot state) embedded as data URIs; the ROM table is also written
+as CSV beside the HTML. Nothing but the pseudonymous ID identifies the patient.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import io
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+from calibration.errors import RehabError
+from game.db.database import Database, ExerciseRow, RomRow, utc_now
+from game.rom.session import round_to_5
+
+#: The normal band: from this fraction below the standard's normal value up to it.
+NORMAL_BAND_FRACTION = 0.10
+
+_SIDE_STYLE = {"right": ("#1f77b4", "o"), "left": ("#d62728", "s")}
+
+_CSV_COLUMNS = ("session_started_utc", "test", "side", "angle", "mode", "position", "standard", "reference_deg",
+                "value_deg", "rounded_deg", "start_deg", "range_deg", "compensation", "estimated_markers",
+                "duration_s", "recorded_utc", "uid")
+
+
+@dataclass(frozen=True, slots=True)
+class _TestInfo:
+    title: str
+    normal_deg: float | None
+    position_words: str
+
+
+def _test_info(test: str, standard: str) -> _TestInfo:
+    from game.rom.spec import load_rom_test
+    from tracking.errors import ContentError
+
+    try:
+        t = load_rom_test(test)
+    except ContentError:  # a result of a test this installation does not define
+        return _TestInfo(test.replace("_", " "), None, "")
+    return _TestInfo(t.title, t.normal_deg(standard), t.position_words)
+
+
+def _png(fig) -> str:
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def session_order(rows: Sequence[RomRow | ExerciseRow]) -> dict[str, int]:
+    """Session uid -> 1-based number in time order (over the rows given)."""
+    seen: dict[str, str] = {}
+    for r in rows:
+        seen.setdefault(r.session_uid, r.session_started_utc)
+    ordered = sorted(seen, key=lambda uid: (seen[uid], uid))
+    return {uid: i + 1 for i, uid in enumerate(ordered)}
+
+
+def rom_plot_png(title: str, rows: Sequence[RomRow], order: dict[str, int], normal_deg: float | None,
+                 standard: str) -> str:
+    """One test's maxima over the sessions (both sides) as a base64 PNG."""
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MultipleLocator
+
+    fig = Figure(figsize=(7.5, 3.4))
+    ax = fig.add_subplot(1, 1, 1)
+    values = [r.value_deg for r in rows]
+    if normal_deg is not None:
+        lo = normal_deg * (1.0 - NORMAL_BAND_FRACTION)
+        ax.axhspan(lo, normal_deg, color="#2ca02c", alpha=0.18, lw=0,
+                   label=f"normal ({standard.upper()} {normal_deg:g}, band to -{100 * NORMAL_BAND_FRACTION:.0f} %)")
+        ax.axhline(normal_deg, color="#2ca02c", lw=1.2)
+        values += [lo, normal_deg]
+    for side in ("right", "left"):
+        pts = sorted(((order[r.session_uid], r) for r in rows if r.side == side), key=lambda p: p[0])
+        if not pts:
+            continue
+        colour, marker = _SIDE_STYLE[side]
+        xs, ys = [p[0] for p in pts], [p[1].value_deg for p in pts]
+        ax.plot(xs, ys, color=colour, lw=1.5, marker=marker, ms=7, label=side)
+        flagged = [(x, r.value_deg) for x, r in pts if r.compensation]
+        if flagged:
+            ax.scatter(*zip(*flagged), s=180, facecolors="none", edgecolors="#ff7f0e", linewidths=2, zorder=5,
+                       label=f"{side}: compensation")
+        est = [(x, r.value_deg) for x, r in pts if r.estimated_markers]
+        if est:
+            ax.scatter(*zip(*est), s=60, marker="x", color="black", zorder=6, label=f"{side}: estimated markers")
+    lo_y = 5 * (int(min(values) // 5) - 2)
+    hi_y = 5 * (int(max(values) // 5) + 3)
+    ax.set_ylim(lo_y, hi_y)
+    ax.yaxis.set_minor_locator(MultipleLocator(5))
+    ax.yaxis.set_major_locator(MultipleLocator(10 if hi_y - lo_y <= 120 else 20))
+    ax.grid(True, which="minor", axis="y", color="#dddddd", lw=0.6)
+    ax.grid(True, which="major", axis="y", color="#bbbbbb", lw=0.8)
+    xs = sorted({order[r.session_uid] for r in rows})
+    dates = {order[r.session_uid]: r.session_started_utc[:10] for r in rows}
+    ax.set_xticks(xs)
+    ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs], fontsize=8)
+    ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
+    ax.set_xlabel("session")
+    ax.set_ylabel("maximum (deg, active ROM)")
+    ax.set_title(title)
+    ax.legend(fontsize=8, loc="best", framealpha=0.85)
+    fig.tight_layout()
+    return _png(fig)
+
+
+def exercise_plot_png(rows: Sequence[ExerciseRow], order: dict[str, int]) -> str:
+    """Repetitions per game and session, and session durations, as a base64 PNG."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7.5, 4.6))
+    ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
+    games = sorted({r.game for r in rows})
+    width = 0.8 / max(len(games), 1)
+    for k, game in enumerate(games):
+        reps: dict[int, int] = defaultdict(int)
+        for r in rows:
+            if r.game == game:
+                reps[order[r.session_uid]] += r.repetitions
+        xs = sorted(reps)
+        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width, label=game)
+    minutes: dict[int, float] = defaultdict(float)
+    for r in rows:
+        minutes[order[r.session_uid]] += r.duration_s / 60.0
+    xs = sorted(minutes)
+    ax2.bar(xs, [minutes[x] for x in xs], width=0.6, color="#7f7f7f")
+    dates = {order[r.session_uid]: r.session_started_utc[:10] for r in rows}
+    for ax in (ax1, ax2):
+        ax.set_xticks(xs)
+        ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs], fontsize=8)
+        ax.grid(True, axis="y", color="#dddddd")
+    ax1.set_ylabel("repetitions")
+    ax1.legend(fontsize=8)
+    ax1.set_title("Games")
+    ax2.set_ylabel("minutes played")
+    ax2.set_xlabel("session")
+    fig.tight_layout()
+    return _png(fig)
+
+
+def _csv_row(r: RomRow) -> list:
+    return [r.session_started_utc, r.test, r.side, r.angle, r.mode, r.position, r.standard,
+            "" if r.reference_deg is None else f"{r.reference_deg:g}", f"{r.value_deg:.1f}", round_to_5(r.value_deg),
+            f"{r.start_deg:.1f}", f"{r.range_deg:.1f}", r.compensation, r.estimated_markers,
+            "" if r.duration_s is None else f"{r.duration_s:.1f}", r.recorded_utc, r.uid]
+
+
+def write_report(db: Database, patient_id: str, out_html: str | Path, *, standard: str = "jarm") -> tuple[Path, Path]:
+    """Write the HTML report and the CSV beside it; returns both paths.
+
+    Raises:
+        DatabaseError: unknown patient.
+        RehabError: the output folder cannot be written.
+    """
+    from game.rom.spec import STANDARDS, check_standard
+
+    check_standard(standard)
+    db.require_patient(patient_id)
+    out_html = Path(out_html)
+    csv_path = out_html.with_suffix(".csv")
+    roms = db.rom_results(patient_id)
+    games = db.exercise_results(patient_id)
+    order = session_order(list(roms) + list(games))
+    esc = html.escape
+
+    parts = [f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>ROM progress: {esc(patient_id)}</title>
+<style>
+body {{ font-family: sans-serif; margin: 24px; color: #222; max-width: 1100px; }}
+h1 {{ font-size: 22px; margin-bottom: 4px; }} h2 {{ font-size: 18px; margin-top: 28px; }}
+.meta {{ color: #555; font-size: 13px; }}
+table {{ border-collapse: collapse; font-size: 12px; margin-top: 8px; }}
+th, td {{ border: 1px solid #ccc; padding: 3px 6px; text-align: left; }}
+td.num {{ text-align: right; }} tr.flag td {{ background: #fff4e5; }}
+img {{ display: block; margin: 8px 0 16px 0; max-width: 100%; }}
+</style></head><body>
+<h1>Range of motion progress: patient {esc(patient_id)}</h1>
+<p class="meta">Report written {esc(utc_now())}. Active ROM (the patient's own movement), maxima in degrees,
+shown rounded to 5 degrees as recorded clinically (raw values in the table and in {esc(csv_path.name)}).
+Normal values: {esc(STANDARDS[standard])}; a normal value measured in another test position is not shown
+as a band. Orange rings: the attempt showed compensation. Crosses: the maximum rested on estimated (hidden)
+markers.</p>
+"""]
+    if not roms:
+        parts.append("<p>No ROM results yet.</p>")
+    by_test: dict[str, list[RomRow]] = defaultdict(list)
+    for r in roms:
+        by_test[r.test].append(r)
+    for test in sorted(by_test, key=lambda t: min(order[r.session_uid] for r in by_test[t])):
+        info = _test_info(test, standard)
+        rows = by_test[test]
+        png = rom_plot_png(info.title, rows, order, info.normal_deg, standard)
+        latest = {side: max((r for r in rows if r.side == side), key=lambda r: order[r.session_uid], default=None)
+                  for side in ("right", "left")}
+        summary = "; ".join(f"{side} latest {round_to_5(r.value_deg)} deg" for side, r in latest.items() if r is not None)
+        parts.append(f"<h2>{esc(info.title)}</h2><p class=\"meta\">{esc(info.position_words)} {esc(summary)}.</p>"
+                     f"<img alt=\"{esc(info.title)} over the sessions\" src=\"data:image/png;base64,{png}\">")
+    if roms:
+        parts.append("<h2>All ROM results</h2><table><tr><th>session</th><th>date (UTC)</th><th>test</th><th>side</th>"
+                     "<th>recorded</th><th>raw</th><th>start</th><th>range</th><th>normal</th><th>mode</th>"
+                     "<th>position</th><th>compensation</th><th>estimated markers</th></tr>")
+        for r in roms:
+            normal = f"{r.standard.upper()} {r.reference_deg:g}" if r.reference_deg is not None else f"{r.standard.upper()}: none for this position"
+            parts.append(
+                f"<tr class=\"{'flag' if r.compensation else ''}\"><td class=\"num\">#{order[r.session_uid]}</td>"
+                f"<td>{esc(r.session_started_utc.replace('T', ' ').rstrip('Z'))}</td><td>{esc(r.test.replace('_', ' '))}</td>"
+                f"<td>{esc(r.side)}</td><td class=\"num\"><b>{round_to_5(r.value_deg)}</b></td>"
+                f"<td class=\"num\">{r.value_deg:.1f}</td><td class=\"num\">{r.start_deg:.1f}</td>"
+                f"<td class=\"num\">{r.range_deg:.1f}</td><td>{esc(normal)}</td><td>{esc(r.mode)}</td>"
+                f"<td>{esc(r.position.replace('_', ' '))}</td><td>{esc(r.compensation) or '-'}</td>"
+                f"<td>{esc(r.estimated_markers) or '-'}</td></tr>")
+        parts.append("</table>")
+    parts.append("<h2>Games</h2>")
+    if games:
+        parts.append(f"<img alt=\"repetitions and durations over the sessions\" "
+                     f"src=\"data:image/png;base64,{exercise_plot_png(games, order)}\">")
+        parts.append("<table><tr><th>session</th><th>date (UTC)</th><th>game</th><th>repetitions</th>"
+                     "<th>minutes</th><th>score</th></tr>")
+        for g in games:
+            score = "" if g.score is None else f"{g.score:g}"
+            parts.append(f"<tr><td class=\"num\">#{order[g.session_uid]}</td>"
+                         f"<td>{esc(g.session_started_utc.replace('T', ' ').rstrip('Z'))}</td><td>{esc(g.game)}</td>"
+                         f"<td class=\"num\">{g.repetitions}</td><td class=\"num\">{g.duration_s / 60:.1f}</td>"
+                         f"<td class=\"num\">{esc(score)}</td></tr>")
+        parts.append("</table>")
+    else:
+        parts.append("<p>No game results yet.</p>")
+    parts.append("</body></html>\n")
+    try:
+        out_html.parent.mkdir(parents=True, exist_ok=True)
+        out_html.write_text("".join(parts), encoding="utf-8")
+        with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(_CSV_COLUMNS)
+            for r in roms:
+                w.writerow(_csv_row(r))
+    except OSError as exc:
+        raise RehabError(f"{out_html}: cannot write the report ({exc.strerror}): check the folder") from None
+    return out_html, csv_path

@@ -1,0 +1,9 @@
+"""Range-of-motion (ROM) tests: the test definitions (content), the test logic over tracker samples.
+
+- :mod:`game.rom.spec`: ROM tests as content (``content/rom_tests/*.yaml``), validated at load.
+- :mod:`game.rom.session`: :class:`RomTestSession`, the pure state machine that the ROM test scene
+  and ``rehab rom-test`` share (start position -> recording -> done, accept or discard).
+- :mod:`game.rom.simulated`: one test run on the simulated patient through the real tracker.
+
+No pygame, OpenGL, processes or files in the logic: it takes samples and returns values.
+"""

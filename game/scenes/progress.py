@@ -1,0 +1,321 @@
+"""The progress review: one patient's ROM results over the sessions, and the games played.
+
+Left, the tests the patient has results for (Up/Down or the mouse choose); right, the chosen
+test's maxima over the sessions as a plot (both sides, in session order), with the normal band
+of the standard (from the normal value down 10 %, as in ``rehab report``; none when the standard's
+value is for another position) and the 5-degree recording grid; rings mark compensated attempts,
+crosses maxima that rested on estimated markers. Below, the games' repetitions and minutes per
+session, or "No games yet".
+
+Plots are drawn by matplotlib (Agg, no pyplot state) into an RGB array once per choice and
+uploaded as one texture; the scene's colours match the application's theme.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from calibration.errors import RehabError
+from game.app import BaseScene, Frame
+from game.gfx import theme
+from game.input import Action, InputEvent, Pointer, PointerKind, Press
+from game.report import NORMAL_BAND_FRACTION, session_order
+from game.rom.session import round_to_5
+
+#: Plot colours (sRGB hex) on the application's dark background.
+BAND_COLOUR = "#5ec8be"
+SIDE_COLOURS = {"right": ("#f2be5c", "o"), "left": ("#8fb4ff", "s")}
+_BG = "#%02x%02x%02x" % theme.BACKGROUND
+_TEXT = "#%02x%02x%02x" % theme.TEXT
+_DIM = "#%02x%02x%02x" % theme.TEXT_DIM
+_GRID = "#3a4556"
+
+
+def _figure_rgb(fig) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a matplotlib figure drawn by Agg."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[:, :, :3].copy()
+
+
+def _style(ax) -> None:
+    ax.set_facecolor(_BG)
+    for spine in ax.spines.values():
+        spine.set_color(_GRID)
+    ax.tick_params(colors=_DIM, labelsize=13)
+    ax.xaxis.label.set_color(_DIM)
+    ax.yaxis.label.set_color(_DIM)
+
+
+def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: float | None, standard: str,
+                 size_px: tuple[int, int]) -> np.ndarray:
+    """One test's maxima over the sessions as an (H, W, 3) uint8 RGB image of ``size_px`` (w, h).
+
+    Args:
+        rows: the test's :class:`game.db.RomRow` (both sides).
+        order: session uid -> session number (:func:`game.report.session_order`).
+        normal_deg: the standard's normal value for the test's position (None: no band).
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.ticker import MultipleLocator
+
+    dpi = 100
+    fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
+    ax = fig.add_subplot(1, 1, 1)
+    _style(ax)
+    values = [r.value_deg for r in rows]
+    if normal_deg is not None:
+        lo = normal_deg * (1.0 - NORMAL_BAND_FRACTION)
+        ax.axhspan(lo, normal_deg, color=BAND_COLOUR, alpha=0.30, lw=0,
+                   label=f"normal, {standard.upper()} {normal_deg:g}")
+        ax.axhline(normal_deg, color=BAND_COLOUR, lw=1.5)
+        values += [lo, normal_deg]
+    for side in ("right", "left"):
+        pts = sorted(((order[r.session_uid], r) for r in rows if r.side == side), key=lambda p: p[0])
+        if not pts:
+            continue
+        colour, marker = SIDE_COLOURS[side]
+        ax.plot([p[0] for p in pts], [p[1].value_deg for p in pts], color=colour, lw=2.5, marker=marker, ms=10,
+                label=side, zorder=4)
+        flagged = [(x, r.value_deg) for x, r in pts if r.compensation]
+        if flagged:
+            ax.scatter(*zip(*flagged), s=330, facecolors="none", edgecolors="#e87068", linewidths=2.5, zorder=5,
+                       label=f"{side}: compensation")
+        est = [(x, r.value_deg) for x, r in pts if r.estimated_markers]
+        if est:
+            ax.scatter(*zip(*est), s=90, marker="x", color=_TEXT, zorder=6, label=f"{side}: estimated markers")
+    lo_y = 5 * (math.floor(min(values) / 5) - 2)
+    hi_y = 5 * (math.floor(max(values) / 5) + 3)
+    ax.set_ylim(lo_y, hi_y)
+    ax.yaxis.set_minor_locator(MultipleLocator(5))   # the clinical 5-degree recording grid
+    ax.yaxis.set_major_locator(MultipleLocator(10 if hi_y - lo_y <= 100 else 20))
+    ax.grid(True, which="minor", axis="y", color=_GRID, lw=0.7)
+    ax.grid(True, which="major", axis="y", color="#56637a", lw=1.0)
+    xs = sorted({order[r.session_uid] for r in rows})
+    dates = {order[r.session_uid]: r.session_started_utc[5:10] for r in rows}
+    ax.set_xticks(xs)
+    ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs])
+    ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
+    ax.set_ylabel("maximum, degrees (active ROM)", fontsize=13)
+    ax.set_title(title, color=_TEXT, fontsize=17, loc="left")
+    # beside the axes: over the plot it would hide the band or the points
+    legend = ax.legend(fontsize=12, loc="upper left", bbox_to_anchor=(1.01, 1.0), facecolor=_BG, edgecolor=_GRID)
+    for text in legend.get_texts():
+        text.set_color(_TEXT)
+    fig.tight_layout()
+    return _figure_rgb(fig)
+
+
+def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, int]) -> np.ndarray:
+    """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image."""
+    from matplotlib.figure import Figure
+
+    dpi = 100
+    fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
+    ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    games = sorted({r.game for r in rows})
+    width = 0.8 / max(len(games), 1)
+    palette = ("#5ec8be", "#f2be5c", "#8fb4ff", "#e87068")
+    for k, game in enumerate(games):
+        reps: dict[int, int] = defaultdict(int)
+        for r in rows:
+            if r.game == game:
+                reps[order[r.session_uid]] += r.repetitions
+        xs = sorted(reps)
+        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width, label=game,
+                color=palette[k % len(palette)])
+    minutes: dict[int, float] = defaultdict(float)
+    for r in rows:
+        minutes[order[r.session_uid]] += r.duration_s / 60.0
+    xs = sorted(minutes)
+    ax2.bar(xs, [minutes[x] for x in xs], width=0.6, color="#a3aebe")
+    for ax, label in ((ax1, "repetitions"), (ax2, "minutes played")):
+        _style(ax)
+        ax.set_xticks(xs)
+        ax.set_xticklabels([f"#{x}" for x in xs])
+        ax.set_title(label, color=_TEXT, fontsize=13, loc="left")
+        ax.grid(True, axis="y", color=_GRID)
+    legend = ax1.legend(fontsize=11, facecolor=_BG, edgecolor=_GRID)
+    for text in legend.get_texts():
+        text.set_color(_TEXT)
+    fig.tight_layout()
+    return _figure_rgb(fig)
+
+
+@dataclass(frozen=True, slots=True)
+class TestInfo:
+    """A stored test's title and the standard's normal value for its position (None: no band)."""
+
+    title: str
+    normal_deg: float | None
+
+
+def test_info(test: str, standard: str) -> TestInfo:
+    """What the content says about a stored test (a test this installation lacks keeps its name)."""
+    from game.rom.spec import load_rom_test
+    from tracking.errors import ContentError
+
+    try:
+        t = load_rom_test(test)
+    except ContentError:
+        return TestInfo(test.replace("_", " ").capitalize(), None)
+    return TestInfo(t.title, t.normal_deg(standard))
+
+
+class ProgressScene(BaseScene):
+    """One patient's progress.
+
+    Args:
+        db_path: the database file.
+        patient_id: the patient (must exist).
+        standard: ``jarm`` or ``aaos``: the normal band shown (never both).
+    """
+
+    def __init__(self, db_path: Path, patient_id: str, *, standard: str = "jarm") -> None:
+        self.db_path = Path(db_path)
+        self.patient_id = patient_id
+        self.standard = standard
+        self.roms: list = []
+        self.games: list = []
+        self.order: dict[str, int] = {}
+        self.tests: list[str] = []
+        self.titles: dict[str, str] = {}
+        self.selected = 0
+        self.error = ""
+        self._textures: dict[str, object] = {}
+        self._shown: tuple | None = None
+
+    # ------------------------------------------------------------------ data
+    def enter(self, app) -> None:
+        super().enter(app)
+        self.load()
+
+    def load(self) -> None:
+        from game.db import Database
+
+        try:
+            with Database(self.db_path) as db:
+                db.require_patient(self.patient_id)
+                self.roms = db.rom_results(self.patient_id)
+                self.games = db.exercise_results(self.patient_id)
+        except RehabError as exc:
+            self.error = str(exc)
+            return
+        self.order = session_order(list(self.roms) + list(self.games))
+        first: dict[str, int] = {}
+        for r in self.roms:
+            first.setdefault(r.test, self.order[r.session_uid])
+        self.tests = sorted(first, key=lambda t: (first[t], t))
+        self.infos = {t: test_info(t, self.standard) for t in self.tests}
+        self.selected = min(self.selected, max(len(self.tests) - 1, 0))
+
+    def exit(self) -> None:
+        for tex in self._textures.values():
+            tex.release()
+        self._textures.clear()
+
+    # ------------------------------------------------------------------ layout
+    def _layout(self):
+        w, h = self.app.screen.size_px
+        s = min(w / 1280.0, h / 720.0)
+        m = theme.MARGIN * s
+        list_w = 330 * s
+        top = 120 * s
+        rows = [(m, top + i * 58 * s, list_w, 50 * s) for i in range(len(self.tests))]
+        plot_x = m + list_w + 24 * s
+        plot = (plot_x, top, w - plot_x - m, (h - top - 60 * s) * 0.66)
+        games = (plot_x, plot[1] + plot[3] + 14 * s, plot[2], h - 60 * s - plot[1] - plot[3] - 14 * s)
+        return s, rows, plot, games
+
+    def _texture(self, key: str, rgb: np.ndarray):
+        old = self._textures.pop(key, None)
+        if old is not None:
+            old.release()
+        h, w = rgb.shape[:2]
+        tex = self.app.screen.ctx.texture((w, h), 3, np.ascontiguousarray(rgb).tobytes(), alignment=1)
+        self._textures[key] = tex
+        return tex
+
+    def _ensure_plots(self, plot: tuple, games: tuple) -> None:
+        want = (self.selected, round(plot[2]), round(plot[3]), round(games[3]))
+        if self._shown == want or not self.tests:
+            return
+        test = self.tests[self.selected]
+        info = self.infos[test]
+        rows = [r for r in self.roms if r.test == test]
+        self.plot_rgb = rom_plot_rgb(info.title, rows, self.order, info.normal_deg, self.standard,
+                                     (round(plot[2]), round(plot[3])))
+        self._texture("rom", self.plot_rgb)
+        if self.games and games[3] > 40:
+            self._texture("games", games_plot_rgb(self.games, self.order, (round(games[2]), round(games[3]))))
+        self._shown = want
+
+    # ------------------------------------------------------------------ input
+    def handle(self, event: InputEvent) -> None:
+        n = len(self.tests)
+        if isinstance(event, Press):
+            if not event.down:
+                return
+            if event.action is Action.UP and n:
+                self.selected = (self.selected - 1) % n
+            elif event.action is Action.DOWN and n:
+                self.selected = (self.selected + 1) % n
+            elif event.action is Action.BACK:
+                self.app.pop()
+        elif isinstance(event, Pointer) and event.kind in (PointerKind.MOVE, PointerKind.PRESS) and n:
+            w, h = self.app.screen.size_px
+            _, rows, _, _ = self._layout()
+            for i, (rx, ry, rw, rh) in enumerate(rows):
+                if rx <= event.x * w < rx + rw and ry <= event.y * h < ry + rh:
+                    self.selected = i
+
+    def latest_words(self, test: str) -> str:
+        """The latest result per side, rounded to 5: ``R 145°  L 140°``."""
+        parts = []
+        for side in ("right", "left"):
+            rows = [r for r in self.roms if r.test == test and r.side == side]
+            if rows:
+                parts.append(f"{side[0].upper()} {round_to_5(rows[-1].value_deg)}\N{DEGREE SIGN}")
+        return "  ".join(parts)
+
+    # ------------------------------------------------------------------ drawing
+    def render_2d(self, frame: Frame) -> None:
+        c = frame.canvas
+        w, h = frame.size_px
+        s, rows, plot, games = self._layout()
+        m = theme.MARGIN * s
+        c.text(f"Progress: patient {self.patient_id}", (m, 30 * s), round(theme.LARGE * s), theme.TEXT)
+        c.text(f"Active ROM, maxima per session; normal band {self.standard.upper()}", (w - m, 44 * s),
+               round(theme.SMALL * s), theme.TEXT_DIM, anchor="topright")
+        if self.error:
+            for k, line in enumerate(c.wrap(self.error, round(theme.BODY * s), w - 2 * m)[:4]):
+                c.text(line, (m, 140 * s + 40 * s * k), round(theme.BODY * s), theme.FAILURE)
+            return
+        if not self.tests:
+            c.text("No ROM results yet.", (plot[0] + plot[2] / 2, plot[1] + plot[3] / 2), round(theme.MEDIUM * s),
+                   theme.TEXT_DIM, anchor="center")
+        for i, (rect, test) in enumerate(zip(rows, self.tests)):
+            chosen = i == self.selected
+            if chosen:
+                c.rect(rect, (*theme.ACCENT_DARK, 255), radius=12 * s, border=3 * s, border_colour=theme.ACCENT)
+            c.text(self.infos[test].title, (rect[0] + 16 * s, rect[1] + rect[3] / 2), round(theme.SMALL * s),
+                   theme.TEXT if chosen else theme.TEXT_DIM, anchor="midleft")
+            c.text(self.latest_words(test), (rect[0] + rect[2] - 14 * s, rect[1] + rect[3] / 2),
+                   round(theme.SMALL * s), theme.TEXT if chosen else theme.TEXT_DIM, anchor="midright")
+        self._ensure_plots(plot, games)
+        if self.tests:
+            c.texture(self._textures["rom"], plot)
+        if self.games and "games" in self._textures:
+            c.texture(self._textures["games"], games)
+        else:
+            c.text("No games yet.", (games[0] + 20 * s, games[1] + 20 * s), round(theme.BODY * s), theme.TEXT_DIM)
+        c.text("Up / Down: test   Esc: back   (rehab report writes this as a file)", (w / 2, h - 16 * s),
+               round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")

@@ -1,0 +1,96 @@
+"""The HTML progress report: embedded PNG plots, the table, the CSV beside it, sessions in order."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import re
+
+import cv2
+import numpy as np
+import pytest
+
+from game.db import Database, DatabaseError
+from game.report import rom_plot_png, session_order, write_report
+from game.rom.session import RomResult
+
+
+def rom_result(test="shoulder_flexion", value=120.0, comp=(), est=()) -> RomResult:
+    return RomResult(test=test, title=test, side="right", angle=f"right_{test}", direction=1, mode="active",
+                     position="seated_arm_at_side", position_words="Seated.", standard="jarm", reference_deg=180.0,
+                     max_deg=value, start_deg=-10.0, range_deg=value + 10.0, max_time_s=3.0, started_s=1.0,
+                     ended_s=6.0, compensations=comp, estimated_markers=est, n_samples=150)
+
+
+@pytest.fixture()
+def db(tmp_path):
+    db = Database(tmp_path / "db.sqlite3")
+    db.add_patient("P001")
+    db.add_patient("P002")
+    # sessions inserted out of date order: the report must sort them by date
+    for day, value in (("2026-03-01", 130.0), ("2026-01-01", 100.0), ("2026-02-01", 117.4)):
+        s = db.start_session("P001", "rom", started_utc=f"{day}T09:00:00Z")
+        comp = ("the trunk leaned 10 degrees back",) if value == 117.4 else ()
+        db.add_rom_result(s, rom_result(value=value, comp=comp), recorded_utc=f"{day}T09:05:00Z")
+        db.add_rom_result(s, rom_result(test="shoulder_external_rotation", value=value / 3, est=("MRE2",)),
+                          recorded_utc=f"{day}T09:06:00Z")
+        g = db.start_session("P001", "exercise", started_utc=f"{day}T10:00:00Z")
+        db.add_exercise_result(g, "reach", int(value / 10), 300.0, recorded_utc=f"{day}T10:05:00Z")
+    yield db
+    db.close()
+
+
+def _pngs(html: str) -> list[np.ndarray]:
+    out = []
+    for b64 in re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html):
+        img = cv2.imdecode(np.frombuffer(base64.b64decode(b64), np.uint8), cv2.IMREAD_COLOR)
+        assert img is not None and img.shape[0] > 100
+        out.append(img)
+    return out
+
+
+def test_report_has_plots_table_and_csv(db, tmp_path):
+    html_path, csv_path = write_report(db, "P001", tmp_path / "out" / "report.html")
+    html = html_path.read_text(encoding="utf-8")
+    assert csv_path == tmp_path / "out" / "report.csv"
+    assert len(_pngs(html)) == 3  # two ROM tests and the games
+    assert "patient P001" in html and "Active ROM" in html and "JARM" in html
+    assert "the trunk leaned 10 degrees back" in html and "MRE2" in html
+    # table rows in session order, rounded to 5 with the raw value beside it
+    order = [m for m in re.findall(r"<td>(2026-\d\d-\d\d) 09:00:00</td><td>shoulder flexion", html)]
+    assert order == ["2026-01-01", "2026-02-01", "2026-03-01"]
+    assert "<b>115</b></td><td class=\"num\">117.4</td>" in html
+    with open(csv_path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 6 and rows[0]["value_deg"] == "100.0" and rows[0]["mode"] == "active"
+    assert {r["standard"] for r in rows} == {"jarm"} and rows[2]["rounded_deg"] == "115"
+
+
+def test_sessions_are_numbered_by_date(db):
+    order = session_order(db.rom_results("P001"))
+    dates = sorted((n, r.session_started_utc) for r in db.rom_results("P001") for u, n in order.items() if u == r.session_uid)
+    assert [d for _, d in dates] == sorted(d for _, d in dates)
+
+
+def test_progress_plot_shows_the_normal_band_and_the_points(db):
+    rows = [r for r in db.rom_results("P001") if r.test == "shoulder_flexion"]
+    order = session_order(rows)
+    img = cv2.imdecode(np.frombuffer(base64.b64decode(rom_plot_png("Shoulder flexion", rows, order, 180.0, "jarm")),
+                                     np.uint8), cv2.IMREAD_COLOR)
+    b, g, r = (img[..., k].astype(int) for k in range(3))
+    band = (g > 200) & (r > 190) & (r < 225) & (b > 190) & (b < 225) & (g - r > 12)  # pale green, alpha 0.18
+    blue = (b > 150) & (r < 80) & (g > 90) & (g < 150)  # the right side's line and markers
+    assert band.sum() > 2000 and blue.sum() > 200
+    # the band is above the points (normal 180, band to 162; the points reach 130)
+    assert np.median(np.nonzero(band)[0]) < np.median(np.nonzero(blue)[0])
+    # the points climb from session 1 to 3: blue pixels' height falls (image y) from left to right
+    ys, xs = np.nonzero(blue)
+    left, right = ys[xs < np.percentile(xs, 20)], ys[xs > np.percentile(xs, 80)]
+    assert left.mean() > right.mean()
+
+
+def test_a_patient_without_results_gets_a_report_and_an_unknown_one_an_error(db, tmp_path):
+    html_path, _ = write_report(db, "P002", tmp_path / "p2.html")
+    assert "No ROM results yet" in html_path.read_text(encoding="utf-8")
+    with pytest.raises(DatabaseError, match="no patient 'P404'"):
+        write_report(db, "P404", tmp_path / "x.html")
