@@ -80,6 +80,7 @@ from __future__ import annotations
 import statistics
 import time
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -322,6 +323,53 @@ class ColourTable:
         np.take(self.lut, index, out=labels, mode="clip")
         return labels
 
+    def classify_windows(self, images: Sequence[np.ndarray], image_index: np.ndarray, boxes: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Label the pixels of many windows, in several images, with one table look-up.
+
+        The per-frame tracker's search windows are small (a few hundred to a few thousand pixels):
+        gathering all of them into one array and reading the table once costs far less than one
+        call per window.
+
+        Args:
+            images: (H, W, 3) uint8 OpenCV BGR images.
+            image_index: (K,) int index into ``images`` of each window.
+            boxes: (K, 4) int ``x0, y0, x1, y1`` of each window, inside its image, end exclusive.
+
+        Returns:
+            labels: (P,) uint8 labels of all windows' pixels, window after window, each window in
+                row order (row-major ``(y1 - y0, x1 - x0)``).
+            starts: (K + 1,) int64 offset of each window's first pixel in ``labels``; the last
+                entry is P.
+        """
+        for img in images:
+            _check_image(img)
+        boxes = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
+        widths = boxes[:, 2] - boxes[:, 0]
+        heights = boxes[:, 3] - boxes[:, 1]
+        image_index = np.asarray(image_index, dtype=np.int64).reshape(-1)
+        sizes = np.array([img.shape[1::-1] for img in images], dtype=np.int64).reshape(-1, 2)  # (w, h)
+        size = sizes[image_index]
+        if (widths < 0).any() or (heights < 0).any() or (boxes[:, :2] < 0).any() or (boxes[:, 2:] > size).any():
+            raise ValueError("window boxes must satisfy 0 <= x0 <= x1 <= W and 0 <= y0 <= y1 <= H")
+        starts = np.zeros(len(boxes) + 1, dtype=np.int64)
+        np.cumsum(widths * heights, out=starts[1:])
+        words = np.empty(int(starts[-1]), dtype=np.uint32)
+        # OpenCV copies a window's BGR pixels into 4-byte BGRA words (alpha 255 on top) several
+        # times faster than numpy reads them at stride 3; the top byte is masked off after
+        bytes_ = words.view(np.uint8)
+        for img_k, (x0, y0, x1, y1), a, b in zip(image_index.tolist(), boxes.tolist(), starts[:-1].tolist(),
+                                                 starts[1:].tolist()):
+            if b > a:
+                cv2.cvtColor(images[img_k][y0:y1, x0:x1], cv2.COLOR_BGR2BGRA,
+                             dst=bytes_[4 * a:4 * b].reshape(y1 - y0, x1 - x0, 4))
+        np.bitwise_and(words, 0xFFFFFF, out=words)
+        if self.bits < 8:
+            words = _quantize_index(words, self.bits)
+        labels = np.empty(words.shape, dtype=np.uint8)
+        np.take(self.lut, words, out=labels, mode="clip")
+        return labels, starts
+
 
 def _check_image(image_bgr: np.ndarray) -> None:
     if image_bgr.dtype != np.uint8 or image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
@@ -330,11 +378,14 @@ def _check_image(image_bgr: np.ndarray) -> None:
         )
 
 
-def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int,
+                 out: np.ndarray | None = None) -> np.ndarray:
     """Full 24-bit table index ``B | G << 8 | R << 16`` of each pixel of a window.
 
+    Args:
+        out: (y1 - y0, x1 - x0) uint32 array to write into (default: a new one).
     Returns:
-        (y1 - y0, x1 - x0) uint32.
+        (y1 - y0, x1 - x0) uint32 (``out`` when given).
 
     The fast path reads each pixel's 3 bytes as part of an unaligned little-endian uint32 at
     stride 3. Reading 4 bytes from the pixel's first byte overruns the buffer at the image's last
@@ -343,7 +394,8 @@ def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> n
     """
     h, w = image_bgr.shape[:2]
     nh, nw = y1 - y0, x1 - x0
-    out = np.empty((nh, nw), dtype=np.uint32)
+    if out is None:
+        out = np.empty((nh, nw), dtype=np.uint32)
     if nh == 0 or nw == 0:
         return out
     if not (image_bgr.flags.c_contiguous and image_bgr.strides[1] == 3):

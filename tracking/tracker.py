@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
-from calibration.camera import Camera
+from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
 from tracking.angles import joint_angles
 from tracking.blobs import find_blobs
@@ -155,6 +155,8 @@ class Tracker:
         self.measurer = FrameMeasurer(self.cameras, self.table, markerset.radius_m)
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
+        self._stack = CameraStack(self.cameras)
+        self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
@@ -296,100 +298,101 @@ class Tracker:
         Q (equation 4) is a product of one factor per camera, 1 / (1 + |G_j C_j|), so the candidate
         of largest Q takes in every camera the centroid nearest to the predicted image position.
         The window's pixels of the marker's colour usually form that one ball: its centroid comes
-        from the mask's moments, computed for all of a camera's windows at once (one gather of the
-        windows' pixels, one table look-up, array reductions). A window whose mask is too large or
-        not round holds several balls (or clutter): then its regions are separated and the one
-        nearest to the prediction is taken.
+        from the mask's moments. Every marker is projected into every camera at once, and the
+        windows of all markers in all cameras are gathered into one array for one table look-up
+        (:meth:`ColourTable.classify_windows`); the moments are sums over the few marker-coloured
+        pixels. A window whose mask is too large or not round holds several balls (or clutter):
+        then its regions are separated and the one nearest to the prediction is taken.
 
         Returns:
             uv (M, C, 2) float64 centroids (NaN where none), radius (M, C) equivalent radius in px.
         """
+        p = self.params
         m_count = self.markerset.n_markers
         n_cams = len(self.cameras)
         uv_out = np.full((m_count, n_cams, 2), np.nan)
         rad_out = np.full((m_count, n_cams), np.nan)
-        self._pred_uv = np.full((m_count, n_cams, 2), np.nan)  # predictions in each image (for Q)
-        # markers measured last frame share small windows (vectorized); the others (coming back
-        # from hiding: larger uncertainty) get windows of their own size
-        recent = known & (self.frames_unmeasured == 0)
-        groups = [np.flatnonzero(recent)] + [np.array([m]) for m in np.flatnonzero(known & ~recent)]
-        for group in groups:
-            if group.size:
-                self._windows(images, pred, sigma, group, uv_out, rad_out)
+        uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
+        self._pred_uv = uv
+        focal = self._stack.focal_px
+        safe_depth = np.maximum(depth, 1e-3)
+        r_px = focal * self.markerset.radius_m / safe_depth
+        half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
+        size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)  # (C, 2) width, height
+        with np.errstate(invalid="ignore"):
+            valid = known[:, None] & np.isfinite(uv).all(axis=2) & (depth > 0)
+            valid &= (uv[..., 0] > -half) & (uv[..., 0] < size[:, 0] + half)
+            valid &= (uv[..., 1] > -half) & (uv[..., 1] < size[:, 1] + half)
+        self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
+        if valid.any():
+            self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
         return uv_out, rad_out
 
-    def _windows(self, images, pred, sigma, idx, uv_out, rad_out) -> None:
-        """Fill uv_out/rad_out for markers ``idx``, whose windows share one size per camera."""
-        p = self.params
-        lut = self.table.lut
-        target = (self.colour[idx] + 1).astype(np.uint8)
-        for c, (cam, img) in enumerate(zip(self.cameras, images)):
-            uv = cam.project(pred[idx])
-            self._pred_uv[idx, c] = uv
-            depth = cam.world_to_camera(pred[idx])[:, 2]
-            f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
-            safe_depth = np.maximum(depth, 1e-3)
-            r_px = f * self.markerset.radius_m / safe_depth
-            half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * f * sigma[idx] / safe_depth, p.max_window_px)
-            h_img, w_img = img.shape[:2]
-            valid = np.isfinite(uv).all(axis=1) & (depth > 0)
-            valid &= (uv[:, 0] > -half) & (uv[:, 0] < w_img + half) & (uv[:, 1] > -half) & (uv[:, 1] < h_img + half)
-            if not valid.any():
-                continue
-            # one window size for the camera: the largest needed (hidden markers' larger windows
-            # are rare and short-lived)
-            hw = int(np.ceil(half[valid].max()))
-            size = 2 * hw + 1
-            cx = np.round(np.where(valid, uv[:, 0], 0)).astype(np.int64)
-            cy = np.round(np.where(valid, uv[:, 1], 0)).astype(np.int64)
-            offs = np.arange(-hw, hw + 1)
-            xs = cx[:, None] + offs[None, :]  # (K, S)
-            ys = cy[:, None] + offs[None, :]
-            # each marker keeps to its own window inside the shared size (a fast marker's large
-            # window must not make the others swallow their same-coloured neighbours)
-            own = np.abs(offs)[None, :] <= half[:, None]  # (K, S)
-            inside = (((xs >= 0) & (xs < w_img)) & own)[:, None, :] & (((ys >= 0) & (ys < h_img)) & own)[:, :, None]
-            flat = ys.clip(0, h_img - 1)[:, :, None] * w_img + xs.clip(0, w_img - 1)[:, None, :]
-            img_c = np.ascontiguousarray(img)
-            words = np.ndarray((h_img * w_img - 1,), dtype="<u4", buffer=img_c, strides=(3,))
-            pix = np.take(words, flat, mode="clip")  # the image's last pixel reads its neighbour
-            np.bitwise_and(pix, 0xFFFFFF, out=pix)
-            labels = np.take(lut, pix)
-            mask = (labels == target[:, None, None]) & inside & valid[:, None, None]
-            col = mask.sum(axis=1, dtype=np.float64)  # (K, S) counts per column
-            row = mask.sum(axis=2, dtype=np.float64)  # (K, S) counts per row
-            m00 = col.sum(axis=1)
-            ok = m00 >= self.gates[c].min_area_px
-            with np.errstate(divide="ignore", invalid="ignore"):
-                mx = (col * offs).sum(axis=1) / m00
-                my = (row * offs).sum(axis=1) / m00
-                mu20 = (col * offs**2).sum(axis=1) / m00 - mx**2
-                mu02 = (row * offs**2).sum(axis=1) / m00 - my**2
-                mu11 = np.einsum("kij,i,j->k", mask, offs.astype(np.float64), offs.astype(np.float64)) / m00 - mx * my
-                spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
-                lam1 = (mu20 + mu02) / 2.0 + spread
-                lam2 = (mu20 + mu02) / 2.0 - spread
-                roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
-            # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
-            ok &= m00 >= 0.4 * np.pi * r_px**2
-            simple = ok & (m00 <= 1.6 * np.pi * r_px**2) & (roundness >= 0.6)
-            uv_out[idx[simple], c, 0] = cx[simple] + mx[simple]
-            uv_out[idx[simple], c, 1] = cy[simple] + my[simple]
-            rad_out[idx[simple], c] = np.sqrt(m00[simple] / np.pi)
-            gate = self.gates[c]
-            for k in np.flatnonzero(ok & ~simple):  # several regions in the window: separate them
-                m = idx[k]
-                x0, y0 = max(0, cx[k] - hw), max(0, cy[k] - hw)
-                x1, y1 = min(w_img, cx[k] + hw + 1), min(h_img, cy[k] + hw + 1)
-                win_labels = self.table.classify_window(img, x0, y0, x1, y1)
-                blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
-                                   max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
-                                   offset_px=(x0, y0))
-                sel = np.flatnonzero(blobs.colour == self.colour[m])
-                if sel.size:
-                    j = sel[np.argmin(np.linalg.norm(blobs.uv_px[sel] - uv[k], axis=1))]
-                    uv_out[m, c] = blobs.uv_px[j]
-                    rad_out[m, c] = blobs.radius_px[j]
+    def _windows(self, images, valid, uv, half, r_px, known, size, uv_out, rad_out) -> None:
+        """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
+
+        A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
+        the image border; the moments are taken about that pixel centre.
+        """
+        mi, ci = np.nonzero(valid)
+        cx = np.round(uv[mi, ci, 0]).astype(np.int64)
+        cy = np.round(uv[mi, ci, 1]).astype(np.int64)
+        ext = np.floor(half[mi, ci]).astype(np.int64)
+        w_img, h_img = size[ci, 0], size[ci, 1]
+        x0 = np.minimum(np.maximum(cx - ext, 0), w_img)
+        y0 = np.minimum(np.maximum(cy - ext, 0), h_img)
+        x1 = np.maximum(np.minimum(cx + ext + 1, w_img), x0)
+        y1 = np.maximum(np.minimum(cy + ext + 1, h_img), y0)
+        labels, starts = self.table.classify_windows(images, ci, np.stack([x0, y0, x1, y1], axis=1))
+        # the marker's own colour among the (few) marker-coloured pixels of each window
+        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
+        win = np.searchsorted(starts, hit, side="right") - 1
+        own = labels[hit] == self.colour[mi[win]] + 1
+        hit, win = hit[own], win[own]
+        row, col = np.divmod(hit - starts[win], (x1 - x0)[win])
+        dx = (col + (x0 - cx)[win]).astype(np.float64)  # offsets from the window's centre pixel
+        dy = (row + (y0 - cy)[win]).astype(np.float64)
+        k_count = mi.size
+        # sums of integers: exact in float64 whatever the order
+        m00 = np.bincount(win, minlength=k_count).astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mx = np.bincount(win, dx, k_count) / m00
+            my = np.bincount(win, dy, k_count) / m00
+            mu20 = np.bincount(win, dx * dx, k_count) / m00 - mx**2
+            mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
+            mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
+            spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
+            lam1 = (mu20 + mu02) / 2.0 + spread
+            lam2 = (mu20 + mu02) / 2.0 - spread
+            roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
+        ball_area = np.pi * r_px[mi, ci] ** 2
+        # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
+        ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
+        simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
+        ms, cs = mi[simple], ci[simple]
+        uv_out[ms, cs, 0] = cx[simple] + mx[simple]
+        uv_out[ms, cs, 1] = cy[simple] + my[simple]
+        rad_out[ms, cs] = np.sqrt(m00[simple] / np.pi)
+        crowded = np.flatnonzero(ok & ~simple)
+        if crowded.size == 0:
+            return
+        # several regions in the window: separate them, in a window of the size that the markers
+        # measured last frame share in this camera (the largest of theirs), or of the marker's own
+        recent = known & (self.frames_unmeasured == 0)
+        for k in crowded:
+            m, c = int(mi[k]), int(ci[k])
+            hw = int(np.ceil(half[recent & valid[:, c], c].max() if recent[m] else half[m, c]))
+            img, gate = images[c], self.gates[c]
+            x0k, y0k = max(0, cx[k] - hw), max(0, cy[k] - hw)
+            x1k, y1k = min(w_img[k], cx[k] + hw + 1), min(h_img[k], cy[k] + hw + 1)
+            win_labels = self.table.classify_window(img, x0k, y0k, x1k, y1k)
+            blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
+                               max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
+                               offset_px=(x0k, y0k), colours=(int(self.colour[m]),))
+            if len(blobs):
+                j = np.argmin(np.linalg.norm(blobs.uv_px - uv[m, c], axis=1))
+                uv_out[m, c] = blobs.uv_px[j]
+                rad_out[m, c] = blobs.radius_px[j]
 
     def _choose(self, obs, pred, sigma, known):
         """Triangulate every marker from its window centroids; keep geometrically consistent ones."""
