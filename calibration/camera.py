@@ -346,6 +346,11 @@ class CameraStack:
     def __len__(self) -> int:
         return len(self.cameras)
 
+    def world_to_cameras(self, p_world_m: np.ndarray) -> np.ndarray:
+        """(N, 3) world metres -> (N, C, 3) camera-frame metres of each point in each camera."""
+        p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
+        return (np.matmul(p, self._rotation_t) + self.t_m[:, None, :]).transpose(1, 0, 2)
+
     def project(self, p_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project points into every camera.
 
@@ -356,9 +361,8 @@ class CameraStack:
                 :meth:`Camera.project`.
             depth_m: (N, C) float64 camera-frame z of each point in each camera.
         """
-        p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
         # (C, N, 3): the same products as Camera.world_to_camera, camera by camera
-        p_cam = np.matmul(p, self._rotation_t) + self.t_m[:, None, :]
+        p_cam = self.world_to_cameras(p_world_m).transpose(1, 0, 2)
         z = p_cam[..., 2]
         K = self.K
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

@@ -42,6 +42,9 @@ from tracking.triangulation import reprojection_errors_px, triangulate
 log = logging.getLogger(__name__)
 
 
+_MEASURED = np.uint8(MarkerStatus.MEASURED)
+
+
 class TrackingState(enum.IntEnum):
     """What the tracker is doing."""
 
@@ -124,11 +127,6 @@ STEP_STAGES = (
     "full-frame re-acquisition",
     "joint angles",
 )
-
-
-def _depth_rows(geo: RigGeometry, p: np.ndarray) -> np.ndarray:
-    """(M, 3) points -> (M, C) depth in each camera (NaN rows stay NaN)."""
-    return np.einsum("cj,mj->mc", geo.extrinsics[:, 2, :3], p) + geo.extrinsics[None, :, 2, 3]
 
 
 class Tracker:
@@ -313,7 +311,7 @@ class Tracker:
         uv_out = np.full((m_count, n_cams, 2), np.nan)
         rad_out = np.full((m_count, n_cams), np.nan)
         uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
-        self._pred_uv = uv
+        self._pred_uv, self._pred_depth = uv, depth
         focal = self._stack.focal_px
         safe_depth = np.maximum(depth, 1e-3)
         r_px = focal * self.markerset.radius_m / safe_depth
@@ -397,80 +395,96 @@ class Tracker:
     def _choose(self, obs, pred, sigma, known):
         """Triangulate every marker from its window centroids; keep geometrically consistent ones."""
         uv, rad = obs
-        geo = self.geometry
+        params = self.params
+        stack = self._stack
         m_count, n_cams = uv.shape[:2]
-        xn = np.full_like(uv, np.nan)
-        for c, cam in enumerate(self.cameras):
-            ok = np.isfinite(uv[:, c, 0])
-            if ok.any():
-                xn[ok, c] = cam.undistort_points(uv[ok, c])
+        xn = stack.undistort_points(uv)
         seen = np.isfinite(xn[..., 0]) & known[:, None]
+        ball_px = stack.focal_px * self.markerset.radius_m  # ball radius in pixels at 1 m
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
         # shifted centroid: leave it out while two full views remain
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, np.nan_to_num(pred)))
-        partial = seen & (ratio < 0.8)
+            partial = seen & (rad / (ball_px / self._pred_depth) < 0.8)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         seen &= ~(partial & keep_full[:, None])
-        pts = np.full((m_count, 3), np.nan)
-        for _ in range(n_cams):
-            pts = triangulate(geo.extrinsics, xn, seen)
-            err = reprojection_errors_px(geo.extrinsics, geo.focal_px, pts, xn, seen)
+        ext = self.geometry.extrinsics
+        pts = triangulate(ext, xn, seen)
+        err, depth = self._reprojection(pts, xn)
+        rows = np.arange(m_count)
+        for _ in range(n_cams):  # drop the worst view while it misses and three or more remain
             worst = np.argmax(np.where(seen, err, -1.0), axis=1)
-            worst_err = err[np.arange(m_count), worst]
-            drop = (worst_err > self.params.max_reproj_px) & (seen.sum(axis=1) >= 3)
+            drop = (err[rows, worst] > params.max_reproj_px) & (seen.sum(axis=1) >= 3)
             if not drop.any():
                 break
-            seen[np.flatnonzero(drop), worst[drop]] = False
+            redo = np.flatnonzero(drop)
+            seen[redo, worst[drop]] = False
+            pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
+            err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         n_seen = seen.sum(axis=1)
-        sq = np.where(seen, err, 0.0) ** 2
-        rms = np.sqrt(sq.sum(axis=1) / np.maximum(n_seen, 1))
+        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ np.ones(n_cams) / np.maximum(n_seen, 1))
         # two views always meet in some point: a two-camera candidate must fit tightly and show a
         # ball of the right size in both views (as in tracking.reconstruction)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_now = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, pts))
-        size_fit = np.all(~seen | ((ratio_now > 0.65) & (ratio_now < 1.35)), axis=1)
-        two_ok = (rms <= self.params.max_reproj_px_two_view) & size_fit
-        with np.errstate(invalid="ignore"):
-            measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px) & ((n_seen >= 3) | two_ok)
-            measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
-        # Q of the chosen candidate, for the one-ball-one-marker rule
-        q_cam = 1.0 / (1.0 + np.linalg.norm(uv - self._pred_uv, axis=-1))
-        q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
+            ratio_now = rad / (ball_px / depth)
+            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now < 1.35))).any(axis=1)
+            measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
+            measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
+            off = pts - pred
+            measured &= np.sqrt((off * off) @ np.ones(3)) <= params.gate_sigmas * sigma + 0.01
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
-        was_measured = self.status == MarkerStatus.MEASURED
-        d = np.linalg.norm(new_pos[:, None, :] - new_pos[None, :, :], axis=-1)
-        clash = measured[:, None] & measured[None, :] & (d < self.params.same_ball_m)
+        diff = new_pos[:, None, :] - new_pos[None, :, :]
+        dist = np.sqrt((diff * diff) @ np.ones(3))  # (M, M), NaN unless both measured
+        with np.errstate(invalid="ignore"):
+            clash = dist < params.same_ball_m
         np.fill_diagonal(clash, False)
         if clash.any():
-            rank = np.lexsort((-q_best, ~was_measured))
-            for a in rank:
+            # Q (equation 4) of the chosen candidate
+            duv = uv - self._pred_uv
+            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ np.ones(2)))
+            q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
+            was_measured = self.status == _MEASURED
+            for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        measured &= self._segments_consistent(new_pos, measured)
+        measured &= self._segments_consistent(dist, new_pos, measured)
         new_pos[~measured] = np.nan
+        self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         return new_pos, measured
 
-    def _segments_consistent(self, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    def _reprojection(self, pts: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
+        cam = self._stack.world_to_cameras(pts)
+        depth = cam[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = cam[..., :2] / depth[..., None] - xn
+        return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
+
+    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
         """False for a marker whose distance to a segment neighbour broke its learned length.
 
         Neighbours measured this frame count; so do neighbours known only from last frame's
         estimate, against a newly found marker (with twice the tolerance), so that a marker
         coming back from hiding cannot take a ball that is not where its segment says.
+
+        Args:
+            dist: (M, M) distances between the markers' candidate positions ``pos`` (NaN where
+                either has none).
+            pos: (M, 3) candidate positions; measured: (M,) bool.
         """
         tol = self.params.segment_tol_m
-        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
-        dev = np.abs(d - self.seg_length)
-        check = self._same_segment & measured[:, None] & measured[None, :] & np.isfinite(self.seg_length)
-        bad_pair = check & (dev > tol)
-        returning = measured & (self.status != MarkerStatus.MEASURED)
-        known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
-        if returning.any() and known_prev.any():
-            d_prev = np.linalg.norm(pos[:, None, :] - self.positions[None, :, :], axis=-1)
-            chk = self._same_segment & returning[:, None] & known_prev[None, :] & np.isfinite(self.seg_length)
-            bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
-            measured = measured & ~bad_prev
+        with np.errstate(invalid="ignore"):
+            bad_pair = self._same_segment & measured[:, None] & measured[None, :] & (np.abs(dist - self.seg_length) > tol)
+        returning = measured & (self.status != _MEASURED)
+        if returning.any():
+            known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
+            if known_prev.any():
+                diff = pos[:, None, :] - self.positions[None, :, :]
+                d_prev = np.sqrt((diff * diff) @ np.ones(3))
+                chk = self._same_segment & returning[:, None] & known_prev[None, :]
+                with np.errstate(invalid="ignore"):
+                    bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
+                measured = measured & ~bad_prev
         ok = measured.copy()
         # drop the marker involved in most broken pairs, one at a time
         while bad_pair.any():
