@@ -65,6 +65,13 @@ class TrackerSample:
         angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined.
         message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
+        windows_px: (M, C, 3) float64 search window of each marker in each camera this frame:
+            predicted image position (u, v) and half size, pixels (the pixels within the half size
+            of the rounded position were searched); NaN where the marker had no window in that
+            camera; None when no windows were searched (waiting for identification).
+        uv_px: (M, C, 2) float64 window centroid from which each marker's position was
+            triangulated in each camera this frame; NaN where none (not measured, view not used,
+            or the marker found again by full-frame measurement); None when no windows were searched.
     """
 
     frame_index: int
@@ -75,6 +82,8 @@ class TrackerSample:
     angles_deg: dict[str, float]
     message: str = ""
     n_points: int = 0
+    windows_px: np.ndarray | None = None
+    uv_px: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,6 +206,7 @@ class Tracker:
         t = index / self.fps if time_s is None else float(time_s)
         message = ""
         n_points = 0
+        self._windows_px = self._used_uv = None
         if self.state == TrackingState.WAITING:
             t0 = time.perf_counter()
             points = self.measurer.measure(images)
@@ -218,6 +228,8 @@ class Tracker:
             angles_deg={k: float(v) for k, v in angles.items()},
             message=message,
             n_points=n_points,
+            windows_px=self._windows_px,
+            uv_px=self._used_uv,
         )
 
     # ------------------------------------------------------------------ identification
