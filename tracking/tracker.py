@@ -165,6 +165,7 @@ class Tracker:
         self._stack = CameraStack(self.cameras)
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
+        self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
         self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
         self.times = StageTimes(STEP_STAGES)
@@ -357,11 +358,15 @@ class Tracker:
         # the marker's own colour among the (few) marker-coloured pixels of each window
         hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
         win = np.searchsorted(starts, hit, side="right") - 1
-        own = labels[hit] == self.colour[mi[win]] + 1
+        own = labels[hit] == self._label[mi][win]
         hit, win = hit[own], win[own]
-        row, col = np.divmod(hit - starts[win], (x1 - x0)[win])
-        dx = (col + (x0 - cx)[win]).astype(np.float64)  # offsets from the window's centre pixel
-        dy = (row + (y0 - cy)[win]).astype(np.float64)
+        # pixel -> column and row in its window -> offsets from the window's centre pixel, in
+        # float64 (exact for these small integers; a float division is cheaper than an integer one)
+        local = hit - starts[win]
+        width = (x1 - x0).astype(np.float64)[win]
+        row = np.floor(local / width)
+        dx = local - row * width + (x0 - cx).astype(np.float64)[win]
+        dy = row + (y0 - cy).astype(np.float64)[win]
         k_count = mi.size
         # sums of integers: exact in float64 whatever the order
         m00 = np.bincount(win, minlength=k_count).astype(np.float64)
