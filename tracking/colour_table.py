@@ -359,10 +359,18 @@ class ColourTable:
         starts = np.zeros(len(boxes) + 1, dtype=np.int64)
         np.cumsum(widths * heights, out=starts[1:])
         words = np.empty(int(starts[-1]), dtype=np.uint32)
+        # images whose pixels OpenCV can read in place (any row stride); others go through numpy
+        plain = [img.strides[1:] == (3, 1) for img in images]
+        as_bytes = words.view(np.uint8)
+        bgra = cv2.COLOR_BGR2BGRA
         for img_k, (x0, y0, x1, y1), a, b in zip(image_index.tolist(), boxes.tolist(), starts[:-1].tolist(),
                                                  starts[1:].tolist()):
-            if b > a:
-                _pixel_words(images[img_k], x0, y0, x1, y1, out=words[a:b].reshape(y1 - y0, x1 - x0), masked=False)
+            if b == a:
+                continue
+            if plain[img_k]:  # the loop body of _pixel_words, without its checks
+                cv2.cvtColor(images[img_k][y0:y1, x0:x1], bgra, dst=as_bytes[4 * a:4 * b].reshape(y1 - y0, x1 - x0, 4))
+            else:
+                _pixel_words(images[img_k], x0, y0, x1, y1, out=words[a:b].reshape(y1 - y0, x1 - x0))
         np.bitwise_and(words, 0xFFFFFF, out=words)
         if self.bits < 8:
             words = _quantize_index(words, self.bits)
@@ -379,13 +387,11 @@ def _check_image(image_bgr: np.ndarray) -> None:
 
 
 def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int,
-                 out: np.ndarray | None = None, *, masked: bool = True) -> np.ndarray:
+                 out: np.ndarray | None = None) -> np.ndarray:
     """Full 24-bit table index ``B | G << 8 | R << 16`` of each pixel of a window.
 
     Args:
         out: (y1 - y0, x1 - x0) C-contiguous uint32 array to write into (default: a new one).
-        masked: False leaves 0xFF in the top byte where OpenCV wrote the words (the caller masks
-            many windows at once).
     Returns:
         (y1 - y0, x1 - x0) uint32 (``out`` when given).
 
@@ -401,8 +407,7 @@ def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int,
     win = image_bgr[y0:y1, x0:x1]
     if win.strides[1:] == (3, 1) and out.flags.c_contiguous:
         cv2.cvtColor(win, cv2.COLOR_BGR2BGRA, dst=out.view(np.uint8).reshape(nh, nw, 4))
-        if masked:
-            np.bitwise_and(out, 0xFFFFFF, out=out)
+        np.bitwise_and(out, 0xFFFFFF, out=out)
     else:  # an unusual memory layout (e.g. a channel-reversed view)
         np.left_shift(win[..., 2], 16, out=out, dtype=np.uint32)
         out |= np.left_shift(win[..., 1], 8, dtype=np.uint32)
