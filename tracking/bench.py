@@ -95,7 +95,8 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> It
     ms = load_markerset(base.markerset)
     table = ColourTable.build(ms.palette)
     with one_core() as where:
-        yield f"per-frame pipeline below: {where}; wall-clock medians (CPU time of the thread in brackets)"
+        yield (f"per-frame pipeline below: {where}; wall-clock medians (CPU time of the thread in brackets: "
+               "on a busy machine the wall clock also counts other processes)")
         # full-frame measurement
         measurer = FrameMeasurer(cameras, table, ms.radius_m)
         measurer.measure(frames[0])  # warm-up (page in the table)
@@ -117,19 +118,21 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> It
             tracker.step(f)
         if tracker.state == TrackingState.TRACKING:
             tracker.times.reset()
-            wall, cpu = np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0)
+            wall, cpu_track = np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0)
             track_s = float(wall)
             yield (
                 f"steady-state tracking, 4x640x480:         {1000 * track_s:7.2f} ms per frame set "
-                f"({1 / track_s:6.1f} frame sets/s; CPU {1000 * cpu:.2f} ms), "
-                f"{measure_s / track_s:.1f}x faster than full-frame measurement"
+                f"({1 / track_s:6.1f} frame sets/s; CPU {1000 * cpu_track:.2f} ms = {1 / cpu_track:.0f}/s), "
+                f"{measure_s / track_s:.1f}x faster than full-frame measurement (CPU {cpu / cpu_track:.1f}x)"
             )
             yield "    stages (mean ms): " + ", ".join(f"{k} {v:.2f}" for k, v in tracker.times.per_frame_ms().items())
-            ratio, rate = measure_s / track_s, 1 / track_s
-            yield (
-                f"speed target (>= 5x full frame, >= 300 frame sets/s on one core): "
-                f"{ratio:.1f}x {'met' if ratio >= 5 else 'NOT met'}, {rate:.0f}/s {'met' if rate >= 300 else 'NOT met'}"
-            )
+            for what, ratio, rate in (("wall-clock", measure_s / track_s, 1 / track_s),
+                                      ("CPU time", cpu / cpu_track, 1 / cpu_track)):
+                yield (
+                    f"speed target (>= 5x full frame, >= 300 frame sets/s on one core), {what}: "
+                    f"{ratio:.1f}x {'met' if ratio >= 5 else 'NOT met'}, "
+                    f"{rate:.0f}/s {'met' if rate >= 300 else 'NOT met'}"
+                )
         else:
             yield "steady-state tracking: the markers were not identified on these frames (no reference pose)"
 

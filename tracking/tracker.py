@@ -491,7 +491,8 @@ class Tracker:
         """
         tol = self.params.segment_tol_m
         with np.errstate(invalid="ignore"):
-            bad_pair = self._same_segment & measured[:, None] & measured[None, :] & (np.abs(dist - self.seg_length) > tol)
+            broken = np.abs(dist - self.seg_length) > tol
+        bad_pair = self._same_segment & measured[:, None] & measured[None, :] & broken
         returning = measured & (self.status != _MEASURED)
         if returning.any():
             known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
