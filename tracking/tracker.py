@@ -330,10 +330,9 @@ class Tracker:
         r_px = focal * self.markerset.radius_m / safe_depth
         half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
         size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)  # (C, 2) width, height
+        # in front of the camera (project() gives NaN behind it) and the window overlaps the image
         with np.errstate(invalid="ignore"):
-            valid = known[:, None] & np.isfinite(uv).all(axis=2) & (depth > 0)
-            valid &= (uv[..., 0] > -half) & (uv[..., 0] < size[:, 0] + half)
-            valid &= (uv[..., 1] > -half) & (uv[..., 1] < size[:, 1] + half)
+            valid = known[:, None] & (uv > -half[..., None]).all(axis=2) & (uv < size + half[..., None]).all(axis=2)
         self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
         if valid.any():
             self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
@@ -346,15 +345,12 @@ class Tracker:
         the image border; the moments are taken about that pixel centre.
         """
         mi, ci = np.nonzero(valid)
-        cx = np.round(uv[mi, ci, 0]).astype(np.int64)
-        cy = np.round(uv[mi, ci, 1]).astype(np.int64)
-        ext = np.floor(half[mi, ci]).astype(np.int64)
-        w_img, h_img = size[ci, 0], size[ci, 1]
-        x0 = np.minimum(np.maximum(cx - ext, 0), w_img)
-        y0 = np.minimum(np.maximum(cy - ext, 0), h_img)
-        x1 = np.maximum(np.minimum(cx + ext + 1, w_img), x0)
-        y1 = np.maximum(np.minimum(cy + ext + 1, h_img), y0)
-        labels, starts = self.table.classify_windows(images, ci, np.stack([x0, y0, x1, y1], axis=1))
+        centre = np.round(uv[mi, ci]).astype(np.int64)  # (K, 2) window centre pixel x, y
+        ext = half[mi, ci].astype(np.int64)[:, None]  # half size rounded down (it is positive)
+        size_k = size[ci]
+        lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
+        hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
+        labels, starts = self.table.classify_windows(images, ci, np.concatenate([lo, hi], axis=1))
         # the marker's own colour among the (few) marker-coloured pixels of each window
         hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
         win = np.searchsorted(starts, hit, side="right") - 1
@@ -363,10 +359,11 @@ class Tracker:
         # pixel -> column and row in its window -> offsets from the window's centre pixel, in
         # float64 (exact for these small integers; a float division is cheaper than an integer one)
         local = hit - starts[win]
-        width = (x1 - x0).astype(np.float64)[win]
+        width = (hi[:, 0] - lo[:, 0]).astype(np.float64)[win]
+        offset = (lo - centre).astype(np.float64)[win]  # (n, 2) of the window's first pixel
         row = np.floor(local / width)
-        dx = local - row * width + (x0 - cx).astype(np.float64)[win]
-        dy = row + (y0 - cy).astype(np.float64)[win]
+        dx = local - row * width + offset[:, 0]
+        dy = row + offset[:, 1]
         k_count = mi.size
         # sums of integers: exact in float64 whatever the order
         m00 = np.bincount(win, minlength=k_count).astype(np.float64)
@@ -377,17 +374,14 @@ class Tracker:
             mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
             mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
             spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
-            lam1 = (mu20 + mu02) / 2.0 + spread
-            lam2 = (mu20 + mu02) / 2.0 - spread
-            roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
+            mean_var = (mu20 + mu02) / 2.0
+            roundness = np.sqrt(np.clip(mean_var - spread, 0, None) / (mean_var + spread))
         ball_area = np.pi * r_px[mi, ci] ** 2
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
         ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
         simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
-        ms, cs = mi[simple], ci[simple]
-        uv_out[ms, cs, 0] = cx[simple] + mx[simple]
-        uv_out[ms, cs, 1] = cy[simple] + my[simple]
-        rad_out[ms, cs] = np.sqrt(m00[simple] / np.pi)
+        uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
+        rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
         crowded = np.flatnonzero(ok & ~simple)
         if crowded.size == 0:
             return
@@ -398,8 +392,9 @@ class Tracker:
             m, c = int(mi[k]), int(ci[k])
             hw = int(np.ceil(half[recent & valid[:, c], c].max() if recent[m] else half[m, c]))
             img, gate = images[c], self.gates[c]
-            x0k, y0k = max(0, cx[k] - hw), max(0, cy[k] - hw)
-            x1k, y1k = min(w_img[k], cx[k] + hw + 1), min(h_img[k], cy[k] + hw + 1)
+            (cx, cy), (w_img, h_img) = centre[k].tolist(), size_k[k].tolist()
+            x0k, y0k = max(0, cx - hw), max(0, cy - hw)
+            x1k, y1k = min(w_img, cx + hw + 1), min(h_img, cy + hw + 1)
             win_labels = self.table.classify_window(img, x0k, y0k, x1k, y1k)
             blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
                                max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
