@@ -37,7 +37,7 @@ from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import Points3D, RigGeometry
 from tracking.status import MarkerStatus
-from tracking.triangulation import reprojection_errors_px, triangulate
+from tracking.triangulation import triangulate
 
 log = logging.getLogger(__name__)
 
