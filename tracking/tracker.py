@@ -358,12 +358,12 @@ class Tracker:
         hit, win = hit[own], win[own]
         # pixel -> column and row in its window -> offsets from the window's centre pixel, in
         # float64 (exact for these small integers; a float division is cheaper than an integer one)
-        local = hit - starts[win]
+        local = (hit - starts[win]).astype(np.float64)
         width = (hi[:, 0] - lo[:, 0]).astype(np.float64)[win]
-        offset = (lo - centre).astype(np.float64)[win]  # (n, 2) of the window's first pixel
+        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
         row = np.floor(local / width)
-        dx = local - row * width + offset[:, 0]
-        dy = row + offset[:, 1]
+        dx = local - row * width + first[:, 0][win]  # (1-D gathers: numpy's fast path)
+        dy = row + first[:, 1][win]
         k_count = mi.size
         # sums of integers: exact in float64 whatever the order
         m00 = np.bincount(win, minlength=k_count).astype(np.float64)
