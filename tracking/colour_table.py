@@ -33,9 +33,13 @@ cast as cyan; clothes and props must avoid the marker hues.
 Full and quantized tables
 -------------------------
 ``bits = 8`` is the FULL table: 2**24 entries (16 MiB), index ``B | G << 8 | R << 16``, which is
-the little-endian 32-bit word starting at a pixel's B byte with its top byte masked off. So the
-index of a whole row of pixels is one unaligned, stride-3 ``uint32`` view of the image bytes and
-one AND, and the look-up is one ``np.take``.
+the little-endian 32-bit word starting at a pixel's B byte with its top byte masked off. OpenCV
+widens a window's BGR pixels to BGRA words (``cv2.cvtColor`` straight into the index buffer) and
+one AND clears the alpha byte; the look-up is one ``np.take``. (Reading the words through an
+unaligned, stride-3 ``uint32`` view of the image bytes, as first done, makes numpy buffer the
+reads: 0.30 ms for a 640x480 index against 0.12 ms, 11 us against 7 us for a 61x61 window,
+minimum CPU times on the shared machine.) :meth:`ColourTable.classify_windows` labels the search
+windows of all markers in all cameras with one look-up.
 
 ``bits < 8`` is a QUANTIZED table: 2**(3*bits) entries (2**18 = 256 KiB for 6 bits), index
 ``(B >> s) | (G >> s) << bits | (R >> s) << 2*bits`` with ``s = 8 - bits``; each bin holds the label
@@ -80,6 +84,7 @@ from __future__ import annotations
 import statistics
 import time
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -322,6 +327,57 @@ class ColourTable:
         np.take(self.lut, index, out=labels, mode="clip")
         return labels
 
+    def classify_windows(self, images: Sequence[np.ndarray], image_index: np.ndarray, boxes: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Label the pixels of many windows, in several images, with one table look-up.
+
+        The per-frame tracker's search windows are small (a few hundred to a few thousand pixels):
+        gathering all of them into one array and reading the table once costs far less than one
+        call per window.
+
+        Args:
+            images: (H, W, 3) uint8 OpenCV BGR images.
+            image_index: (K,) int index into ``images`` of each window.
+            boxes: (K, 4) int ``x0, y0, x1, y1`` of each window, inside its image, end exclusive.
+
+        Returns:
+            labels: (P,) uint8 labels of all windows' pixels, window after window, each window in
+                row order (row-major ``(y1 - y0, x1 - x0)``).
+            starts: (K + 1,) int64 offset of each window's first pixel in ``labels``; the last
+                entry is P.
+        """
+        for img in images:
+            _check_image(img)
+        boxes = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
+        widths = boxes[:, 2] - boxes[:, 0]
+        heights = boxes[:, 3] - boxes[:, 1]
+        image_index = np.asarray(image_index, dtype=np.int64).reshape(-1)
+        sizes = np.array([img.shape[1::-1] for img in images], dtype=np.int64).reshape(-1, 2)  # (w, h)
+        size = sizes[image_index]
+        if (widths < 0).any() or (heights < 0).any() or (boxes[:, :2] < 0).any() or (boxes[:, 2:] > size).any():
+            raise ValueError("window boxes must satisfy 0 <= x0 <= x1 <= W and 0 <= y0 <= y1 <= H")
+        starts = np.zeros(len(boxes) + 1, dtype=np.int64)
+        np.cumsum(widths * heights, out=starts[1:])
+        words = np.empty(int(starts[-1]), dtype=np.uint32)
+        # images whose pixels OpenCV can read in place (any row stride); others go through numpy
+        plain = [img.strides[1:] == (3, 1) for img in images]
+        as_bytes = words.view(np.uint8)
+        bgra = cv2.COLOR_BGR2BGRA
+        for img_k, (x0, y0, x1, y1), a, b in zip(image_index.tolist(), boxes.tolist(), starts[:-1].tolist(),
+                                                 starts[1:].tolist()):
+            if b == a:
+                continue
+            if plain[img_k]:  # the loop body of _pixel_words, without its checks
+                cv2.cvtColor(images[img_k][y0:y1, x0:x1], bgra, dst=as_bytes[4 * a:4 * b].reshape(y1 - y0, x1 - x0, 4))
+            else:
+                _pixel_words(images[img_k], x0, y0, x1, y1, out=words[a:b].reshape(y1 - y0, x1 - x0))
+        np.bitwise_and(words, 0xFFFFFF, out=words)
+        if self.bits < 8:
+            words = _quantize_index(words, self.bits)
+        labels = np.empty(words.shape, dtype=np.uint8)
+        np.take(self.lut, words, out=labels, mode="clip")
+        return labels, starts
+
 
 def _check_image(image_bgr: np.ndarray) -> None:
     if image_bgr.dtype != np.uint8 or image_bgr.ndim != 3 or image_bgr.shape[2] != 3:
@@ -330,46 +386,32 @@ def _check_image(image_bgr: np.ndarray) -> None:
         )
 
 
-def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+def _pixel_words(image_bgr: np.ndarray, x0: int, y0: int, x1: int, y1: int,
+                 out: np.ndarray | None = None) -> np.ndarray:
     """Full 24-bit table index ``B | G << 8 | R << 16`` of each pixel of a window.
 
+    Args:
+        out: (y1 - y0, x1 - x0) C-contiguous uint32 array to write into (default: a new one).
     Returns:
-        (y1 - y0, x1 - x0) uint32.
+        (y1 - y0, x1 - x0) uint32 (``out`` when given).
 
-    The fast path reads each pixel's 3 bytes as part of an unaligned little-endian uint32 at
-    stride 3. Reading 4 bytes from the pixel's first byte overruns the buffer at the image's last
-    pixel, reading from the byte before underruns it at the first pixel; one of the two is safe for
-    any window but the whole image, which is done as a flat array with its last pixel apart.
+    OpenCV widens the window's BGR pixels to BGRA (alpha 255 in the top byte of each
+    little-endian word) straight into ``out``, and the top byte is masked off: about 3x faster
+    than numpy reading 4-byte words at the unaligned stride of 3 bytes (which it buffers).
     """
-    h, w = image_bgr.shape[:2]
     nh, nw = y1 - y0, x1 - x0
-    out = np.empty((nh, nw), dtype=np.uint32)
+    if out is None:
+        out = np.empty((nh, nw), dtype=np.uint32)
     if nh == 0 or nw == 0:
         return out
-    if not (image_bgr.flags.c_contiguous and image_bgr.strides[1] == 3):
-        win = image_bgr[y0:y1, x0:x1]
+    win = image_bgr[y0:y1, x0:x1]
+    if win.strides[1:] == (3, 1) and out.flags.c_contiguous:
+        cv2.cvtColor(win, cv2.COLOR_BGR2BGRA, dst=out.view(np.uint8).reshape(nh, nw, 4))
+        np.bitwise_and(out, 0xFFFFFF, out=out)
+    else:  # an unusual memory layout (e.g. a channel-reversed view)
         np.left_shift(win[..., 2], 16, out=out, dtype=np.uint32)
         out |= np.left_shift(win[..., 1], 8, dtype=np.uint32)
         out |= win[..., 0]
-        return out
-    row = w * 3
-    start = y0 * row + x0 * 3
-    touches_first = start == 0
-    touches_last = (y1 == h) and (x1 == w)
-    if not touches_first:
-        words = np.ndarray((nh, nw), dtype="<u4", buffer=image_bgr, offset=start - 1, strides=(row, 3))
-        np.right_shift(words, 8, out=out)
-    elif not touches_last:
-        words = np.ndarray((nh, nw), dtype="<u4", buffer=image_bgr, offset=start, strides=(row, 3))
-        np.bitwise_and(words, 0xFFFFFF, out=out)
-    else:  # the whole image (first and last pixel): contiguous rows, flat
-        n = nh * nw
-        flat = out.reshape(-1)
-        if n > 1:
-            words = np.ndarray((n - 1,), dtype="<u4", buffer=image_bgr, offset=0, strides=(3,))
-            np.bitwise_and(words, 0xFFFFFF, out=flat[: n - 1])
-        b, g, r = (int(c) for c in image_bgr[h - 1, w - 1])
-        flat[n - 1] = b | (g << 8) | (r << 16)
     return out
 
 

@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
-from calibration.camera import Camera
+from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
 from tracking.angles import joint_angles
 from tracking.blobs import find_blobs
@@ -37,9 +37,12 @@ from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import Points3D, RigGeometry
 from tracking.status import MarkerStatus
-from tracking.triangulation import reprojection_errors_px, triangulate
+from tracking.triangulation import triangulate
 
 log = logging.getLogger(__name__)
+
+
+_MEASURED = np.uint8(MarkerStatus.MEASURED)
 
 
 class TrackingState(enum.IntEnum):
@@ -62,6 +65,13 @@ class TrackerSample:
         angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined.
         message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
+        windows_px: (M, C, 3) float64 search window of each marker in each camera this frame:
+            predicted image position (u, v) and half size, pixels (the pixels within the half size
+            of the rounded position were searched); NaN where the marker had no window in that
+            camera; None when no windows were searched (waiting for identification).
+        uv_px: (M, C, 2) float64 window centroid from which each marker's position was
+            triangulated in each camera this frame; NaN where none (not measured, view not used,
+            or the marker found again by full-frame measurement); None when no windows were searched.
     """
 
     frame_index: int
@@ -72,6 +82,8 @@ class TrackerSample:
     angles_deg: dict[str, float]
     message: str = ""
     n_points: int = 0
+    windows_px: np.ndarray | None = None
+    uv_px: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,11 +138,6 @@ STEP_STAGES = (
 )
 
 
-def _depth_rows(geo: RigGeometry, p: np.ndarray) -> np.ndarray:
-    """(M, 3) points -> (M, C) depth in each camera (NaN rows stay NaN)."""
-    return np.einsum("cj,mj->mc", geo.extrinsics[:, 2, :3], p) + geo.extrinsics[None, :, 2, 3]
-
-
 class Tracker:
     """Labels and tracks the markers of one marker set seen by calibrated cameras.
 
@@ -155,7 +162,10 @@ class Tracker:
         self.measurer = FrameMeasurer(self.cameras, self.table, markerset.radius_m)
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
+        self._stack = CameraStack(self.cameras)
+        self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
+        self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
         self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
         self.times = StageTimes(STEP_STAGES)
@@ -197,6 +207,7 @@ class Tracker:
         t = index / self.fps if time_s is None else float(time_s)
         message = ""
         n_points = 0
+        self._windows_px = self._used_uv = None
         if self.state == TrackingState.WAITING:
             t0 = time.perf_counter()
             points = self.measurer.measure(images)
@@ -218,6 +229,8 @@ class Tracker:
             angles_deg={k: float(v) for k, v in angles.items()},
             message=message,
             n_points=n_points,
+            windows_px=self._windows_px,
+            uv_px=self._used_uv,
         )
 
     # ------------------------------------------------------------------ identification
@@ -296,178 +309,195 @@ class Tracker:
         Q (equation 4) is a product of one factor per camera, 1 / (1 + |G_j C_j|), so the candidate
         of largest Q takes in every camera the centroid nearest to the predicted image position.
         The window's pixels of the marker's colour usually form that one ball: its centroid comes
-        from the mask's moments, computed for all of a camera's windows at once (one gather of the
-        windows' pixels, one table look-up, array reductions). A window whose mask is too large or
-        not round holds several balls (or clutter): then its regions are separated and the one
-        nearest to the prediction is taken.
+        from the mask's moments. Every marker is projected into every camera at once, and the
+        windows of all markers in all cameras are gathered into one array for one table look-up
+        (:meth:`ColourTable.classify_windows`); the moments are sums over the few marker-coloured
+        pixels. A window whose mask is too large or not round holds several balls (or clutter):
+        then its regions are separated and the one nearest to the prediction is taken.
 
         Returns:
             uv (M, C, 2) float64 centroids (NaN where none), radius (M, C) equivalent radius in px.
         """
+        p = self.params
         m_count = self.markerset.n_markers
         n_cams = len(self.cameras)
         uv_out = np.full((m_count, n_cams, 2), np.nan)
         rad_out = np.full((m_count, n_cams), np.nan)
-        self._pred_uv = np.full((m_count, n_cams, 2), np.nan)  # predictions in each image (for Q)
-        # markers measured last frame share small windows (vectorized); the others (coming back
-        # from hiding: larger uncertainty) get windows of their own size
-        recent = known & (self.frames_unmeasured == 0)
-        groups = [np.flatnonzero(recent)] + [np.array([m]) for m in np.flatnonzero(known & ~recent)]
-        for group in groups:
-            if group.size:
-                self._windows(images, pred, sigma, group, uv_out, rad_out)
+        uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
+        self._pred_uv, self._pred_depth = uv, depth
+        focal = self._stack.focal_px
+        safe_depth = np.maximum(depth, 1e-3)
+        r_px = focal * self.markerset.radius_m / safe_depth
+        half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
+        size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)  # (C, 2) width, height
+        # in front of the camera (project() gives NaN behind it) and the window overlaps the image
+        with np.errstate(invalid="ignore"):
+            valid = known[:, None] & (uv > -half[..., None]).all(axis=2) & (uv < size + half[..., None]).all(axis=2)
+        self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
+        if valid.any():
+            self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
         return uv_out, rad_out
 
-    def _windows(self, images, pred, sigma, idx, uv_out, rad_out) -> None:
-        """Fill uv_out/rad_out for markers ``idx``, whose windows share one size per camera."""
-        p = self.params
-        lut = self.table.lut
-        target = (self.colour[idx] + 1).astype(np.uint8)
-        for c, (cam, img) in enumerate(zip(self.cameras, images)):
-            uv = cam.project(pred[idx])
-            self._pred_uv[idx, c] = uv
-            depth = cam.world_to_camera(pred[idx])[:, 2]
-            f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
-            safe_depth = np.maximum(depth, 1e-3)
-            r_px = f * self.markerset.radius_m / safe_depth
-            half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * f * sigma[idx] / safe_depth, p.max_window_px)
-            h_img, w_img = img.shape[:2]
-            valid = np.isfinite(uv).all(axis=1) & (depth > 0)
-            valid &= (uv[:, 0] > -half) & (uv[:, 0] < w_img + half) & (uv[:, 1] > -half) & (uv[:, 1] < h_img + half)
-            if not valid.any():
-                continue
-            # one window size for the camera: the largest needed (hidden markers' larger windows
-            # are rare and short-lived)
-            hw = int(np.ceil(half[valid].max()))
-            size = 2 * hw + 1
-            cx = np.round(np.where(valid, uv[:, 0], 0)).astype(np.int64)
-            cy = np.round(np.where(valid, uv[:, 1], 0)).astype(np.int64)
-            offs = np.arange(-hw, hw + 1)
-            xs = cx[:, None] + offs[None, :]  # (K, S)
-            ys = cy[:, None] + offs[None, :]
-            # each marker keeps to its own window inside the shared size (a fast marker's large
-            # window must not make the others swallow their same-coloured neighbours)
-            own = np.abs(offs)[None, :] <= half[:, None]  # (K, S)
-            inside = (((xs >= 0) & (xs < w_img)) & own)[:, None, :] & (((ys >= 0) & (ys < h_img)) & own)[:, :, None]
-            flat = ys.clip(0, h_img - 1)[:, :, None] * w_img + xs.clip(0, w_img - 1)[:, None, :]
-            img_c = np.ascontiguousarray(img)
-            words = np.ndarray((h_img * w_img - 1,), dtype="<u4", buffer=img_c, strides=(3,))
-            pix = np.take(words, flat, mode="clip")  # the image's last pixel reads its neighbour
-            np.bitwise_and(pix, 0xFFFFFF, out=pix)
-            labels = np.take(lut, pix)
-            mask = (labels == target[:, None, None]) & inside & valid[:, None, None]
-            col = mask.sum(axis=1, dtype=np.float64)  # (K, S) counts per column
-            row = mask.sum(axis=2, dtype=np.float64)  # (K, S) counts per row
-            m00 = col.sum(axis=1)
-            ok = m00 >= self.gates[c].min_area_px
-            with np.errstate(divide="ignore", invalid="ignore"):
-                mx = (col * offs).sum(axis=1) / m00
-                my = (row * offs).sum(axis=1) / m00
-                mu20 = (col * offs**2).sum(axis=1) / m00 - mx**2
-                mu02 = (row * offs**2).sum(axis=1) / m00 - my**2
-                mu11 = np.einsum("kij,i,j->k", mask, offs.astype(np.float64), offs.astype(np.float64)) / m00 - mx * my
-                spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
-                lam1 = (mu20 + mu02) / 2.0 + spread
-                lam2 = (mu20 + mu02) / 2.0 - spread
-                roundness = np.sqrt(np.clip(lam2, 0, None) / lam1)
-            # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
-            ok &= m00 >= 0.4 * np.pi * r_px**2
-            simple = ok & (m00 <= 1.6 * np.pi * r_px**2) & (roundness >= 0.6)
-            uv_out[idx[simple], c, 0] = cx[simple] + mx[simple]
-            uv_out[idx[simple], c, 1] = cy[simple] + my[simple]
-            rad_out[idx[simple], c] = np.sqrt(m00[simple] / np.pi)
-            gate = self.gates[c]
-            for k in np.flatnonzero(ok & ~simple):  # several regions in the window: separate them
-                m = idx[k]
-                x0, y0 = max(0, cx[k] - hw), max(0, cy[k] - hw)
-                x1, y1 = min(w_img, cx[k] + hw + 1), min(h_img, cy[k] + hw + 1)
-                win_labels = self.table.classify_window(img, x0, y0, x1, y1)
-                blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
-                                   max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
-                                   offset_px=(x0, y0))
-                sel = np.flatnonzero(blobs.colour == self.colour[m])
-                if sel.size:
-                    j = sel[np.argmin(np.linalg.norm(blobs.uv_px[sel] - uv[k], axis=1))]
-                    uv_out[m, c] = blobs.uv_px[j]
-                    rad_out[m, c] = blobs.radius_px[j]
+    def _windows(self, images, valid, uv, half, r_px, known, size, uv_out, rad_out) -> None:
+        """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
+
+        A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
+        the image border; the moments are taken about that pixel centre.
+        """
+        mi, ci = np.nonzero(valid)
+        centre = np.round(uv[mi, ci]).astype(np.int64)  # (K, 2) window centre pixel x, y
+        ext = half[mi, ci].astype(np.int64)[:, None]  # half size rounded down (it is positive)
+        size_k = size[ci]
+        lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
+        hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
+        labels, starts = self.table.classify_windows(images, ci, np.concatenate([lo, hi], axis=1))
+        # the marker's own colour among the (few) marker-coloured pixels of each window
+        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
+        win = np.searchsorted(starts, hit, side="right") - 1
+        own = labels[hit] == self._label[mi][win]
+        hit, win = hit[own], win[own]
+        # pixel -> column and row in its window -> offsets from the window's centre pixel, in
+        # float64 (exact for these small integers; a float division is cheaper than an integer one)
+        local = (hit - starts[win]).astype(np.float64)
+        width = (hi[:, 0] - lo[:, 0]).astype(np.float64)[win]
+        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
+        row = np.floor(local / width)
+        dx = local - row * width + first[:, 0][win]  # (1-D gathers: numpy's fast path)
+        dy = row + first[:, 1][win]
+        k_count = mi.size
+        # sums of integers: exact in float64 whatever the order
+        m00 = np.bincount(win, minlength=k_count).astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mx = np.bincount(win, dx, k_count) / m00
+            my = np.bincount(win, dy, k_count) / m00
+            mu20 = np.bincount(win, dx * dx, k_count) / m00 - mx**2
+            mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
+            mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
+            spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
+            mean_var = (mu20 + mu02) / 2.0
+            roundness = np.sqrt(np.clip(mean_var - spread, 0, None) / (mean_var + spread))
+        ball_area = np.pi * r_px[mi, ci] ** 2
+        # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
+        ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
+        simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
+        uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
+        rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
+        crowded = np.flatnonzero(ok & ~simple)
+        if crowded.size == 0:
+            return
+        # several regions in the window: separate them, in a window of the size that the markers
+        # measured last frame share in this camera (the largest of theirs), or of the marker's own
+        recent = known & (self.frames_unmeasured == 0)
+        for k in crowded:
+            m, c = int(mi[k]), int(ci[k])
+            hw = int(np.ceil(half[recent & valid[:, c], c].max() if recent[m] else half[m, c]))
+            img, gate = images[c], self.gates[c]
+            (cx, cy), (w_img, h_img) = centre[k].tolist(), size_k[k].tolist()
+            x0k, y0k = max(0, cx - hw), max(0, cy - hw)
+            x1k, y1k = min(w_img, cx + hw + 1), min(h_img, cy + hw + 1)
+            win_labels = self.table.classify_window(img, x0k, y0k, x1k, y1k)
+            blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
+                               max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,
+                               offset_px=(x0k, y0k), colours=(int(self.colour[m]),))
+            if len(blobs):
+                j = np.argmin(np.linalg.norm(blobs.uv_px - uv[m, c], axis=1))
+                uv_out[m, c] = blobs.uv_px[j]
+                rad_out[m, c] = blobs.radius_px[j]
 
     def _choose(self, obs, pred, sigma, known):
         """Triangulate every marker from its window centroids; keep geometrically consistent ones."""
         uv, rad = obs
-        geo = self.geometry
+        params = self.params
+        stack = self._stack
         m_count, n_cams = uv.shape[:2]
-        xn = np.full_like(uv, np.nan)
-        for c, cam in enumerate(self.cameras):
-            ok = np.isfinite(uv[:, c, 0])
-            if ok.any():
-                xn[ok, c] = cam.undistort_points(uv[ok, c])
+        xn = stack.undistort_points(uv)
         seen = np.isfinite(xn[..., 0]) & known[:, None]
+        ball_px = stack.focal_px * self.markerset.radius_m  # ball radius in pixels at 1 m
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
         # shifted centroid: leave it out while two full views remain
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, np.nan_to_num(pred)))
-        partial = seen & (ratio < 0.8)
+            partial = seen & (rad / (ball_px / self._pred_depth) < 0.8)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         seen &= ~(partial & keep_full[:, None])
-        pts = np.full((m_count, 3), np.nan)
-        for _ in range(n_cams):
-            pts = triangulate(geo.extrinsics, xn, seen)
-            err = reprojection_errors_px(geo.extrinsics, geo.focal_px, pts, xn, seen)
+        ext = self.geometry.extrinsics
+        pts = triangulate(ext, xn, seen)
+        err, depth = self._reprojection(pts, xn)
+        rows = np.arange(m_count)
+        for _ in range(n_cams):  # drop the worst view while it misses and three or more remain
             worst = np.argmax(np.where(seen, err, -1.0), axis=1)
-            worst_err = err[np.arange(m_count), worst]
-            drop = (worst_err > self.params.max_reproj_px) & (seen.sum(axis=1) >= 3)
+            drop = (err[rows, worst] > params.max_reproj_px) & (seen.sum(axis=1) >= 3)
             if not drop.any():
                 break
-            seen[np.flatnonzero(drop), worst[drop]] = False
+            redo = np.flatnonzero(drop)
+            seen[redo, worst[drop]] = False
+            pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
+            err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         n_seen = seen.sum(axis=1)
-        sq = np.where(seen, err, 0.0) ** 2
-        rms = np.sqrt(sq.sum(axis=1) / np.maximum(n_seen, 1))
+        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ np.ones(n_cams) / np.maximum(n_seen, 1))
         # two views always meet in some point: a two-camera candidate must fit tightly and show a
         # ball of the right size in both views (as in tracking.reconstruction)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_now = rad / (geo.focal_px[None, :] * self.markerset.radius_m / _depth_rows(geo, pts))
-        size_fit = np.all(~seen | ((ratio_now > 0.65) & (ratio_now < 1.35)), axis=1)
-        two_ok = (rms <= self.params.max_reproj_px_two_view) & size_fit
-        with np.errstate(invalid="ignore"):
-            measured = (n_seen >= 2) & (rms <= self.params.max_reproj_px) & ((n_seen >= 3) | two_ok)
-            measured &= np.linalg.norm(pts - pred, axis=1) <= self.params.gate_sigmas * sigma + 0.01
-        # Q of the chosen candidate, for the one-ball-one-marker rule
-        q_cam = 1.0 / (1.0 + np.linalg.norm(uv - self._pred_uv, axis=-1))
-        q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
+            ratio_now = rad / (ball_px / depth)
+            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now < 1.35))).any(axis=1)
+            measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
+            measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
+            off = pts - pred
+            measured &= np.sqrt((off * off) @ np.ones(3)) <= params.gate_sigmas * sigma + 0.01
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
-        was_measured = self.status == MarkerStatus.MEASURED
-        d = np.linalg.norm(new_pos[:, None, :] - new_pos[None, :, :], axis=-1)
-        clash = measured[:, None] & measured[None, :] & (d < self.params.same_ball_m)
+        diff = new_pos[:, None, :] - new_pos[None, :, :]
+        dist = np.sqrt((diff * diff) @ np.ones(3))  # (M, M), NaN unless both measured
+        with np.errstate(invalid="ignore"):
+            clash = dist < params.same_ball_m
         np.fill_diagonal(clash, False)
         if clash.any():
-            rank = np.lexsort((-q_best, ~was_measured))
-            for a in rank:
+            # Q (equation 4) of the chosen candidate
+            duv = uv - self._pred_uv
+            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ np.ones(2)))
+            q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
+            was_measured = self.status == _MEASURED
+            for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        measured &= self._segments_consistent(new_pos, measured)
+        measured &= self._segments_consistent(dist, new_pos, measured)
         new_pos[~measured] = np.nan
+        self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         return new_pos, measured
 
-    def _segments_consistent(self, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    def _reprojection(self, pts: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
+        cam = self._stack.world_to_cameras(pts)
+        depth = cam[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = cam[..., :2] / depth[..., None] - xn
+        return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
+
+    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
         """False for a marker whose distance to a segment neighbour broke its learned length.
 
         Neighbours measured this frame count; so do neighbours known only from last frame's
         estimate, against a newly found marker (with twice the tolerance), so that a marker
         coming back from hiding cannot take a ball that is not where its segment says.
+
+        Args:
+            dist: (M, M) distances between the markers' candidate positions ``pos`` (NaN where
+                either has none).
+            pos: (M, 3) candidate positions; measured: (M,) bool.
         """
         tol = self.params.segment_tol_m
-        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
-        dev = np.abs(d - self.seg_length)
-        check = self._same_segment & measured[:, None] & measured[None, :] & np.isfinite(self.seg_length)
-        bad_pair = check & (dev > tol)
-        returning = measured & (self.status != MarkerStatus.MEASURED)
-        known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
-        if returning.any() and known_prev.any():
-            d_prev = np.linalg.norm(pos[:, None, :] - self.positions[None, :, :], axis=-1)
-            chk = self._same_segment & returning[:, None] & known_prev[None, :] & np.isfinite(self.seg_length)
-            bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
-            measured = measured & ~bad_prev
+        with np.errstate(invalid="ignore"):
+            broken = np.abs(dist - self.seg_length) > tol
+        bad_pair = self._same_segment & measured[:, None] & measured[None, :] & broken
+        returning = measured & (self.status != _MEASURED)
+        if returning.any():
+            known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
+            if known_prev.any():
+                diff = pos[:, None, :] - self.positions[None, :, :]
+                d_prev = np.sqrt((diff * diff) @ np.ones(3))
+                chk = self._same_segment & returning[:, None] & known_prev[None, :]
+                with np.errstate(invalid="ignore"):
+                    bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
+                measured = measured & ~bad_prev
         ok = measured.copy()
         # drop the marker involved in most broken pairs, one at a time
         while bad_pair.any():

@@ -39,25 +39,24 @@ def triangulate(extrinsics: np.ndarray, xn: np.ndarray, seen: np.ndarray | None 
     ok = seen.sum(axis=1) >= 2
     if not ok.any():
         return out
-    x = np.where(seen[..., None], xn, 0.0)[ok]  # (n, C, 2)
-    w = seen[ok].astype(np.float64)  # (n, C)
-    # rows: x * P3 - P1 and y * P3 - P2 for every camera
-    P1, P2, P3 = extrinsics[:, 0, :], extrinsics[:, 1, :], extrinsics[:, 2, :]  # (C, 4)
-    for _ in range(2):
-        ax = x[..., 0:1] * P3 - P1  # (n, C, 4)
-        ay = x[..., 1:2] * P3 - P2
-        A = np.concatenate([ax, ay], axis=1) * np.concatenate([w, w], axis=1)[..., None]
-        # Solve A[:, :, :3] X = -A[:, :, 3] in the least-squares sense via normal equations
-        # (inhomogeneous form: exact same minimiser as the SVD for points not at infinity).
-        M = A[..., :3]
-        b = -A[..., 3]
-        MtM = np.einsum("nki,nkj->nij", M, M)
-        Mtb = np.einsum("nki,nk->ni", M, b)
-        X = np.linalg.solve(MtM, Mtb[..., None])[..., 0]
-        # reweight by 1 / depth so each row measures an image-plane (normalized) error
-        depth = np.einsum("cj,nj->nc", P3[:, :3], X) + P3[:, 3]
-        w = np.where(seen[ok], 1.0 / np.maximum(np.abs(depth), 1e-6), 0.0)
-        w /= w.max(axis=1, keepdims=True)
+    if not ok.all():
+        xn, seen = xn[ok], seen[ok]
+    x = np.where(seen[..., None], xn, 0.0)  # (n, C, 2)
+    w = seen.astype(np.float64)  # (n, C)
+    # rows x * P3 - P1 and y * P3 - P2 of every camera: (n, C, 2, 4)
+    rows = x[..., None] * extrinsics[None, :, 2:3, :] - extrinsics[None, :, 0:2, :]
+    n = x.shape[0]
+    for first in (True, False):
+        A = (rows * w[..., None, None]).reshape(n, 2 * n_cams, 4)
+        # normal equations of A[:, :, :3] X = -A[:, :, 3] (inhomogeneous form: the same minimiser
+        # as the SVD for points not at infinity), all from one Gram matrix A^T A
+        G = np.matmul(A.transpose(0, 2, 1), A)
+        X = np.linalg.solve(G[:, :3, :3], -G[:, :3, 3:])[..., 0]
+        if first:
+            # reweight by 1 / depth so each row measures an image-plane (normalized) error
+            depth = X @ extrinsics[:, 2, :3].T + extrinsics[:, 2, 3]
+            w = np.where(seen, 1.0 / np.maximum(np.abs(depth), 1e-6), 0.0)
+            w /= w.max(axis=1, keepdims=True)
     out[ok] = X
     return out
 

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from calibration.camera import Camera, check_rotation, rotation_from_rvec, rvec_from_rotation
+from calibration.camera import Camera, CameraStack, check_rotation, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import CalibrationError, RehabError
 
 # ----------------------------------------------------------------------------- strategies
@@ -390,3 +390,34 @@ def test_from_rotation_keeps_a_tiny_tilt():
     tilt = rotation_from_rvec([2e-6, 0.0, 0.0])
     cam = Camera.from_rotation("c", (640, 480), simple_camera().K, np.zeros(4), tilt, [0.0, 0.0, 3.0])
     np.testing.assert_allclose(cam.rvec, [2e-6, 0.0, 0.0], rtol=1e-9, atol=0)
+
+
+# ----------------------------------------------------------------------------- several cameras at once
+@settings(max_examples=25, deadline=None)
+@given(st.data())
+def test_camera_stack_projects_and_undistorts_like_each_camera(data):
+    """CameraStack (the tracker's fast path) gives each camera's own numbers, bit for bit."""
+    cams = [data.draw(cameras(distorted=d, skew=k)) for d, k in ((False, False), (True, False), (True, True),
+                                                                  (False, True))]
+    cams.append(simple_camera(dist=np.array([0.1, -0.05, 0.001, -0.002, 0.01, 0.02, 0.0, 0.001])))  # rational
+    stack = CameraStack(cams)
+    xy, z = data.draw(points_in_front(n=6))
+    p = np.vstack([world_points(cams[1], xy, z), [[np.nan] * 3], cams[0].centre_m + [0.0, 0.0, 0.0]])
+    uv, depth = stack.project(p)
+    assert uv.shape == (len(p), len(cams), 2) and depth.shape == (len(p), len(cams))
+    for c, cam in enumerate(cams):
+        np.testing.assert_array_equal(uv[:, c], cam.project(p))
+        np.testing.assert_array_equal(depth[:, c], cam.world_to_camera(p)[:, 2])
+        np.testing.assert_array_equal(stack.world_to_cameras(p)[:, c], cam.world_to_camera(p))
+    xn = stack.undistort_points(uv)
+    for c, cam in enumerate(cams):
+        seen = np.isfinite(uv[:, c]).all(axis=1)
+        assert np.isnan(xn[~seen, c]).all()
+        np.testing.assert_allclose(xn[seen, c], cam.undistort_points(uv[seen, c]), rtol=0, atol=1e-12)
+    assert stack.distorted.tolist() == [c.has_distortion for c in cams]
+    np.testing.assert_array_equal(stack.focal_px, [(c.K[0, 0] + c.K[1, 1]) / 2 for c in cams])
+
+
+def test_camera_stack_needs_a_camera():
+    with pytest.raises(CalibrationError, match="at least one camera"):
+        CameraStack(())

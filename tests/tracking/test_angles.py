@@ -434,6 +434,23 @@ def test_vectorized_over_frames_equals_per_frame():
     assert all(v.shape == (20,) for v in batch.values())
 
 
+def test_one_frame_path_gives_the_same_bits_as_the_array_path():
+    """One frame is computed in Python floats (speed); it must equal the array code exactly."""
+    rng = np.random.default_rng(11)
+    frames = rng.normal(0.0, 0.3, (400, len(REQUIRED_MARKERS), 3))
+    frames[rng.random(frames.shape[:2]) < 0.05] = np.nan  # missing markers
+    frames[:40, 5] = frames[:40, 4]  # coincident epicondyles
+    frames[40:80, 1] = frames[40:80, 0]  # coincident trunk markers
+    frames[80:120] = np.round(frames[80:120], 1)  # exact zeros and axis-aligned vectors
+    frames[120] = body(right=dict(upper_dir=(0.0, 1.0, 0.0)))  # straight up: +180, not -180
+    batch = joint_angles(frames, REQUIRED_MARKERS)
+    for t, frame in enumerate(frames):
+        single = joint_angles(frame, REQUIRED_MARKERS)
+        for c in ANGLE_COLUMNS:
+            a, b = float(single[c]), float(batch[c][t])
+            assert (np.isnan(a) and np.isnan(b)) or (a == b and np.signbit(a) == np.signbit(b)), (t, c, a, b)
+
+
 def test_unit_independent():
     p = body(right=dict(ELBOW_90, humeral_rotation_deg=30.0, supination_deg=40.0), left=FORWARD)
     metres, millimetres = joint_angles(p, REQUIRED_MARKERS), joint_angles(p * 1000.0, REQUIRED_MARKERS)

@@ -164,6 +164,29 @@ def test_window_equals_crop_of_full_classify(request, table_name):
         assert np.array_equal(labels, whole[y0:y1, x0:x1]), (x0, y0, x1, y1)
 
 
+@pytest.mark.parametrize("table_name", ["full", "quantized"])
+def test_many_windows_of_several_images_equal_one_window_at_a_time(request, table_name):
+    table = request.getfixturevalue(table_name)
+    rng = np.random.default_rng(7)
+    images = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8) for _ in range(2)]
+    images.append(rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)[:, ::-1])  # another size, a view
+    boxes = [(0, 0, 64, 48), (0, 0, 1, 1), (63, 47, 64, 48), (5, 5, 5, 9), (10, 20, 30, 21), (0, 0, 40, 30)]
+    index = [0, 1, 1, 0, 2, 2]
+    for _ in range(30):
+        k = int(rng.integers(0, 3))
+        h, w = images[k].shape[:2]
+        x0, y0 = int(rng.integers(0, w)), int(rng.integers(0, h))
+        boxes.append((x0, y0, int(rng.integers(x0, w + 1)), int(rng.integers(y0, h + 1))))
+        index.append(k)
+    labels, starts = table.classify_windows(images, np.array(index), np.array(boxes))
+    assert starts.shape == (len(boxes) + 1,) and starts[0] == 0 and starts[-1] == labels.size
+    for k, (x0, y0, x1, y1), a, b in zip(index, boxes, starts[:-1], starts[1:]):
+        one = table.classify_window(images[k], x0, y0, x1, y1)
+        assert np.array_equal(labels[a:b].reshape(one.shape), one), (k, x0, y0, x1, y1)
+    with pytest.raises(ValueError, match="0 <= x0 <= x1 <= W"):
+        table.classify_windows(images, np.array([2]), np.array([(0, 0, 41, 30)]))  # image 2 is 40 wide
+
+
 def test_non_contiguous_images_are_classified_too(full):
     rng = np.random.default_rng(6)
     image = rng.integers(0, 256, (30, 40, 3), dtype=np.uint8)

@@ -81,3 +81,40 @@ def test_wrong_number_of_images_is_a_clear_error():
     tracker = Tracker(load_rig("ring4", (64, 48)), load_markerset())
     with pytest.raises(RehabError, match="4 cameras but got 3 images"):
         tracker.step([np.zeros((48, 64, 3), np.uint8)] * 3)
+
+
+def test_windows_and_centroids_for_the_camera_monitor():
+    """windows_px and uv_px: the windows searched and the centroids used, in pixels of each camera."""
+    studio, motion = studio_from_settings(
+        SimulationSettings(motion="shoulder_abduction", size_px=(320, 240), fps=15.0)
+    )
+    with studio:
+        cams = studio.cameras
+        tracker = Tracker(cams, studio.markerset, fps=15.0)
+        runs = [(tracker.step(sf.frames.images, sf.frames.time_s), sf.markers_m)
+                for sf in studio.play(motion, 15.0, seconds=1.0, noise_sigma=1.5)]
+    m_count, n_cams = studio.markerset.n_markers, len(cams)
+    first, _ = runs[0]
+    assert first.windows_px is None and first.uv_px is None  # identified on full frames, no windows
+    errors = []
+    for sample, truth in runs[1:]:
+        assert sample.windows_px.shape == (m_count, n_cams, 3) and sample.uv_px.shape == (m_count, n_cams, 2)
+        measured = sample.status == MarkerStatus.MEASURED
+        for c, cam in enumerate(cams):
+            true_uv = cam.project(truth)
+            win = sample.windows_px[:, c]
+            has_window = np.isfinite(win).all(axis=1)
+            # a window is centred near the marker's image and at least as large as the ball
+            assert (np.abs(win[has_window, :2] - true_uv[has_window]) <= win[has_window, 2:3]).all()
+            uv = sample.uv_px[:, c]
+            has = np.isfinite(uv).all(axis=1)
+            assert (has <= (measured & has_window)).all()  # only measured markers, only in their windows
+            assert (np.abs(uv[has] - win[has, :2]) <= win[has, 2:3] + 1.0).all()
+            # the centroid is on the marker's own ball, and the measured point reprojects onto it
+            errors.extend(np.linalg.norm(uv[has] - true_uv[has], axis=1))
+            reproj = cam.project(sample.positions_m[has])
+            assert np.linalg.norm(reproj - uv[has], axis=1).max(initial=0.0) < tracker.params.max_reproj_px
+        assert (np.isfinite(sample.uv_px[measured]).all(axis=2).sum(axis=1) >= 2).all()
+    errors = np.array(errors)
+    assert errors.size > 0.9 * len(runs[1:]) * m_count * 2
+    assert errors.max() < 1.5 and np.sqrt(np.mean(errors**2)) < 0.35  # binary centroids of ~3 px balls: 0.27 px RMS
