@@ -24,7 +24,7 @@ log = logging.getLogger(__name__)
 
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
-SCENES = ("home", "live", "cameras", "rom", "progress")
+SCENES = ("home", "live", "cameras", "rom", "progress", "game")
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +43,9 @@ class PlayOptions:
         start_timeout_s: how long the tracker may take to start.
         db_path: the database of patients and results (None: the user's data directory).
         patient, test, side, standard: what ``rom`` and ``progress`` open on.
+        game: the exercise game to open (``content/games`` name) on ``patient`` and ``side``.
+        auto: the simulated patient plays the game by itself (the automatic demo).
+        mute: no sound.
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -58,6 +61,9 @@ class PlayOptions:
     test: str | None = None
     side: str = "right"
     standard: str = "jarm"
+    game: str | None = None
+    auto: bool = False
+    mute: bool = False
 
 
 def make_avatar(ctx, marker_names):
@@ -104,8 +110,21 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return PatientsScene(db_path, lambda pid: ProgressScene(db_path, pid, standard=options.standard),
                              title="Progress: choose the patient", allow_new=False)
 
+    def open_game(spec, patient_id, side=options.side, auto=options.auto):
+        from game.scenes.game_play import GameScene
+
+        return GameScene(link, spec, side, db_path, patient_id, make_avatar=make_avatar, auto=auto,
+                         mute=options.mute, source=source_kind)
+
+    def open_games():
+        from game.scenes.game_menu import ChooseGameScene
+
+        return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side),
+                             title="Games: choose the patient")
+
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
+        MenuEntry("Games", "Exercise games with targets inside the measured range", open_games),
         MenuEntry("ROM test", "Measure a range of motion, store it for the patient", open_rom),
         MenuEntry("Progress", "A patient's results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
@@ -116,6 +135,12 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         app.push(open_live())
     elif options.scene == "cameras":
         app.push(open_monitor())
+    elif options.scene == "game" or options.game:
+        from game.exergames.spec import load_game
+
+        spec = load_game(options.game or "reach")
+        _check_patient(db_path, options.patient)
+        app.push(open_game(spec, options.patient))
     elif options.scene in ("rom", "progress"):
         _check_patient(db_path, options.patient)
         if options.scene == "progress":
@@ -136,7 +161,7 @@ def _check_patient(db_path: Path, patient: str | None) -> None:
     from game.db import Database
 
     if not patient:
-        raise RehabError("give --patient ID with --scene rom or progress (see rehab patients)")
+        raise RehabError("give --patient ID with --scene rom or progress or --game (see rehab patients)")
     with Database(db_path) as db:
         db.require_patient(patient)
 
