@@ -40,7 +40,8 @@ log = logging.getLogger(__name__)
 
 VIEW_SHARE = 0.64
 INPUT_PERIOD_S = 1.0 / 60.0
-STALE_SAMPLE_S = 1.0
+#: Samples stop for this long (the tracker publishes 30 a second): the game pauses rather than score an old pose.
+STALE_SAMPLE_S = 0.5
 #: How long a cue's flash stays on the screen.
 FLASH_S = 0.8
 GOOD = (120, 220, 120)
