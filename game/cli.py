@@ -272,10 +272,11 @@ def _cmd_play(args) -> int:
     elif args.auto:
         raise RehabError("--auto plays a game: give --game NAME")
     if args.scene == "rom" and args.motion is None:
+        from game.play import DEFAULT_ROM_TEST
         from game.rom.spec import load_rom_test
 
         # the ROM scene plays the test's own motion (its demo); start the tracker on it
-        motion = load_rom_test(args.test or "shoulder_flexion").simulated_motion.get(args.side)
+        motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
                          "or give a motion YAML file")
@@ -300,6 +301,10 @@ def _cmd_play(args) -> int:
         auto=args.auto,
         mute=args.mute,
     )
+    if options.scene in ("rom", "progress"):
+        from game.play import check_scene_options
+
+        check_scene_options(options)   # one line before anything starts
     summary = run_play(options)
     print(f"rehab play: {summary.line()}")
     return 0

@@ -67,8 +67,9 @@ class LiveLink:
         try:
             self.tracker.start(self._start_timeout_s, wait=False)
         except RehabError as exc:
+            # Shown by the scenes (and by the command line when headless): logged once, quietly.
             self.state, self.error = LinkState.FAILED, str(exc)
-            log.error("%s", self.error)
+            log.info("the tracker cannot start: %s", self.error)
             return
         self.state = LinkState.STARTING
 

@@ -160,6 +160,9 @@ def overlay_cameras(
     """
     c = len(images_bgr)
     m = len(names)
+    for label, arr, k in (("windows_px", windows_px, 3), ("uv_px", uv_px, 2)):
+        if arr is not None and np.shape(arr) != (m, c, k):
+            raise ValueError(f"{label} must be ({m}, {c}, {k}) for {m} markers and {c} images, got {np.shape(arr)}")
     cams = list(camera_names) if camera_names is not None else [f"cam{j + 1}" for j in range(c)]
     st = None if status is None else np.asarray(status)
     lost = [names[k] for k in range(m) if st is not None and st[k] == MarkerStatus.LOST]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable
 
@@ -25,6 +25,10 @@ log = logging.getLogger(__name__)
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
 SCENES = ("home", "live", "cameras", "rom", "progress", "game")
+#: The test ``--scene rom`` opens when none is named.
+DEFAULT_ROM_TEST = "shoulder_flexion"
+#: The game ``--scene game`` opens when none is named.
+DEFAULT_GAME = "reach"
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,10 +71,10 @@ class PlayOptions:
 
 
 def make_avatar(ctx, marker_names):
-    """The avatar view on ``ctx`` (game.avatar) for a marker set's names."""
-    from game.scenes.avatar_view import AvatarView
+    """The patient's avatar on ``ctx`` for a marker set's names (:mod:`game.avatar`)."""
+    from game.avatar.live import LiveAvatar
 
-    return AvatarView(ctx, marker_names)
+    return LiveAvatar(ctx, marker_names)
 
 
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,
@@ -124,9 +128,9 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
-        MenuEntry("Games", "Exercise games with targets inside the measured range", open_games),
-        MenuEntry("ROM test", "Measure a range of motion, store it for the patient", open_rom),
-        MenuEntry("Progress", "A patient's results over the sessions", open_progress),
+        MenuEntry("Games", "Exercise inside the measured range", open_games),
+        MenuEntry("ROM test", "Measure a range of motion", open_rom),
+        MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
@@ -138,32 +142,40 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
     elif options.scene == "game" or options.game:
         from game.exergames.spec import load_game
 
-        spec = load_game(options.game or "reach")
-        _check_patient(db_path, options.patient)
+        spec = load_game(options.game or DEFAULT_GAME)
+        check_scene_options(replace(options, scene="game"))
         app.push(open_game(spec, options.patient))
     elif options.scene in ("rom", "progress"):
-        _check_patient(db_path, options.patient)
+        check_scene_options(options)
         if options.scene == "progress":
             app.push(ProgressScene(db_path, options.patient, standard=options.standard))
         else:
-            from game.rom.spec import check_side, load_rom_test
+            from game.rom.spec import load_rom_test
 
-            test = load_rom_test(options.test or "shoulder_flexion")
-            check_side(test, options.side)
+            test = load_rom_test(options.test or DEFAULT_ROM_TEST)
             visit = RomVisit(db_path, options.patient, options.standard, source_kind)
             app.push(ChooseTestScene(visit, open_test, side=options.side))
             app.push(open_test(visit, test, options.side, demo=True))
     return app
 
 
-def _check_patient(db_path: Path, patient: str | None) -> None:
-    """The ``rom`` and ``progress`` scenes open on an existing patient (one line otherwise)."""
-    from game.db import Database
+def check_scene_options(options: PlayOptions) -> None:
+    """The ``rom``, ``progress`` and ``game`` scenes open on an existing patient (and a test for the side).
 
-    if not patient:
-        raise RehabError("give --patient ID with --scene rom or progress or --game (see rehab patients)")
-    with Database(db_path) as db:
-        db.require_patient(patient)
+    Raises:
+        RehabError: one line saying what to give or fix.
+    """
+    from game.db import Database, default_db_path
+
+    if not options.patient:
+        what = "--game" if options.scene == "game" else f"--scene {options.scene}"
+        raise RehabError(f"give --patient ID with {what} (see rehab patients)")
+    if options.scene == "rom":
+        from game.rom.spec import check_side, load_rom_test
+
+        check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
+    with Database(options.db_path or default_db_path()) as db:
+        db.require_patient(options.patient)
 
 
 def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,

@@ -114,3 +114,27 @@ def test_never_overshoots_the_two_samples_around_it(values, gaps, display):
 def test_capacity_must_hold_two_samples():
     with pytest.raises(ValueError):
         PoseInterpolator(capacity=1)
+
+
+def test_look_fader_fades_a_real_change_and_smooths_flicker():
+    from game.avatar.interpolate import LookFader
+
+    n = len(SEGMENTS)
+    fader = LookFader(n, tau_s=0.15)
+    measured = np.full(n, MarkerStatus.MEASURED, np.uint8)
+    estimated = np.full(n, MarkerStatus.ESTIMATED, np.uint8)
+    assert (fader.update(measured, 0.0) == 0).all()
+    # A real change: visible within a few tenths of a second, complete after half a second.
+    assert 0.0 < fader.update(estimated, 0.05)[0, 0] < 0.5
+    assert fader.update(estimated, 0.6)[0, 0] > 0.95
+    # A marker flickering every sample (30 Hz) at display frames (60 Hz): no blinking.
+    fader.reset()
+    levels = []
+    for k in range(120):
+        t = k / 60.0
+        state = estimated if int(t * 30) % 2 else measured
+        levels.append(fader.update(state, t)[0, 0])
+    tail = np.array(levels[60:])
+    assert np.ptp(tail) < 0.25
+    with pytest.raises(ValueError):
+        fader.update(np.zeros(n + 1, np.uint8), 1.0)

@@ -197,3 +197,58 @@ def test_mirror_view_frames_the_whole_body_from_the_floor_to_a_raised_hand(p, se
         assert (np.abs(ndc) < 1.0).all()
         # Not lost in the frame either: the body spans most of the height.
         assert np.ptp(ndc[:, 1]) > 1.3
+
+
+def test_live_avatar_draws_the_interpolated_patient_from_a_still_camera(gl):
+    from game.avatar.live import LiveAvatar
+
+    ctx, fbo, _ = gl
+    model = BodyModel(BodyDimensions.from_percentile(50, "female"), MS)
+    avatar = LiveAvatar(ctx, MS.names)
+    status = np.ones(MS.n_markers, np.uint8)
+    rng = np.random.default_rng(0)
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+    assert avatar.render((W, H), 0.0) is None  # no sample yet: background only
+    cameras = []
+    for k in range(12):  # 30 Hz samples, the right arm rising, 3 mm marker noise
+        m = model.markers_m(Pose(right=ArmPose.clinical(abduction_deg=8.0 * k)))
+        avatar.push(k / 30.0, m + rng.normal(0.0, 0.003, m.shape), status)
+        fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
+        pose = avatar.render((W, H), k / 30.0 + 0.01, background=False)
+        cameras.append(avatar.camera(pose, W / H)[0])
+    img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(H, W, 3)[::-1]
+    view, proj = avatar.camera(pose, W / H)
+    assert covered(img, project(view, proj, np.array([pose.joint("right_hand"), pose.joint("head")]))).all()
+    # Shown one sample interval late: the hand is where the sample before last put it.
+    assert 70.0 < np.degrees(np.arctan2(*(pose.joint("right_elbow") - pose.joint("right_shoulder"))[[0, 1]] * [1, -1])) < 90.0
+    # Marker noise does not shake the camera; moving the chair re-aims it.
+    assert all(np.array_equal(c, cameras[1]) for c in cameras[1:])
+    avatar.push(1.0, model.markers_m(Pose()) + [0.3, 0.0, 0.0], status)
+    moved = avatar.render((W, H), 1.5, background=False)
+    assert not np.array_equal(avatar.camera(moved, W / H)[0], cameras[-1])
+    avatar.release()
+
+
+@pytest.mark.parametrize("gradient", [True, False])
+def test_background_resets_colour_and_depth(gl, gradient):
+    from game.avatar.renderer import AvatarStyle
+
+    ctx, fbo, _ = gl
+    style = AvatarStyle(background_gradient=gradient)
+    renderer = AvatarRenderer(ctx, style)
+    sk = skeleton(reference_pose())
+    view, proj = mirror_view(sk, W / H)
+    fbo.use()
+    fbo.clear(0.0, 0.0, 0.0, 1.0, depth=0.0)  # a depth buffer that would hide everything
+    renderer.render_background()
+    renderer.render(sk, view, proj, floor=False)
+    img = np.frombuffer(fbo.read(components=3), np.uint8).reshape(H, W, 3)[::-1].astype(int)
+    top, bottom = np.array(style.background_top_rgb), np.array(style.background_bottom_rgb)
+    if gradient:
+        assert np.abs(img[0, 0] - 255 * top).max() <= 3 and np.abs(img[-1, 0] - 255 * bottom).max() <= 3
+    else:
+        assert np.abs(img[0, 0] - 255 * (top + bottom) / 2).max() <= 1
+    head = project(view, proj, sk.joint("head")[None])[0].astype(int)
+    assert np.abs(img[head[1], head[0]] - img[head[1], 0]).sum() > 30  # the body shows
+    renderer.release()

@@ -16,6 +16,7 @@ import pytest
 from tracking.live import LiveTracker, PatientInput, SourceConfig
 from tracking.live.client import BLOCK_PREFIX, remove_stale_blocks
 from tracking.live.protocol import LiveError
+from tracking.live.ring import ProcessState
 from tracking.live.source import SimSource
 from tracking.status import MarkerStatus
 from tracking.tracker import TrackingState
@@ -103,6 +104,20 @@ def test_the_interactive_hand_is_measured_where_it_goes(live):
     assert np.linalg.norm(sample.positions_m[right_w1] - sample.truth_m[right_w1]) < 0.010
     assert np.linalg.norm(sample.positions_m[right_w1] - start) > 0.2  # it moved, and was followed
     live.set_patient_input(PatientInput())  # the arm stays where it is
+
+
+def test_wait_pause_and_resume(live):
+    live.poll()
+    t0 = time.perf_counter()
+    assert live.wait(5.0)
+    assert time.perf_counter() - t0 < 5.0 and live.poll()
+    live.pause()
+    assert _wait(lambda: live.status().state == ProcessState.PAUSED, 5.0)
+    live.poll()
+    assert not live.wait(0.5)  # nothing new while paused
+    assert live.status().alive  # the heartbeat goes on
+    live.resume()
+    assert live.wait(5.0) and live.poll()
 
 
 def test_a_killed_process_is_replaced_within_2_s_without_blocking(live):

@@ -114,3 +114,8 @@ def test_monitor_texture_shows_the_image_in_its_viewport():
     tex.release()
     fbo.release()
     ctx.release()
+
+
+def test_window_arrays_must_match_markers_and_cameras():
+    with pytest.raises(ValueError, match=r"\(3, 2, 3\)"):
+        overlay_cameras([grey(), grey()], NAMES, RGB, windows_px=np.zeros((3, 4, 3)))

@@ -1,9 +1,9 @@
 """How fast the avatar renders offscreen: frames per second at the game's resolution.
 
-:func:`avatar_fps` replays the simulated patient raising and turning an arm: poses arrive at 30 Hz
-(skeleton built from the markers), every display frame interpolates the pose for its time stamp,
-dresses it, draws the background, floor and body into an offscreen framebuffer, and reads the
-pixels back (which waits for the GPU, here Mesa llvmpipe on the CPU). The figure is therefore
+:func:`avatar_fps` replays the simulated patient raising and turning an arm through
+:class:`LiveAvatar`: marker samples arrive at 30 Hz (skeleton built from them), every display
+frame interpolates the pose for its time stamp, fades the looks, dresses the pose, draws the
+background, floor and body into an offscreen framebuffer, and reads the pixels back (which waits for the GPU, here Mesa llvmpipe on the CPU). The figure is therefore
 what one game frame of the avatar scene costs, readback included (a window swap costs less).
 """
 
@@ -16,9 +16,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from game.avatar.interpolate import PoseInterpolator
-from game.avatar.renderer import AvatarRenderer, mirror_view
-from game.avatar.skeleton import SkeletonPose, SkeletonTracker
+from game.avatar.live import LiveAvatar
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 from tracking.sim.renderer import create_context
@@ -26,15 +24,14 @@ from tracking.sim.renderer import create_context
 SAMPLE_RATE_HZ = 30.0
 
 
-def demo_poses(n: int = 60, markerset: str = "upper_limb_seated") -> list[SkeletonPose]:
-    """``n`` skeleton poses of one cycle: the right arm rises forward to 150 degrees and back while
-    the forearm turns from pronation to supination and the left elbow bends (simulated markers)."""
+def demo_markers(n: int = 60, markerset: str = "upper_limb_seated") -> tuple[tuple[str, ...], list[np.ndarray]]:
+    """Marker names and ``n`` frames (M, 3) of one cycle of the simulated patient: the right arm
+    rises forward to 150 degrees and back while the forearm turns from pronation to supination
+    and the left elbow bends (the first frame is the reference pose)."""
     ms = load_markerset(markerset)
     body = BodyModel(BodyDimensions.from_percentile(50, "male"), ms)
-    tracker = SkeletonTracker(ms.names)
-    status = np.ones(ms.n_markers, np.uint8)
-    out = []
-    for k in range(n):
+    frames = [body.markers_m(reference_pose())]
+    for k in range(1, n):
         s = 0.5 - 0.5 * math.cos(2.0 * math.pi * k / n)
         pose = Pose(
             trunk_lateral_lean_deg=5.0 * s,
@@ -42,8 +39,8 @@ def demo_poses(n: int = 60, markerset: str = "upper_limb_seated") -> list[Skelet
                                    forearm_supination_deg=-80.0 + 160.0 * s),
             left=ArmPose.clinical(abduction_deg=15.0, elbow_flexion_deg=10.0 + 90.0 * s),
         )
-        out.append(tracker.update(body.markers_m(pose if k else reference_pose()), status))
-    return out
+        frames.append(body.markers_m(pose))
+    return ms.names, frames
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,10 +96,9 @@ def bench_avatar(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, m
             resolved = ctx.renderbuffer((w, h))
             target = ctx.framebuffer(color_attachments=[resolved])
             objs += [resolved, target]
-        renderer = AvatarRenderer(ctx)
-        poses = demo_poses()
-        view, proj = mirror_view(poses[0], w / h, yaw_deg=20.0)
-        interp = PoseInterpolator()
+        names, markers = demo_markers()
+        status = np.ones(len(names), np.uint8)
+        avatar = LiveAvatar(ctx, names)
         pixels = bytearray(w * h * 3)
         frames = 0
         t_start = c_start = None
@@ -111,13 +107,11 @@ def bench_avatar(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, m
         next_sample = 0
         while True:
             now = time.perf_counter() - t0
-            while next_sample / SAMPLE_RATE_HZ <= now:
-                interp.push(next_sample / SAMPLE_RATE_HZ, poses[next_sample % len(poses)])
+            while next_sample / SAMPLE_RATE_HZ <= now:  # the tracker's samples, skeleton included
+                avatar.push(next_sample / SAMPLE_RATE_HZ, markers[next_sample % len(markers)], status)
                 next_sample += 1
-            pose = interp.sample(now)
             fbo.use()
-            renderer.render_background()
-            renderer.render(pose, view, proj)
+            avatar.render((w, h), now)
             if msaa:
                 ctx.copy_framebuffer(target, fbo)
             target.read_into(pixels, components=3)
@@ -127,7 +121,7 @@ def bench_avatar(size: tuple[int, int] = (1280, 720), seconds: float = 3.0, *, m
             elif t_start is not None and time.perf_counter() - t_start >= seconds:
                 break
         wall, cpu = time.perf_counter() - t_start, time.process_time() - c_start
-        renderer.release()
+        avatar.release()
         return AvatarBench(frames / wall, 1000.0 * cpu / frames, frames, (w, h), msaa)
     finally:
         for obj in reversed(objs):

@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from game.avatar.skeleton import SkeletonPose
+from tracking.status import MarkerStatus
 
 
 def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
@@ -139,3 +140,57 @@ class PoseInterpolator:
             if t0 <= t:
                 return lerp_pose(p0, p1, (t - t0) / (t1 - t0))
         return samples[0][1]
+
+
+def state_looks(state: np.ndarray) -> np.ndarray:
+    """(S,) uint8 :class:`MarkerStatus` per segment -> (S, 2) float32 amounts 0/1 of the estimated
+    and the lost look (what :class:`game.avatar.renderer.AvatarRenderer` draws)."""
+    st = np.asarray(state)
+    return np.stack([st == MarkerStatus.ESTIMATED, st == MarkerStatus.LOST], axis=1).astype(np.float32)
+
+
+class LookFader:
+    """Fades each segment's estimated/lost look in and out instead of switching it.
+
+    A marker that flickers between measured and estimated would make its segment blink amber at
+    the sample rate; patients watch the avatar, so the look approaches its target exponentially
+    with time constant ``tau_s`` (~0.15 s: a real change shows within a few tenths of a second,
+    one-sample flickers barely tint). Pure numpy, stateful.
+
+    Args:
+        n_segments: number of segments (``len(SEGMENTS)``).
+        tau_s: time constant of the fade.
+    """
+
+    def __init__(self, n_segments: int, tau_s: float = 0.15) -> None:
+        if tau_s <= 0:
+            raise ValueError(f"tau_s must be positive, got {tau_s}")
+        self._tau = float(tau_s)
+        self._looks: np.ndarray | None = None
+        self._n = int(n_segments)
+        self._time: float | None = None
+
+    def reset(self) -> None:
+        self._looks = None
+        self._time = None
+
+    def update(self, state: np.ndarray, time_s: float) -> np.ndarray:
+        """The looks to draw at ``time_s`` for segment states ``state``.
+
+        Args:
+            state: (S,) uint8 :class:`MarkerStatus` per segment (the shown pose's ``state``).
+            time_s: display time, seconds (any monotonic clock).
+        Returns:
+            (S, 2) float32 amounts 0..1 of the estimated and the lost look.
+        """
+        st = np.asarray(state)
+        if st.shape != (self._n,):
+            raise ValueError(f"state must be ({self._n},), got {st.shape}")
+        target = state_looks(st).astype(np.float64)
+        if self._looks is None or self._time is None:
+            self._looks = target
+        else:
+            dt = max(float(time_s) - self._time, 0.0)
+            self._looks = target + (self._looks - target) * np.exp(-dt / self._tau)
+        self._time = float(time_s)
+        return self._looks.astype(np.float32)

@@ -43,14 +43,15 @@ def menu_rects(size_px: tuple[int, int], n: int) -> list[Rect]:
     w, h = size_px
     scale = min(w / 1280.0, h / 720.0)
     bw, bh, gap = BUTTON_W * scale, BUTTON_H * scale, BUTTON_GAP * scale
-    total = n * bh + (n - 1) * gap
     room = h - 210 * scale - 90 * scale  # below the title, above the footer and status lines
-    if total > room:  # many entries: shorter buttons rather than off the screen
-        bh, gap = bh * room / total, gap * room / total
-        total = room
+    columns = 1 if n * bh + (n - 1) * gap <= room else 2   # many entries: two columns, same buttons
+    rows = -(-n // columns)
+    if columns == 2:
+        bw = min(bw, (w - 2 * theme.MARGIN * scale - gap) / 2)
+    total = rows * bh + (rows - 1) * gap
     top = max(210 * scale, (h - total) / 2 + 60 * scale)
-    x = (w - bw) / 2
-    return [(x, top + i * (bh + gap), bw, bh) for i in range(n)]
+    x0 = (w - columns * bw - (columns - 1) * gap) / 2
+    return [(x0 + (i % columns) * (bw + gap), top + (i // columns) * (bh + gap), bw, bh) for i in range(n)]
 
 
 def hit(rects: list[Rect], x_px: float, y_px: float) -> int | None:

@@ -41,6 +41,8 @@ FOVY_DEG = 34.0
 NEAR_M, FAR_M = 0.1, 20.0
 #: Share of the window's width the 3D view takes (the panel takes the rest).
 VIEW_SHARE = 0.62
+#: A sample with fewer known markers (the tracker waiting for the reference pose) moves no avatar.
+MIN_KNOWN_MARKERS = 4
 #: Shortest interval between two patient inputs sent to the tracker process.
 INPUT_PERIOD_S = 1.0 / 60.0
 #: A sample older than this while the process runs means the source has stalled.
@@ -212,8 +214,8 @@ class LiveScene(BaseScene):
         motions: scripted motion names M cycles through (None in the list: mouse control).
         motion: what plays when the scene opens (None: mouse control).
         open_monitor: makes the camera-check scene for C (None: C does nothing).
-        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar view
-            (:class:`game.scenes.avatar_view.AvatarView`); None: markers only.
+        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar
+            (:class:`game.avatar.live.LiveAvatar`); None: markers only.
         show_markers: draw the measured markers over the avatar.
     """
 
@@ -324,7 +326,9 @@ class LiveScene(BaseScene):
             self.avatar = self.make_avatar(self.app.screen.ctx, self.link.markerset.names)
         if self.avatar is not None:
             for sample in self.link.new_samples:
-                self.avatar.push(sample)
+                # A tracker still waiting for the reference pose knows too few markers to pose a body.
+                if np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                    self.avatar.push_sample(sample)
 
     # ------------------------------------------------------------------ drawing
     def clear_rect(self, frame: Frame) -> tuple[int, int, int, int] | None:
@@ -340,16 +344,16 @@ class LiveScene(BaseScene):
         self._consume_samples()
         if self.avatar is None:
             return
-        self.avatar.pose_at(self.app.clock())
-        camera = self.avatar.camera(self.layout.view.aspect)
-        if camera is not None:
-            self.view_m, self.proj_m = camera
         ctx = frame.screen.ctx
-        ctx.viewport = self.layout.view.gl(frame.size_px[1])
+        v = self.layout.view
+        ctx.viewport = v.gl(frame.size_px[1])
         try:
-            self.avatar.render(self.view_m, self.proj_m)
+            pose = self.avatar.render((v.w, v.h), self.app.clock())
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
+        if pose is not None:
+            # The avatar's still mirror camera: markers, the hand target and the pointer use it too.
+            self.view_m, self.proj_m = self.avatar.camera(pose, v.aspect)
 
     def render_2d(self, frame: Frame) -> None:
         c, s = frame.canvas, self.layout.scale
@@ -399,7 +403,7 @@ class LiveScene(BaseScene):
                 for sd in sides for suffix, label, rng in ARM_ROWS]
         if side:
             rows += TRUNK_ROWS
-        row_h = (ph - (y - py) - 130 * s) / max(len(rows), 1)
+        row_h = (ph - (y - py) - 150 * s) / max(len(rows), 1)
         row_h = min(row_h, 74 * s)
         size = round((theme.BODY if row_h >= 60 * s else theme.SMALL) * s)
         value_size = round((theme.MEDIUM if row_h >= 60 * s else theme.BODY) * s)
@@ -415,7 +419,7 @@ class LiveScene(BaseScene):
                 a, b = min(zero, at), max(zero, at)
                 c.rect((a, bar_y, max(b - a, 3 * s), 8 * s), theme.ACCENT, radius=4 * s)
             y += row_h
-        self._draw_marker_counts(frame, sample, (x, py + ph - 112 * s), right)
+        self._draw_marker_counts(frame, sample, (x, py + ph - 142 * s), right)
 
     def _draw_marker_counts(self, frame: Frame, sample, pos, right: float) -> None:
         c, s = frame.canvas, self.layout.scale

@@ -106,7 +106,8 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
     ax.set_ylabel("maximum, degrees (active ROM)", fontsize=13)
     ax.set_title(title, color=_TEXT, fontsize=17, loc="left")
-    legend = ax.legend(fontsize=12, loc="lower right", facecolor=_BG, edgecolor=_GRID)
+    # beside the axes: over the plot it would hide the band or the points
+    legend = ax.legend(fontsize=12, loc="upper left", bbox_to_anchor=(1.01, 1.0), facecolor=_BG, edgecolor=_GRID)
     for text in legend.get_texts():
         text.set_color(_TEXT)
     fig.tight_layout()
@@ -276,6 +277,15 @@ class ProgressScene(BaseScene):
                 if rx <= event.x * w < rx + rw and ry <= event.y * h < ry + rh:
                     self.selected = i
 
+    def latest_words(self, test: str) -> str:
+        """The latest result per side, rounded to 5: ``R 145°  L 140°``."""
+        parts = []
+        for side in ("right", "left"):
+            rows = [r for r in self.roms if r.test == test and r.side == side]
+            if rows:
+                parts.append(f"{side[0].upper()} {round_to_5(rows[-1].value_deg)}\N{DEGREE SIGN}")
+        return "  ".join(parts)
+
     # ------------------------------------------------------------------ drawing
     def render_2d(self, frame: Frame) -> None:
         c = frame.canvas
@@ -296,11 +306,10 @@ class ProgressScene(BaseScene):
             chosen = i == self.selected
             if chosen:
                 c.rect(rect, (*theme.ACCENT_DARK, 255), radius=12 * s, border=3 * s, border_colour=theme.ACCENT)
-            latest = [r for r in self.roms if r.test == test][-1]
             c.text(self.infos[test].title, (rect[0] + 16 * s, rect[1] + rect[3] / 2), round(theme.SMALL * s),
                    theme.TEXT if chosen else theme.TEXT_DIM, anchor="midleft")
-            c.text(f"{round_to_5(latest.value_deg)}\N{DEGREE SIGN}", (rect[0] + rect[2] - 14 * s, rect[1] + rect[3] / 2),
-                   round(theme.BODY * s), theme.TEXT if chosen else theme.TEXT_DIM, anchor="midright")
+            c.text(self.latest_words(test), (rect[0] + rect[2] - 14 * s, rect[1] + rect[3] / 2),
+                   round(theme.SMALL * s), theme.TEXT if chosen else theme.TEXT_DIM, anchor="midright")
         self._ensure_plots(plot, games)
         if self.tests:
             c.texture(self._textures["rom"], plot)

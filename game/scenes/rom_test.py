@@ -6,7 +6,7 @@ Two scenes over one :class:`RomVisit` (the patient, the database, the standard):
   position and the patient's instructions in large type, the normal value of the standard.
   Up/Down choose, Left/Right or Tab switch the side, Enter starts, Esc goes back; mouse: hover and
   click (the standard chip switches JARM/AAOS for the whole visit: the tables are never mixed).
-- :class:`RomTestScene`: the avatar (mirror view) beside a big live readout of the test value,
+- :class:`RomTestScene`: the avatar (:class:`game.avatar.live.LiveAvatar`, mirror view) beside a big live readout of the test value,
   the steps (start position -> hold still -> move -> done), the maximum so far, compensation
   warnings in plain words, the standard's reference value with its position, the patient's
   previous results of this test and side. The tracker's samples (``LiveLink.new_samples``,
@@ -30,6 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
 from game.gfx import theme
@@ -38,6 +40,7 @@ from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LinkState
 from game.rom.session import RomProgress, RomResult, RomState, RomTestSession, round_to_5
 from game.rom.spec import RomTest, load_all_rom_tests
+from game.scenes.live import MIN_KNOWN_MARKERS
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +125,7 @@ def reference_line(test: RomTest, standard: str) -> str:
         return f"{standard.upper()}: no normal value for this test"
     if not ref.comparable:
         return f"{standard.upper()} {ref.value_deg:g} was measured {ref.position_words}: another position, not comparable"
-    return f"{standard.upper()} normal {ref.value_deg:g}\N{DEGREE SIGN}"
+    return f"{standard.upper()} normal {ref.value_deg:g}\N{DEGREE SIGN} ({test.position_id.replace('_', ' ')})"
 
 
 def previous_line(row) -> str:
@@ -278,7 +281,7 @@ class RomTestScene(BaseScene):
             samples' markers; ``set_motion`` plays the demo motion).
         visit: the patient, database and standard.
         test: the test; side: ``right`` or ``left``.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.scenes.avatar_view.AvatarView`
+        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`
             (None: no avatar, e.g. unit tests of the logic).
         demo: play the test's scripted motion on the simulated patient from the start.
     """
@@ -343,8 +346,9 @@ class RomTestScene(BaseScene):
         for sample in self.link.new_samples:
             was = self.session.state
             self.progress = self.session.feed(sample)
-            if self.avatar is not None:
-                self.avatar.push(sample)
+            # a tracker still waiting for the reference pose knows too few markers to pose a body
+            if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                self.avatar.push_sample(sample)
             if was != RomState.DONE and self.session.state == RomState.DONE:
                 # compensation: the scene asks to repeat (Repeat is chosen first); else Accept
                 self.selected = 1 if self.session.result.compensated else 0
@@ -454,14 +458,11 @@ class RomTestScene(BaseScene):
         self.consume()
         if self.avatar is None:
             return
-        self.avatar.pose_at(self.app.clock())
-        camera = self.avatar.camera(self.view.aspect)
-        if camera is None:
-            return
         ctx = frame.screen.ctx
-        ctx.viewport = self.view.gl(frame.size_px[1])
+        v = self.view
+        ctx.viewport = v.gl(frame.size_px[1])
         try:
-            self.avatar.render(*camera)
+            self.avatar.render((v.w, v.h), self.app.clock())
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
 
@@ -475,15 +476,15 @@ class RomTestScene(BaseScene):
         if state is LinkState.RESTARTING:
             return "The tracker stopped: restarting...", theme.ATTENTION
         p = self.progress
+        if self.notice[0]:
+            return self.notice
         if p is None:
             return "Waiting for the tracker...", theme.ATTENTION
-        if p.state == RomState.DONE:
+        if self.state == RomState.DONE:
             r = self.session.result
             if r.compensated:
                 return "Compensation seen: please repeat the test.", theme.ATTENTION
             return "Done: accept or discard the result.", theme.ACCENT
-        if p.state == RomState.ACCEPTED:
-            return self.notice
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT
@@ -514,7 +515,8 @@ class RomTestScene(BaseScene):
         y = self._draw_compensation(c, x, y, width)
         c.text(reference_line(self.test, self.visit.standard), (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 32 * s
-        self._draw_previous(c, x, y, width)
+        buttons_top = self._button_rects(1)[0][1]
+        self._draw_previous(c, x, y, buttons_top - 12 * s)
         self._draw_buttons(c)
         if self.demo:
             v = self.view
@@ -555,10 +557,11 @@ class RomTestScene(BaseScene):
         c.text("Maximum", (mx, y), round(theme.SMALL * s), theme.TEXT_DIM)
         if result is not None:
             c.text(f"raw {result.max_deg:.1f}\N{DEGREE SIGN}", (mx, y + 30 * s), round(theme.MEDIUM * s), theme.TEXT)
-            c.text(f"from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s), round(theme.SMALL * s),
-                   theme.TEXT_DIM)
+            c.text(f"active ROM, from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s),
+                   round(theme.SMALL * s), theme.TEXT_DIM)
         elif math.isfinite(best):
-            c.text(f"{round_to_5(best)}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)
+            # whole degrees while moving (never below "now"); the result is rounded to 5
+            c.text(f"{round(best):d}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)
         else:
             c.text("-", (mx, y + 24 * s), round(theme.TITLE * s), theme.TEXT_FAINT)
         estimated = result.estimated if result is not None else (p is not None and p.estimated)
@@ -586,15 +589,21 @@ class RomTestScene(BaseScene):
             c.text(line, (x + 15 * s, y + 10 * s + k * 30 * s), size, theme.TEXT)
         return y + h + 12 * s
 
-    def _draw_previous(self, c, x: float, y: float, width: float) -> None:
+    def _draw_previous(self, c, x: float, y: float, bottom: float) -> None:
+        """The latest previous results that fit above ``bottom`` (at most :data:`PREVIOUS_SHOWN`)."""
         s = self.scale
         size = round(theme.SMALL * s)
         if not self.previous:
             c.text("No previous results for this test and side.", (x, y), size, theme.TEXT_FAINT)
             return
-        c.text("Previous results", (x, y), size, theme.TEXT_DIM)
+        fit = min(PREVIOUS_SHOWN, int((bottom - y - 30 * s) // (28 * s)))
+        if fit < 1:
+            return
+        more = len(self.previous) - fit
+        c.text("Previous results" + (f" (latest {fit} of {len(self.previous)})" if more > 0 else ""), (x, y), size,
+               theme.TEXT_DIM)
         y += 30 * s
-        for row in self.previous[-PREVIOUS_SHOWN:]:
+        for row in self.previous[-fit:]:
             c.text(previous_line(row), (x + 12 * s, y), size, theme.TEXT)
             y += 28 * s
 

@@ -145,3 +145,10 @@ def test_bad_motion_is_one_line(capsys):
     assert main(["play", "--headless", "--motion", "no_such_motion"]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown motion 'no_such_motion'" in err[0] and "shoulder_flexion" in err[0]
+
+
+def test_a_tracker_that_cannot_start_is_one_line(headless, capsys):
+    assert main(["play", "--headless", "--rig", "no_such_rig", "--seconds", "1"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown rig 'no_such_rig'" in err[0] and "ring4" in err[0]
+    assert multiprocessing.active_children() == []

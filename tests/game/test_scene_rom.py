@@ -48,6 +48,7 @@ class MotionLink:
         self._queue: list = []
         self.n = 0
         self.motion_t0 = 0
+        self.estimated: set[str] = set()   # markers published as estimated (hidden) in every sample
 
     def set_motion(self, name) -> None:
         self.motions.append(name)
@@ -68,7 +69,8 @@ class MotionLink:
             m = len(truth)
             sample = LiveSample(
                 frame_index=self.n, time_s=self.n / FPS, t_frame_ready_s=self.n / FPS, t_published_s=self.n / FPS,
-                state=1, positions_m=truth, status=np.ones(m, np.uint8),
+                state=1, positions_m=truth,
+                status=np.array([2 if n in self.estimated else 1 for n in self.markerset.names], np.uint8),
                 angles_deg=np.array([angles[a] for a in self.angle_names]), message="",
                 windows_px=np.full((m, 1, 3), np.nan), uv_px=np.full((m, 1, 2), np.nan), truth_m=truth,
                 number=self.n, angle_names=self.angle_names)
@@ -188,7 +190,7 @@ def test_test_list_shows_the_sides_tests_and_opens_one(screen, db_path):
     app.dispatch(Press(Action.SELECT))
     assert opened == [("shoulder_flexion", "left")]
     assert reference_line(load_rom_test("shoulder_external_rotation"), "aaos").startswith("AAOS 90 was measured")
-    assert reference_line(load_rom_test("shoulder_flexion"), "jarm") == "JARM normal 180\N{DEGREE SIGN}"
+    assert reference_line(load_rom_test("shoulder_flexion"), "jarm") == "JARM normal 180\N{DEGREE SIGN} (seated arm at side)"
 
 
 # ---------------------------------------------------------------------------- the test
@@ -316,3 +318,25 @@ def test_the_scene_draws_the_readout_and_buttons(screen, db_path):
     accept, repeat, _ = scene._button_rects(3)
     assert teal(accept) > 100 and teal(repeat) < 10
     assert math.isfinite(scene.session.result.max_deg)
+
+
+def test_a_maximum_on_estimated_markers_is_marked_and_stored_so(screen, db_path):
+    link = MotionLink()
+    link.estimated = {"MRE2"}                               # the medial elbow marker hidden by the trunk
+    app = make_app(screen, link)
+    scene = RomTestScene(link, RomVisit(db_path, "P001"), load_rom_test("shoulder_extension"), "right", demo=True)
+    app.push(scene)
+    run_test(app, link, scene)
+    result = scene.session.result
+    assert result.estimated_markers == ("MRE2",)
+    app.frame()
+    rgb = screen.read_rgb().astype(int)
+    x0, right, _ = scene._panel()
+    s = scene.scale
+    line = rgb[round(270 * s):round(310 * s), round(x0):round(right)]   # the amber "relied on estimated" line
+    assert (np.abs(line - np.array((242, 190, 92))).sum(axis=2) < 60).sum() > 50
+    scene.press("accept")
+    with Database(db_path) as db:
+        (row,) = db.rom_results("P001")
+    assert row.estimated_markers == "MRE2" and row.test == "shoulder_extension"
+    assert "estimated markers" in previous_line(row)

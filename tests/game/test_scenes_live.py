@@ -14,7 +14,7 @@ from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState
-from game.scenes.avatar_view import AvatarView
+from game.avatar.live import LiveAvatar
 from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
 from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
 from tracking.angles import ANGLE_COLUMNS, joint_angles
@@ -110,7 +110,7 @@ def make_app(screen, *, motion=None, avatar=True):
     app.push(BaseScene())
     scene = LiveScene(link, motions=[None, "shoulder_flexion", "reach"], motion=motion,
                       open_monitor=lambda: MonitorScene(link),
-                      make_avatar=(lambda ctx, names: AvatarView(ctx, names)) if avatar else None)
+                      make_avatar=(lambda ctx, names: LiveAvatar(ctx, names)) if avatar else None)
     app.push(scene)
     return app, scene, link, clock
 

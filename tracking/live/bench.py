@@ -41,8 +41,17 @@ def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
             "max": float(values_ms.max())}
 
 
+def process_cpu_s(pid: int) -> float:
+    """CPU seconds (user + system, all threads) a process has used so far; NaN if unknown (not Linux)."""
+    try:
+        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+    except OSError:
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *, fps: float = 30.0,
-                    motion: str | None = "shoulder_flexion", rig: str = "ring4", spin: bool = True) -> dict:
+                    motion: str | None = "shoulder_flexion", rig: str = "ring4", reader: str = "wait") -> dict:
     """Run the tracker process for ``seconds`` and measure latency and pace.
 
     Args:
@@ -51,15 +60,22 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
         fps: the source's frame rate.
         motion: scripted motion of the simulated patient (None: the interactive patient, still).
         rig: camera layout.
-        spin: read in a tight loop (yielding the CPU between reads), as for the measurement; False
-            reads every 5 ms as a game loop might (the latency then includes up to that wait).
+        reader: how the game process reads: ``"wait"`` blocks on the tracker's new-sample pipe
+            (:meth:`LiveTracker.wait`) and reads at once; ``"spin"`` polls in a tight loop,
+            yielding the CPU between polls (on a loaded machine the scheduler then makes the
+            reader wait for its turn); ``"frame"`` polls every 5 ms as a game loop might (the
+            latency then includes up to that wait).
 
     Returns:
         dict with ``size``, ``fps_asked``, ``fps_kept`` (samples per wall second), ``samples``,
         ``dropped``, ``errors``, ``latency_ms``/``publish_ms``/``transport_ms``/``tracker_ms``
-        (each ``p50``, ``p99``, ``max``), ``tracker_ms_mean``, ``render_ms_mean``, ``load_avg``
-        (1-minute load average, or NaN).
+        (each ``p50``, ``p99``, ``max``), ``tracker_ms_mean``, ``render_ms_mean``,
+        ``cpu_ms_per_frame`` (CPU time of the tracker process, all threads, per frame set: what
+        the figures would be on an idle machine does not depend on the load as wall times do),
+        ``load_avg`` (1-minute load average, or NaN).
     """
+    if reader not in ("wait", "spin", "frame"):
+        raise ValueError(f"reader {reader!r}: use 'wait', 'spin' or 'frame'")
     config = SourceConfig(size=tuple(size), fps=fps, motion=motion, rig=rig)
     latency, publish, transport, step, render = [], [], [], [], []
     with LiveTracker(config, auto_restart=False, warm_standby=False) as live:
@@ -68,6 +84,7 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
         t_end = t_measure + seconds
         first_number = None
         count = 0
+        cpu_start = cpu_end = float("nan")
         while True:
             records = live.poll_records()
             t_seen = time.perf_counter()
@@ -77,6 +94,7 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
                     continue
                 if first_number is None:
                     first_number = int(rec["number"])
+                    cpu_start = process_cpu_s(live.pid)
                 count += 1
                 step_s = float(rec["step_ms"]) / 1000.0
                 published = float(rec["t_published_s"])
@@ -86,8 +104,12 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
                 step.append(step_s)
                 render.append(float(rec["source_ms"]) / 1000.0)
             if t_seen >= t_end:
+                cpu_end = process_cpu_s(live.pid)
                 break
-            time.sleep(0 if spin else 0.005)
+            if reader == "wait":
+                live.wait(0.1)
+            else:
+                time.sleep(0 if reader == "spin" else 0.005)
         status = live.status()
     try:
         load = os.getloadavg()[0]
@@ -96,6 +118,7 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
     ms = lambda v: np.asarray(v) * 1000.0  # noqa: E731
     return {
         "size": tuple(size),
+        "reader": reader,
         "fps_asked": float(fps),
         "fps_kept": count / seconds,
         "samples": count,
@@ -107,6 +130,7 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
         "tracker_ms": _percentiles(ms(step)),
         "tracker_ms_mean": float(ms(step).mean()) if step else float("nan"),
         "render_ms_mean": float(ms(render).mean()) if render else float("nan"),
+        "cpu_ms_per_frame": (cpu_end - cpu_start) * 1000.0 / max(count - 1, 1),
         "load_avg": load,
     }
 
@@ -117,8 +141,9 @@ def format_result(r: dict) -> str:
     lat, tr = r["latency_ms"], r["tracker_ms"]
     return (f"{w}x{h}: kept {r['fps_kept']:.1f} of {r['fps_asked']:.0f} frame sets/s ({r['samples']} samples, "
             f"{r['dropped']} dropped, {r['errors']} errors; render {r['render_ms_mean']:.1f} ms, tracker "
-            f"{r['tracker_ms_mean']:.1f} ms mean / {tr['p99']:.1f} p99; load average {r['load_avg']:.1f})\n"
-            f"  latency beyond tracking: p50 {lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, max {lat['max']:.3f} ms "
+            f"{r['tracker_ms_mean']:.1f} ms mean / {tr['p99']:.1f} p99, CPU {r['cpu_ms_per_frame']:.1f} ms per "
+            f"frame set; load average {r['load_avg']:.1f})\n"
+            f"  latency beyond tracking ({r['reader']} reader): p50 {lat['p50']:.3f} ms, p99 {lat['p99']:.3f} ms, max {lat['max']:.3f} ms "
             f"(publish p99 {r['publish_ms']['p99']:.3f} ms, transport p99 {r['transport_ms']['p99']:.3f} ms)")
 
 
@@ -129,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="camera size; repeat for several (default 320x240 and 640x480)")
     parser.add_argument("--fps", type=float, default=30.0, help="source frame rate (default 30)")
     parser.add_argument("--motion", default="shoulder_flexion", help="scripted motion (default shoulder_flexion)")
+    parser.add_argument("--reader", choices=("wait", "spin", "frame"), default="wait",
+                        help="how the reader waits for samples (default wait: blocks on the new-sample pipe)")
     args = parser.parse_args(argv)
     sizes = args.size or ["320x240", "640x480"]
     for text in sizes:
@@ -137,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError:
             print(f"--size {text}: write WIDTHxHEIGHT, e.g. 320x240", file=sys.stderr)
             return 1
-        print(format_result(measure_latency(args.seconds, (w, h), fps=args.fps, motion=args.motion)), flush=True)
+        print(format_result(measure_latency(args.seconds, (w, h), fps=args.fps, motion=args.motion, reader=args.reader)),
+              flush=True)
     return 0
 
 

@@ -22,6 +22,7 @@ import math
 import multiprocessing
 import os
 import secrets
+import select
 import threading
 import time
 from dataclasses import replace
@@ -208,6 +209,7 @@ class LiveTracker:
         self._reader: RingReader | None = None
         self._images: ImageSlot | None = None
         self._args: ProcessArgs | None = None
+        self._notify_r = None  # read end of the "new sample" pipe
         self._motion = source.motion
         self._input = PatientInput()
         self._paused = False
@@ -252,7 +254,10 @@ class LiveTracker:
             ImageSlot(image_shm.buf, images, initialize=True).release()
             self._reader = RingReader(sample_shm.buf, ring)
             self._images = ImageSlot(image_shm.buf, images)
-            self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid())
+            self._notify_r, notify_w = self._ctx.Pipe(duplex=False)
+            os.set_blocking(self._notify_r.fileno(), False)
+            self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid(),
+                                     notify=notify_w)
             self._child = self._spawn(standby=False)
             if wait:
                 self._wait_ready(timeout_s)
@@ -308,6 +313,11 @@ class LiveTracker:
                 if part is not None:
                     part.release()
             self._reader = self._images = None
+            if self._args is not None and self._args.notify is not None:
+                self._args.notify.close()
+            if self._notify_r is not None:
+                self._notify_r.close()
+            self._args = self._notify_r = None
             for shm in self._shm:
                 shm.close()
                 try:
@@ -476,6 +486,25 @@ class LiveTracker:
     def poll_records(self) -> list[np.ndarray]:
         """Like :meth:`poll`, as raw shared-memory records (copies): cheaper for tight loops."""
         return [] if self._reader is None else self._reader.read_new()
+
+    def wait(self, timeout_s: float) -> bool:
+        """Block until a sample newer than the last :meth:`poll` is published, or ``timeout_s``
+        passes; True if there is one. For a thread that records every sample (a ROM test) or a
+        benchmark; a game loop simply polls once per frame."""
+        if self._reader is None:
+            return False
+        deadline = time.perf_counter() + timeout_s
+        fd = self._notify_r.fileno()
+        while self._reader.written() <= self._reader.next_number:
+            left = deadline - time.perf_counter()
+            if left <= 0 or not select.select([fd], [], [], left)[0]:
+                return self._reader.written() > self._reader.next_number
+            try:
+                while os.read(fd, 65536):
+                    pass
+            except BlockingIOError:
+                pass
+        return True
 
     def latest(self) -> LiveSample | None:
         """The newest sample (None before the first)."""

@@ -70,6 +70,9 @@ class ProcessArgs:
         paused: start paused.
         standby: get ready (source, tracker), then wait for :class:`Activate` before publishing:
             a warm spare that takes over within a frame or two when the running process dies.
+        notify: write end of a pipe (a ``multiprocessing`` Connection used only for its file
+            descriptor) that gets one byte per published sample, so a reader can block until the
+            next sample instead of polling; None: no notification.
         die_with_parent: ask Linux to kill this process when the thread that spawned it ends
             (``PR_SET_PDEATHSIG`` follows the spawning *thread*, so the game sets it only when
             spawning from its main thread; the parent-pid check and the pipe's end-of-file cover
@@ -86,6 +89,7 @@ class ProcessArgs:
     paused: bool = False
     standby: bool = False
     die_with_parent: bool = True
+    notify: object = None
 
 
 def one_line(where: str, frame_index: int, exc: BaseException) -> str:
@@ -104,10 +108,11 @@ class TrackerLoop:
         fps: the source's frame rate (time stamps are ``frame_index / fps``).
         tracker: the tracker (default: one for the source's cameras and marker set).
         clock: ``time.perf_counter`` (injected in tests).
+        notify_fd: non-blocking pipe end that gets one byte per published sample (or None).
     """
 
     def __init__(self, source: FrameSource, writer: RingWriter, images: ImageSlot | None, *, fps: float,
-                 tracker=None, clock: Callable[[], float] = time.perf_counter) -> None:
+                 tracker=None, clock: Callable[[], float] = time.perf_counter, notify_fd: int | None = None) -> None:
         from tracking.tracker import Tracker
 
         self.source = source
@@ -117,6 +122,7 @@ class TrackerLoop:
         self.tracker = tracker or Tracker(source.cameras, source.markerset, fps=self.fps)
         self.angle_names = angle_names_for(source.markerset)
         self.clock = clock
+        self.notify_fd = notify_fd
         self.paused = False
         self._fps_ema = math.nan
         self._step_ema = math.nan
@@ -147,7 +153,8 @@ class TrackerLoop:
                 self.source.handle(command)
             except Exception as exc:  # a bad motion name must not stop the tracker
                 self._report("source", exc)
-            if isinstance(command, SetMotion):
+                return True
+            if isinstance(command, SetMotion):  # the new motion starts from the reference pose
                 self.tracker.reidentify()
         else:
             log.warning("unknown command %r ignored", command)
@@ -211,6 +218,11 @@ class TrackerLoop:
         rec["message"] = encode_line(sample.message)
         rec["t_published_s"] = self.clock()
         self.writer.publish()
+        if self.notify_fd is not None:
+            try:
+                os.write(self.notify_fd, b"\1")
+            except (BlockingIOError, BrokenPipeError):
+                pass  # the reader is far behind (the pipe is full) or gone: the ring has the sample
 
     def _rates(self, t_ready_s: float, step_ms: float) -> None:
         h = self.writer.header
@@ -226,7 +238,7 @@ class TrackerLoop:
     def _report(self, where: str, exc: BaseException, index: int | None = None) -> None:
         line = one_line(where, self.frame_index - 1 if index is None else index, exc)
         self.writer.set_error(line)
-        key = f"{where}:{type(exc).__name__}:{exc}"
+        key = f"{where}:{type(exc).__name__}"  # not the text: it may name the frame
         n = self._error_counts.get(key, 0)
         self._error_counts[key] = n + 1
         if n % LOG_EVERY == 0:
@@ -344,7 +356,11 @@ def tracker_main(args: ProcessArgs, conn) -> None:
             h["heartbeat_s"] = time.perf_counter()
             patient_input, paused = go.patient_input, go.paused
             motion = go.motion
-        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker)
+        notify_fd = None
+        if args.notify is not None:
+            notify_fd = args.notify.fileno()
+            os.set_blocking(notify_fd, False)
+        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker, notify_fd=notify_fd)
         if motion != args.config.motion:
             loop.handle(SetMotion(motion))
         loop.handle(SetPatientInput(patient_input))

@@ -1,0 +1,147 @@
+"""The progress review scene on a database of a few results: the plot drawn with the normal band
+(its colour in the plot's pixels, at the normal value's height) and the 5-degree grid, the tests
+listed and chosen with the keys, the games' plot or "No games yet", and one line for an unknown
+patient."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from game.app import App, BaseScene, Settings
+from game.db import Database
+from game.gfx.screen import GraphicsUnavailable, open_screen
+from game.input import Action, Press
+from game.rom.session import RomResult
+from game.scenes.progress import BAND_COLOUR, ProgressScene, rom_plot_rgb
+
+SIZE = (1280, 720)
+
+
+def result(test: str, value: float, *, side: str = "right", angle: str = "shoulder_flexion", ref: float | None = 180.0,
+           compensation: tuple[str, ...] = (), estimated: tuple[str, ...] = ()) -> RomResult:
+    return RomResult(test=test, title=test, side=side, angle=f"{side}_{angle}", direction=1, mode="active",
+                     position="seated_arm_at_side", position_words="seated", standard="jarm", reference_deg=ref,
+                     max_deg=value, start_deg=-10.0, range_deg=value + 10.0, max_time_s=3.0, started_s=1.0,
+                     ended_s=7.0, compensations=compensation, estimated_markers=estimated, n_samples=90)
+
+
+def fill(path, *, games: bool) -> None:
+    with Database(path) as db:
+        db.add_patient("P001")
+        for day, (flex, elbow) in enumerate(((121.3, 118.0), (133.9, 126.2), (146.2, 131.0)), start=1):
+            sid = db.start_session("P001", "rom", started_utc=f"2026-11-{day:02d}T09:00:00Z")
+            db.add_rom_result(sid, result("shoulder_flexion", flex, compensation=("the trunk leaned",) if day == 2 else ()))
+            db.add_rom_result(sid, result("shoulder_flexion", flex - 8, side="left"))
+            db.add_rom_result(sid, result("elbow_flexion", elbow, angle="elbow_flexion", ref=145.0,
+                                          estimated=("MRE2",) if day == 3 else ()))
+            if games:
+                gid = db.start_session("P001", "exercise", started_utc=f"2026-11-{day:02d}T10:00:00Z")
+                db.add_exercise_result(gid, "reach", repetitions=10 + 5 * day, duration_s=240.0 + 30 * day)
+
+
+@pytest.fixture
+def screen(monkeypatch):
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        s = open_screen(SIZE, "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+    yield s
+    s.close()
+
+
+def band_rgb() -> np.ndarray:
+    return np.array([int(BAND_COLOUR[i:i + 2], 16) for i in (1, 3, 5)])
+
+
+def test_plot_has_the_normal_band_at_the_normal_value(tmp_path):
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=False)
+    with Database(path) as db:
+        rows = [r for r in db.rom_results("P001") if r.test == "shoulder_flexion"]
+    from game.report import session_order
+
+    rgb = rom_plot_rgb("Shoulder flexion", rows, session_order(rows), 180.0, "jarm", (800, 400)).astype(int)
+    assert rgb.shape == (400, 800, 3)
+    # the band: the teal drawn at 30 % over the dark background, a horizontal stripe across the axes
+    background = np.array([27, 33, 43])
+    expected = background + 0.3 * (band_rgb() - background)
+    band = np.abs(rgb - expected).sum(axis=2) < 12
+    rows_with_band = np.flatnonzero(band.sum(axis=1) > 300)
+    assert len(rows_with_band) >= 8
+    # no band when the standard's value is for another position
+    plain = rom_plot_rgb("x", rows, session_order(rows), None, "aaos", (800, 400)).astype(int)
+    assert (np.abs(plain - expected).sum(axis=2) < 12).sum() < 50
+
+
+def test_progress_scene_draws_the_plot_and_the_games(screen, tmp_path):
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=True)
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    scene = ProgressScene(path, "P001", standard="jarm")
+    app.push(scene)
+    assert scene.tests == ["elbow_flexion", "shoulder_flexion"]   # first session, then name
+    app.frame()
+    rgb = screen.read_rgb().astype(int)
+    _, _, plot, games = scene._layout()
+    x, y, w, h = (round(v) for v in plot)
+    background = np.array([27, 33, 43])
+    expected = background + 0.3 * (band_rgb() - background)
+    in_plot = rgb[y:y + h, x:x + w]
+    assert ((np.abs(in_plot - expected).sum(axis=2) < 14).sum(axis=1) > 200).sum() >= 5    # the band
+    # the right side's line (amber) is drawn
+    amber = np.abs(in_plot - np.array([242, 190, 92])).sum(axis=2) < 40
+    assert amber.sum() > 300
+    # the games' bars in the lower part
+    gx, gy, gw, gh = (round(v) for v in games)
+    lower = rgb[gy:gy + gh, gx:gx + gw]
+    assert (np.abs(lower - band_rgb()).sum(axis=2) < 30).sum() > 500
+    screen.save_png(tmp_path / "progress.png")
+    first_plot = scene.plot_rgb
+    app.dispatch(Press(Action.DOWN))
+    app.frame()
+    assert scene.selected == 1 and scene.plot_rgb is not first_plot
+    app.dispatch(Press(Action.BACK))
+    assert not isinstance(app.scene, ProgressScene)
+    app.close()
+
+
+def test_no_games_yet_and_unknown_patient(screen, tmp_path):
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=False)
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    scene = ProgressScene(path, "P001")
+    app.push(scene)
+    app.frame()
+    assert scene.games == [] and "games" not in scene._textures
+    unknown = ProgressScene(path, "P404")
+    app.push(unknown)
+    app.frame()
+    assert "no patient 'P404'" in unknown.error
+    app.close()
+
+
+def test_play_command_opens_the_progress_scene_and_refuses_an_unknown_patient(screen, tmp_path, capsys):
+    import cv2
+
+    from game.cli import main
+
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=False)
+    assert main(["play", "--headless", "--scene", "progress", "--db", str(path)]) == 1
+    assert main(["play", "--headless", "--scene", "rom", "--patient", "P404", "--db", str(path)]) == 1
+    assert main(["play", "--headless", "--scene", "rom", "--patient", "P001", "--test", "no_such_test",
+                 "--db", str(path)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3
+    assert "give --patient ID" in err[0] and "no patient 'P404'" in err[1] and "no_such_test" in err[2]
+    out = tmp_path / "progress.png"
+    assert main(["play", "--headless", "--scene", "progress", "--patient", "P001", "--db", str(path),
+                 "--seconds", "0.5", "--screenshot", str(out), "--window", "1280x720"]) == 0
+    rgb = cv2.imread(str(out))[:, :, ::-1].astype(int)
+    background = np.array([27, 33, 43])
+    expected = background + 0.3 * (band_rgb() - background)
+    assert ((np.abs(rgb - expected).sum(axis=2) < 14).sum(axis=1) > 200).sum() >= 5   # the normal band
