@@ -35,6 +35,7 @@ from game.gfx import theme
 from game.gfx.view3d import Viewport, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LinkState
+from game.scenes.live import MIN_KNOWN_MARKERS
 
 log = logging.getLogger(__name__)
 
@@ -45,6 +46,42 @@ STALE_SAMPLE_S = 0.5
 #: How long a cue's flash stays on the screen.
 FLASH_S = 0.8
 GOOD = (120, 220, 120)
+#: The camera is re-aimed when the pelvis moved this far.
+CAMERA_REAIM_M = 0.08
+
+
+def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """(view, mirrored projection) framing the upper body and the game's targets.
+
+    Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body):
+    reach frames from the hips to a hand raised above the head, turned 25 degrees towards the active
+    side so forward reaches show their depth; the rotation games frame the trunk and the forearm
+    in front of it, turned 15 degrees.
+    """
+    from game.avatar.renderer import look_at, perspective
+
+    rp = pose.frame("pelvis")
+    fwd = -rp[:, 2].copy()
+    fwd[1] = 0.0
+    fwd /= max(float(np.linalg.norm(fwd)), 1e-9)
+    right = np.array([-fwd[2], 0.0, fwd[0]])
+    yaw = math.radians((25.0 if kind == "reach" else 15.0) * (1.0 if side == "right" else -1.0))
+    direction = math.cos(yaw) * fwd + math.sin(yaw) * right
+    shoulders = (pose.joint("right_acromion") + pose.joint("left_acromion")) / 2.0
+    pelvis = pose.joint("pelvis")
+    if kind == "reach":
+        target = shoulders + np.array([0.0, 0.10, 0.0]) + 0.12 * fwd
+        half = 0.80
+    else:
+        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd
+        half = 0.52
+    half = max(half, half * 0.9 / aspect)
+    fov = 30.0
+    distance = half / math.tan(math.radians(fov) / 2.0)
+    pitch = math.radians(10.0)
+    eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
+    proj = perspective(fov, aspect, near_m=0.1, far_m=distance + 6.0)
+    return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
 
 
 def load_limits(db_path: Path, patient_id: str, spec: GameSpec, side: str) -> RomLimits:
@@ -69,11 +106,11 @@ def target_shapes(shapes, spec: GameSpec, session: GameSession):
     if t is None or frame is None:
         return shapes
     colour = _rgb01(spec.colour)
-    glow = np.clip(colour * (0.7 + 0.6 * t.hold_fraction), 0, 1)
+    glow = np.clip(colour + (1.0 - colour) * 0.6 * t.hold_fraction, 0, 1)   # whitens as it fills
     e_c, e_a, e_rgb, c_p0, c_p1, c_r = [], [], [], [], [], []
     if spec.kind == "reach":
         e_c.append(t.hand_m)
-        e_a.append(np.eye(3) * t.size * 0.55)
+        e_a.append(np.eye(3) * t.size * 0.7)
         e_rgb.append(glow)
     elif spec.kind == "rotation":
         up = frame.trunk[:, 1]
@@ -120,7 +157,7 @@ class GameScene(BaseScene):
         link: the live tracker link.
         spec: the game; side: the active arm.
         db_path, patient_id: where the ROM is read from and the session stored.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.scenes.avatar_view.AvatarView`.
+        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`.
         auto: the simulated patient plays by itself.
         mute: no sound.
         seed: the targets' random generator.
@@ -158,6 +195,7 @@ class GameScene(BaseScene):
         self._turn = 0
         self._hand_target = None
         self.view_m = self.proj_m = None
+        self._camera_pelvis = None
 
     # ------------------------------------------------------------------ life cycle
     def enter(self, app) -> None:
@@ -272,8 +310,8 @@ class GameScene(BaseScene):
         reading, reason = None, self.no_reading_reason()
         if not reason and markerset is not None:
             for sample in samples:
-                if self.avatar is not None:
-                    self.avatar.push(sample)
+                if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                    self.avatar.push_sample(sample)
             latest = samples[-1] if samples else self.link.latest
             reading, reason = read_sample(latest, markerset.names, self.link.angle_names, self.side)
         self.session.update(now, reading, reason)
@@ -303,20 +341,23 @@ class GameScene(BaseScene):
         self.consume()
         if self.avatar is None:
             return
-        from game.avatar.renderer import mirror_view
         from game.avatar.shapes import body_shapes
 
-        pose = self.avatar.pose_at(self.app.clock())
+        now = self.app.clock()
+        pose = self.avatar.interpolator.sample(now)
         ctx = frame.screen.ctx
         ctx.viewport = self.view.gl(frame.size_px[1])
         try:
             self.avatar.renderer.render_background()
             if pose is not None:
-                yaw = 25.0 if self.spec.kind == "reach" else 15.0
-                self.view_m, self.proj_m = mirror_view(pose, self.view.aspect, yaw_deg=yaw * (1 if self.side == "right" else -1),
-                                                       margin=0.86)
+                if self.proj_m is None or self._camera_pelvis is None or \
+                        np.linalg.norm(pose.joint("pelvis") - self._camera_pelvis) > CAMERA_REAIM_M:
+                    # a still camera: re-aimed only when the patient moves on the seat
+                    self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.spec.kind, self.side)
+                    self._camera_pelvis = pose.joint("pelvis").copy()
                 shapes = target_shapes(body_shapes(pose), self.spec, self.session)
-                self.avatar.renderer.render(pose, self.view_m, self.proj_m, shapes=shapes)
+                self.avatar.renderer.render(pose, self.view_m, self.proj_m, shapes=shapes,
+                                            looks=self.avatar.fader.update(pose.state, now))
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
 
