@@ -301,7 +301,7 @@ def _cmd_play(args) -> int:
         auto=args.auto,
         mute=args.mute,
     )
-    if options.scene in ("rom", "progress"):
+    if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
 
         check_scene_options(options)   # one line before anything starts

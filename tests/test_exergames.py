@@ -313,3 +313,18 @@ def test_the_log_is_stored_and_read_back(tmp_path):
     lo, hi = details["range_used"]["forearm_supination"]
     assert lo < 0 < hi   # targets alternate pronation and supination
     assert details["limits"]["positive_deg"] == 70.0
+
+
+def test_play_game_options_are_checked_in_one_line(tmp_path, capsys):
+    from game.cli import main
+
+    db = tmp_path / "db.sqlite3"
+    with Database(db) as d:
+        d.add_patient("P001")
+    for argv, words in ((["--game", "nosuch", "--patient", "P001"], "unknown game 'nosuch'"),
+                        (["--game", "reach", "--patient", "NOPE"], "no patient 'NOPE'"),
+                        (["--game", "reach"], "give --patient ID with --game"),
+                        (["--auto"], "--auto plays a game")):
+        assert main(["play", "--headless", "--db", str(db), *argv]) != 0
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1
