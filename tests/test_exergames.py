@@ -328,3 +328,21 @@ def test_play_game_options_are_checked_in_one_line(tmp_path, capsys):
         assert main(["play", "--headless", "--db", str(db), *argv]) != 0
         err = capsys.readouterr().err.strip()
         assert words in err and len(err.splitlines()) == 1
+
+
+def test_sound_cues_are_generated_tones_and_silence_never_fails(monkeypatch):
+    from game.exergames.audio import NOTES, RATE_HZ, Sounds, tone
+
+    samples = tone(NOTES[Cue.COLLECTED])
+    duration = sum(d for _, d in NOTES[Cue.COLLECTED])
+    assert samples.dtype == np.int16 and samples.shape[1] == 2
+    assert abs(len(samples) - duration * RATE_HZ) <= len(NOTES[Cue.COLLECTED])
+    assert 0.2 * 32767 < np.abs(samples).max() < 32767
+    # the first note's pitch: 659 Hz from the zero crossings
+    first = samples[: int(0.08 * RATE_HZ), 0].astype(float)
+    crossings = np.count_nonzero(np.diff(np.sign(first)) != 0)
+    assert crossings / 2 / 0.08 == pytest.approx(659.3, rel=0.2)
+    monkeypatch.setenv("SDL_AUDIODRIVER", "dummy")
+    for sounds in (Sounds(), Sounds(mute=True)):
+        assert not sounds.enabled
+        sounds.play(Cue.COLLECTED)   # silent, no error
