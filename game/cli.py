@@ -233,6 +233,8 @@ def _add_play(sub) -> None:
     p.add_argument("--auto", action="store_true",
                    help="with --game: the simulated patient plays by itself (the automatic demo)")
     p.add_argument("--mute", action="store_true", help="no sound")
+    p.add_argument("--max-level", type=int, choices=range(1, 11), default=None, metavar="1..10",
+                   help="the therapist's highest level of the games (default: each game's own limit)")
     p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress", "game"), default=None,
                    help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
                    "--test playing its demo motion; progress: the progress review of --patient")
@@ -300,6 +302,7 @@ def _cmd_play(args) -> int:
         game=args.game,
         auto=args.auto,
         mute=args.mute,
+        max_level=args.max_level,
     )
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options

@@ -50,6 +50,7 @@ class PlayOptions:
         game: the exercise game to open (``content/games`` name) on ``patient`` and ``side``.
         auto: the simulated patient plays the game by itself (the automatic demo).
         mute: no sound.
+        max_level: the therapist's highest level of the games, 1..10 (None: each game's own limit).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -68,6 +69,7 @@ class PlayOptions:
     game: str | None = None
     auto: bool = False
     mute: bool = False
+    max_level: int | None = None
 
 
 def make_avatar(ctx, marker_names):
@@ -114,16 +116,18 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return PatientsScene(db_path, lambda pid: ProgressScene(db_path, pid, standard=options.standard),
                              title="Progress: choose the patient", allow_new=False)
 
-    def open_game(spec, patient_id, side=options.side, auto=options.auto):
-        from game.scenes.game_play import GameScene
+    def open_game(spec, patient_id, side=options.side, auto=options.auto, max_level=options.max_level):
+        from game.scenes.game_play import GameScene, level_from_shown
 
         return GameScene(link, spec, side, db_path, patient_id, make_avatar=make_avatar, auto=auto,
-                         mute=options.mute, source=source_kind)
+                         mute=options.mute, source=source_kind,
+                         level_high=None if max_level is None else level_from_shown(max_level))
 
     def open_games():
         from game.scenes.game_menu import ChooseGameScene
 
-        return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side),
+        return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side,
+                                                                  max_level=options.max_level),
                              title="Games: choose the patient")
 
     home = HomeScene([

@@ -346,3 +346,30 @@ def test_sound_cues_are_generated_tones_and_silence_never_fails(monkeypatch):
     for sounds in (Sounds(), Sounds(mute=True)):
         assert not sounds.enabled
         sounds.play(Cue.COLLECTED)   # silent, no error
+
+
+def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+    from game.scenes.game_play import level_from_shown, level_shown
+
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec.name, pid, kw))
+    menu.app = FakeApp()
+    for action in (Action.DOWN, Action.RIGHT, Action.NEXT_MOTION, Action.ROTATE_IN, Action.ROTATE_IN,
+                   Action.ROTATE_IN, Action.SELECT):
+        menu.handle(Press(action, True))
+    (name, pid, kw), = opened
+    assert name == menu.games[1].name and pid == "P001"
+    assert kw == {"side": "left", "auto": True, "max_level": 8}
+    menu.change_max_level(+5)
+    assert menu.max_level is None          # above 10: each game's own limit
+    assert [level_shown(level_from_shown(k)) for k in range(1, 11)] == list(range(1, 11))
+    spec = load_game("reach").difficulty
+    a = LevelAdapter(spec, start=0.9, high=level_from_shown(3))
+    assert a.level == pytest.approx(2 / 9)

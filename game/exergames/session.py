@@ -138,8 +138,7 @@ class LevelAdapter:
         self.spec = spec
         self.low = spec.min_level if low is None else float(low)
         self.high = spec.max_level if high is None else float(high)
-        if self.low > self.high:
-            self.low, self.high = self.high, self.low
+        self.low = min(self.low, self.high)   # the therapist's highest level wins over the game's lowest
         self.level = min(max(spec.start if start is None else float(start), self.low), self.high)
         self.recent: list[bool] = []
         self.changes: list[float] = []

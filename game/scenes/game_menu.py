@@ -1,7 +1,8 @@
 """Choose an exercise game for a patient: the games of ``content/games`` in large type.
 
-Up/Down choose, Left/Right switch the arm, M switches the automatic demo (the simulated patient
-plays by itself), Enter starts, Esc goes back; mouse: hover and click.
+Up/Down choose, Left/Right switch the arm, Q/E lower/raise the therapist's highest level (the
+difficulty adapts up to it), M switches the automatic demo (the simulated patient plays by
+itself), Enter starts, Esc goes back; mouse: hover and click.
 """
 
 from __future__ import annotations
@@ -15,23 +16,25 @@ from game.input import Action, InputEvent, Pointer, PointerKind, Press
 
 
 class ChooseGameScene(BaseScene):
-    """The list of games; Enter opens ``open_game(spec, patient_id, side, auto)`` on top.
+    """The list of games; Enter opens ``open_game(spec, patient_id, side=, auto=, max_level=)`` on top.
 
     Args:
         patient_id: the patient who plays.
         open_game: makes the game scene.
         side: the arm first chosen.
         games: the games offered (default: every built-in game).
+        max_level: the therapist's highest level, 1..10 (None: each game's own limit).
     """
 
     def __init__(self, patient_id: str, open_game: Callable[..., BaseScene], *, side: str = "right",
-                 games: Sequence[GameSpec] | None = None) -> None:
+                 games: Sequence[GameSpec] | None = None, max_level: int | None = None) -> None:
         self.patient_id = patient_id
         self.open_game = open_game
         self.side = side
         self.games = list(games) if games is not None else load_all_games()
         self.selected = 0
         self.auto = False
+        self.max_level = max_level
 
     def _rows(self):
         w, h = self.app.screen.size_px
@@ -41,7 +44,13 @@ class ChooseGameScene(BaseScene):
 
     def start(self) -> None:
         if self.games:
-            self.app.push(self.open_game(self.games[self.selected], self.patient_id, side=self.side, auto=self.auto))
+            self.app.push(self.open_game(self.games[self.selected], self.patient_id, side=self.side, auto=self.auto,
+                                         max_level=self.max_level))
+
+    def change_max_level(self, step: int) -> None:
+        """Q/E: the highest level the difficulty may reach (1..10; above 10: the games' own limits)."""
+        level = (self.max_level or 11) + step
+        self.max_level = None if level > 10 else max(1, level)
 
     def handle(self, event: InputEvent) -> None:
         n = len(self.games)
@@ -57,6 +66,8 @@ class ChooseGameScene(BaseScene):
                 self.side = "left" if self.side == "right" else "right"
             elif a is Action.NEXT_MOTION:
                 self.auto = not self.auto
+            elif a in (Action.ROTATE_IN, Action.ROTATE_OUT):
+                self.change_max_level(1 if a is Action.ROTATE_OUT else -1)
             elif a is Action.SELECT:
                 self.start()
             elif a is Action.BACK:
@@ -78,7 +89,9 @@ class ChooseGameScene(BaseScene):
         m = theme.MARGIN * s
         c.text(f"Games: patient {self.patient_id}", (m, 36 * s), round(theme.LARGE * s), theme.TEXT)
         demo = "demo on: plays by itself" if self.auto else "demo off"
-        c.text(f"{self.side.capitalize()} arm   ({demo})", (m, 100 * s), round(theme.SMALL * s), theme.TEXT_DIM)
+        limit = "each game's own" if self.max_level is None else str(self.max_level)
+        c.text(f"{self.side.capitalize()} arm   Highest level: {limit}   ({demo})", (m, 100 * s), round(theme.SMALL * s),
+               theme.TEXT_DIM)
         for i, (rect, g) in enumerate(zip(rows, self.games)):
             chosen = i == self.selected
             c.rect(rect, (*theme.ACCENT_DARK, 255) if chosen else theme.PANEL, radius=16 * s, border=3 * s,
@@ -86,5 +99,5 @@ class ChooseGameScene(BaseScene):
             c.circle((rect[0] + 56 * s, rect[1] + rect[3] / 2), 30 * s, (*g.colour, 255))
             c.text(g.title, (rect[0] + 110 * s, rect[1] + 18 * s), round(theme.MEDIUM * s), theme.TEXT)
             c.text(g.exercises, (rect[0] + 110 * s, rect[1] + 66 * s), round(theme.SMALL * s), theme.TEXT_DIM)
-        c.text("Up / Down: game   Left / Right: arm   M: demo   Enter: play   Esc: back", (w / 2, h - 20 * s),
+        c.text("Up / Down: game   Left / Right: arm   Q / E: highest level   M: demo   Enter: play   Esc: back", (w / 2, h - 20 * s),
                round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")

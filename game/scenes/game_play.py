@@ -50,6 +50,16 @@ GOOD = (120, 220, 120)
 CAMERA_REAIM_M = 0.08
 
 
+def level_shown(level: float) -> int:
+    """The level as the patient sees it, 1..10, from the session's 0..1."""
+    return 1 + round(min(max(level, 0.0), 1.0) * 9)
+
+
+def level_from_shown(shown: int) -> float:
+    """The session's level 0..1 of a shown level 1..10."""
+    return (min(max(int(shown), 1), 10) - 1) / 9.0
+
+
 def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, np.ndarray]:
     """(view, mirrored projection) framing the upper body and the game's targets.
 
@@ -422,7 +432,7 @@ class GameScene(BaseScene):
         frac = sess.remaining_s / sess.spec.duration_s
         c.text(f"Time {int(sess.remaining_s) // 60}:{int(sess.remaining_s) % 60:02d}", (x, y), round(theme.BODY * s),
                theme.TEXT)
-        c.text(f"Level {1 + round(sess.level * 9)}", (right, y), round(theme.BODY * s), theme.ACCENT, anchor="topright")
+        c.text(f"Level {level_shown(sess.level)}", (right, y), round(theme.BODY * s), theme.ACCENT, anchor="topright")
         y += 44 * s
         c.rect((x, y, right - x, 12 * s), (255, 255, 255, 30), radius=6 * s)
         c.rect((x, y, (right - x) * frac, 12 * s), theme.ACCENT, radius=6 * s)
