@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Iterable, Mapping
 
 import pygame
@@ -34,8 +35,8 @@ class Action(enum.Enum):
     TOGGLE_FPS = "frame rate"
 
 
-#: The one key map. Keys absent here do nothing.
-KEYMAP: Mapping[int, Action] = {
+#: The one key map (read-only). Keys absent here do nothing.
+KEYMAP: Mapping[int, Action] = MappingProxyType({
     pygame.K_UP: Action.UP,
     pygame.K_DOWN: Action.DOWN,
     pygame.K_LEFT: Action.LEFT,
@@ -57,7 +58,7 @@ KEYMAP: Mapping[int, Action] = {
     pygame.K_c: Action.MONITOR,
     pygame.K_F1: Action.TOGGLE_FPS,
     pygame.K_f: Action.TOGGLE_FPS,
-}
+})
 
 
 @dataclass(frozen=True, slots=True)

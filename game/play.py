@@ -11,14 +11,17 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from calibration.errors import RehabError
 from game.app import App, RunSummary, Services, Settings
 from game.gfx.screen import open_screen
-from game.live_link import LiveLink, LinkState
+from game.live_link import LiveLink
 from game.scenes.home import HomeScene, MenuEntry
 from game.scenes.live import LiveScene
+
+if TYPE_CHECKING:
+    from tracking.live import SourceConfig
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +40,7 @@ class PlayOptions:
 
     Attributes:
         settings: window size, update rate, frame-rate cap.
-        source: what the tracker process measures (``tracking.live.SourceConfig``).
+        source: what the tracker process measures (None: the simulated patient's defaults).
         headless: draw offscreen for ``seconds`` and stop.
         seconds: run time (None: until quit).
         screenshot: save the last frame there (PNG).
@@ -54,7 +57,7 @@ class PlayOptions:
     """
 
     settings: Settings = field(default_factory=Settings)
-    source: object = None
+    source: "SourceConfig | None" = None
     headless: bool = False
     seconds: float | None = None
     screenshot: Path | None = None

@@ -18,6 +18,7 @@ Drawing order is call order.
 
 from __future__ import annotations
 
+import functools
 import struct
 
 import moderngl
@@ -114,7 +115,9 @@ _ANCHORS = ("topleft", "midtop", "topright", "midleft", "center", "midright", "b
             "bottomright")
 
 
+@functools.lru_cache(maxsize=256)
 def _rgba(colour: Colour) -> tuple[float, float, float, float]:
+    """sRGB 0..255 -> 0..1 RGBA (a UI uses a handful of colours: cached)."""
     if len(colour) == 3:
         return colour[0] / 255.0, colour[1] / 255.0, colour[2] / 255.0, 1.0
     return colour[0] / 255.0, colour[1] / 255.0, colour[2] / 255.0, colour[3] / 255.0

@@ -7,6 +7,8 @@ failures. Sizes are font pixel sizes of pygame's bundled font at a 1280x720 wind
 
 from __future__ import annotations
 
+from types import MappingProxyType
+
 BACKGROUND = (27, 33, 43)
 BACKGROUND_GL = (27 / 255, 33 / 255, 43 / 255)
 PANEL = (38, 46, 59, 235)
@@ -21,7 +23,7 @@ ATTENTION = (242, 190, 92)      # amber: waiting, estimated, restarting
 FAILURE = (232, 112, 104)       # muted red: lost, failed
 
 #: Marker status colours (tracking.status.MarkerStatus: 0 lost, 1 measured, 2 estimated).
-STATUS_COLOURS = {0: FAILURE, 1: ACCENT, 2: ATTENTION}
+STATUS_COLOURS = MappingProxyType({0: FAILURE, 1: ACCENT, 2: ATTENTION})
 
 TITLE = 76
 LARGE = 52

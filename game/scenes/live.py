@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -29,7 +29,7 @@ import numpy as np
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspective, pointer_ray, project_px
-from game.input import Action, InputEvent, Pointer, PointerKind, Press
+from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
 
 log = logging.getLogger(__name__)

@@ -5,7 +5,6 @@ answers without a display or with a bad motion."""
 
 from __future__ import annotations
 
-import math
 import multiprocessing
 import os
 import signal
@@ -20,6 +19,7 @@ from game.cli import main
 from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.live_link import LinkState, LiveLink
 from game.play import PlayOptions, build_app
+from game.input import Pointer, PointerKind
 from game.scenes.live import LiveScene, live_layout
 
 pytestmark = pytest.mark.timeout(240)
@@ -68,10 +68,10 @@ def test_headless_play_saves_the_avatar(headless, tmp_path, capsys):
     assert multiprocessing.active_children() == []
 
 
-def test_killing_the_tracker_keeps_the_window_drawing_and_recovers(headless, tmp_path):
+def test_the_mouse_moves_the_hand_and_killing_the_tracker_keeps_the_window_drawing(headless, tmp_path):
     from tracking.live import LiveTracker, SourceConfig
 
-    source = SourceConfig(motion="reference", fps=30.0)
+    source = SourceConfig(motion=None, fps=30.0)   # the interactive simulated patient
     link = LiveLink(lambda: LiveTracker(source))
     screen = open_screen((640, 360), "test", headless=True)
     app = None
@@ -79,12 +79,27 @@ def test_killing_the_tracker_keeps_the_window_drawing_and_recovers(headless, tmp
     try:
         link.start()
         assert link.wait_ready(120), link.error
-        options = PlayOptions(settings=Settings(window_px=(640, 360), max_fps=30), scene="live", motion="reference")
+        options = PlayOptions(settings=Settings(window_px=(640, 360), max_fps=30), scene="live", motion=None)
         app = build_app(screen, options, link)
         scene = app.scene
-        assert isinstance(scene, LiveScene)
+        assert isinstance(scene, LiveScene) and scene.interactive
         app.run(seconds=1.0)
         assert link.state is LinkState.RUNNING and scene.banner(link.latest) is None
+        # The mouse up and to the right of the view: the patient's right hand goes there (mirror).
+        wrist = link.markerset.names.index("MRW1")
+        before = link.latest.positions_m[wrist].copy()
+        view = live_layout((640, 360)).view
+        app.dispatch(Pointer(PointerKind.MOVE, (view.x + 0.8 * view.w) / 640, (view.y + 0.25 * view.h) / 360))
+        target = np.array(scene.control.hand_target_m)
+        assert target[0] > before[0] + 0.2 and target[1] > before[1] + 0.4
+        deadline = time.perf_counter() + 30
+        moved = np.zeros(3)
+        while time.perf_counter() < deadline and not (moved[0] > 0.1 and moved[1] > 0.2):
+            app.run(seconds=0.5)
+            now = link.latest.positions_m[wrist]
+            if np.isfinite(now).all():
+                moved = now - before
+        assert moved[0] > 0.1 and moved[1] > 0.2, f"the right wrist moved by {moved}"
         # the tracker keeps a warm standby process to take over; kill once it is prepared
         deadline = time.perf_counter() + 60
         while not getattr(link.tracker, "standby_ready", True) and time.perf_counter() < deadline:
