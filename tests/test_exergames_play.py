@@ -147,3 +147,25 @@ def test_a_stopped_tracker_pauses_the_game_with_a_message_and_it_resumes(rig):
     finally:
         app.close()
     assert scene.session.log.paused_s >= 0.5
+
+
+def test_the_mouse_on_a_target_moves_the_simulated_hand_there_and_collects_it(rig):
+    from game.input import Pointer, PointerKind
+
+    screen, link, db_path = rig
+    app = App(screen, Settings(window_px=SIZE, max_fps=0, show_fps=False), services=Services(link))
+    scene = GameScene(link, load_game("reach"), "right", db_path, "P001", make_avatar=make_avatar, auto=False,
+                      mute=True, seed=8)
+    app.push(scene)
+
+    def point_at_target(s: GameScene) -> bool:
+        if s.session.target is not None and s.proj_m is not None:
+            x, y = s._project(s.session.target.hand_m)
+            s.handle(Pointer(PointerKind.MOVE, x / SIZE[0], y / SIZE[1]))
+        return s.session.reached >= 1
+
+    try:
+        assert _play(app, scene, point_at_target, 40.0), scene.session.log.targets
+    finally:
+        app.close()
+    assert scene.session.log.targets[0]["reached"]
