@@ -16,7 +16,6 @@ from game.exergames.session import (READY_S, Cue, GameSession, LevelAdapter, Pha
 from game.exergames.spec import available_games, load_game
 from game.exergames.targets import (ArmFrame, RomLimits, elbow_at_side_hand_m, elevation_direction,
                                     flexion_abduction_deg, place_target, rom_limits_from_rows, target_hand_m)
-from game.rom.session import RomResult
 from tracking.errors import ContentError
 
 DT = 1.0 / 30.0

@@ -33,7 +33,7 @@ from game.exergames.spec import GameSpec
 from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
 from game.gfx import theme
 from game.gfx.view3d import Viewport, pointer_ray, project_px
-from game.input import Action, InputEvent, Pointer, PointerKind, Press
+from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState
 from game.scenes.live import MIN_KNOWN_MARKERS
 
