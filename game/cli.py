@@ -228,14 +228,21 @@ def _add_play(sub) -> None:
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=float, default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
-    p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress"), default=None,
+    p.add_argument("--game", default=None,
+                   help="open this exercise game (content/games name or YAML) for --patient on --side")
+    p.add_argument("--auto", action="store_true",
+                   help="with --game: the simulated patient plays by itself (the automatic demo)")
+    p.add_argument("--mute", action="store_true", help="no sound")
+    p.add_argument("--max-level", type=int, choices=range(1, 11), default=None, metavar="1..10",
+                   help="the therapist's highest level of the games (default: each game's own limit)")
+    p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress", "game"), default=None,
                    help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
                    "--test playing its demo motion; progress: the progress review of --patient")
     p.add_argument("--db", type=Path, default=None,
                    help="database of patients and results (default: the user's data directory)")
-    p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress")
+    p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress, or --game")
     p.add_argument("--test", default=None, help="ROM test for --scene rom (default: shoulder_flexion)")
-    p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom")
+    p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
     p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
                    help="reference standard of the ROM tests and the progress band (default: %(default)s)")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
@@ -259,6 +266,13 @@ def _cmd_play(args) -> int:
     from tracking.sim.motions import available_motions
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
+    if args.game is not None or args.scene == "game":
+        from game.exergames.spec import load_game
+
+        load_game(args.game or "reach")   # an unknown game is one line, before anything starts
+        motion = None   # games drive the interactive patient (the mouse or the auto player)
+    elif args.auto:
+        raise RehabError("--auto plays a game: give --game NAME")
     if args.scene == "rom" and args.motion is None:
         from game.play import DEFAULT_ROM_TEST
         from game.rom.spec import load_rom_test
@@ -278,15 +292,19 @@ def _cmd_play(args) -> int:
         headless=args.headless,
         seconds=seconds,
         screenshot=args.screenshot,
-        scene=args.scene or ("live" if args.headless else "home"),
+        scene=args.scene or ("game" if args.game else "live" if args.headless else "home"),
         motion=motion,
         db_path=args.db,
         patient=args.patient,
         test=args.test,
         side=args.side,
         standard=args.standard,
+        game=args.game,
+        auto=args.auto,
+        mute=args.mute,
+        max_level=args.max_level,
     )
-    if options.scene in ("rom", "progress"):
+    if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
 
         check_scene_options(options)   # one line before anything starts

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable
 
@@ -27,9 +27,11 @@ log = logging.getLogger(__name__)
 
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
-SCENES = ("home", "live", "cameras", "rom", "progress")
+SCENES = ("home", "live", "cameras", "rom", "progress", "game")
 #: The test ``--scene rom`` opens when none is named.
 DEFAULT_ROM_TEST = "shoulder_flexion"
+#: The game ``--scene game`` opens when none is named.
+DEFAULT_GAME = "reach"
 
 
 @dataclass(frozen=True, slots=True)
@@ -48,6 +50,10 @@ class PlayOptions:
         start_timeout_s: how long the tracker may take to start.
         db_path: the database of patients and results (None: the user's data directory).
         patient, test, side, standard: what ``rom`` and ``progress`` open on.
+        game: the exercise game to open (``content/games`` name) on ``patient`` and ``side``.
+        auto: the simulated patient plays the game by itself (the automatic demo).
+        mute: no sound.
+        max_level: the therapist's highest level of the games, 1..10 (None: each game's own limit).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -63,6 +69,10 @@ class PlayOptions:
     test: str | None = None
     side: str = "right"
     standard: str = "jarm"
+    game: str | None = None
+    auto: bool = False
+    mute: bool = False
+    max_level: int | None = None
 
 
 def make_avatar(ctx, marker_names):
@@ -109,8 +119,23 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return PatientsScene(db_path, lambda pid: ProgressScene(db_path, pid, standard=options.standard),
                              title="Progress: choose the patient", allow_new=False)
 
+    def open_game(spec, patient_id, side=options.side, auto=options.auto, max_level=options.max_level):
+        from game.scenes.game_play import GameScene, level_from_shown
+
+        return GameScene(link, spec, side, db_path, patient_id, make_avatar=make_avatar, auto=auto,
+                         mute=options.mute, source=source_kind,
+                         level_high=None if max_level is None else level_from_shown(max_level))
+
+    def open_games():
+        from game.scenes.game_menu import ChooseGameScene
+
+        return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side,
+                                                                  max_level=options.max_level),
+                             title="Games: choose the patient")
+
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
+        MenuEntry("Games", "Exercise inside the measured range", open_games),
         MenuEntry("ROM test", "Measure a range of motion", open_rom),
         MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
@@ -121,6 +146,12 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         app.push(open_live())
     elif options.scene == "cameras":
         app.push(open_monitor())
+    elif options.scene == "game" or options.game:
+        from game.exergames.spec import load_game
+
+        spec = load_game(options.game or DEFAULT_GAME)
+        check_scene_options(replace(options, scene="game"))
+        app.push(open_game(spec, options.patient))
     elif options.scene in ("rom", "progress"):
         check_scene_options(options)
         if options.scene == "progress":
@@ -136,7 +167,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
 
 def check_scene_options(options: PlayOptions) -> None:
-    """The ``rom`` and ``progress`` scenes open on an existing patient (and a test for the side).
+    """The ``rom``, ``progress`` and ``game`` scenes open on an existing patient (and a test for the side).
 
     Raises:
         RehabError: one line saying what to give or fix.
@@ -144,7 +175,8 @@ def check_scene_options(options: PlayOptions) -> None:
     from game.db import Database, default_db_path
 
     if not options.patient:
-        raise RehabError(f"give --patient ID with --scene {options.scene} (see rehab patients)")
+        what = "--game" if options.scene == "game" else f"--scene {options.scene}"
+        raise RehabError(f"give --patient ID with {what} (see rehab patients)")
     if options.scene == "rom":
         from game.rom.spec import check_side, load_rom_test
 

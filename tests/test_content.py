@@ -35,5 +35,5 @@ def test_motions_load(name):
 
 
 def test_every_yaml_file_belongs_to_a_known_kind():
-    kinds = {"markersets", "rigs", "motions", "rom_tests"}
+    kinds = {"markersets", "rigs", "motions", "rom_tests", "games"}
     assert {p.parts[0] for p in ALL_YAML} <= kinds

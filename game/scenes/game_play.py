@@ -1,0 +1,517 @@
+"""An exercise game, live: the avatar, the targets in its 3D view, big counters, cues, pauses.
+
+A thin scene over :class:`game.exergames.session.GameSession`: every frame the tracker's new
+samples move the avatar and become one :class:`~game.exergames.session.Reading` (or the reason
+there is none: the tracker starting, restarting, stalled, waiting for the reference pose, markers
+lost), the session advances on the game clock, its cues sound (:class:`game.exergames.audio.Sounds`)
+and flash. Targets are drawn as solids in the avatar's 3D view (a star to touch, gate posts, the
+key's lock beside the hand) with a 2D ring that fills while the target is held; the panel shows
+the stars collected, the time left, the level and what to do. When the session ends (time up or
+Esc) its log is stored for the patient (``exercise_results``, shown in the progress review).
+
+Play: with the simulated patient the mouse moves the hand (on a plane through the current
+target), Q/E turn the forearm; with ``auto`` the simulated patient plays by itself
+(:class:`game.exergames.autoplay.AutoPlayer`), through the tracker like any patient.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from calibration.errors import RehabError
+from game.app import BaseScene, Frame
+from game.exergames.audio import Sounds
+from game.exergames.autoplay import AutoPlayer
+from game.exergames.session import Cue, GameSession, Phase, read_sample, store_log
+from game.exergames.spec import GameSpec
+from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
+from game.gfx import theme
+from game.gfx.view3d import Viewport, pointer_ray, project_px
+from game.input import Action, InputEvent, Pointer, PointerKind
+from game.live_link import LinkState
+from game.scenes.live import MIN_KNOWN_MARKERS
+
+log = logging.getLogger(__name__)
+
+VIEW_SHARE = 0.64
+INPUT_PERIOD_S = 1.0 / 60.0
+#: Samples stop for this long (the tracker publishes 30 a second): the game pauses rather than score an old pose.
+STALE_SAMPLE_S = 0.5
+#: How long a cue's flash stays on the screen.
+FLASH_S = 0.8
+GOOD = (120, 220, 120)
+#: The camera is re-aimed when the pelvis moved this far.
+CAMERA_REAIM_M = 0.08
+
+
+def level_shown(level: float) -> int:
+    """The level as the patient sees it, 1..10, from the session's 0..1."""
+    return 1 + round(min(max(level, 0.0), 1.0) * 9)
+
+
+def level_from_shown(shown: int) -> float:
+    """The session's level 0..1 of a shown level 1..10."""
+    return (min(max(int(shown), 1), 10) - 1) / 9.0
+
+
+def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """(view, mirrored projection) framing the upper body and the game's targets.
+
+    Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body):
+    reach frames from the hips to a hand raised above the head, turned 25 degrees towards the active
+    side so forward reaches show their depth; the rotation games frame the trunk and the forearm
+    in front of it, turned 15 degrees.
+    """
+    from game.avatar.renderer import look_at, perspective
+
+    rp = pose.frame("pelvis")
+    fwd = -rp[:, 2].copy()
+    fwd[1] = 0.0
+    fwd /= max(float(np.linalg.norm(fwd)), 1e-9)
+    right = np.array([-fwd[2], 0.0, fwd[0]])
+    yaw = math.radians((25.0 if kind == "reach" else 15.0) * (1.0 if side == "right" else -1.0))
+    direction = math.cos(yaw) * fwd + math.sin(yaw) * right
+    shoulders = (pose.joint("right_acromion") + pose.joint("left_acromion")) / 2.0
+    pelvis = pose.joint("pelvis")
+    if kind == "reach":
+        target = shoulders + np.array([0.0, 0.10, 0.0]) + 0.12 * fwd
+        half = 0.80
+    else:
+        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd
+        half = 0.52
+    half = max(half, half * 0.9 / aspect)
+    fov = 30.0
+    distance = half / math.tan(math.radians(fov) / 2.0)
+    pitch = math.radians(10.0)
+    eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
+    proj = perspective(fov, aspect, near_m=0.1, far_m=distance + 6.0)
+    return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
+
+
+def load_limits(db_path: Path, patient_id: str, spec: GameSpec, side: str) -> RomLimits:
+    """The patient's latest stored ROM for the game (defaults where none is stored)."""
+    from game.db import Database
+
+    with Database(db_path) as db:
+        db.require_patient(patient_id)
+        rows = db.rom_results(patient_id)
+    return rom_limits_from_rows(spec, rows, side)
+
+
+def _rgb01(c) -> np.ndarray:
+    return np.asarray(c[:3], np.float32) / 255.0
+
+
+def target_shapes(shapes, spec: GameSpec, session: GameSession):
+    """The avatar's solids plus the current target's (BodyShapes with rows appended)."""
+    from game.avatar.shapes import PART_CHAIR
+
+    t, frame = session.target, session.frame
+    if t is None or frame is None:
+        return shapes
+    colour = _rgb01(spec.colour)
+    glow = np.clip(colour + (1.0 - colour) * 0.6 * t.hold_fraction, 0, 1)   # whitens as it fills
+    e_c, e_a, e_rgb, c_p0, c_p1, c_r = [], [], [], [], [], []
+    if spec.kind == "reach":
+        e_c.append(t.hand_m)
+        e_a.append(np.eye(3) * t.size * 0.7)
+        e_rgb.append(glow)
+    elif spec.kind == "rotation":
+        up = frame.trunk[:, 1]
+        for side in (-1.0, 1.0):
+            p = elbow_at_side_hand_m(frame, t.target.value_deg + side * t.size)
+            c_p0.append(p - 0.10 * up)
+            c_p1.append(p + 0.10 * up)
+            c_r.append(0.014)
+            e_c.append(p + 0.12 * up)
+            e_a.append(np.eye(3) * 0.028)
+            e_rgb.append(glow)
+    else:  # the lock: a flat disc beside the hand, on the side the key must turn to
+        out = frame.out
+        e_c.append(t.hand_m + 0.10 * frame.trunk[:, 1] + 0.02 * out)
+        e_a.append(np.stack([0.05 * out, 0.05 * frame.trunk[:, 1], 0.015 * frame.trunk[:, 2]], axis=1))
+        e_rgb.append(glow)
+    n_e, n_c = len(e_c), len(c_p0)
+    out = replace(
+        shapes,
+        ellipsoid_centre_m=np.concatenate([shapes.ellipsoid_centre_m, np.array(e_c).reshape(-1, 3)]),
+        ellipsoid_axes_m=np.concatenate([shapes.ellipsoid_axes_m, np.array(e_a).reshape(-1, 3, 3)]),
+        ellipsoid_rgb=np.concatenate([shapes.ellipsoid_rgb, np.array(e_rgb, np.float32).reshape(-1, 3)]),
+        ellipsoid_part=np.concatenate([shapes.ellipsoid_part, np.full(n_e, PART_CHAIR, np.int32)]),
+        ellipsoid_fine=np.concatenate([shapes.ellipsoid_fine, np.ones(n_e, bool)]),
+    )
+    if n_c:
+        out = replace(
+            out,
+            capsule_p0_m=np.concatenate([shapes.capsule_p0_m, np.array(c_p0)]),
+            capsule_p1_m=np.concatenate([shapes.capsule_p1_m, np.array(c_p1)]),
+            capsule_r0_m=np.concatenate([shapes.capsule_r0_m, np.array(c_r)]),
+            capsule_r1_m=np.concatenate([shapes.capsule_r1_m, np.array(c_r)]),
+            capsule_rgb=np.concatenate([shapes.capsule_rgb, np.tile(np.float32([0.95, 0.95, 0.98]), (n_c, 1))]),
+            capsule_part=np.concatenate([shapes.capsule_part, np.full(n_c, PART_CHAIR, np.int32)]),
+            capsule_caps=np.concatenate([shapes.capsule_caps, np.ones((n_c, 2), bool)]),
+        )
+    return out
+
+
+class GameScene(BaseScene):
+    """One exercise game for one patient.
+
+    Args:
+        link: the live tracker link.
+        spec: the game; side: the active arm.
+        db_path, patient_id: where the ROM is read from and the session stored.
+        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`.
+        auto: the simulated patient plays by itself.
+        mute: no sound.
+        seed: the targets' random generator.
+        level, level_low, level_high: the therapist's start level and limits (None: the game's).
+        source: stored with the session (e.g. ``sim``).
+    """
+
+    def __init__(self, link, spec: GameSpec, side: str, db_path: Path, patient_id: str, *,
+                 make_avatar: Callable | None = None, auto: bool = False, mute: bool = False, seed: int = 0,
+                 level: float | None = None, level_low: float | None = None, level_high: float | None = None,
+                 source: str = "sim") -> None:
+        self.link = link
+        self.spec = spec
+        self.side = side
+        self.db_path = Path(db_path)
+        self.patient_id = patient_id
+        self.make_avatar = make_avatar
+        self.auto = auto
+        self.mute = mute
+        self.source = source
+        self.limits = load_limits(self.db_path, patient_id, spec, side)
+        self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
+                                   level_high=level_high)
+        self.player = AutoPlayer(self.session)
+        self.avatar = None
+        self.sounds: Sounds | None = None
+        self.stored_uid: str | None = None
+        self.store_error = ""
+        self._sample_clock_s = math.nan
+        self._since_sent_s = 0.0
+        self._sent = None
+        self._flash: tuple[str, tuple, float] | None = None
+        self._frame_consumed = -1
+        self._forearm_deg = 0.0
+        self._turn = 0
+        self._hand_target = None
+        self.view_m = self.proj_m = None
+        self._camera_pelvis = None
+
+    # ------------------------------------------------------------------ life cycle
+    def enter(self, app) -> None:
+        super().enter(app)
+        w, h = app.screen.size_px
+        self.scale = min(w / 1280.0, h / 720.0)
+        self.view = Viewport(0, 0, round(w * VIEW_SHARE), h)
+        self.sounds = Sounds(self.mute)
+        self.link.set_motion(None)   # the interactive patient: the mouse or the auto player moves the arm
+
+    def exit(self) -> None:
+        self.save()
+        if self.avatar is not None:
+            self.avatar.release()
+            self.avatar = None
+
+    def save(self) -> str | None:
+        """End the session and store its log (once; nothing for a session that never played)."""
+        if self.stored_uid is not None or self.store_error:
+            return self.stored_uid
+        log_ = self.session.finish()
+        try:
+            self.stored_uid = store_log(self.db_path, self.patient_id, log_, source=self.source)
+        except RehabError as exc:
+            self.store_error = str(exc)
+            log.error("game session not stored: %s", exc)
+        if self.stored_uid:
+            log.info("stored %s session %s for %s: %d reached, %d missed, %.0f s", self.spec.name, self.stored_uid,
+                     self.patient_id, log_.reached, log_.missed, log_.duration_s)
+        return self.stored_uid
+
+    # ------------------------------------------------------------------ input
+    def handle(self, event: InputEvent) -> None:
+        if isinstance(event, Pointer):
+            if event.kind in (PointerKind.MOVE, PointerKind.PRESS) and not self.auto:
+                self._aim(event.x * self.app.screen.size_px[0], event.y * self.app.screen.size_px[1])
+            return
+        if event.action in (Action.ROTATE_IN, Action.ROTATE_OUT):
+            sign = 1 if event.action is Action.ROTATE_OUT else -1
+            self._turn = sign if event.down else 0
+            return
+        if not event.down:
+            return
+        if event.action is Action.BACK:
+            self.app.pop()
+        elif event.action is Action.REIDENTIFY:
+            self.link.reidentify()
+        elif event.action is Action.NEXT_MOTION:
+            self.auto = not self.auto
+
+    def _aim(self, x_px: float, y_px: float) -> None:
+        """The mouse moves the simulated hand on a vertical plane through the target (or the rest position)."""
+        v = self.view
+        s = self.session
+        if self.proj_m is None or s.frame is None or not (v.x <= x_px < v.x + v.w):
+            return
+        origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
+        anchor = s.target.hand_m if s.target is not None else elbow_at_side_hand_m(s.frame, 0.0)
+        normal = s.frame.trunk[:, 2]
+        denom = float(direction @ normal)
+        if abs(denom) < 1e-9:
+            return
+        hit = origin + float((anchor - origin) @ normal) / denom * direction
+        self._hand_target = tuple(float(x) for x in hit)
+
+    def update(self, dt_s: float) -> None:
+        self._forearm_deg = float(np.clip(self._forearm_deg + self._turn * 90.0 * dt_s, -85.0, 85.0))
+        self._since_sent_s += dt_s
+        if self._since_sent_s < INPUT_PERIOD_S - 1e-9:
+            return
+        elapsed, self._since_sent_s = self._since_sent_s, 0.0
+        if self.auto:
+            value = self.player.patient_input(elapsed)
+        else:
+            from tracking.live import PatientInput
+
+            value = PatientInput(side=self.side, hand_target_m=self._hand_target, forearm_rotation_deg=self._forearm_deg)
+        if value != self._sent:
+            self.link.set_patient_input(value)
+            self._sent = value
+
+    # ------------------------------------------------------------------ samples -> session
+    def no_reading_reason(self) -> str:
+        """Why there is no usable sample now ("" when samples flow)."""
+        state = self.link.state
+        if state is LinkState.STARTING:
+            return "Starting the tracker..."
+        if state is LinkState.FAILED:
+            return f"The tracker is not running: {self.link.error}"
+        if state is LinkState.RESTARTING:
+            return "The tracker stopped: restarting..."
+        if state is LinkState.CLOSED:
+            return "The tracker is off"
+        if self.link.latest is None:
+            return "Waiting for the first images..."
+        if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:
+            return "No new images from the cameras..."
+        return ""
+
+    def consume(self) -> None:
+        """This frame's samples: the avatar, one reading, the session, the cues (once per frame)."""
+        if self._frame_consumed == self.app.frames:
+            return
+        self._frame_consumed = self.app.frames
+        now = self.app.clock()
+        samples = self.link.new_samples
+        markerset = self.link.markerset
+        if samples:
+            self._sample_clock_s = now
+        if self.avatar is None and self.make_avatar is not None and markerset is not None:
+            self.avatar = self.make_avatar(self.app.screen.ctx, markerset.names)
+        reading, reason = None, self.no_reading_reason()
+        if not reason and markerset is not None:
+            for sample in samples:
+                if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
+                    self.avatar.push_sample(sample)
+            latest = samples[-1] if samples else self.link.latest
+            reading, reason = read_sample(latest, markerset.names, self.link.angle_names, self.side)
+        self.session.update(now, reading, reason)
+        for cue in self.session.take_cues():
+            self._cue(cue, now)
+        if self.session.phase is Phase.DONE and self.stored_uid is None and not self.store_error:
+            self.save()
+
+    def _cue(self, cue: Cue, now: float) -> None:
+        if self.sounds is not None:
+            self.sounds.play(cue)
+        words = {Cue.COLLECTED: ("Great!", GOOD), Cue.MISSED: ("Next one!", theme.TEXT_DIM),
+                 Cue.LEVEL_UP: ("Level up!", theme.ACCENT), Cue.LEVEL_DOWN: ("A little easier", theme.TEXT_DIM),
+                 Cue.READY: ("Go!", GOOD), Cue.DONE: ("Well done!", GOOD)}.get(cue)
+        if words is not None:
+            self._flash = (*words, now)
+
+    # ------------------------------------------------------------------ drawing
+    def clear_rect(self, frame: Frame):
+        if self.avatar is None:
+            return None
+        w, h = frame.size_px
+        x0 = round(self.view.x + self.view.w)
+        return (x0, 0, w - x0, h)
+
+    def render_3d(self, frame: Frame) -> None:
+        self.consume()
+        if self.avatar is None:
+            return
+        from game.avatar.shapes import body_shapes
+
+        now = self.app.clock()
+        pose = self.avatar.interpolator.sample(now)
+        ctx = frame.screen.ctx
+        ctx.viewport = self.view.gl(frame.size_px[1])
+        try:
+            self.avatar.renderer.render_background()
+            if pose is not None:
+                if self.proj_m is None or self._camera_pelvis is None or \
+                        np.linalg.norm(pose.joint("pelvis") - self._camera_pelvis) > CAMERA_REAIM_M:
+                    # a still camera: re-aimed only when the patient moves on the seat
+                    self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.spec.kind, self.side)
+                    self._camera_pelvis = pose.joint("pelvis").copy()
+                shapes = target_shapes(body_shapes(pose), self.spec, self.session)
+                self.avatar.renderer.render(pose, self.view_m, self.proj_m, shapes=shapes,
+                                            looks=self.avatar.fader.update(pose.state, now))
+        finally:
+            ctx.viewport = (0, 0, *frame.size_px)
+
+    def _project(self, p_m) -> tuple[float, float] | None:
+        if self.proj_m is None:
+            return None
+        xy = project_px(np.asarray(p_m, dtype=np.float64).reshape(1, 3), self.proj_m @ self.view_m, self.view)[0]
+        return (float(xy[0]), float(xy[1])) if np.isfinite(xy).all() else None
+
+    def render_2d(self, frame: Frame) -> None:
+        self.consume()
+        c, s = frame.canvas, self.scale
+        self._draw_target_ring(c)
+        self._draw_panel(c, frame.size_px)
+        self._draw_banner(c)
+        self._draw_flash(c)
+
+    def _draw_target_ring(self, c) -> None:
+        sess, s = self.session, self.scale
+        t = sess.target
+        if t is None or sess.frame is None:
+            return
+        centre = self._project(t.hand_m)
+        if centre is None:
+            return
+        edge = self._project(t.hand_m + (t.size if self.spec.kind == "reach" else 0.06) * sess.frame.trunk[:, 1])
+        r = max(22 * s, abs(edge[1] - centre[1]) if edge is not None else 30 * s) + 8 * s
+        colour = tuple(self.spec.colour)
+        dim = sess.paused
+        c.circle(centre, r, (0, 0, 0, 0), border=3 * s, border_colour=(*colour, 110 if dim else 230))
+        n = 24
+        filled = round(n * t.hold_fraction)
+        for k in range(n):
+            a = -math.pi / 2 + 2 * math.pi * k / n
+            p = (centre[0] + (r + 9 * s) * math.cos(a), centre[1] + (r + 9 * s) * math.sin(a))
+            c.circle(p, 4.5 * s, (*GOOD, 255) if k < filled else (255, 255, 255, 50))
+        # time left of the target: a thin bar under the ring
+        left = max(0.0, 1.0 - t.age_s / t.time_limit_s)
+        c.rect((centre[0] - r, centre[1] + r + 22 * s, 2 * r, 7 * s), (255, 255, 255, 40), radius=3 * s)
+        c.rect((centre[0] - r, centre[1] + r + 22 * s, 2 * r * left, 7 * s), (*colour, 220), radius=3 * s)
+
+    def _draw_panel(self, c, size_px) -> None:
+        sess, s = self.session, self.scale
+        w, h = size_px
+        x = self.view.w + 30 * s
+        right = w - theme.MARGIN * s
+        y = theme.MARGIN * s
+        c.text(self.spec.title, (x, y), round(theme.MEDIUM * s), theme.TEXT)
+        y += 48 * s
+        c.text(f"Patient {self.patient_id}, {self.side} arm" + ("   (demo: plays by itself)" if self.auto else ""),
+               (x, y), round(theme.SMALL * 0.85 * s), theme.TEXT_DIM)
+        y += 42 * s
+        # the big counter
+        c.rect((x, y, right - x, 150 * s), theme.PANEL, radius=20 * s, border=2 * s, border_colour=theme.PANEL_EDGE)
+        c.circle((x + 70 * s, y + 75 * s), 44 * s, (*self.spec.colour, 255))
+        c.text(f"{sess.reached}", (x + 140 * s, y + 75 * s), round(110 * s), theme.TEXT, anchor="midleft")
+        c.text("collected", (right - 20 * s, y + 50 * s), round(theme.SMALL * s), theme.TEXT_DIM, anchor="midright")
+        c.text(f"{sess.log.missed} missed", (right - 20 * s, y + 100 * s), round(theme.SMALL * s), theme.TEXT_FAINT,
+               anchor="midright")
+        y += 172 * s
+        # time left and level
+        frac = sess.remaining_s / sess.spec.duration_s
+        c.text(f"Time {int(sess.remaining_s) // 60}:{int(sess.remaining_s) % 60:02d}", (x, y), round(theme.BODY * s),
+               theme.TEXT)
+        c.text(f"Level {level_shown(sess.level)}", (right, y), round(theme.BODY * s), theme.ACCENT, anchor="topright")
+        y += 44 * s
+        c.rect((x, y, right - x, 12 * s), (255, 255, 255, 30), radius=6 * s)
+        c.rect((x, y, (right - x) * frac, 12 * s), theme.ACCENT, radius=6 * s)
+        y += 36 * s
+        if self.spec.kind != "reach":
+            y = self._draw_gauge(c, x, y, right)
+        size = round(theme.SMALL * s)
+        for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
+            c.text(line, (x, y), size, theme.TEXT_DIM)
+            y += 30 * s
+        c.text("Esc: end and save   Q/E: turn forearm   M: demo on/off", (x, h - 20 * s), round(theme.SMALL * 0.75 * s),
+               theme.TEXT_FAINT, anchor="bottomleft")
+
+    def _draw_gauge(self, c, x: float, y: float, right: float) -> float:
+        """The rotation range as a half dial: the measured range, the target, the arm now."""
+        sess, s = self.session, self.scale
+        r = min((right - x) / 2 - 10 * s, 120 * s)
+        cx, cy = (x + right) / 2, y + r + 10 * s
+        lim = self.limits
+        lo, hi = -lim.negative_deg * sess.spec.stretch_fraction, lim.positive_deg * sess.spec.stretch_fraction
+        span = max(hi, -lo, 1.0)
+
+        def at(v: float, rr: float) -> tuple[float, float]:
+            a = math.radians(v / span * 90.0)   # 0 up, + to the right (out / supination)
+            return (cx + rr * math.sin(a), cy - rr * math.cos(a))
+
+        for k in range(41):
+            v = lo + (hi - lo) * k / 40
+            c.circle(at(v, r), 3 * s, (255, 255, 255, 60))
+        t = sess.target
+        if t is not None:
+            for dv in np.linspace(-t.size, t.size, 7):
+                c.circle(at(t.target.value_deg + dv, r), 9 * s, (*sess.spec.colour, 235))
+        v = sess.value_now()
+        if math.isfinite(v):
+            for k in range(1, 9):
+                c.circle(at(v, r * k / 9), 5 * s, theme.TEXT)
+            c.circle(at(v, r), 12 * s, GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
+            c.text(f"{round(v):d}\N{DEGREE SIGN}", (cx, cy + 6 * s), round(theme.BODY * s), theme.TEXT, anchor="midtop")
+        words = ("in", "out") if sess.spec.kind == "rotation" else ("palm down", "palm up")
+        c.text(words[0], at(lo, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
+        c.text(words[1], at(hi, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
+        return cy + 50 * s
+
+    def _draw_banner(self, c) -> None:
+        sess, s = self.session, self.scale
+        v = self.view
+        if sess.phase is Phase.DONE:
+            text = f"Well done! {sess.reached} collected." + (" Saved." if self.stored_uid else "")
+            colour = GOOD
+        elif sess.phase is Phase.GET_READY:
+            text = sess.pause_reason or "Get ready: sit up straight, arm relaxed"
+            colour = theme.ATTENTION
+        elif sess.pause_reason:
+            text, colour = f"Paused: {sess.pause_reason}", theme.ATTENTION
+        elif sess.compensation:
+            text, colour = f"Paused: {sess.compensation}", theme.FAILURE
+        else:
+            return
+        size = round(theme.BODY * s)
+        width = v.w - 2 * theme.MARGIN * s
+        lines = c.wrap(text, size, width - 40 * s)[:3]
+        line_h = c.measure("Ag", size)[1] + 6 * s
+        bh = len(lines) * line_h + 28 * s
+        bx, by = v.x + theme.MARGIN * s, theme.MARGIN * s
+        c.rect((bx, by, width, bh), theme.OVERLAY, radius=14 * s, border=3 * s, border_colour=colour)
+        for k, line in enumerate(lines):
+            c.text(line, (bx + 20 * s, by + 14 * s + k * line_h), size, theme.TEXT)
+
+    def _draw_flash(self, c) -> None:
+        if self._flash is None:
+            return
+        text, colour, t0 = self._flash
+        age = self.app.clock() - t0
+        if age > FLASH_S:
+            self._flash = None
+            return
+        s = self.scale
+        v = self.view
+        alpha = round(255 * (1.0 - age / FLASH_S))
+        c.text(text, (v.x + v.w / 2, v.h * 0.78 - 30 * s * age), round(theme.TITLE * s), (*colour[:3], alpha),
+               anchor="center")

@@ -1,0 +1,374 @@
+"""Exercise-game logic on arrays: content, target placement inside the stored ROM (and moving with
+it), the forward kinematics against the joint-angle definitions, difficulty adaptation, the
+pauses (tracker stopped, markers lost, posture, compensation) and the stored log."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from game.db import Database
+from game.exergames.session import (READY_S, Cue, GameSession, LevelAdapter, Phase, Reading, read_sample,
+                                    store_log)
+from game.exergames.spec import available_games, load_game
+from game.exergames.targets import (ArmFrame, RomLimits, elbow_at_side_hand_m, elevation_direction,
+                                    flexion_abduction_deg, place_target, rom_limits_from_rows, target_hand_m)
+from tracking.errors import ContentError
+
+DT = 1.0 / 30.0
+
+
+def frame(side: str = "right") -> ArmFrame:
+    """An upright seated patient's arm: trunk axes = world axes (x right, y up, z back)."""
+    x = 0.19 if side == "right" else -0.19
+    return ArmFrame(np.array([x, 1.05, 0.0]), np.eye(3), 0.30, 0.26, side)
+
+
+def reading(hand, *, lean=0.0, hiking=0.10, elbow=90.0, elevation=5.0, er=0.0, sup=0.0, side="right") -> Reading:
+    angles = {"shoulder_flexion": 0.0, "shoulder_abduction": elevation, "shoulder_elevation": elevation,
+              "elbow_flexion": elbow, "shoulder_external_rotation": er, "forearm_supination": sup,
+              "trunk_forward_lean": lean, "trunk_lateral_lean": 0.0}
+    return Reading(np.asarray(hand, dtype=np.float64), angles, hiking, frame(side))
+
+
+def rom_row(test, value, side="right", day="2026-11-01"):
+    from game.db.database import RomRow
+
+    return RomRow("u", "s", "P001", f"{day}T10:00:00Z", test, side, f"{side}_{test}", "active", "p", "jarm", None,
+                  value, 0.0, value, "", "", 5.0, day)
+
+
+# ----------------------------------------------------------------------------- content
+@pytest.mark.parametrize("name", available_games())
+def test_every_game_loads(name):
+    spec = load_game(name)
+    assert spec.name == name and spec.comfort_fraction < spec.stretch_fraction
+
+
+def test_there_are_three_games_for_different_motions():
+    kinds = {load_game(n).kind for n in available_games()}
+    assert kinds == {"reach", "rotation", "forearm"}
+
+
+def test_a_misspelt_key_is_one_line_naming_file_and_key(tmp_path):
+    text = (load_game("reach").model_dump_json())
+    data = json.loads(text)
+    data["hold_time"] = 3
+    path = tmp_path / "bad.yaml"
+    import yaml
+
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match=r"bad.yaml: hold_time: unknown key"):
+        load_game(str(path))
+
+
+# ----------------------------------------------------------------------------- ROM limits
+def test_latest_stored_result_of_each_test_wins_and_defaults_fill_the_rest():
+    spec = load_game("reach")
+    rows = [rom_row("shoulder_flexion", 100.0, day="2026-10-01"), rom_row("shoulder_flexion", 130.0),
+            rom_row("shoulder_abduction", 150.0, side="left")]
+    limits = rom_limits_from_rows(spec, rows, "right")
+    assert limits.positive_deg == 130.0
+    assert limits.negative_deg == spec.rom["frontal"].default_deg   # only the left side was stored
+    assert dict(limits.sources)["shoulder_flexion"].startswith("stored")
+    assert dict(limits.sources)["shoulder_abduction"] == "default"
+
+
+# ----------------------------------------------------------------------------- forward kinematics
+@pytest.mark.parametrize("theta", [20.0, 45.0, 80.0])
+def test_elevation_directions_read_back_as_flexion_and_abduction(theta):
+    f = frame()
+    flex, abd = flexion_abduction_deg(elevation_direction(f, theta, 0.0), f)
+    assert flex == pytest.approx(theta) and abd == pytest.approx(0.0, abs=1e-9)
+    flex, abd = flexion_abduction_deg(elevation_direction(f, theta, 90.0), f)
+    assert abd == pytest.approx(theta) and flex == pytest.approx(0.0, abs=1e-9)
+    left = frame("left")
+    assert flexion_abduction_deg(elevation_direction(left, theta, 90.0), left)[1] == pytest.approx(theta)
+
+
+@pytest.mark.parametrize("side", ["right", "left"])
+@pytest.mark.parametrize("rotation", [-40.0, 0.0, 35.0])
+def test_elbow_at_side_hand_gives_the_external_rotation_of_the_spec(side, rotation):
+    """spec/JOINT_ANGLES.md: signed angle from -z_T to the forearm about u (about -u on the left)."""
+    f = frame(side)
+    hand = elbow_at_side_hand_m(f, rotation)
+    elbow = f.shoulder_m - f.upper_arm_m * f.trunk[:, 1]
+    u = (elbow - f.shoulder_m) / f.upper_arm_m
+    axis = u if side == "right" else -u
+    fore = hand - elbow
+    ref = np.array([0.0, 0.0, -1.0])
+    measured = math.degrees(math.atan2(np.cross(ref, fore) @ axis, ref @ fore))
+    assert measured == pytest.approx(rotation, abs=1e-6)
+    assert np.linalg.norm(fore) == pytest.approx(f.forearm_m)
+
+
+# ----------------------------------------------------------------------------- placement
+@pytest.mark.parametrize("name", ["reach", "rotation", "turn_key"])
+def test_targets_lie_between_the_comfort_fraction_and_the_top_of_the_stored_maximum(name):
+    spec = load_game(name)
+    limits = RomLimits(120.0, 100.0, 140.0)
+    rng = np.random.default_rng(3)
+    for top in (spec.difficulty.top_fraction.easy, spec.stretch_fraction):
+        for k in range(200):
+            t = place_target(spec.kind, limits, spec.comfort_fraction, top, rng, direction=1 if k % 2 else -1,
+                             planes_deg=spec.planes_deg, elbow_range_deg=spec.elbow_flexion_deg)
+            assert spec.comfort_fraction <= t.fraction <= top
+            assert abs(t.value_deg) == pytest.approx(t.fraction * t.limit_deg)
+            assert min(limits.positive_deg, limits.negative_deg) <= t.limit_deg <= max(limits.positive_deg,
+                                                                                        limits.negative_deg)
+            if spec.kind != "reach":
+                assert t.limit_deg == (limits.positive_deg if t.value_deg > 0 else limits.negative_deg)
+            else:
+                assert t.elbow_deg <= limits.elbow_deg
+
+
+def test_changing_the_stored_rom_moves_the_targets():
+    spec = load_game("reach")
+    f = frame()
+    small, large = RomLimits(60.0, 60.0, 140.0), RomLimits(150.0, 150.0, 140.0)
+    heights = {}
+    for name, limits in (("small", small), ("large", large)):
+        rng = np.random.default_rng(7)
+        ts = [place_target("reach", limits, spec.comfort_fraction, spec.stretch_fraction, rng,
+                           planes_deg=spec.planes_deg, elbow_range_deg=spec.elbow_flexion_deg) for _ in range(30)]
+        heights[name] = np.array([target_hand_m("reach", t, f)[1] for t in ts])
+        assert all(t.value_deg <= spec.stretch_fraction * limits.positive_deg + 1e-9 for t in ts)
+    # same draws, larger range: every target higher (the arm rises further)
+    assert (heights["large"] > heights["small"] + 0.05).all()
+    rot = load_game("rotation")
+    a = place_target("rotation", RomLimits(30.0, 30.0), rot.comfort_fraction, 1.0, np.random.default_rng(1))
+    b = place_target("rotation", RomLimits(70.0, 30.0), rot.comfort_fraction, 1.0, np.random.default_rng(1))
+    assert b.value_deg == pytest.approx(a.value_deg * 70.0 / 30.0)
+    assert np.linalg.norm(target_hand_m("rotation", a, f) - target_hand_m("rotation", b, f)) > 0.05
+
+
+# ----------------------------------------------------------------------------- difficulty
+def test_level_rises_with_success_falls_with_failure_within_the_therapists_limits():
+    spec = load_game("reach").difficulty
+    a = LevelAdapter(spec, start=0.3, low=0.2, high=0.6)
+    sizes = [a.size]
+    for _ in range(5 * spec.window):
+        a.record(True)
+        sizes.append(a.size)
+    assert a.level == pytest.approx(0.6)                 # capped by the therapist
+    assert sizes[-1] < sizes[0]                          # smaller targets
+    assert a.hold_s > spec.hold_s.at(0.3) and a.time_limit_s < spec.time_limit_s.at(0.3)
+    assert a.top_fraction > spec.top_fraction.at(0.3)    # further out
+    for _ in range(10 * spec.window):
+        a.record(False)
+    assert a.level == pytest.approx(0.2)
+    b = LevelAdapter(spec, start=0.5)
+    for ok in (True, False, True, False):                # 50 %: between the thresholds, stays
+        b.record(ok)
+    assert b.level == 0.5
+
+
+# ----------------------------------------------------------------------------- the session
+def _ready(session: GameSession, t0: float = 0.0, **kw) -> float:
+    """Feed still readings until the game plays; returns the time."""
+    t = t0
+    rest = elbow_at_side_hand_m(frame(), 0.0)
+    while session.phase is Phase.GET_READY:
+        session.update(t, reading(rest, **kw))
+        t += DT
+        assert t < t0 + READY_S + 1.0
+    return t
+
+
+def _until_target(session: GameSession, t: float, hand=None) -> float:
+    rest = elbow_at_side_hand_m(frame(), 0.0)
+    while session.target is None:
+        session.update(t, reading(rest if hand is None else hand))
+        t += DT
+    return t
+
+
+def test_holding_the_hand_on_a_target_collects_it_and_leaving_it_misses_it():
+    spec = load_game("reach")
+    s = GameSession(spec, RomLimits(120.0, 110.0, 140.0), seed=1)
+    t = _until_target(s, _ready(s))
+    target = s.target
+    t0 = t
+    while s.log.reached == 0:
+        s.update(t, reading(target.hand_m + 0.3 * target.size))
+        t += DT
+        assert t - t0 < target.hold_s + 0.2
+    assert t - t0 >= target.hold_s - DT
+    assert Cue.COLLECTED in s.take_cues()
+    rec = s.log.targets[0]
+    assert rec["reached"] and rec["value_deg"] == pytest.approx(target.target.value_deg, abs=0.01)
+    # the next target: the hand stays away, the time limit runs out
+    t = _until_target(s, t)
+    limit = s.target.time_limit_s
+    far = s.target.hand_m + np.array([0.0, -0.4, 0.2])
+    t1 = t
+    while s.log.missed == 0:
+        s.update(t, reading(far))
+        t += DT
+    assert t - t1 == pytest.approx(limit, abs=2 * DT)
+    assert s.log.range_used["elbow_flexion"] == (90.0, 90.0)
+
+
+def test_tracker_stopped_or_markers_lost_pause_the_game_and_it_resumes():
+    spec = load_game("rotation")
+    s = GameSession(spec, RomLimits(60.0, 60.0), seed=2)
+    t = _until_target(s, _ready(s))
+    age = s.target.age_s
+    for _ in range(60):   # two seconds without a reading
+        s.update(t, None, "The tracker stopped: restarting...")
+        t += DT
+    assert s.paused and s.pause_reason.startswith("The tracker stopped")
+    assert s.target.age_s == age and s.log.paused_s == pytest.approx(2.0, abs=1e-6)
+    assert Cue.PAUSED in s.take_cues()
+    goal = s.target.target.value_deg
+    s.update(t, reading(elbow_at_side_hand_m(frame(), goal), er=goal))
+    assert not s.paused and Cue.RESUMED in s.take_cues()
+    # the elbow leaves the side: a posture pause, nothing scored
+    held = s.target.held_s
+    for _ in range(30):
+        t += DT
+        s.update(t, reading(elbow_at_side_hand_m(frame(), goal), er=goal, elevation=60.0))
+    assert s.pause_reason == "Keep your elbow at your side" and s.target.held_s == held
+
+
+def test_read_sample_says_why_there_is_no_reading():
+    from tracking.markerset import load_markerset
+    from tracking.sim.body import BodyDimensions, BodyModel, reference_pose
+    from tracking.angles import ANGLE_COLUMNS, joint_angles
+
+    ms = load_markerset("upper_limb_seated")
+    p = BodyModel(BodyDimensions.from_percentile(50, "male"), ms).markers_m(reference_pose())
+    angles = joint_angles(p, ms.names)
+    names = tuple(ANGLE_COLUMNS)
+
+    class S:
+        state = 1
+        message = ""
+        positions_m = p
+        status = np.ones(len(ms.names), np.uint8)
+        angles_deg = np.array([float(angles[n]) for n in names])
+
+    r, why = read_sample(S, ms.names, names, "right")
+    assert why == "" and r is not None
+    assert np.linalg.norm(r.hand_m - (p[ms.names.index("MRW1")] + p[ms.names.index("MRW2")]) / 2) < 1e-12
+    assert r.angles["elbow_flexion"] == pytest.approx(float(angles["right_elbow_flexion"]))
+    S.status = S.status.copy()
+    S.status[ms.names.index("MRW1")] = 0
+    r, why = read_sample(S, ms.names, names, "right")
+    assert r is None and "MRW1" in why
+    S.state = 0
+    S.message = "identifying the markers"
+    r, why = read_sample(S, ms.names, names, "right")
+    assert r is None and "identifying" in why
+
+
+def test_compensation_pauses_scoring_and_its_time_is_logged():
+    spec = load_game("reach")
+    s = GameSession(spec, RomLimits(120.0, 110.0, 140.0), seed=4)
+    t = _until_target(s, _ready(s))
+    on = s.target.hand_m
+    for _ in range(45):   # leaning 15 degrees forward while on the target: nothing collected
+        s.update(t, reading(on, lean=15.0))
+        t += DT
+    assert s.compensation.startswith("Sit up straight") and s.log.reached == 0
+    assert s.log.compensation_s == pytest.approx(45 * DT, abs=1e-6)
+    for _ in range(10):   # hiking the shoulder 3 cm at a low elevation
+        s.update(t, reading(on, hiking=0.13))
+        t += DT
+    assert s.compensation.startswith("Relax your shoulder")
+    while s.log.reached == 0:
+        s.update(t, reading(on))
+        t += DT
+    assert not s.compensation
+
+
+def test_the_log_is_stored_and_read_back(tmp_path):
+    spec = load_game("turn_key")
+    s = GameSession(spec, RomLimits(70.0, 60.0), seed=5)
+    t = _ready(s)
+    for _ in range(3):
+        t = _until_target(s, t)
+        goal = s.target.target.value_deg
+        n = s.log.reached
+        while s.log.reached == n:
+            s.update(t, reading(elbow_at_side_hand_m(frame(), 0.0), sup=goal))
+            t += DT
+    log = s.finish()
+    path = tmp_path / "db.sqlite3"
+    with Database(path) as db:
+        db.add_patient("P001")
+    uid = store_log(path, "P001", log, source="sim")
+    with Database(path) as db:
+        (row,) = db.exercise_results("P001")
+        (session,) = db.sessions("P001")
+    assert row.uid == uid and row.game == "turn_key" and row.repetitions == 3 and session.kind == "exercise"
+    assert row.duration_s == pytest.approx(t - DT, abs=1e-6) and row.score == 1.0
+    details = json.loads(row.details)
+    assert details["reached"] == 3 and len(details["targets"]) == 3
+    assert all(spec.comfort_fraction <= d["fraction"] <= spec.stretch_fraction for d in details["targets"])
+    lo, hi = details["range_used"]["forearm_supination"]
+    assert lo < 0 < hi   # targets alternate pronation and supination
+    assert details["limits"]["positive_deg"] == 70.0
+
+
+def test_play_game_options_are_checked_in_one_line(tmp_path, capsys):
+    from game.cli import main
+
+    db = tmp_path / "db.sqlite3"
+    with Database(db) as d:
+        d.add_patient("P001")
+    for argv, words in ((["--game", "nosuch", "--patient", "P001"], "unknown game 'nosuch'"),
+                        (["--game", "reach", "--patient", "NOPE"], "no patient 'NOPE'"),
+                        (["--game", "reach"], "give --patient ID with --game"),
+                        (["--auto"], "--auto plays a game")):
+        assert main(["play", "--headless", "--db", str(db), *argv]) != 0
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1
+
+
+def test_sound_cues_are_generated_tones_and_silence_never_fails(monkeypatch):
+    from game.exergames.audio import NOTES, RATE_HZ, Sounds, tone
+
+    samples = tone(NOTES[Cue.COLLECTED])
+    duration = sum(d for _, d in NOTES[Cue.COLLECTED])
+    assert samples.dtype == np.int16 and samples.shape[1] == 2
+    assert abs(len(samples) - duration * RATE_HZ) <= len(NOTES[Cue.COLLECTED])
+    assert 0.2 * 32767 < np.abs(samples).max() < 32767
+    # the first note's pitch: 659 Hz from the zero crossings
+    first = samples[: int(0.08 * RATE_HZ), 0].astype(float)
+    crossings = np.count_nonzero(np.diff(np.sign(first)) != 0)
+    assert crossings / 2 / 0.08 == pytest.approx(659.3, rel=0.2)
+    monkeypatch.setenv("SDL_AUDIODRIVER", "dummy")
+    for sounds in (Sounds(), Sounds(mute=True)):
+        assert not sounds.enabled
+        sounds.play(Cue.COLLECTED)   # silent, no error
+
+
+def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+    from game.scenes.game_play import level_from_shown, level_shown
+
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec.name, pid, kw))
+    menu.app = FakeApp()
+    for action in (Action.DOWN, Action.RIGHT, Action.NEXT_MOTION, Action.ROTATE_IN, Action.ROTATE_IN,
+                   Action.ROTATE_IN, Action.SELECT):
+        menu.handle(Press(action, True))
+    (name, pid, kw), = opened
+    assert name == menu.games[1].name and pid == "P001"
+    assert kw == {"side": "left", "auto": True, "max_level": 8}
+    menu.change_max_level(+5)
+    assert menu.max_level is None          # above 10: each game's own limit
+    assert [level_shown(level_from_shown(k)) for k in range(1, 11)] == list(range(1, 11))
+    spec = load_game("reach").difficulty
+    a = LevelAdapter(spec, start=0.9, high=level_from_shown(3))
+    assert a.level == pytest.approx(2 / 9)
