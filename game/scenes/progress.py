@@ -246,14 +246,15 @@ class ProgressScene(BaseScene):
 
     def _ensure_plots(self, plot: tuple, games: tuple) -> None:
         want = (self.selected, round(plot[2]), round(plot[3]), round(games[3]))
-        if self._shown == want or not self.tests:
+        if self._shown == want:
             return
-        test = self.tests[self.selected]
-        info = self.infos[test]
-        rows = [r for r in self.roms if r.test == test]
-        self.plot_rgb = rom_plot_rgb(info.title, rows, self.order, info.normal_deg, self.standard,
-                                     (round(plot[2]), round(plot[3])))
-        self._texture("rom", self.plot_rgb)
+        if self.tests:  # a patient may have played games before any ROM test
+            test = self.tests[self.selected]
+            info = self.infos[test]
+            rows = [r for r in self.roms if r.test == test]
+            self.plot_rgb = rom_plot_rgb(info.title, rows, self.order, info.normal_deg, self.standard,
+                                         (round(plot[2]), round(plot[3])))
+            self._texture("rom", self.plot_rgb)
         if self.games and games[3] > 40:
             self._texture("games", games_plot_rgb(self.games, self.order, (round(games[2]), round(games[3]))))
         self._shown = want

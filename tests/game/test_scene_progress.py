@@ -124,6 +124,25 @@ def test_no_games_yet_and_unknown_patient(screen, tmp_path):
     app.close()
 
 
+def test_games_show_for_a_patient_without_rom_results(screen, tmp_path):
+    path = tmp_path / "db.sqlite3"
+    with Database(path) as db:
+        db.add_patient("P002")
+        gid = db.start_session("P002", "exercise", started_utc="2026-11-03T10:00:00Z")
+        db.add_exercise_result(gid, "reach", repetitions=12, duration_s=300.0)
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    scene = ProgressScene(path, "P002")
+    app.push(scene)
+    app.frame()
+    assert scene.tests == [] and "games" in scene._textures
+    _, _, _, games = scene._layout()
+    gx, gy, gw, gh = (round(v) for v in games)
+    lower = screen.read_rgb().astype(int)[gy:gy + gh, gx:gx + gw]
+    assert (np.abs(lower - band_rgb()).sum(axis=2) < 30).sum() > 200   # the games' bars
+    app.close()
+
+
 def test_play_command_opens_the_progress_scene_and_refuses_an_unknown_patient(screen, tmp_path, capsys):
     import cv2
 
