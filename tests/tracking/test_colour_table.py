@@ -1,6 +1,5 @@
 """ColourTable: marker colours survive shading, casts and noise; skin, wood, greys never match."""
 
-import time
 
 import numpy as np
 import pytest
@@ -69,12 +68,10 @@ def test_palette_is_the_marker_set_palette(palette, full):
     assert not full.lut.flags.writeable
 
 
-def test_build_is_deterministic_and_fast(palette, full):
-    start = time.perf_counter()
+def test_build_is_deterministic(palette, full):
+    # (its speed is reported by `rehab bench`, not asserted: timed tests fail on loaded machines)
     again = ColourTable.build(palette)
-    elapsed = time.perf_counter() - start
     assert np.array_equal(again.lut, full.lut)
-    assert elapsed < 0.5
 
 
 @pytest.mark.parametrize("table_name", ["full", "quantized"])
