@@ -219,14 +219,19 @@ class CameraSource:
         readers, self._readers = self._readers, []
         for r in readers:
             r.stop.set()
-        for r in readers:
-            r.thread.join(timeout=1.0)
-            if r.thread.is_alive():  # blocked in the driver: it is a daemon thread, leave it
-                log.warning("camera %s (device %r) does not return from read(); releasing it anyway", r.name, r.device)
+        for r in readers:  # most readers leave read() within a frame period
+            if r.thread.is_alive():
+                r.thread.join(timeout=max(2 * self.period_s, 0.1))
+        for r in readers:  # releasing also unblocks a read() stuck in the driver
             try:
                 r.capture.release()
             except Exception as exc:  # releasing must not hide the reason we are closing
                 log.warning("camera %s: release failed: %s", r.name, exc)
+        for r in readers:
+            if r.thread.is_alive():
+                r.thread.join(timeout=1.0)
+                if r.thread.is_alive():  # a daemon thread: it cannot keep the program alive
+                    log.warning("camera %s (device %r) does not return from read()", r.name, r.device)
 
     def __enter__(self) -> "CameraSource":
         self.open()
@@ -258,11 +263,10 @@ class CameraSource:
             fresh = [k for k, r in enumerate(self._readers) if r.seq > self._used[k] and not self._stopped(r, now)]
             chosen: dict[int, _Frame] = {}
             if fresh:
-                t_ref = min(self._readers[k].frames[-1].stamp for k in fresh)
+                new = {k: [f for f in self._readers[k].frames if f.seq > self._used[k]] for k in fresh}
+                t_ref = self._set_time(new)
                 for k in fresh:
-                    r = self._readers[k]
-                    new = [f for f in r.frames if f.seq > self._used[k]]
-                    best = min(new, key=lambda f: abs(f.stamp - t_ref))
+                    best = min(new[k], key=lambda f: abs(f.stamp - t_ref))
                     skipped = best.seq - self._used[k] - 1 if self._used[k] >= 0 else 0
                     if abs(best.stamp - t_ref) > 0.5 * self.period_s:
                         self.out_of_step[k] += 1
@@ -293,6 +297,21 @@ class CameraSource:
         self._index += 1
         self._log_new_warnings()
         return fs
+
+    def _set_time(self, new: dict[int, list[_Frame]]) -> float:
+        """The instant of the set: the new frame's stamp that the most cameras have a frame within
+        half a period of (the latest such stamp on a tie), no later than a period after the
+        earliest camera's newest frame (a later instant would leave out cameras that simply have
+        not delivered it yet)."""
+        half = 0.5 * self.period_s
+        limit = min(frames[-1].stamp for frames in new.values()) + self.period_s
+        stamps = np.array(sorted({f.stamp for frames in new.values() for f in frames if f.stamp <= limit}))
+        count = np.zeros(len(stamps), np.int64)
+        for frames in new.values():
+            s = np.array([f.stamp for f in frames])
+            count += (np.abs(stamps[:, None] - s[None, :]) <= half).any(axis=1)
+        best = np.flatnonzero(count == count.max())[-1]
+        return float(stamps[best])
 
     def _drop(self, k: int, now: float, frames: int) -> None:
         self.dropped[k] += frames
