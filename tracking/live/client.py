@@ -35,7 +35,7 @@ from tracking.live.process import ProcessArgs, tracker_main
 from tracking.live.protocol import (Activate, LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
                                     SetMotion, SetPatientInput, SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingReader, RingWriter, decode_line
-from tracking.live.source import angle_names_for, source_geometry
+from tracking.live.source import angle_names_for, resolve_config, source_geometry
 
 log = logging.getLogger(__name__)
 
@@ -234,6 +234,7 @@ class LiveTracker:
             return
         remove_stale_blocks()
         _check_motion(self._motion)
+        self.source = resolve_config(self.source)
         cameras, markerset = source_geometry(self.source)
         self.cameras, self.markerset = cameras, markerset
         self.angle_names = angle_names_for(markerset)
@@ -449,6 +450,7 @@ class LiveTracker:
             errors=errors,
             state=int(h["state"]) if child is not None else int(ProcessState.STOPPED),
             samples=int(h["written"]),
+            warning=self._reader.warning_line(),
         )
 
     @property
@@ -551,6 +553,7 @@ class LiveTracker:
         """
         source.check()
         _check_motion(source.motion)
+        source = resolve_config(source)
         source_geometry(source)
         self.close()
         self.source = source
