@@ -275,6 +275,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_validate(sub)
     _add_bench(sub)
     _add_play(sub)
+    from game.cli_record import add_commands as add_record_commands  # rehab record (its own module)
+    add_record_commands(sub)
     return parser
 
 

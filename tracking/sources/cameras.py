@@ -52,7 +52,13 @@ def open_capture(device: str, size_px: tuple[int, int] | None, fps: float | None
     The size and frame rate are requests; the driver may ignore them (the first frame's size is
     checked against the calibration).
     """
-    cap = cv2.VideoCapture(int(device) if device.isdigit() else device)
+    # OpenCV prints its own warnings when a device is absent; the caller reports it in one line
+    level = cv2.utils.logging.getLogLevel()
+    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    try:
+        cap = cv2.VideoCapture(int(device) if device.isdigit() else device)
+    finally:
+        cv2.utils.logging.setLogLevel(level)
     if cap.isOpened():
         if size_px is not None:
             cap.set(cv2.CAP_PROP_FRAME_WIDTH, float(size_px[0]))

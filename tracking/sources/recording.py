@@ -9,7 +9,7 @@ import numpy as np
 
 from tracking.markerset import MarkerSet
 from tracking.recording import Recording
-from tracking.sources.base import SourceError, SourceFrameSet, black_image
+from tracking.sources.base import SourceError, SourceFrameSet
 
 log = logging.getLogger(__name__)
 
@@ -58,11 +58,11 @@ class RecordingSource:
         images = self._rec.read_images()
         ended = np.array([img is None for img in images])
         if ended.any():
-            self._end = self._ending(ended)
-            if ended.all() and not self._short():
-                log.info("%s: the recording ended after %d frame sets", self.folder, self._index)
+            if ended.all() and not self._short():  # the normal end
                 self._end = f"the recording {self.folder} ended after {self._index} frame sets"
+                log.info("%s", self._end)
                 return None
+            self._end = self._ending(ended)
             log.warning("%s", self._end)
             if self.strict:
                 raise SourceError(self._end)
@@ -93,7 +93,7 @@ class RecordingSource:
         return done
 
     def warnings(self) -> tuple[str, ...]:
-        return (self._end,) if self._end and "cut short" in self._end else ()
+        return (self._end,) if self._end and "cut short" in self._end else ()  # a normal end is no problem
 
     def end_reason(self) -> str:
         return self._end
@@ -109,9 +109,3 @@ class RecordingSource:
     def __exit__(self, *exc) -> None:
         self.close()
 
-
-def blank_frame_set(cameras, index: int, time_s: float) -> SourceFrameSet:
-    """A frame set in which every camera is missing (black images)."""
-    c = len(cameras)
-    return SourceFrameSet(index, time_s, tuple(black_image(cam) for cam in cameras), np.full(c, np.nan),
-                          np.ones(c, bool))

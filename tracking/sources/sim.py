@@ -29,6 +29,7 @@ class SimulatedSource:
         self.fps = float(settings.fps)
         self.n_frames = self.studio.n_frames(self.motion, self.fps, settings.seconds)
         self._frames = None
+        self._ended = False
 
     def open(self) -> None:
         if self._frames is None:
@@ -41,6 +42,7 @@ class SimulatedSource:
         self.open()
         sim = next(self._frames, None)
         if sim is None:
+            self._ended = True
             return None
         fs = sim.frames
         c = len(self.cameras)
@@ -51,7 +53,7 @@ class SimulatedSource:
         return ()
 
     def end_reason(self) -> str:
-        return "the motion ended" if self._frames is not None else ""
+        return f"the motion {self.settings.motion!r} ended" if self._ended else ""
 
     def close(self) -> None:
         self._frames = None
