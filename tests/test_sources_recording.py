@@ -178,3 +178,42 @@ def test_tracking_goes_on_with_the_other_cameras_when_one_stops(recording):
         assert ok.mean() >= 0.85
         err = np.linalg.norm(s["positions_m"][ok] - truth_m[k[0]][ok], axis=1)
         assert np.median(err) < 0.005 and err.max() < 0.03
+
+
+def replayed_cameras_one_stops(config):
+    """Source factory (``kind="module:function"``, run in the tracker process): the recording at
+    ``config.path`` replayed by four fake cameras at ``config.fps``; cam2 stops after 10 frames."""
+    with Recording(config.path) as rec:
+        cams = rec.cameras
+        per_camera = list(zip(*[fs.images for fs in rec]))
+    t0 = time.perf_counter() + 0.5
+    devices = [ReplayDevice(images, t0, config.fps, stop_after=10 if c == 1 else None)
+               for c, images in enumerate(per_camera)]
+    source = CameraSource(cams, ["0", "1", "2", "3"], config.fps, stall_s=0.4,
+                          capture_factory=lambda dev, size, fps: devices[int(dev)])
+    with RecordingSource(config.path) as rs:
+        return DeviceSource(source, rs.markerset())
+
+
+def test_the_game_sees_a_stopped_camera_as_a_status_warning_and_tracking_goes_on(recording):
+    config = SourceConfig(kind=f"{__name__}:replayed_cameras_one_stops", path=str(recording), size=(320, 240),
+                          fps=7.5)
+    with LiveTracker(config, auto_restart=False, warm_standby=False) as live:
+        deadline = time.perf_counter() + 60.0
+        samples, status = [], live.status()
+        while time.perf_counter() < deadline and "stopped" not in status.warning:
+            samples += live.poll()
+            status = live.status()
+            time.sleep(0.05)
+        assert "camera cam2 (device '1') stopped" in status.warning
+        assert "tracking goes on with cam1, cam3, cam4" in status.warning
+        before = len(samples)
+        while time.perf_counter() < deadline and len(samples) < before + 5:
+            samples += live.poll()
+            time.sleep(0.05)
+        assert live.status().alive and live.status().last_error == ""
+    late = samples[before:]
+    assert len(late) >= 5
+    for s in late:  # tracked from the three other cameras
+        assert s.state == TrackingState.TRACKING
+        assert (s.status != MarkerStatus.LOST).mean() >= 0.85
