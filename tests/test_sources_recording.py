@@ -217,3 +217,25 @@ def test_the_game_sees_a_stopped_camera_as_a_status_warning_and_tracking_goes_on
     for s in late:  # tracked from the three other cameras
         assert s.state == TrackingState.TRACKING
         assert (s.status != MarkerStatus.LOST).mean() >= 0.85
+
+
+def test_the_cameras_kind_opens_devices_through_opencv_in_the_process(recording):
+    """OpenCV opens an image sequence ("cam1/%06d.png") like a camera: it delivers every frame at
+    once and then ends, which the game sees as stopped cameras; no standby opens the devices twice."""
+    devices = tuple(str(recording / f"cam{k}" / "%06d.png") for k in range(1, 5))
+    config = SourceConfig(kind="cameras", devices=devices, calibration=str(recording / "calibration.toml"), fps=15.0,
+                          size=(64, 48))
+    assert resolve_config(config).size == (320, 240)  # the calibration's
+    with LiveTracker(config) as live:
+        deadline = time.perf_counter() + 30.0
+        status = live.status()
+        while time.perf_counter() < deadline and "every camera stopped" not in status.warning:
+            time.sleep(0.05)
+            status = live.status()
+        assert status.warning == "every camera stopped: cam1, cam2, cam3, cam4: the device reports no more frames"
+        assert status.last_error == "" and status.samples >= 1
+        time.sleep(2.5)  # past the delay after which a standby would start
+        live.status()
+        assert not live.standby_ready and live._spare is None
+    with pytest.raises(Exception, match="calibration.toml has 4 cameras but the source has 2 camera devices"):
+        LiveTracker(SourceConfig(kind="cameras", devices=devices[:2], calibration=str(recording / "calibration.toml"))).start()

@@ -271,11 +271,10 @@ class DeviceSource:
         return frame
 
     def warnings(self) -> tuple[str, ...]:
-        """The source's current problems (and why it ended), one line each."""
-        found = tuple(self.source.warnings())
-        if self._ended and self._ended not in found:
-            found += (self._ended,)
-        return found
+        """The source's current problems, one line each; once it ended, why (that line only)."""
+        if self._ended:
+            return (self._ended,)
+        return tuple(self.source.warnings())
 
     def handle(self, command: object) -> None:
         if isinstance(command, SetMotion) and command.name is not None:

@@ -251,7 +251,8 @@ class CameraSource:
         return bool(r.ended) or now - r.newest_stamp() > self.stall_s
 
     def read(self) -> SourceFrameSet | None:
-        """The next frame set (it waits for the cameras' next frames); None when every camera ended."""
+        """The next frame set (it waits for the cameras' next frames); None when every camera ended
+        for good (its driver reports failure; a silent camera may come back)."""
         self.open()
         n = len(self.cameras)
         with self.cond:
@@ -263,7 +264,7 @@ class CameraSource:
                 if not waiting or now >= deadline:
                     break
                 self.cond.wait(min(deadline - now, 0.05))
-            if all(r.ended for r in self._readers) and all(r.seq <= self._used[k] for k, r in enumerate(self._readers)):
+            if all(r.ended for r in self._readers):  # frames left in the buffers are stale now
                 return None
             now = self.clock()
             fresh = [k for k, r in enumerate(self._readers) if r.seq > self._used[k] and not self._stopped(r, now)]
@@ -334,8 +335,10 @@ class CameraSource:
         out = []
         readers = self._readers
         stopped = np.array([self._stopped(r, now) for r in readers], bool)
+        if readers and stopped.all():
+            out.append(("all/stopped", "every camera stopped: " + self._stop_reasons(now)))
         for k, r in enumerate(readers):
-            if stopped[k]:
+            if stopped[k] and not stopped.all():
                 why = r.ended or f"no frame for {now - r.newest_stamp():.1f} s"
                 rest = camera_names(self.cameras, ~stopped)
                 tail = f"tracking goes on with {rest}" if rest else "no camera delivers frames"
@@ -369,7 +372,15 @@ class CameraSource:
                 log.warning("%s", line)
         self._logged = {key for key, _ in current}
 
+    def _stop_reasons(self, now: float) -> str:
+        """``"cam1, cam2: the device reports no more frames; cam3: no frame for 0.6 s"``."""
+        by_reason: dict[str, list[str]] = {}
+        for r in self._readers:
+            why = r.ended or f"no frame for {now - r.newest_stamp():.1f} s"
+            by_reason.setdefault(why, []).append(r.name)
+        return "; ".join(f"{', '.join(names)}: {why}" for why, names in by_reason.items())
+
     def end_reason(self) -> str:
         if self._readers and all(r.ended for r in self._readers):
-            return "every camera stopped: " + "; ".join(f"{r.name}: {r.ended}" for r in self._readers)
+            return "every camera stopped: " + self._stop_reasons(self.clock())
         return ""
