@@ -239,3 +239,25 @@ def test_the_cameras_kind_opens_devices_through_opencv_in_the_process(recording)
         assert not live.standby_ready and live._spare is None
     with pytest.raises(Exception, match="calibration.toml has 4 cameras but the source has 2 camera devices"):
         LiveTracker(SourceConfig(kind="cameras", devices=devices[:2], calibration=str(recording / "calibration.toml"))).start()
+
+
+def test_device_source_repeats_the_warm_up_set_and_skips_ahead_after_a_restart(recording):
+    from tracking.live.protocol import LiveError, PatientInput, SetMotion, SetPatientInput
+
+    with Recording(recording) as rec:
+        expected = [fs.images for fs in rec]
+    rs = RecordingSource(recording)
+    source = DeviceSource(rs, rs.markerset())
+    try:
+        first = source.grab(0, 0.0, False)
+        assert source.grab(0, 0.0, True) is first  # the loop tracks the warm-up frame set first
+        later = source.grab(30, 0.0, True)  # a replacement process continues at frame 30
+        assert later.time_s == pytest.approx(30 / FPS)
+        assert all(np.array_equal(a, b) for a, b in zip(later.images, expected[30]))
+        source.handle(SetPatientInput(PatientInput()))  # ignored: no simulated patient here
+        with pytest.raises(LiveError, match="plays no motions"):
+            source.handle(SetMotion("reach"))
+        assert source.grab(50, 0.0, True) is None
+        assert source.warnings() == (f"the recording {recording} ended after 46 frame sets",)
+    finally:
+        source.close()
