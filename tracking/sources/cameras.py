@@ -277,8 +277,7 @@ class CameraSource:
                     skipped = best.seq - self._used[k] - 1 if self._used[k] >= 0 else 0
                     if abs(best.stamp - t_ref) > 0.5 * self.period_s:
                         self.out_of_step[k] += 1
-                        self._skew_events[k].append((now, best.stamp - t_ref))
-                        skipped = 0  # its frames stay available to the next set
+                        self._skew_events[k].append((now, best.stamp - t_ref))  # its frames wait for the next set
                         continue
                     chosen[k] = best
                     self._used[k] = best.seq
