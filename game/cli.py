@@ -346,9 +346,11 @@ def build_parser() -> argparse.ArgumentParser:
     _add_play(sub)
     from game import cli_calibrate  # calibrate, simulate-calibration
     from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
+    from game import cli_record  # record
 
     cli_calibrate.add_commands(sub)
     cli_clinic.add_commands(sub)
+    cli_record.add_commands(sub)
     return parser
 
 

@@ -186,10 +186,19 @@ class Recording:
     def fps(self) -> float:
         return self.meta.fps
 
+    @property
+    def file_names(self) -> tuple[str, ...]:
+        """The video or image-folder name of each camera, calibration order (``"cam2.avi"``)."""
+        return tuple(r.path.name for r in self._readers)
+
+    def read_images(self) -> list[np.ndarray | None]:
+        """The next image of every camera, calibration order; None where its video or folder ended."""
+        return [r.read() for r in self._readers]
+
     def __iter__(self) -> Iterator[FrameSet]:
         index = 0
         while True:
-            images = [r.read() for r in self._readers]
+            images = self.read_images()
             if any(img is None for img in images):
                 ended = [r.path.name for r, img in zip(self._readers, images) if img is None]
                 if len(ended) < len(images):

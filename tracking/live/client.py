@@ -35,7 +35,7 @@ from tracking.live.process import ProcessArgs, tracker_main
 from tracking.live.protocol import (Activate, LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
                                     SetMotion, SetPatientInput, SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingReader, RingWriter, decode_line
-from tracking.live.source import angle_names_for, source_geometry
+from tracking.live.source import angle_names_for, resolve_config, source_geometry
 
 log = logging.getLogger(__name__)
 
@@ -184,7 +184,8 @@ class LiveTracker:
         warm_standby: keep a second process prepared (source and tracker built, not publishing),
             so that a restart takes a frame or two instead of a process start (about 1.5 s on an
             idle machine, several seconds on a loaded one). Costs the memory of a second process
-            and its start-up CPU shortly after :meth:`start`.
+            and its start-up CPU shortly after :meth:`start`. Never for live cameras (a device
+            opens in one process at a time).
 
     After :meth:`start`: ``cameras``, ``markerset`` and ``angle_names`` describe the samples.
     """
@@ -234,6 +235,7 @@ class LiveTracker:
             return
         remove_stale_blocks()
         _check_motion(self._motion)
+        self.source = resolve_config(self.source)
         cameras, markerset = source_geometry(self.source)
         self.cameras, self.markerset = cameras, markerset
         self.angle_names = angle_names_for(markerset)
@@ -261,7 +263,7 @@ class LiveTracker:
             self._child = self._spawn(standby=False)
             if wait:
                 self._wait_ready(timeout_s)
-                if self.warm_standby:
+                if self._standby_allowed():
                     self._spare = self._spawn(standby=True)
         except BaseException:
             self.close()
@@ -389,12 +391,16 @@ class LiveTracker:
                             spare.failed or _exit_reason(spare.proc.exitcode))
                 spare.stop(0.0)
                 self._spare = None
-        elif self.warm_standby and self._child is not None and self._child.ready:
+        elif self._standby_allowed() and self._child is not None and self._child.ready:
             if self._spare_due is None:
                 self._spare_due = now + STANDBY_DELAY_S
             elif now >= self._spare_due:
                 self._spare_due = None
                 self._spare = self._spawn(standby=True)
+
+    def _standby_allowed(self) -> bool:
+        """A standby would open the cameras a second time, which a camera device refuses."""
+        return self.warm_standby and self.source.kind != "cameras"
 
     def _restart(self, reason: str) -> None:
         self.restarts += 1
@@ -449,6 +455,7 @@ class LiveTracker:
             errors=errors,
             state=int(h["state"]) if child is not None else int(ProcessState.STOPPED),
             samples=int(h["written"]),
+            warning=self._reader.warning_line(),
         )
 
     @property
@@ -551,6 +558,7 @@ class LiveTracker:
         """
         source.check()
         _check_motion(source.motion)
+        source = resolve_config(source)
         source_geometry(source)
         self.close()
         self.source = source

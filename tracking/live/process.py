@@ -128,6 +128,7 @@ class TrackerLoop:
         self._step_ema = math.nan
         self._last_ready = math.nan
         self._error_counts: dict[str, int] = {}
+        self._warning = ""
         last = writer.latest_frame_index()
         self.frame_index = 0 if last is None else last + 1
         m, c = source.markerset.n_markers, len(source.cameras)
@@ -166,14 +167,21 @@ class TrackerLoop:
         from tracking.tracker import TrackingState
 
         index = self.frame_index
-        self.frame_index += 1
         time_s = index / self.fps
         try:
             frame = self.source.grab(index, time_s, self.tracker.state == TrackingState.TRACKING)
+            if frame is None:  # the source ended (a recording): nothing more to track
+                self._warn(getattr(self.source, "warnings", tuple)())
+                return False
             self._check_images(frame.images)
         except Exception as exc:
+            self.frame_index += 1
             self._report("source", exc, index)
             return False
+        self.frame_index += 1
+        self._warn(frame.warnings)
+        if math.isfinite(frame.time_s):
+            time_s = frame.time_s
         t0 = self.clock()
         self.writer.header["heartbeat_s"] = t0
         try:
@@ -187,6 +195,13 @@ class TrackerLoop:
             self.images.write(frame.images, index)
         self._rates(frame.t_ready_s, step_ms)
         return True
+
+    def _warn(self, warnings) -> None:
+        """Publish the source's current warnings when they change."""
+        line = "; ".join(warnings)
+        if line != self._warning:
+            self._warning = line
+            self.writer.set_warning(line)
 
     def _check_images(self, images) -> None:
         """The source delivers what the cameras are calibrated for (the tracker trusts it)."""
@@ -386,6 +401,9 @@ def _warm_up(source: FrameSource, tracker) -> None:
     full-frame identification) that would otherwise stall the first heartbeats.
     """
     frame = source.grab(0, 0.0, False)
+    if frame is None:
+        reason = "; ".join(getattr(source, "warnings", tuple)()) or "it ended at once"
+        raise LiveError(f"the source delivered no frame set: {reason}")
     tracker.step(frame.images, 0.0)
     tracker.reset()
     source.handle(Reidentify())  # a motion starts again from its reference pose

@@ -19,24 +19,36 @@ class LiveError(RehabError):
     """The live tracker cannot start or was asked for something it cannot do."""
 
 
+#: The built-in source kinds of :class:`SourceConfig`.
+SOURCE_KINDS = ("sim", "recording", "cameras")
+
+
 @dataclass(frozen=True, slots=True)
 class SourceConfig:
     """What the tracker process measures.
 
     Attributes:
-        kind: ``"sim"``: the simulated patient rendered by virtual cameras (the only kind so far;
-            ``"video"`` and ``"cameras"`` come later). A ``"module:function"`` path names a
-            factory ``function(config) -> FrameSource`` to import in the tracker process (how
-            tests inject a faulty source).
-        rig: camera layout (content/rigs name or file).
-        size: camera image (width, height), pixels.
-        fps: camera frame rate; the process delivers frame sets at this rate in real time.
+        kind: ``"sim"``: the simulated patient rendered by virtual cameras; ``"recording"``: a
+            recording folder (``path``) played once in real time; ``"cameras"``: live cameras
+            (``devices`` and ``calibration``). A ``"module:function"`` path names a factory
+            ``function(config) -> FrameSource`` to import in the tracker process (how tests
+            inject a faulty source).
+        rig: camera layout (content/rigs name or file) of the simulated patient.
+        size: camera image (width, height), pixels; a recording's or a calibration's size
+            replaces it (:func:`tracking.live.source.resolve_config`).
+        fps: camera frame rate; the process delivers frame sets at this rate in real time (a
+            recording's meta.yaml replaces it).
         motion: a scripted motion (content/motions name or file) played in a loop; None: the
             interactive patient (:class:`PatientInput`).
         body: simulated body, ``p<percentile>_<sex>`` (e.g. ``p50_male``, ``p5_female``).
         markerset: marker set name or file.
         seed: sensor-noise seed.
         noise_sigma: sensor noise of the simulated cameras, 8-bit units.
+        path: the recording folder (kind ``"recording"``).
+        devices: OpenCV device indices (``"0"``), URLs or video files, one per calibrated camera,
+            calibration order (kind ``"cameras"``).
+        calibration: calibration file (kind ``"cameras"``; for ``"recording"`` it replaces
+            the folder's calibration.toml).
     """
 
     kind: str = "sim"
@@ -48,6 +60,9 @@ class SourceConfig:
     markerset: str = "upper_limb_seated"
     seed: int = 0
     noise_sigma: float = 1.5
+    path: str | None = None
+    devices: tuple[str, ...] = ()
+    calibration: str | None = None
 
     def body_percentile_sex(self) -> tuple[float, str]:
         """``"p50_male"`` -> (50.0, "male"); :class:`LiveError` if malformed."""
@@ -63,8 +78,12 @@ class SourceConfig:
             raise LiveError(f"source size {w}x{h}: give a camera image size between 16x16 and 4096x4096")
         if not (1.0 <= self.fps <= 240.0):
             raise LiveError(f"source fps {self.fps:g}: give a frame rate between 1 and 240")
-        if self.kind != "sim" and ":" not in self.kind:
-            raise LiveError(f"source kind {self.kind!r}: only 'sim' (the simulated patient) exists so far")
+        if self.kind not in SOURCE_KINDS and ":" not in self.kind:
+            raise LiveError(f"source kind {self.kind!r}: give one of {', '.join(SOURCE_KINDS)} or module:function")
+        if self.kind == "recording" and not self.path:
+            raise LiveError("source kind 'recording' needs path: the recording folder")
+        if self.kind == "cameras" and not (self.devices and self.calibration):
+            raise LiveError("source kind 'cameras' needs devices (e.g. ('0', '1')) and calibration: the calibration file")
         self.body_percentile_sex()
 
 
@@ -155,6 +174,9 @@ class LiveStatus:
         errors: frame sets whose processing raised (each is logged; the last is ``last_error``).
         state: ``tracking.live.ring.ProcessState`` of the process (STARTING while restarting).
         samples: samples published so far.
+        warning: the source's current problems as one line ("" if none): a camera that stopped
+            (tracking goes on with the others), dropped or out-of-step frames, a recording that
+            ended or is cut short.
     """
 
     alive: bool
@@ -167,6 +189,7 @@ class LiveStatus:
     errors: int = 0
     state: int = 0
     samples: int = 0
+    warning: str = ""
 
 
 # ============================================================================ commands

@@ -34,7 +34,7 @@ import numpy as np
 from calibration.errors import RehabError
 
 MAGIC = 0x5245484142_4C5632  # "REHABLV2"
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 #: Bytes of the one-line message of a sample and of the error line of the header (UTF-8).
 MESSAGE_BYTES = 240
 #: A reader gives up on a slot after this many torn copies in a row (the writer is far faster
@@ -112,6 +112,8 @@ HEADER_DTYPE = np.dtype([
     ("errors", "<i8"),  # frame sets whose processing raised
     ("error_seq", "<u8"),
     ("error", f"S{MESSAGE_BYTES}"),
+    ("warning_seq", "<u8"),  # the source's current warnings, "; "-joined ("" when none)
+    ("warning", f"S{MESSAGE_BYTES}"),
 ], align=True)
 
 
@@ -284,6 +286,13 @@ class RingWriter:
         h["error_seq"] = int(h["error_seq"]) + 1
         h["errors"] = int(h["errors"]) + 1
 
+    def set_warning(self, line: str) -> None:
+        """Publish the source's current warnings as one line ("" clears them)."""
+        h = self._v.header
+        h["warning_seq"] = int(h["warning_seq"]) + 1  # odd: being written
+        h["warning"] = encode_line(line)
+        h["warning_seq"] = int(h["warning_seq"]) + 1
+
     def release(self) -> None:
         self._v.release()
 
@@ -347,13 +356,20 @@ class RingReader:
 
     def error_line(self) -> str:
         """The writer's last error line ("" if none)."""
+        return self._line("error")
+
+    def warning_line(self) -> str:
+        """The source's current warnings ("" if none)."""
+        return self._line("warning")
+
+    def _line(self, field: str) -> str:
         h = self._v.header
         for _ in range(MAX_RETRIES):
-            s1 = int(h["error_seq"])
+            s1 = int(h[f"{field}_seq"])
             if s1 & 1:
                 continue
-            raw = bytes(h["error"])
-            if int(h["error_seq"]) == s1:
+            raw = bytes(h[field])
+            if int(h[f"{field}_seq"]) == s1:
                 return decode_line(raw)
         return ""
 

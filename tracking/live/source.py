@@ -6,15 +6,19 @@ played in a loop, or the interactive patient of :mod:`tracking.sim.interactive` 
 game's ``PatientInput``. It hands the tracker only the images; the true marker centres travel
 beside them for tests and benchmarks.
 
-Video files and real cameras are later kinds with the same interface.
+Recordings and live cameras (:mod:`tracking.sources`) come through :class:`DeviceSource`, which
+adapts a :class:`tracking.sources.FrameSource` to this interface: their frame sets carry their own
+time stamps and the source's current warnings (a stopped camera, dropped frames), and a source
+that ended delivers None.
 """
 
 from __future__ import annotations
 
 import importlib
 import logging
+import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol, Sequence
 
 import numpy as np
@@ -36,12 +40,16 @@ class SourceFrame:
         truth_m: (M, 3) float64 true marker centres (world metres), or None (real cameras).
         t_ready_s: ``time.perf_counter()`` when the images were complete.
         source_ms: time the source took to deliver them.
+        time_s: the source's own time stamp of the set (NaN: the loop's ``frame_index / fps``).
+        warnings: the source's current problems, one line each.
     """
 
     images: Sequence[np.ndarray]
     truth_m: np.ndarray | None
     t_ready_s: float
     source_ms: float
+    time_s: float = math.nan
+    warnings: tuple[str, ...] = ()
 
 
 class FrameSource(Protocol):
@@ -50,10 +58,10 @@ class FrameSource(Protocol):
     cameras: tuple[Camera, ...]
     markerset: MarkerSet
 
-    def grab(self, frame_index: int, time_s: float, identified: bool) -> SourceFrame:
+    def grab(self, frame_index: int, time_s: float, identified: bool) -> SourceFrame | None:
         """The frame set of ``frame_index`` at source time ``time_s``; ``identified`` tells a
         simulated patient whether the tracker has identified the markers (a patient waiting to be
-        identified holds the reference pose)."""
+        identified holds the reference pose). None: the source has ended (a recording)."""
 
     def handle(self, command: object) -> None:
         """Apply a source command (``SetMotion``, ``SetPatientInput``, ``Reidentify``)."""
@@ -63,14 +71,55 @@ class FrameSource(Protocol):
 
 
 def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet]:
-    """Cameras and marker set of a source, without opening it (cheap: content files only).
+    """Cameras and marker set of a source, without opening it (content, calibration and
+    meta.yaml files only).
 
     The game sizes the shared memory from them before the tracker process starts.
     """
     from tracking.sim.rigs import load_rig
 
     config.check()
+    if config.kind == "recording":
+        from tracking.sources.recording import RecordingSource
+
+        with RecordingSource(config.path, config.calibration) as rec:
+            return rec.cameras, rec.markerset()
+    if config.kind == "cameras":
+        return _calibrated_cameras(config), load_markerset(config.markerset)
     return tuple(load_rig(config.rig, tuple(config.size))), load_markerset(config.markerset)
+
+
+def _calibrated_cameras(config: SourceConfig) -> tuple[Camera, ...]:
+    from calibration.files import check_camera_count, load_calibration
+
+    cameras = tuple(load_calibration(config.calibration))
+    check_camera_count(cameras, len(config.devices), "the source", kind="camera devices",
+                       calibration_name=str(config.calibration))
+    return cameras
+
+
+def resolve_config(config: SourceConfig) -> SourceConfig:
+    """``config`` with the image size (and, for a recording, the frame rate) its source decides.
+
+    Raises:
+        LiveError: the cameras' image sizes differ (the live image block holds one size).
+        RehabError: the recording or the calibration cannot be read (one line).
+    """
+    config.check()
+    if config.kind not in ("recording", "cameras"):
+        return config
+    cameras, _ = source_geometry(config)
+    sizes = sorted({tuple(c.size_px) for c in cameras})
+    if len(sizes) != 1:
+        raise LiveError(f"the cameras have different image sizes {sizes}: the live tracker needs one size; "
+                        "set the cameras to one size and recalibrate")
+    fps = config.fps
+    if config.kind == "recording":
+        from tracking.recording import read_meta
+        from pathlib import Path
+
+        fps = read_meta(Path(config.path)).fps
+    return replace(config, size=sizes[0], fps=fps, motion=None)
 
 
 def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:
@@ -79,9 +128,22 @@ def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:
 
 
 def open_source(config: SourceConfig) -> FrameSource:
-    """The source that ``config`` names (``"sim"``, or a ``"module:function"`` factory)."""
+    """The source that ``config`` names (``"sim"``, ``"recording"``, ``"cameras"``, or a
+    ``"module:function"`` factory)."""
     if config.kind == "sim":
         return SimSource(config)
+    if config.kind == "recording":
+        from tracking.sources.recording import RecordingSource
+
+        rec = RecordingSource(config.path, config.calibration)
+        return DeviceSource(rec, rec.markerset())
+    if config.kind == "cameras":
+        from tracking.sources.cameras import CameraSource
+
+        # a read never blocks the loop longer than half a second (its heartbeat is watched)
+        cams = CameraSource(_calibrated_cameras(config), config.devices, config.fps,
+                            stall_s=min(max(5.0 / config.fps, 0.25), 0.5))
+        return DeviceSource(cams, load_markerset(config.markerset))
     module_name, _, attr = config.kind.partition(":")
     try:
         factory = getattr(importlib.import_module(module_name), attr)
@@ -163,3 +225,60 @@ class SimSource:
     def close(self) -> None:
         self.studio.close()
 
+
+
+class DeviceSource:
+    """A :class:`tracking.sources.FrameSource` (a recording, live cameras) as a tracker-process source.
+
+    Frame sets come in the source's order with its time stamps. The loop asks for frame sets by
+    number: asking again for the last one returns it again (the warm-up frame set is the first
+    one tracked), and a number beyond the next one skips the frame sets in between (a replacement
+    process continues a recording where the dead one was). When the source ends, :meth:`grab`
+    returns None and the end is one of :meth:`warnings`.
+
+    Args:
+        source: the frame source (opened here).
+        markerset: the markers the tracker looks for.
+    """
+
+    def __init__(self, source, markerset: MarkerSet) -> None:
+        self.source = source
+        self.cameras = tuple(source.cameras)
+        self.markerset = markerset
+        self.fps = source.fps
+        source.open()
+        self._next = 0  # number of the next frame set the source will deliver
+        self._last: tuple[int, SourceFrame] | None = None
+        self._ended = ""
+
+    def grab(self, frame_index: int, time_s: float, identified: bool) -> SourceFrame | None:
+        if self._last is not None and self._last[0] == frame_index:
+            return self._last[1]
+        if self._ended:
+            return None
+        t0 = time.perf_counter()
+        if frame_index > self._next and hasattr(self.source, "skip"):
+            self._next += self.source.skip(frame_index - self._next)
+        fs = self.source.read()
+        t1 = time.perf_counter()
+        if fs is None:
+            self._ended = self.source.end_reason() or "the source ended"
+            log.warning("%s", self._ended)
+            return None
+        self._next += 1
+        frame = SourceFrame(fs.images, fs.truth_m, t1, (t1 - t0) * 1000.0, fs.time_s, self.warnings())
+        self._last = (frame_index, frame)
+        return frame
+
+    def warnings(self) -> tuple[str, ...]:
+        """The source's current problems, one line each; once it ended, why (that line only)."""
+        if self._ended:
+            return (self._ended,)
+        return tuple(self.source.warnings())
+
+    def handle(self, command: object) -> None:
+        if isinstance(command, SetMotion) and command.name is not None:
+            raise LiveError(f"motion {command.name!r}: this source measures a recording or cameras, it plays no motions")
+
+    def close(self) -> None:
+        self.source.close()

@@ -1,0 +1,166 @@
+"""CameraSource: reader threads, grouping by time stamp, dropped / out-of-step / stopped cameras.
+
+The cameras are fake devices (``VideoCapture``'s ``read``/``isOpened``/``release``) that deliver
+frame ``k`` at ``t0 + phase + k / fps`` with every pixel set to ``k % 256``, so a frame set's
+images tell which frame of each camera it holds; and OpenCV reading video files.
+"""
+
+import logging
+import time
+
+import numpy as np
+import pytest
+
+from calibration.errors import CalibrationError
+from tracking.recording import RecordingWriter
+from tracking.sources.base import SourceError
+from tracking.sources.cameras import CameraSource, open_capture
+
+from fake_cameras import SIZE, FakeDevice, cameras, factory_of
+
+
+def make_source(devs, fps, **kw):
+    return CameraSource(cameras(len(devs)), [str(k) for k in range(len(devs))], fps,
+                        capture_factory=factory_of(devs), **kw)
+
+
+def frame_values(fs):
+    return [int(img[0, 0, 0]) if not m else None for img, m in zip(fs.images, fs.missing)]
+
+
+def test_frames_of_the_same_instant_are_grouped():
+    fps = 20.0
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, fps, phase_s=p) for p in (0.0, 0.004, 0.009)]
+    with make_source(devs, fps) as src:
+        sets = [src.read() for _ in range(15)]
+        assert src.warnings() == () or all("dropped" in w for w in src.warnings())
+    complete = [fs for fs in sets if not fs.missing.any()]
+    assert len(complete) >= 12
+    same = [len(set(frame_values(fs))) == 1 for fs in complete]  # every camera's frame of the same instant
+    # (host time stamps: a reader thread not scheduled for half a period on the loaded test
+    # machine stamps its frame late, rarely)
+    assert np.mean(same) >= 0.85
+    for fs in complete:
+        assert np.nanmax(fs.stamps_s) - np.nanmin(fs.stamps_s) <= 0.5 / fps
+        assert all(img.shape == (SIZE[1], SIZE[0], 3) for img in fs.images)
+    assert np.all(np.diff([fs.time_s for fs in sets]) > 0)
+    assert [fs.index for fs in sets] == list(range(15))
+
+
+@pytest.mark.parametrize("mode", ["hang", "fail"])
+def test_a_camera_that_stops_is_missing_and_warned_about(mode, caplog):
+    fps = 20.0
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps, stop_after=5, mode=mode), FakeDevice(t0, fps)]
+    caplog.set_level(logging.WARNING, logger="tracking.sources.cameras")
+    with make_source(devs, fps, stall_s=0.3) as src:
+        sets = [src.read() for _ in range(20)]
+        warnings = src.warnings()
+    late = sets[-5:]
+    for fs in late:
+        assert fs.missing.tolist() == [False, True, False]
+        assert not fs.images[1].any()  # black image for the missing camera
+        assert np.isnan(fs.stamps_s[1])
+        a, _, c = frame_values(fs)
+        assert a == c
+    stopped = [w for w in warnings if "stopped" in w]
+    assert len(stopped) == 1 and "cam2" in stopped[0] and "tracking goes on with cam1, cam3" in stopped[0]
+    assert "\n" not in stopped[0]
+    logged = [r.getMessage() for r in caplog.records if "stopped" in r.getMessage()]
+    assert len(logged) == 1  # logged once when it appears, not per frame set
+    assert src.missing[1] >= 5 and src.missing[0] == 0
+
+
+def test_a_camera_that_comes_back_is_used_again():
+    fps = 20.0
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps, skip=range(4, 16))]  # silent for 0.6 s
+    with make_source(devs, fps, stall_s=0.25) as src:
+        sets = [src.read() for _ in range(24)]
+        assert not any("stopped" in w for w in src.warnings())
+    assert any(fs.missing[1] for fs in sets[4:16])
+    assert not sets[-1].missing.any() and len(set(frame_values(sets[-1]))) == 1
+
+
+def test_a_slow_reader_and_a_driver_gap_count_as_dropped_frames():
+    fps = 25.0
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps, skip=(6, 7, 8))]
+    with make_source(devs, fps) as src:
+        for _ in range(6):
+            src.read()
+            time.sleep(2.5 / fps)  # the tracker is slower than the cameras
+        warnings = src.warnings()
+    assert src.dropped[0] >= 5
+    assert src.dropped[1] >= src.dropped[0]  # plus the frames its driver never delivered
+    assert any(w.startswith("camera cam1 dropped") for w in warnings)
+
+
+def test_a_camera_out_of_step_is_left_out_and_warned_about():
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, 20.0), FakeDevice(t0, 20.0), FakeDevice(t0, 13.0)]  # cam3 runs slower
+    with make_source(devs, 20.0, stall_s=1.0) as src:
+        sets = [src.read() for _ in range(30)]
+        warnings = src.warnings()
+    assert src.out_of_step[2] > 0 and src.out_of_step[0] == 0
+    assert any("cam3 is out of step" in w for w in warnings)
+    for fs in sets:  # whatever is in a set lies within half a period of the others
+        s = fs.stamps_s[~fs.missing]
+        assert s.max() - s.min() <= 0.5 / 20.0 + 1e-9
+
+
+def test_open_errors_are_one_line():
+    t0 = time.perf_counter()
+    src = make_source([FakeDevice(t0, 20.0), FakeDevice(t0, 20.0, opened=False)], 20.0)
+    with pytest.raises(SourceError, match=r"camera cam2 \(device '1'\): cannot open it"):
+        src.open()
+    src = make_source([FakeDevice(t0, 20.0), FakeDevice(t0, 20.0, size=(64, 48))], 20.0)
+    with pytest.raises(CalibrationError, match="calibration of cam2 is for 32x24 but camera cam2 .* delivers 64x48"):
+        src.open()
+    src = make_source([FakeDevice(t0, 20.0), FakeDevice(t0, 20.0, stop_after=0)], 20.0, open_timeout_s=0.3)
+    with pytest.raises(SourceError, match=r"no image from cam2 \(device '1'\) within 0.3 s"):
+        src.open()
+    with pytest.raises(SourceError, match="2 camera devices .* for 3 calibrated cameras"):
+        CameraSource(cameras(3), ["0", "1"], 20.0)
+
+
+class Paced:
+    """Wraps a capture so that it delivers at most ``fps`` frames per second (a video file as a camera)."""
+
+    def __init__(self, cap, fps):
+        self.cap, self.period, self.next = cap, 1.0 / fps, time.perf_counter() + 0.05
+
+    def isOpened(self):
+        return self.cap.isOpened()
+
+    def read(self):
+        delay = self.next - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+        self.next += self.period
+        return self.cap.read()
+
+    def release(self):
+        self.cap.release()
+
+
+def test_opencv_reads_video_files_as_cameras(tmp_path):
+    cams = cameras(2)
+    writer = RecordingWriter(tmp_path, cams, 20.0)
+    for k in range(12):
+        writer.write([np.full((SIZE[1], SIZE[0], 3), 10 * k + c, np.uint8) for c in range(2)])
+    writer.close()
+    files = [str(tmp_path / f"{c.name}.avi") for c in cams]
+    src = CameraSource(cams, files, 20.0, stall_s=0.3,
+                       capture_factory=lambda dev, size, fps: Paced(open_capture(dev, size, fps), fps))
+    sets = []
+    with src:
+        while (fs := src.read()) is not None:
+            sets.append(fs)
+        assert "every camera stopped" in src.end_reason()
+    complete = [fs for fs in sets if not fs.missing.any()]
+    assert len(complete) >= 8
+    for fs in complete:
+        a, b = (int(img[0, 0, 0]) for img in fs.images)
+        assert b - a == 1 and a % 10 == 0  # frame k of both files (FFV1 is lossless)
