@@ -318,6 +318,10 @@ def _add_bench(sub) -> None:
     p = sub.add_parser("bench", help="measure speed: colour table, centroids, triangulation, simulator")
     p.add_argument("--frames", type=int, default=60, help="frame sets per measurement (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer frames, for a smoke run")
+    p.add_argument("--seconds", type=float, default=10.0,
+                   help="measuring time of the live-process and application figures (default: %(default)s)")
+    p.add_argument("--skip-live", action="store_true",
+                   help="only the per-frame pipeline (no tracker process, no application)")
     p.set_defaults(func=_cmd_bench)
 
 
@@ -327,7 +331,29 @@ def _cmd_bench(args) -> int:
     n = 10 if args.quick else args.frames
     for line in run_benchmarks(n_frames=n):
         print(line, flush=True)
+    if args.skip_live:
+        return 0
+    seconds = 2.0 if args.quick else args.seconds
+    _bench_live(seconds)
     return 0
+
+
+def _bench_live(seconds: float) -> None:
+    """The tracker process (latency, pace) and the application (frame rate) with it running."""
+    from game.app import Settings
+    from game.play import PlayOptions, run_play
+    from tracking.live.bench import format_result, measure_latency
+
+    print("\nTracker process (simulated patient, 30 frame sets/s): frame ready -> sample seen by the game "
+          "process, minus the tracker's own step time", flush=True)
+    for size in ((320, 240), (640, 480)):
+        print("  " + format_result(measure_latency(seconds, size)).replace("\n", "\n  "), flush=True)
+    print("\nApplication (live avatar scene, 1280x720, headless EGL, uncapped) while the tracker process "
+          "measures the simulated patient at 320x240, 30 frame sets/s:", flush=True)
+    summary = run_play(PlayOptions(settings=Settings(window_px=(1280, 720), max_fps=0.0, show_fps=False),
+                                   headless=True, seconds=seconds, scene="live", motion="shoulder_abduction"))
+    print(f"  {summary.line()}", flush=True)
+    print(f"  target 60 frames/s: {'met' if summary.fps >= 60.0 else 'NOT met'} on this machine", flush=True)
 
 
 # --------------------------------------------------------------------------- main
