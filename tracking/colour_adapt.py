@@ -74,6 +74,8 @@ class ColourAdapter:
         table: the :class:`ColourTable` to give the tracker; its ``lut`` is rewritten in place.
         models: the current colour models.
         seconds: wall time of every :meth:`observe` call (the per-frame cost of adaptation).
+        cpu_seconds: the same as CPU time of the calling thread (what the work costs on a machine
+            shared with other jobs, where wall time also counts waiting for a core).
     """
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 10, rate: float = 0.3,
@@ -97,6 +99,7 @@ class ColourAdapter:
         self.loose_saturation = 0.3
         self.updates = 0
         self.seconds: list[float] = []
+        self.cpu_seconds: list[float] = []
         self._frames = 0
 
     def observe(self, images: Sequence[np.ndarray], positions_m: np.ndarray, status: np.ndarray, *,
@@ -111,12 +114,12 @@ class ColourAdapter:
         Returns:
             True if the table was updated.
         """
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         self._frames += 1
         self.builder.apply(self.budget)
         measured = np.asarray(status) == MarkerStatus.MEASURED
         if (not force and (self._frames - 1) % self.every) or not measured.any():
-            self.seconds.append(time.perf_counter() - t0)
+            self._timed(t0, c0)
             return False
         k_count = self.stats.n_colours
         class_px: list[list[np.ndarray]] = [[] for _ in range(k_count)]
@@ -159,9 +162,13 @@ class ColourAdapter:
         labels = label_hue_saturation(self.models, self.stats)
         queued = self.builder.stage(labels)
         self.updates += 1
-        self.seconds.append(time.perf_counter() - t0)
+        self._timed(t0, c0)
         log.debug("colour update %d: %d table entries queued", self.updates, queued)
         return True
+
+    def _timed(self, t0: float, c0: float) -> None:
+        self.seconds.append(time.perf_counter() - t0)
+        self.cpu_seconds.append(time.thread_time() - c0)
 
     def flush(self) -> int:
         """Apply every pending table change now (e.g. before saving). Returns colours rewritten."""

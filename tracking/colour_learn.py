@@ -168,12 +168,14 @@ def fit_models(stats: ColourStats) -> list[ColourModel]:
 
 
 def _smooth(hist: np.ndarray) -> np.ndarray:
-    """Box-sum over +-2 hue bytes (circular) and +-1 saturation bin."""
-    out = np.zeros_like(hist)
-    for dh in range(-2, 3):
-        out += np.roll(hist, dh, axis=0)
-    padded = np.pad(out, ((0, 0), (1, 1)))
-    return padded[:, :-2] + padded[:, 1:-1] + padded[:, 2:]
+    """(..., 256, SAT_BINS) box-sum over +-2 hue bytes (circular) and +-1 saturation bin."""
+    out = hist.copy()
+    for dh in (-2, -1, 1, 2):
+        out += np.roll(hist, dh, axis=-2)
+    res = out.copy()
+    res[..., 1:] += out[..., :-1]
+    res[..., :-1] += out[..., 1:]
+    return res
 
 
 def label_hue_saturation(models: list[ColourModel], stats: ColourStats | None = None) -> np.ndarray:
@@ -190,14 +192,13 @@ def label_hue_saturation(models: list[ColourModel], stats: ColourStats | None = 
     labels = np.where(in_band[:, None] & (sat[None, :] >= floors[nearest][:, None] - 1e-9),
                       nearest[:, None] + 1, 0).astype(np.uint8)
     if stats is not None and stats.hist[0].sum() > 0:
-        smooth = np.stack([_smooth(h) for h in stats.hist])  # (K + 1, 256, SAT_BINS)
-        totals = np.maximum(stats.counts(), 1e-12)
-        share = smooth / totals[:, None, None]
-        bg_share = np.repeat(share[0], 256 // SAT_BINS, axis=1)  # (256, 256)
-        bg_count = np.repeat(smooth[0], 256 // SAT_BINS, axis=1)
-        class_share = np.repeat(share, 256 // SAT_BINS, axis=2)  # (K + 1, 256, 256)
-        own = np.take_along_axis(class_share, labels[None].astype(np.intp), axis=0)[0]
-        labels[(labels > 0) & (bg_count >= MIN_BACKGROUND_COUNT) & (bg_share > own)] = 0
+        smooth = _smooth(stats.hist)  # (K + 1, 256, SAT_BINS)
+        share = smooth / np.maximum(stats.counts(), 1e-12)[:, None, None]
+        step = 256 // SAT_BINS
+        binned = labels[:, step - 1 :: step].astype(np.intp)  # a bin's label at its top byte
+        own = np.take_along_axis(share, binned[None], axis=0)[0]
+        exclude = (smooth[0] >= MIN_BACKGROUND_COUNT) & (share[0] > own)
+        labels[np.repeat(exclude, step, axis=1)] = 0
     return labels
 
 
