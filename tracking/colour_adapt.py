@@ -21,7 +21,7 @@ import logging
 import time
 import zlib
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -65,7 +65,7 @@ class ColourAdapter:
         rate: share of the colour statistics replaced by one update (exponential forgetting).
         inner: fraction of the projected ball radius whose pixels are learned.
         background_samples: pixels drawn per camera per update for the background.
-        label_hs: a learned (256, 256) hue-saturation label table to start from (default nominal).
+        start: learned (models, label_hs) to start from (:func:`read_colours`; default nominal).
         budget: table entries rewritten per frame set at most (a model change is spread over
             frames: ~80 ns per entry on the test machine under load).
         seed: random seed of the background sampling.
@@ -79,7 +79,8 @@ class ColourAdapter:
     """
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 10, rate: float = 0.3,
-                 inner: float = 0.6, background_samples: int = 1500, label_hs: np.ndarray | None = None,
+                 inner: float = 0.6, background_samples: int = 1500,
+                 start: tuple[list[ColourModel], np.ndarray] | None = None,
                  budget: int = 25000, seed: int = 0):
         if every < 1 or not 0.0 < rate <= 1.0:
             raise ValueError("every must be >= 1 and rate in (0, 1]")
@@ -92,8 +93,8 @@ class ColourAdapter:
         self.colour = markerset.colour_index
         self.stats = ColourStats(markerset.palette.shape[0])
         self.builder = LutBuilder(markerset.palette.shape[0])
-        self.models = nominal_models(markerset.palette)
-        self.builder.build(label_hue_saturation(self.models) if label_hs is None else label_hs)
+        self.models = nominal_models(markerset.palette) if start is None else list(start[0])
+        self.builder.build(label_hue_saturation(self.models) if start is None else start[1])
         self.table: ColourTable = self.builder.table(self.models)
         self.loose_hue_deg = 40.0
         self.loose_saturation = 0.3
@@ -210,6 +211,18 @@ def load_colours(path: Path, markerset: MarkerSet) -> ColourTable:
     """A learned colour file -> a full :class:`ColourTable` for the tracker.
 
     Raises:
+        ContentError: the file is missing, malformed, or for other colours.
+    """
+    models, label_hs = read_colours(path, markerset)
+    builder = LutBuilder(len(models))
+    builder.build(label_hs)
+    return builder.table(models)
+
+
+def read_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], np.ndarray]:
+    """A learned colour file -> (models, (256, 256) hue-saturation labels).
+
+    Raises:
         ContentError: the file is missing, malformed, or for another number of colours.
     """
     import tomllib
@@ -230,6 +243,47 @@ def load_colours(path: Path, markerset: MarkerSet) -> ColourTable:
     if nominal != [tuple(c) for c in np.asarray(markerset.palette).tolist()] or label_hs.max() > k:
         raise ContentError(f"{path}: learned for the colours {nominal}, but the marker set {markerset.name} has "
                            f"{np.asarray(markerset.palette).tolist()}: learn them again for this marker set")
-    builder = LutBuilder(k)
-    builder.build(label_hs)
-    return builder.table(models)
+    return models, label_hs
+
+
+def learn_colours(frame_sets: Iterable, cameras: Sequence[Camera], markerset: MarkerSet, *, frames: int = 30,
+                  table: ColourTable | None = None) -> ColourAdapter:
+    """Learn the marker colours from the first frames of a recording that starts in the reference pose.
+
+    The tracker identifies the markers with ``table`` (default: the nominal one); from then on,
+    each of ``frames`` frame sets adds the pixels of the measured markers' balls and of the rest of
+    the images with equal weight (a running mean).
+
+    Args:
+        frame_sets: :class:`tracking.recording.FrameSet` objects in time order.
+        cameras: calibrated cameras, in the order of the images.
+        markerset: the marker set worn.
+        frames: frame sets to learn from after identification.
+
+    Raises:
+        RecordingError: the markers were never identified, or a marker colour was never measured.
+    """
+    from tracking.errors import RecordingError
+    from tracking.tracker import Tracker, TrackingState
+
+    tracker = Tracker(cameras, markerset, table=table)
+    adapter = ColourAdapter(cameras, markerset, every=1)
+    message = "no frames"
+    for fs in frame_sets:
+        sample = tracker.step(fs.images, fs.time_s)
+        if sample.state != TrackingState.TRACKING:
+            message = sample.message or "not identified"
+            continue
+        adapter.rate = 1.0 / (adapter.updates + 1)
+        adapter.observe(fs.images, sample.positions_m, sample.status)
+        if adapter.updates >= frames:
+            break
+    if adapter.updates == 0:
+        raise RecordingError(f"the markers were never identified ({message}): the recording must start with "
+                             "the patient in the reference pose")
+    missing = [tuple(c) for c, n in zip(np.asarray(markerset.palette).tolist(), adapter.stats.counts()[1:]) if n <= 0]
+    if missing:
+        raise RecordingError(f"the marker colour(s) {missing} were never measured in the first frames: make sure "
+                             "every marker is seen by two cameras in the reference pose")
+    adapter.flush()
+    return adapter
