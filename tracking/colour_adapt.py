@@ -78,10 +78,10 @@ class ColourAdapter:
             shared with other jobs, where wall time also counts waiting for a core).
     """
 
-    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 10, rate: float = 0.3,
+    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 30, rate: float = 0.3,
                  inner: float = 0.6, background_samples: int = 1500,
                  start: tuple[list[ColourModel], np.ndarray] | None = None,
-                 budget: int = 25000, seed: int = 0):
+                 budget: int = 12000, seed: int = 0):
         if every < 1 or not 0.0 < rate <= 1.0:
             raise ValueError("every must be >= 1 and rate in (0, 1]")
         self.cameras = tuple(cameras)

@@ -322,7 +322,7 @@ def disc_pixels(image_bgr: np.ndarray, centre_uv: np.ndarray, radius_px: float) 
     y0, y1 = max(int(np.floor(v - r)), 0), min(int(np.ceil(v + r)) + 1, h)
     if x0 >= x1 or y0 >= y1:
         return np.zeros((0, 3), np.uint8)
-    yy, xx = np.mgrid[y0:y1, x0:x1]
+    yy, xx = np.ogrid[y0:y1, x0:x1]
     inside = (xx - u) ** 2 + (yy - v) ** 2 <= r * r
     return image_bgr[y0:y1, x0:x1][inside]
 
@@ -333,10 +333,11 @@ def outside_discs_sample(image_bgr: np.ndarray, centres_uv: np.ndarray, radii_px
     h, w = image_bgr.shape[:2]
     xs = rng.integers(0, w, n)
     ys = rng.integers(0, h, n)
-    ok = np.ones(n, bool)
-    for (u, v), r in zip(centres_uv, radii_px):
-        if np.isfinite(u) and np.isfinite(v) and np.isfinite(r):
-            ok &= (xs - u) ** 2 + (ys - v) ** 2 > r * r
+    c = np.asarray(centres_uv, float).reshape(-1, 2)
+    r = np.asarray(radii_px, float).reshape(-1)
+    use = np.isfinite(c).all(axis=1) & np.isfinite(r)
+    c, r = c[use], r[use]
+    ok = ((xs[:, None] - c[None, :, 0]) ** 2 + (ys[:, None] - c[None, :, 1]) ** 2 > (r * r)[None, :]).all(axis=1)
     return image_bgr[ys[ok], xs[ok]]
 
 
