@@ -66,8 +66,9 @@ class ColourAdapter:
         inner: fraction of the projected ball radius whose pixels are learned.
         background_samples: pixels drawn per camera per update for the background.
         start: learned (models, label_hs) to start from (:func:`read_colours`; default nominal).
-        budget: table entries rewritten per frame set at most (a model change is spread over
-            frames: ~80 ns per entry on the test machine under load).
+        budget: table entries rewritten per frame set at least, while changes are pending (a model
+            change is spread over the frames until the next update: ``max(budget, pending /
+            every)`` per frame set; ~30 ns of CPU per entry).
         seed: random seed of the background sampling.
 
     Attributes:
@@ -102,6 +103,7 @@ class ColourAdapter:
         self.seconds: list[float] = []
         self.cpu_seconds: list[float] = []
         self._frames = 0
+        self._share = 0
 
     def observe(self, images: Sequence[np.ndarray], positions_m: np.ndarray, status: np.ndarray, *,
                 force: bool = False) -> bool:
@@ -117,7 +119,7 @@ class ColourAdapter:
         """
         t0, c0 = time.perf_counter(), time.thread_time()
         self._frames += 1
-        self.builder.apply(self.budget)
+        self.builder.apply(max(self.budget, self._share))
         measured = np.asarray(status) == MarkerStatus.MEASURED
         if (not force and (self._frames - 1) % self.every) or not measured.any():
             self._timed(t0, c0)
@@ -161,7 +163,17 @@ class ColourAdapter:
                 models[k] = fitted[k]
         self.models = models
         labels = label_hue_saturation(self.models, self.stats)
-        queued = self.builder.stage(labels)
+        # colours the cameras see first: a pending change to a colour nobody shows can wait
+        seen = self.stats.hist / np.maximum(self.stats.counts(), 1e-12)[:, None, None]
+        priority = np.repeat(seen.sum(axis=0), 256 // seen.shape[2], axis=1)
+        if first:
+            queued = self.builder.update(labels)  # at identification: the nominal table is replaced at once
+        else:
+            queued = self.builder.stage(labels, priority)
+        # spread what is pending over the frames until the next update, so that the table never
+        # lags more than one update behind (``budget`` is the least per frame)
+        pending = self.builder.pending
+        self._share = int((self.builder.starts[pending + 1] - self.builder.starts[pending]).sum()) // self.every + 1
         self.updates += 1
         self._timed(t0, c0)
         log.debug("colour update %d: %d table entries queued", self.updates, queued)

@@ -14,8 +14,10 @@ saturation, value). :class:`ColourStats` holds, per class (0 = not a marker, ``k
 colour ``k``), a 2-D histogram of (hue byte, saturation byte / 4) of the pixels whose value is at
 least ``min_value``; an update multiplies the old counts by ``1 - rate`` first (exponential
 forgetting). :func:`fit_models` reduces each marker class to a :class:`ColourModel`: the circular
-mean hue, a hue half-width of ``2.5`` standard deviations plus ``8`` deg (clipped to 12..25 deg)
-and a saturation floor at ``0.75`` of the median saturation (clipped to 0.35..0.8).
+mean hue, a hue half-width of ``2.5`` standard deviations plus ``8`` deg (whole degrees, clipped
+to 18..25 deg: the band must leave room for the next drift step) and a saturation floor at
+``0.75`` of the median saturation (in steps of 0.05, clipped to 0.35..0.8; the steps keep noise
+in the statistics from rewriting the table).
 
 Decision rule
 -------------
@@ -158,11 +160,11 @@ def fit_models(stats: ColourStats) -> list[ColourModel]:
         if hist.sum() <= 0:
             raise ContentError(f"marker colour {k - 1} was not seen in any image: show every marker to the cameras")
         mean, std = _circular_hue(hist.sum(axis=1))
-        tol = float(np.clip(2.5 * std + 8.0, MIN_HUE_TOL_DEG, MAX_HUE_TOL_DEG))
+        tol = float(np.clip(np.round(2.5 * std + 8.0), MIN_HUE_TOL_DEG, MAX_HUE_TOL_DEG))
         sat_w = hist.sum(axis=0)
         cdf = np.cumsum(sat_w) / sat_w.sum()
         median_sat = float(sat_centres[np.searchsorted(cdf, 0.5)])
-        floor = float(np.clip(0.75 * median_sat, MIN_SAT_FLOOR, MAX_SAT_FLOOR))
+        floor = float(np.clip(np.round(0.75 * median_sat / 0.05) * 0.05, MIN_SAT_FLOOR, MAX_SAT_FLOOR))
         models.append(ColourModel(mean, tol, floor, _rgb_from_hsv(mean, median_sat)))
     return models
 
@@ -276,15 +278,24 @@ class LutBuilder:
             self._rewrite(np.arange(k0, k0 + 4096))
         return self.lut
 
-    def stage(self, label_hs: np.ndarray) -> int:
-        """Make ``label_hs`` the target; queue its changed keys. Returns the colours queued."""
+    def stage(self, label_hs: np.ndarray, priority: np.ndarray | None = None) -> int:
+        """Make ``label_hs`` the target; queue its changed keys. Returns the colours queued.
+
+        Args:
+            label_hs: (256, 256) uint8 labels by (hue byte, saturation byte).
+            priority: (256, 256) weights; pending keys of higher weight are applied first (e.g.
+                how often the cameras see that hue and saturation), ties in key order.
+        """
         label_hs = np.asarray(label_hs, dtype=np.uint8)
         if self.label_hs is None:
             self.build(label_hs)
             return 0
         changed = np.flatnonzero((label_hs != self.label_hs).reshape(-1))
         self.label_hs = label_hs.copy()
-        self.pending = np.union1d(self.pending, changed)
+        pending = np.union1d(self.pending, changed)
+        if priority is not None and pending.size:
+            pending = pending[np.argsort(-np.asarray(priority, float).reshape(-1)[pending], kind="stable")]
+        self.pending = pending
         return int((self.starts[changed + 1] - self.starts[changed]).sum())
 
     def apply(self, max_colours: int | None = None) -> int:
