@@ -2,16 +2,19 @@
 
 :class:`ColourAdapter` owns a learned table (:mod:`tracking.colour_learn`) that starts as the
 nominal one. Every ``every`` frame sets, after :meth:`tracking.tracker.Tracker.step`, it projects
-the markers measured this frame into each camera, takes the pixels of the inner part of each ball's
-disc (``inner`` of the projected radius), and adds them to the marker colour's histogram; pixels
-drawn at random from outside all discs go to the background's. A disc is used only where the
-current table still labels at least half of it with the marker's colour (so a ball hidden behind
-the arm in that camera teaches nothing) and, of its pixels, only those within
-``loose_hue_deg`` of the colour's current hue with saturation >= ``loose_saturation``: that band is
-wider than the table's, so pixels the table has begun to miss as the light drifts are learned and
-pull the model along. The models are refitted with forgetting ``rate`` and the table's changed
-cells are rewritten in place (:meth:`tracking.colour_learn.LutBuilder.update`): the tracker, which
-reads ``table.lut`` at every window, sees the new table from its next frame.
+the markers measured this frame into each camera and takes the pixels of the inner part of the
+largest ``max_discs`` ball views of each colour (``inner`` of the projected radius) for the
+colour's histogram; pixels drawn at random from outside all balls' discs go to the background's.
+A view is used only where the current table still labels at least half of it with the marker's
+colour (so a ball hidden behind the arm in that camera teaches nothing) and, of its pixels, only
+those within ``loose_hue_deg`` of the colour's current hue with saturation >=
+``loose_saturation``: that band is wider than the table's, so pixels the table has begun to miss
+as the light drifts are learned and pull the model along. The models are refitted with
+forgetting ``rate``; the first update (at identification) replaces the nominal table at once,
+later ones stage their changed table entries (:meth:`tracking.colour_learn.LutBuilder.stage`),
+colours the cameras see first, and each frame set rewrites ``max(budget, pending / every)`` of
+them in place. The tracker, which reads ``table.lut`` at every window, sees each rewrite from its
+next frame, and the table is never more than one update behind the models.
 """
 
 from __future__ import annotations
@@ -64,6 +67,7 @@ class ColourAdapter:
         every: learn from every this many frame sets.
         rate: share of the colour statistics replaced by one update (exponential forgetting).
         inner: fraction of the projected ball radius whose pixels are learned.
+        max_discs: ball views learned per colour per update at most (the largest ones).
         background_samples: pixels drawn per camera per update for the background.
         start: learned (models, label_hs) to start from (:func:`read_colours`; default nominal).
         budget: table entries rewritten per frame set at least, while changes are pending (a model
@@ -82,7 +86,7 @@ class ColourAdapter:
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 30, rate: float = 0.3,
                  inner: float = 0.6, background_samples: int = 1500,
                  start: tuple[list[ColourModel], np.ndarray] | None = None,
-                 budget: int = 12000, seed: int = 0):
+                 budget: int = 12000, max_discs: int = 4, seed: int = 0):
         if every < 1 or not 0.0 < rate <= 1.0:
             raise ValueError("every must be >= 1 and rate in (0, 1]")
         self.cameras = tuple(cameras)
@@ -90,6 +94,7 @@ class ColourAdapter:
         self.every, self.rate, self.inner = int(every), float(rate), float(inner)
         self.background_samples = int(background_samples)
         self.budget = int(budget)
+        self.max_discs = int(max_discs)
         self.rng = np.random.default_rng(seed)
         self.colour = markerset.colour_index
         self.stats = ColourStats(markerset.palette.shape[0])
@@ -129,26 +134,35 @@ class ColourAdapter:
         bg_px = []
         lut = self.table.lut
         known = np.isfinite(positions_m).all(axis=1)
+        p = np.where(known[:, None], positions_m, 0.0)
+        geometry = []  # per camera: (uv, radius px)
         for cam, img in zip(self.cameras, images):
-            depth = cam.world_to_camera(np.where(known[:, None], positions_m, 0.0))[:, 2]
-            uv = cam.project(np.where(known[:, None], positions_m, 0.0))
+            depth = cam.world_to_camera(p)[:, 2]
             f = (cam.K[0, 0] + cam.K[1, 1]) / 2.0
             r_px = np.where(known & (depth > 0), f * self.markerset.radius_m / np.maximum(depth, 1e-6), np.nan)
-            for m in np.flatnonzero(measured & np.isfinite(r_px)):
-                px = disc_pixels(img, uv[m], self.inner * r_px[m])
-                if len(px) < 3:
-                    continue
-                k = int(self.colour[m])
-                words = px[:, 0].astype(np.uint32) | px[:, 1].astype(np.uint32) << 8 | px[:, 2].astype(np.uint32) << 16
-                if np.mean(lut[words] == k + 1) < 0.5:
-                    continue  # hidden in this camera, or another ball in front
-                hsv = hsv_bytes(px)
-                dh = np.abs((hsv[:, 0] / HUE_UNITS_PER_DEG - self.models[k].hue_deg + 180.0) % 360.0 - 180.0)
-                class_px[k].append(hsv[(dh <= self.loose_hue_deg) & (hsv[:, 1] >= self.loose_saturation * 255)])
+            geometry.append((cam.project(p), r_px))
             # background: everything away from every known ball (estimated ones included)
             far = known & np.isfinite(r_px)
-            bg = outside_discs_sample(img, uv[far], 2.0 * r_px[far] + 3.0, self.background_samples, self.rng)
+            bg = outside_discs_sample(img, geometry[-1][0][far], 2.0 * r_px[far] + 3.0, self.background_samples, self.rng)
             bg_px.append(hsv_bytes(bg))
+        # the largest discs of each colour first (most pixels for the work), at most max_discs
+        views = [(r_px[m], c, m) for c, (_, r_px) in enumerate(geometry) for m in np.flatnonzero(measured)
+                 if np.isfinite(r_px[m])]
+        used = np.zeros(k_count, int)
+        for r, c, m in sorted(views, reverse=True):
+            k = int(self.colour[m])
+            if used[k] >= self.max_discs:
+                continue
+            px = disc_pixels(images[c], geometry[c][0][m], self.inner * r)
+            if len(px) < 3:
+                continue
+            words = px[:, 0].astype(np.uint32) | px[:, 1].astype(np.uint32) << 8 | px[:, 2].astype(np.uint32) << 16
+            if np.count_nonzero(lut[words] == k + 1) * 2 < len(px):
+                continue  # hidden in this camera, or another ball in front
+            hsv = hsv_bytes(px)
+            dh = np.abs((hsv[:, 0] / HUE_UNITS_PER_DEG - self.models[k].hue_deg + 180.0) % 360.0 - 180.0)
+            class_px[k].append(hsv[(dh <= self.loose_hue_deg) & (hsv[:, 1] >= self.loose_saturation * 255)])
+            used[k] += 1
         first = self.updates == 0
         rate = 1.0 if first else self.rate
         for k in range(k_count):
