@@ -86,7 +86,7 @@ class ColourAdapter:
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 30, rate: float = 0.3,
                  inner: float = 0.6, background_samples: int = 1500,
                  start: tuple[list[ColourModel], np.ndarray] | None = None,
-                 budget: int = 12000, max_discs: int = 4, seed: int = 0):
+                 budget: int = 4000, max_discs: int = 4, seed: int = 0):
         if every < 1 or not 0.0 < rate <= 1.0:
             raise ValueError("every must be >= 1 and rate in (0, 1]")
         self.cameras = tuple(cameras)
