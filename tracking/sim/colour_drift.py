@@ -29,14 +29,15 @@ DRIFT_SETTINGS = SimulationSettings(
 
 @dataclass
 class DriftScore:
-    """One tracker on the drift recording.
+    """One tracker on the drift recording, filled frame by frame with :meth:`add`.
 
     Attributes:
         names: marker names.
         identified_at: first frame with names (-1: never).
-        measured, estimated, lost: (M,) shares of the frames after identification, per marker.
-        swaps: (M,) frames in which the marker was measured on another marker's ball.
-        lost_from: (M,) first frame from which the marker stayed lost to the end (-1: never).
+        status: per frame after identification, (M,) :class:`MarkerStatus` codes (see
+            :meth:`shares`).
+        swaps: (M,) frames in which the marker was measured on another marker's ball (within
+            20 mm of it and more than 20 mm from its own).
     """
 
     names: list[str]
@@ -76,7 +77,15 @@ class DriftScore:
 
 @dataclass
 class DriftResult:
-    """Both trackers on one drift recording, and the adaptation's cost."""
+    """Both trackers on one drift recording, and the adaptation's cost.
+
+    Attributes:
+        settings: the simulated recording.
+        fixed, adaptive: the two trackers' scores.
+        adapt_seconds, adapt_cpu_seconds: (frames,) wall and CPU time of each adaptation call.
+        every: learning period in frame sets.
+        final_hues_deg: the adapted models' hues at the end.
+    """
 
     settings: SimulationSettings
     fixed: DriftScore
