@@ -96,3 +96,18 @@ def test_short_drift_recording_is_tracked_with_zero_swaps_by_the_adapted_table()
     assert lost.max() == 0.0 and measured.min() > 0.95
     assert not result.adaptive.unmeasured_at_end().any()
     assert result.fixed.unmeasured_at_end().sum() >= 3  # the magenta markers
+
+
+def test_tracker_uses_a_swapped_colour_table_from_the_next_frame(studio_and_motion):
+    from tracking.tracker import Tracker, TrackingState
+
+    studio, motion = studio_and_motion
+    ms = studio.markerset
+    blind = ColourTable.from_lut(ms.palette, np.zeros(1 << 24, np.uint8))
+    tracker = Tracker(studio.cameras, ms, table=blind)
+    images = studio.render(motion.pose_at(0.0), 0, 0.0, noise_sigma=1.5).frames.images
+    assert tracker.step(images).state == TrackingState.WAITING  # a table that sees no colour
+    tracker.set_colour_table(ColourTable.build(ms.palette))
+    sample = tracker.step(images)
+    assert sample.state == TrackingState.TRACKING
+    assert np.all(sample.status == MarkerStatus.MEASURED)
