@@ -87,17 +87,6 @@ def test_adapted_table_keeps_the_markers_that_the_nominal_table_loses_when_light
     assert np.nanmean(adapted_share) > 0.97
 
 
-def test_short_drift_recording_is_tracked_with_zero_swaps_by_the_adapted_table():
-    settings = replace(DRIFT_SETTINGS, seconds=3.0, drift_start_s=0.3, drift_s=2.0)
-    result = run_drift(settings, every=10)
-    assert result.adaptive.identified_at == 0 and result.fixed.identified_at == 0
-    assert result.adaptive.swaps.sum() == 0
-    measured, _, lost = result.adaptive.shares()
-    assert lost.max() == 0.0 and measured.min() > 0.95
-    assert not result.adaptive.unmeasured_at_end().any()
-    assert result.fixed.unmeasured_at_end().sum() >= 3  # the magenta markers
-
-
 def test_tracker_uses_a_swapped_colour_table_from_the_next_frame(studio_and_motion):
     from tracking.tracker import Tracker, TrackingState
 
@@ -111,3 +100,16 @@ def test_tracker_uses_a_swapped_colour_table_from_the_next_frame(studio_and_moti
     sample = tracker.step(images)
     assert sample.state == TrackingState.TRACKING
     assert np.all(sample.status == MarkerStatus.MEASURED)
+
+
+def test_short_drift_recording_is_tracked_with_zero_swaps_by_the_adapted_table():
+    # last in this file: it opens a studio of its own, and a studio renders wrong images after
+    # another studio was opened and closed (a renderer context issue, not the colour code's)
+    settings = replace(DRIFT_SETTINGS, seconds=3.0, drift_start_s=0.3, drift_s=2.0)
+    result = run_drift(settings, every=10)
+    assert result.adaptive.identified_at == 0 and result.fixed.identified_at == 0
+    assert result.adaptive.swaps.sum() == 0
+    measured, _, lost = result.adaptive.shares()
+    assert lost.max() == 0.0 and measured.min() > 0.95
+    assert not result.adaptive.unmeasured_at_end().any()
+    assert result.fixed.unmeasured_at_end().sum() >= 3  # the magenta markers
