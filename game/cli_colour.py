@@ -35,7 +35,7 @@ def add_commands(sub) -> None:
     q.add_argument("--cast", default="1.3,1.0,0.7", help="R,G,B gains reached (default 1.3,1.0,0.7: warm)")
     q.add_argument("--drift-start", type=float, default=1.0, help="drift starts at this time, s (default 1)")
     q.add_argument("--drift-seconds", type=float, default=6.0, help="drift lasts this long, s (default 6)")
-    q.add_argument("--every", type=int, default=30, help="learn from every this many frame sets (default 30)")
+    q.add_argument("--every", type=int, default=60, help="learn from every this many frame sets (default 60)")
     q.add_argument("--seed", type=int, default=0, help="noise seed")
     q.set_defaults(func=_cmd_drift_check)
 

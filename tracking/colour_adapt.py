@@ -83,7 +83,7 @@ class ColourAdapter:
             shared with other jobs, where wall time also counts waiting for a core).
     """
 
-    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 30, rate: float = 0.3,
+    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, every: int = 60, rate: float = 0.3,
                  inner: float = 0.6, background_samples: int = 1500,
                  start: tuple[list[ColourModel], np.ndarray] | None = None,
                  budget: int = 4000, max_discs: int = 4, seed: int = 0):

@@ -117,7 +117,7 @@ class DriftResult:
         return "\n".join(lines)
 
 
-def run_drift(settings: SimulationSettings = DRIFT_SETTINGS, *, every: int = 30, rate: float = 0.3,
+def run_drift(settings: SimulationSettings = DRIFT_SETTINGS, *, every: int = 60, rate: float = 0.3,
               progress: bool = False) -> DriftResult:
     """Render ``settings`` once and track it with the fixed and the adaptive colour table."""
     from tracking.tracker import Tracker, TrackingState
