@@ -121,6 +121,8 @@ def _add_track(sub) -> None:
                    help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
     p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
     p.add_argument("--c3d", type=Path, default=None, help="labelled markers as a C3D file")
+    p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
+    p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.set_defaults(func=_cmd_track)
 
 
@@ -142,6 +144,8 @@ def _cmd_track(args) -> int:
         status_csv=args.status,
         angles_csv=args.angles,
         c3d=args.c3d,
+        colours=args.colours,
+        adapt_colours=args.adapt_colours,
         progress=True,
     )
     print(report)
@@ -372,10 +376,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_play(sub)
     from game import cli_calibrate  # calibrate, simulate-calibration
     from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
+    from game import cli_colour  # colour learn|drift-check
     from game import cli_record  # record
 
     cli_calibrate.add_commands(sub)
     cli_clinic.add_commands(sub)
+    cli_colour.add_commands(sub)
     cli_record.add_commands(sub)
     return parser
 

@@ -286,6 +286,32 @@ class ColourTable:
             pal, int(bits), float(hue_tol_deg), float(min_saturation), float(min_value), float(noise_counts), lut
         )
 
+    @classmethod
+    def from_lut(
+        cls,
+        palette_rgb: np.ndarray,
+        lut: np.ndarray,
+        *,
+        hue_tol_deg: float = DEFAULT_HUE_TOL_DEG,
+        min_saturation: float = DEFAULT_MIN_SATURATION,
+        min_value: float = DEFAULT_MIN_VALUE,
+        noise_counts: float = DEFAULT_NOISE_COUNTS,
+    ) -> "ColourTable":
+        """Wrap a full table filled elsewhere (e.g. from learned colours, :mod:`tracking.colour_learn`).
+
+        The array is used as is, not copied: its owner may rewrite it between frames (online
+        adaptation); the numeric attributes only describe it.
+
+        Args:
+            palette_rgb: (K, 3) uint8 representative sRGB colours of the labels 1..K.
+            lut: (2**24,) uint8 labels 0..K in the index order of the full table.
+        """
+        pal = np.asarray(palette_rgb, dtype=np.uint8).reshape(-1, 3)
+        lut = np.asarray(lut)
+        if lut.dtype != np.uint8 or lut.shape != (1 << 24,):
+            raise ValueError(f"lut must be a (2**24,) uint8 full table, got {lut.dtype} {lut.shape}")
+        return cls(pal, 8, float(hue_tol_deg), float(min_saturation), float(min_value), float(noise_counts), lut)
+
     @property
     def n_colours(self) -> int:
         """Number of palette colours K; labels run 0..K."""

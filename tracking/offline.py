@@ -40,20 +40,24 @@ def track_recording(
     status_csv: Path | None = None,
     angles_csv: Path | None = None,
     c3d: Path | None = None,
+    colours: Path | None = None,
+    adapt_colours: bool = False,
     progress: bool = False,
 ) -> str:
     """Track a recording frame by frame and write what was asked. Returns a summary line.
 
     ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``
     and ``c3d`` the labelled markers from the tracker (the online algorithm, no look-ahead).
+    ``colours`` is a learned colour file (``rehab colour learn``) used instead of the nominal
+    table; ``adapt_colours`` lets the tracker's table follow the lighting (docs/COLOUR.md).
     """
     if trc or status_csv or angles_csv or c3d:
         return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                                points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
-                               c3d=c3d, progress=progress)
+                               c3d=c3d, colours=colours, adapt_colours=adapt_colours, progress=progress)
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
-        table = ColourTable.build(ms.palette)
+        table = _colour_table(ms, colours)
         measurer = FrameMeasurer(rec.cameras, table, ms.radius_m)
         n_points = n_frames = 0
         out = open(points_csv, "w", newline="", encoding="utf-8") if points_csv else None
@@ -82,8 +86,16 @@ def track_recording(
     return f"{n_frames} frame sets, {n_points / max(n_frames, 1):.1f} points per frame ({timing})"
 
 
+def _colour_table(ms: MarkerSet, colours: Path | None) -> ColourTable:
+    if colours is None:
+        return ColourTable.build(ms.palette)
+    from tracking.colour_adapt import load_colours
+
+    return load_colours(colours, ms)
+
+
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
-                    c3d, progress) -> str:
+                    c3d, colours=None, adapt_colours=False, progress=False) -> str:
     from tracking.angles import joint_angles
     from tracking.c3d_io import write_c3d
     from tracking.status import MarkerStatus
@@ -93,7 +105,14 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
 
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
-        tracker = Tracker(rec.cameras, ms, fps=rec.fps)
+        adapter = None
+        if adapt_colours:
+            from tracking.colour_adapt import ColourAdapter, read_colours
+
+            adapter = ColourAdapter(rec.cameras, ms, start=read_colours(colours, ms) if colours else None)
+            tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
+        else:
+            tracker = Tracker(rec.cameras, ms, table=_colour_table(ms, colours), fps=rec.fps)
         positions, status, frames, times = [], [], [], []
         waiting_message = ""
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
@@ -101,6 +120,8 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
             sample = tracker.step(fs.images, fs.time_s)
             if sample.state == TrackingState.WAITING:
                 waiting_message = sample.message
+            elif adapter is not None:
+                adapter.observe(fs.images, sample.positions_m, sample.status)
             positions.append(np.where(sample.status[:, None] == MarkerStatus.LOST, np.nan, sample.positions_m))
             status.append(sample.status)
             frames.append(fs.index)

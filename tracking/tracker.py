@@ -197,6 +197,12 @@ class Tracker:
         """Identify the markers again from the next frame (the patient takes the reference pose)."""
         self.reset()
 
+    def set_colour_table(self, table: ColourTable) -> None:
+        """Use ``table`` from the next frame on, in the windows and the full-frame search (e.g.
+        learned colours, docs/COLOUR.md)."""
+        self.table = table
+        self.measurer.table = table
+
     # ------------------------------------------------------------------ the step
     def step(self, images: Sequence[np.ndarray], time_s: float | None = None) -> TrackerSample:
         """Process one synchronized frame set (one BGR image per camera, calibration order)."""

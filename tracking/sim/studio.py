@@ -42,6 +42,8 @@ class SimulationSettings:
     noise_sigma: float = 1.5
     brightness_drop: float = 0.0
     colour_cast: tuple[float, float, float] | None = None
+    drift_start_s: float = 0.0
+    drift_s: float | None = None
     markerset: str = "upper_limb_seated"
     seed: int = 0
     images: bool = False
@@ -135,14 +137,21 @@ class Studio:
 
     def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
              brightness_drop: float = 0.0, colour_cast: Sequence[float] | None = None, seed: int = 0,
-             with_visibility: bool = True) -> Iterator[SimFrame]:
-        """Render a motion frame by frame. Lighting drifts linearly over the motion's length."""
+             with_visibility: bool = True, drift_start_s: float = 0.0, drift_s: float | None = None
+             ) -> Iterator[SimFrame]:
+        """Render a motion frame by frame.
+
+        Lighting drifts linearly from full exposure and no cast at ``drift_start_s`` to
+        ``1 - brightness_drop`` and ``colour_cast`` ``drift_s`` seconds later (default: over the
+        whole motion), then stays there.
+        """
         duration = motion.duration_s if seconds is None else min(seconds, motion.duration_s)
         n = int(np.floor(duration * fps + 1e-9)) + 1
         cast_end = np.asarray(colour_cast if colour_cast is not None else (1.0, 1.0, 1.0), dtype=float)
+        ramp_s = max((n - 1) / fps - drift_start_s, 1.0 / fps) if drift_s is None else drift_s
         for i in range(n):
-            frac = i / max(n - 1, 1)
             t = i / fps
+            frac = float(np.clip((t - drift_start_s) / ramp_s, 0.0, 1.0)) if ramp_s > 0 else float(t >= drift_start_s)
             yield self.render(
                 motion.pose_at(t), i, t,
                 exposure=1.0 - brightness_drop * frac,
@@ -195,7 +204,7 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
         n = studio.n_frames(motion, settings.fps, settings.seconds)
         frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
                              brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
-                             seed=settings.seed)
+                             seed=settings.seed, drift_start_s=settings.drift_start_s, drift_s=settings.drift_s)
         try:
             for sf in tqdm(frames, total=n, unit="frame", desc="simulating", disable=not progress):
                 writer.write(sf.frames.images)
