@@ -823,6 +823,9 @@ class StudioRenderer:
         if self._released:
             raise RehabError("StudioRenderer.render called after release(): create a new renderer")
         ctx = self._ctx
+        # Make this renderer's context current: another renderer released in this thread (or a
+        # game's window context) may have left none, or its own, current.
+        ctx.__enter__()
         vis = bool(with_visibility)
         self._upload_scene(scene)
         gain = tuple(float(exposure) * float(g) for g in colour_cast)

@@ -51,3 +51,22 @@ def test_visibility_counts_agree_with_the_images(studio_and_motion):
     assert np.all((sf.visible_fraction >= 0) & (sf.visible_fraction <= 1))
     # every marker is seen by two cameras in the reference pose (identification needs them all)
     assert np.all((sf.visible_fraction >= 0.75).sum(axis=0) >= 2)
+
+
+def test_closing_one_studio_leaves_another_rendering_the_same():
+    """Each renderer makes its own GL context current: releasing another one's context (which
+    leaves none current) must not change what this one renders."""
+    from tracking.sim.body import reference_pose
+
+    settings = SimulationSettings(motion="reference", size_px=(160, 120), noise_sigma=0.0)
+    first, _ = studio_from_settings(settings)
+    try:
+        before = first.render(reference_pose(), 0, 0.0)
+        second, _ = studio_from_settings(settings)
+        second.render(reference_pose(), 0, 0.0)
+        second.close()
+        after = first.render(reference_pose(), 0, 0.0)
+        for a, b in zip(before.frames.images, after.frames.images):
+            assert np.array_equal(a, b)
+    finally:
+        first.close()
