@@ -49,8 +49,9 @@ learned while both were measured, widened by ``tolerance_m``; the marker hidden 
 ``max_unsupported_s``. A marker never measured is LOST, and a LOST marker stays LOST until it is
 measured again.
 
-Configuration is plain arrays and marker indices, so any marker set can carry it;
-:func:`default_config` gives the values measured for ``upper_limb_seated``.
+The Estimator takes plain arrays and marker indices; :func:`estimator_config` builds them from
+the marker set's ``hidden_markers:`` section (content/markersets/*.yaml), so every marker set
+chooses its own estimators, weights, rigid groups and limits.
 """
 
 from __future__ import annotations
@@ -71,7 +72,8 @@ class Method(IntEnum):
     CONSTANT_VELOCITY = 0  # equation 5
     NEIGHBOURS = 1         # equation 6
     RIGID = 2              # Kabsch on a segment, falls back to equation 6
-    HINGE = 3              # elbow axis (elbow markers) / wrist circle (wrist markers), falls back to RIGID
+    HINGE = 3              # elbow axis (epicondyle markers), falls back to RIGID
+    FOREARM = 4            # styloid markers from the elbow and the other styloid, falls back to RIGID
 
     @classmethod
     def parse(cls, value: "Method | str | int") -> "Method":
@@ -409,7 +411,7 @@ class Estimator:
         segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
             marker tries the groups that contain it in the order given.
         hinges: elbow hinges (elbow markers with method HINGE).
-        forearms: forearms (styloid markers with method HINGE): the rigid forearm fit, or where
+        forearms: forearms (styloid markers with method FOREARM): the rigid forearm fit, or where
             its misfit exceeds ``max_rigid_residual_m`` (the forearm turned), the wrist circle.
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
@@ -485,8 +487,11 @@ class Estimator:
         self.hinges = {h.marker: h for h in hinges}
         self.forearms = {f.marker: f for f in forearms}
         for i in np.flatnonzero(self.methods == Method.HINGE):
-            if int(i) not in self.hinges and int(i) not in self.forearms:
-                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge or forearm")
+            if int(i) not in self.hinges:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
+        for i in np.flatnonzero(self.methods == Method.FOREARM):
+            if int(i) not in self.forearms:
+                raise ValueError(f"marker {int(i)} uses the forearm estimator but has no forearm")
         self._f_idx = np.array([[f.marker, f.partner, *f.elbow] for f in forearms], dtype=np.intp).reshape(-1, 4)
         self._f_row = {f.marker: r for r, f in enumerate(forearms)}
         # estimation order: elbows first (the wrists' fits may lean on them), then by method
@@ -687,11 +692,11 @@ class Estimator:
                base: np.ndarray) -> tuple[np.ndarray | None, int]:
         """Hinge or rigid estimate of marker k as its method allows, and the method used."""
         method = self.methods[k]
-        if method == Method.HINGE:
-            est = (self._hinge(k, p, ok, weight, prior, base) if k in self.hinges
+        if method in (Method.HINGE, Method.FOREARM):
+            est = (self._hinge(k, p, ok, weight, prior, base) if method == Method.HINGE
                    else self._forearm(k, p, ok, weight, prior))
             if est is not None:
-                return est, Method.HINGE
+                return est, method
             method = Method.RIGID
         if method == Method.RIGID:
             est = self._rigid(k, p, weight, prior)
@@ -829,147 +834,51 @@ class Estimator:
 
 
 # ---------------------------------------------------------------------------------------------
-# Recommended configuration (docs/HIDDEN_MARKERS.md). '*' is a side letter (L or R), '#' the
-# other side's letter; the tables hold for both arms.
-
-#: Equation 6 weights S: marker -> {neighbour: S}.
-WEIGHTS: dict[str, dict[str, float]] = {
-    "MB": {"MP": 1.0, "MLS": 0.25, "MRS": 0.25},
-    "MP": {"MB": 1.0, "MLS": 0.25, "MRS": 0.25},
-    "M*S": {"MB": 1.0, "MP": 0.5, "M*E1": 0.25, "M*E2": 0.25},
-    "M*E1": {"M*E2": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
-    "M*E2": {"M*E1": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
-    "M*W1": {"M*W2": 4.0, "M*E1": 0.5, "M*E2": 0.5},
-    "M*W2": {"M*W1": 4.0, "M*E1": 0.5, "M*E2": 0.5},
-    "M*H": {"M#H": 1.0},
-}
-
-#: Rigid groups, in the order a hidden marker tries them.
-SEGMENTS: tuple[tuple[str, ...], ...] = (
-    ("MB", "MP", "MLS", "MRS"),
-    ("M*E1", "M*E2", "M*W1", "M*W2"),
-    ("M*S", "M*E1", "M*E2", "M*W1", "M*W2"),
-    ("MLH", "MRH"),
-)
-
-#: The estimator of each marker.
-METHODS: dict[str, Method] = {
-    "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
-    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.HINGE, "M*W2": Method.HINGE,
-    "M*H": Method.NEIGHBOURS,
-}
-
-#: Near-rigid pairs whose distance is checked for drift.
-LENGTH_PAIRS: tuple[tuple[str, str], ...] = (
-    ("MB", "MP"), ("MLH", "MRH"), ("M*E1", "M*E2"), ("M*W1", "M*W2"),
-    ("M*E1", "M*W1"), ("M*E1", "M*W2"), ("M*E2", "M*W1"), ("M*E2", "M*W2"),
-    ("MB", "M*S"), ("MP", "M*S"),
-)
-
-#: Time constant (s) of the own relative velocity kept in free directions of a fit
-#: (``velocity_decay_s``): wrists swing with the forearm, elbows move with the humerus.
-VELOCITY_DECAY_S: dict[str, float] = {"M*E1": 0.0, "M*E2": 0.0, "M*H": 0.0}
-DEFAULT_VELOCITY_DECAY_S = 0.15
-
-#: Longest occlusion an estimate is reported for, per estimator (seconds).
-MAX_HIDDEN_S: dict[Method, float] = {
-    Method.CONSTANT_VELOCITY: 0.5, Method.NEIGHBOURS: 2.0, Method.RIGID: 5.0, Method.HINGE: 20.0,
-}
-
-SIDE_LETTERS = ("L", "R")
+# Configuration from the marker set (content/markersets/*.yaml, ``hidden_markers:``)
 
 
-def _expand(pattern: str) -> list[tuple[str, str]]:
-    """'M*E1' -> [(side, 'MLE1'), (side, 'MRE1')]; a name without '*' or '#' -> [('', name)]."""
-    if "*" not in pattern and "#" not in pattern:
-        return [("", pattern)]
-    out = []
-    for s, o in zip(SIDE_LETTERS, SIDE_LETTERS[::-1]):
-        out.append((s, pattern.replace("*", s).replace("#", o)))
-    return out
-
-
-def _side(pattern: str, side: str) -> str:
-    other = {"L": "R", "R": "L", "": ""}[side]
-    return pattern.replace("*", side).replace("#", other)
-
-
-def default_config(markerset, *, method: Method | str | None = None, own_velocity: bool = False) -> dict:
-    """Keyword arguments of :class:`Estimator` for a marker set: ``Estimator(**default_config(ms), fps=...)``.
-
-    ``upper_limb_seated`` markers get the measured tables above (:data:`WEIGHTS`,
-    :data:`SEGMENTS`, :data:`METHODS`, :data:`LENGTH_PAIRS`, :data:`MAX_HIDDEN_S`); markers of
-    other sets get equation 6 with weight 1 for the markers of their own ``segment``.
+def estimator_config(markerset, *, method: Method | str | None = None, own_velocity: bool = False) -> dict:
+    """Keyword arguments of :class:`Estimator` from a marker set's ``hidden_markers:`` section.
 
     Args:
-        markerset: a :class:`~tracking.markerset.MarkerSet` (names, segments).
-        method: one estimator for every marker instead of the recommended ones (comparisons).
+        markerset: a :class:`~tracking.markerset.MarkerSet` (its ``hidden`` configuration and
+            body ``segments``).
+        method: one estimator for every marker instead of the file's choice (comparisons).
         own_velocity: equation 6 as the paper writes it (with the marker's own last velocity).
     """
+    from tracking.markerset import default_hidden
+
     names = list(markerset.names)
     index = {n: i for i, n in enumerate(names)}
+    cfg = markerset.hidden if markerset.hidden is not None else default_hidden(names, markerset.segments)
     m = len(names)
-    seg = np.array(markerset.segments)
-    weights = ((seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)).astype(np.float64)
-    methods = [Method.NEIGHBOURS] * m
-    for pattern, row in WEIGHTS.items():
-        for side, name in _expand(pattern):
-            if name in index and all(_side(k, side) in index for k in row):
-                i = index[name]
-                weights[i] = 0.0
-                for k, s in row.items():
-                    weights[i, index[_side(k, side)]] = s
-    for pattern, meth in METHODS.items():
-        for _, name in _expand(pattern):
-            if name in index:
-                methods[index[name]] = meth
-    segments = []
-    for group in SEGMENTS:
-        for side in (SIDE_LETTERS if any("*" in g for g in group) else ("",)):
-            names_g = [_side(g, side) for g in group]
-            if all(n in index for n in names_g):
-                segments.append(tuple(index[n] for n in names_g))
-    hinges = []
-    for side in SIDE_LETTERS:
-        arm = [f"M{side}{k}" for k in ("S", "E1", "E2", "W1", "W2")]
-        if all(n in index for n in arm):
-            s, e1, e2, w1, w2 = (index[n] for n in arm)
-            hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
-    forearms = []
-    for side in SIDE_LETTERS:
-        arm = [f"M{side}{k}" for k in ("E1", "E2", "W1", "W2")]
-        if all(n in index for n in arm):
-            e1, e2, w1, w2 = (index[n] for n in arm)
-            forearms += [Forearm(w1, w2, (e1, e2)), Forearm(w2, w1, (e1, e2))]
-    hinge_markers = {h.marker for h in hinges} | {f.marker for f in forearms}
-    methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
-    pairs = []
-    for a, b in LENGTH_PAIRS:
-        for side in (SIDE_LETTERS if "*" in a + b else ("",)):
-            na, nb = _side(a, side), _side(b, side)
-            if na in index and nb in index:
-                pairs.append((index[na], index[nb]))
+    weights = np.zeros((m, m))
+    for name, row in cfg.weights.items():
+        for other, s in row.items():
+            weights[index[name], index[other]] = s
+    methods = [Method.parse(e) for e in cfg.estimators]
     if method is not None:
         methods = [Method.parse(method)] * m
-    max_hidden = [MAX_HIDDEN_S[Method(x)] for x in methods]
-    decay = [DEFAULT_VELOCITY_DECAY_S] * m
-    for pattern, tau in VELOCITY_DECAY_S.items():
-        for _, name in _expand(pattern):
-            if name in index:
-                decay[index[name]] = tau
-    trunk = None
-    if all(n in index for n in ("MB", "MP", "MLH", "MRH")):
-        trunk = (index["MB"], index["MP"], index["MLH"], index["MRH"])
+    hinges = []
+    for a, b, shoulder, wa, wb in cfg.elbows:
+        a, b, s, wa, wb = (index[n] for n in (a, b, shoulder, wa, wb))
+        hinges += [Hinge(a, b, s, (wa, wb)), Hinge(b, a, s, (wa, wb))]
+    forearms = []
+    for wa, wb, ea, eb in cfg.forearms:
+        wa, wb, ea, eb = (index[n] for n in (wa, wb, ea, eb))
+        forearms += [Forearm(wa, wb, (ea, eb)), Forearm(wb, wa, (ea, eb))]
     return {
         "methods": methods,
-        "trunk": trunk,
-        "body_segments": list(markerset.segments),
         "weights": weights,
-        "segments": segments,
+        "segments": [tuple(index[n] for n in g) for g in cfg.rigid_groups],
         "hinges": hinges,
         "forearms": forearms,
-        "length_pairs": pairs,
+        "length_pairs": [(index[a], index[b]) for a, b in cfg.length_pairs],
+        "trunk": None if cfg.trunk is None else tuple(index[n] for n in cfg.trunk),
+        "body_segments": list(markerset.segments),
         "own_velocity": own_velocity,
-        "max_hidden_s": max_hidden,
-        "velocity_decay_s": decay,
+        "tolerance_m": cfg.drift_tolerance_m,
+        "max_hidden_s": [cfg.max_hidden_s[x.name.lower()] for x in methods],
+        "max_unsupported_s": cfg.max_unsupported_s,
+        "velocity_decay_s": list(cfg.velocity_decay_s),
     }

@@ -13,7 +13,7 @@ from tracking.hidden import (
     Forearm,
     Method,
     constant_velocity,
-    default_config,
+    estimator_config,
     hinge_axis,
     kabsch,
     neighbour_motion,
@@ -288,9 +288,9 @@ def test_configuration_errors():
 
 # ---------------------------------------------------------------------------------- configuration
 
-def test_default_config_for_the_seed_marker_set():
+def test_config_of_the_seed_marker_set_from_its_yaml():
     ms = load_markerset("upper_limb_seated")
-    cfg = default_config(ms)
+    cfg = estimator_config(ms)
     m = ms.n_markers
     w = cfg["weights"]
     assert w.shape == (m, m) and np.all(np.diag(w) == 0)
@@ -299,26 +299,100 @@ def test_default_config_for_the_seed_marker_set():
     perm = [ms.index(mirror[n]) for n in ms.names]
     np.testing.assert_array_equal(w, w[np.ix_(perm, perm)])  # both arms alike
     assert all(w[i].sum() > 0 for i in range(m))             # every marker has neighbours
+    assert w[ms.index("MRW1"), ms.index("MRW2")] == 4.0 and w[ms.index("MRW1"), ms.index("MRE1")] == 0.5
     methods = cfg["methods"]
-    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.HINGE
+    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.FOREARM
     assert {f.marker for f in cfg["forearms"]} == {ms.index(n) for n in ("MLW1", "MLW2", "MRW1", "MRW2")}
     assert all(isinstance(f, Forearm) for f in cfg["forearms"])
     assert {h.marker for h in cfg["hinges"]} == {ms.index(n) for n in ("MLE1", "MLE2", "MRE1", "MRE2")}
+    assert (ms.index("MRE1"), ms.index("MRW2")) in cfg["length_pairs"]
+    assert cfg["tolerance_m"] == pytest.approx(0.03)
     Estimator(**cfg, fps=15.0)
-    eq5 = default_config(ms, method="constant_velocity")
+    eq5 = estimator_config(ms, method="constant_velocity")
     assert set(eq5["methods"]) == {Method.CONSTANT_VELOCITY}
 
 
-def test_default_config_for_another_marker_set_uses_its_segments():
-    class Tiny:
-        names = ("A", "B", "C")
-        segments = ("arm", "arm", "leg")
+TINY_SET = """
+name: tiny
+marker_diameter_mm: 40
+markers:
+  - {name: A, colour: [255, 0, 0], segment: arm}
+  - {name: B, colour: [0, 255, 0], segment: arm}
+  - {name: C, colour: [0, 0, 255], segment: arm}
+  - {name: D, colour: [255, 255, 0], segment: leg}
+"""
 
-    cfg = default_config(Tiny())
-    np.testing.assert_array_equal(cfg["weights"], [[0, 1, 0], [1, 0, 0], [0, 0, 0]])
+
+def write_set(tmp_path, text):
+    path = tmp_path / "tiny.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_marker_set_without_hidden_markers_gets_equation_6_on_its_segments(tmp_path):
+    ms = load_markerset(write_set(tmp_path, TINY_SET))
+    cfg = estimator_config(ms)
+    np.testing.assert_array_equal(cfg["weights"], [[0, 1, 1, 0], [1, 0, 1, 0], [1, 1, 0, 0], [0, 0, 0, 0]])
     assert set(cfg["methods"]) == {Method.NEIGHBOURS} and cfg["hinges"] == cfg["forearms"] == []
-    assert cfg["trunk"] is None
+    assert cfg["trunk"] is None and cfg["length_pairs"] == []
     Estimator(**cfg)
+
+
+def test_another_marker_set_chooses_its_own_estimators(tmp_path):
+    """A marker set file decides estimators, weights, rigid groups and limits; the Estimator
+    built from it behaves accordingly (a hidden marker follows its rigid group exactly)."""
+    text = TINY_SET + """
+hidden_markers:
+  markers:
+    A: {estimator: rigid, neighbours: {B: 2, C: 0.5}}
+    D: {estimator: constant_velocity}
+  rigid_groups: [[A, B, C, D]]
+  limits:
+    length_pairs: [[A, B]]
+    drift_tolerance_mm: 10
+    max_hidden_s: {rigid: 1.5}
+"""
+    ms = load_markerset(write_set(tmp_path, text))
+    cfg = estimator_config(ms)
+    assert cfg["methods"] == [Method.RIGID, Method.NEIGHBOURS, Method.NEIGHBOURS, Method.CONSTANT_VELOCITY]
+    np.testing.assert_array_equal(cfg["weights"][0], [0, 2, 0.5, 0])
+    np.testing.assert_array_equal(cfg["weights"][1], [1, 0, 1, 0])  # not listed: its segment, weight 1
+    assert cfg["segments"] == [(0, 1, 2, 3)] and cfg["length_pairs"] == [(0, 1)]
+    assert cfg["tolerance_m"] == pytest.approx(0.01) and cfg["max_hidden_s"][0] == 1.5
+    truth = rigid_motion(60)
+    measured = np.ones((60, 4), dtype=bool)
+    measured[20:50, 0] = False
+    p, s = run(Estimator(**cfg, fps=30.0), truth, measured)
+    assert (s[20:50, 0] == ESTIMATED).all() and (s[:, 1:] == MEASURED).all()
+    np.testing.assert_allclose(p[20:50, 0], truth[20:50, 0], atol=1e-9)
+    measured[:, 0] = True
+    measured[10:59, 3] = False  # constant velocity, 1.5 s limit not its own: 0.5 s (15 frames)
+    _, s = run(Estimator(**cfg, fps=30.0), truth, measured)
+    assert (s[10:25, 3] == ESTIMATED).all() and (s[26:59, 3] == LOST).all()
+
+
+@pytest.mark.parametrize("section, expected", [
+    ("  markers:\n    A: {estimator: spline}", "hidden_markers.markers.A.estimator"),
+    ("  markers:\n    A: {estimator: rigid, neighbours: {Z: 1}}", "hidden_markers.markers.A.neighbours: unknown marker 'Z'"),
+    ("  markers:\n    A: {estimator: rigid, neighbours: {B: -1}}", "hidden_markers.markers.A.neighbours"),
+    ("  markers:\n    A: {estimator: hinge}", "hidden_markers.markers.A: estimator hinge needs A in an 'elbows' entry"),
+    ("  markers:\n    A: {estimator: forearm}", "estimator forearm needs A in a 'forearms' entry"),
+    ("  rigid_groups: [[A, Q]]", "hidden_markers.rigid_groups.0: unknown marker 'Q'"),
+    ("  rigid_groups: [[A, A]]", "hidden_markers.rigid_groups.0: a marker appears twice"),
+    ("  limits: {length_pairs: [[A, M*B]]}", "hidden_markers.limits.length_pairs.0: '*' needs identification.sides"),
+    ("  limits: {drift_tolerance_mm: 0}", "hidden_markers.limits.drift_tolerance_mm"),
+    ("  limits: {max_hidden_s: {rigid: -1}}", "hidden_markers.limits.max_hidden_s"),
+    ("  limits: {max_hiden_s: {rigid: 1}}", "hidden_markers.limits.max_hiden_s: unknown key"),
+    ("  markers:\n    A: {estimator: rigid}\n  elbows: [{markers: [A, B], shoulder: C}]", "hidden_markers.elbows.0.wrist"),
+])
+def test_bad_hidden_marker_sections_are_one_line_errors(tmp_path, section, expected):
+    from tracking.errors import ContentError
+
+    path = write_set(tmp_path, TINY_SET + "hidden_markers:\n" + section + "\n")
+    with pytest.raises(ContentError) as info:
+        load_markerset(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path)) and expected in message, message
 
 
 def test_hinge_estimator_on_the_simulated_arm_without_rendering():
@@ -335,7 +409,7 @@ def test_hinge_estimator_on_the_simulated_arm_without_rendering():
     k = ms.index("MRE2")
     measured = np.ones(truth.shape[:2], dtype=bool)
     measured[30:90, k] = False  # 2 s to 6 s: elbow to the side and flexed, forearm turned out
-    est = Estimator(**default_config(ms), fps=fps)
+    est = Estimator(**estimator_config(ms), fps=fps)
     p, s = run(est, truth, measured, noise_m=0.001)
     assert (s[30:90, k] == ESTIMATED).all()
     err = np.linalg.norm(p[30:90, k] - truth[30:90, k], axis=1)
@@ -401,7 +475,7 @@ def test_forearm_switches_to_the_wrist_circle_when_the_forearm_turns():
     cfg = dict(methods=[Method.HINGE, Method.HINGE, Method.HINGE, Method.HINGE], weights=np.ones((4, 4)),
                segments=[(0, 1, 2, 3)], forearms=[Forearm(2, 3, (0, 1)), Forearm(3, 2, (0, 1))],
                hinges=[], fps=30.0)
-    cfg["methods"] = [Method.RIGID, Method.RIGID, Method.HINGE, Method.HINGE]
+    cfg["methods"] = [Method.RIGID, Method.RIGID, Method.FOREARM, Method.FOREARM]
     p, s = run(Estimator(**cfg), truth, measured)
     assert (s[10:, 3] == ESTIMATED).all()
     np.testing.assert_allclose(p[10:30, 3], truth[10:30, 3], atol=1e-9)  # flexion: rigid, exact
@@ -420,7 +494,7 @@ def test_any_input_gives_consistent_statuses(seed, p_hidden):
     """Random (even degenerate) positions and masks never raise; status and NaN agree."""
     ms = load_markerset("upper_limb_seated")
     rng = np.random.default_rng(seed)
-    est = Estimator(**default_config(ms), fps=15.0)
+    est = Estimator(**estimator_config(ms), fps=15.0)
     base = rng.normal(0.0, 0.3, (ms.n_markers, 3))
     for t in range(25):
         x = base + rng.normal(0.0, 0.01, base.shape) * (t % 5 != 0)  # every 5th frame: a repeat
