@@ -396,6 +396,150 @@ def wrist_centre(
     return centre + along_m * n + radius_m * (math.cos(theta) * a + math.sin(theta) * b)
 
 
+@dataclass(frozen=True, slots=True)
+class ElbowFrame:
+    """The elbow's flexion axis with a reference direction fixed in the humerus.
+
+    Attributes:
+        centre: (3,) elbow centre (midpoint of the epicondyle markers), world metres.
+        n: (3,) unit flexion axis (first epicondyle marker -> second).
+        r1: (3,) unit humerus direction (shoulder pivot -> elbow) made perpendicular to n.
+        r2: (3,) ``n x r1``; the forearm's flexion angle theta is measured from r1 towards r2.
+    """
+
+    centre: np.ndarray
+    n: np.ndarray
+    r1: np.ndarray
+    r2: np.ndarray
+
+
+def elbow_frame(elbow_a_m: np.ndarray, elbow_b_m: np.ndarray, pivot_m: np.ndarray) -> ElbowFrame | None:
+    """The :class:`ElbowFrame` from the two epicondyle markers and the shoulder pivot (None if
+    degenerate: coincident markers, or the humerus along the flexion axis)."""
+    centre = 0.5 * (elbow_a_m + elbow_b_m)
+    e = elbow_b_m - elbow_a_m
+    le = math.sqrt(float(e @ e))
+    if not le > 1e-6:
+        return None
+    n = e / le
+    h = centre - pivot_m
+    h = h - float(h @ n) * n
+    lh = math.sqrt(float(h @ h))
+    if not lh > 1e-6:
+        return None
+    r1 = h / lh
+    return ElbowFrame(centre, n, r1, _cross(n, r1))
+
+
+@dataclass(frozen=True, slots=True)
+class ForearmShape:
+    """Constants of one forearm, learned while its four markers are measured.
+
+    The wrist centre C (midpoint of the styloid markers) is ``along`` along the flexion axis from
+    the elbow centre and ``radius`` from the axis; the styloid markers are ``half`` either side of
+    C along u, whose component along the forearm axis (elbow centre -> C) is ``tilt``.
+    """
+
+    along: float
+    radius: float
+    half: float
+    tilt: float
+
+
+def forearm_markers(frame: ElbowFrame, shape: ForearmShape, theta: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two styloid markers for flexion ``theta`` (about n, from r1) and supination ``psi``
+    (u about the forearm axis, from the flexion axis), radians."""
+    c = frame.centre + shape.along * frame.n + shape.radius * (math.cos(theta) * frame.r1 + math.sin(theta) * frame.r2)
+    a = _unit(c - frame.centre)
+    p1 = _unit(frame.n - float(frame.n @ a) * a)
+    p2 = _cross(a, p1)
+    side = math.sqrt(max(1.0 - shape.tilt * shape.tilt, 0.0))
+    u = shape.tilt * a + side * (math.cos(psi) * p1 + math.sin(psi) * p2)
+    return c - shape.half * u, c + shape.half * u
+
+
+def forearm_angles(frame: ElbowFrame, wrist_a_m: np.ndarray, wrist_b_m: np.ndarray) -> tuple[float, float, ForearmShape]:
+    """Inverse of :func:`forearm_markers`: (theta, psi, shape) of measured styloid markers."""
+    c = 0.5 * (wrist_a_m + wrist_b_m)
+    v = c - frame.centre
+    along = float(v @ frame.n)
+    radial = v - along * frame.n
+    theta = math.atan2(float(radial @ frame.r2), float(radial @ frame.r1))
+    a = _unit(v)
+    w = wrist_b_m - wrist_a_m
+    half = 0.5 * math.sqrt(float(w @ w))
+    u = w / (2.0 * half)
+    p1 = _unit(frame.n - float(frame.n @ a) * a)
+    p2 = _cross(a, p1)
+    psi = math.atan2(float(u @ p2), float(u @ p1))
+    return theta, psi, ForearmShape(along, math.sqrt(float(radial @ radial)), half, float(u @ a))
+
+
+def _forearm_points_f(c0, n, r1, r2, along, radius, half, tilt, theta, psi):
+    """:func:`forearm_markers` in plain floats (tuples): the inner loop of :func:`fit_forearm`."""
+    ct, st = math.cos(theta), math.sin(theta)
+    v = [along * n[i] + radius * (ct * r1[i] + st * r2[i]) for i in range(3)]
+    lv = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    a = [x / lv for x in v]
+    na = n[0] * a[0] + n[1] * a[1] + n[2] * a[2]
+    p1 = [n[i] - na * a[i] for i in range(3)]
+    lp = math.sqrt(p1[0] * p1[0] + p1[1] * p1[1] + p1[2] * p1[2])
+    p1 = [x / lp for x in p1]
+    p2 = [a[1] * p1[2] - a[2] * p1[1], a[2] * p1[0] - a[0] * p1[2], a[0] * p1[1] - a[1] * p1[0]]
+    side = math.sqrt(max(1.0 - tilt * tilt, 0.0))
+    cp, sp = math.cos(psi), math.sin(psi)
+    u = [tilt * a[i] + side * (cp * p1[i] + sp * p2[i]) for i in range(3)]
+    c = [c0[i] + v[i] for i in range(3)]
+    return [c[i] - half * u[i] for i in range(3)], [c[i] + half * u[i] for i in range(3)]
+
+
+def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple[int, np.ndarray]],
+                theta_pred: float, psi_pred: float, sigma_theta: float, sigma_psi: float,
+                sigma_m: float = 0.002, iterations: int = 4) -> tuple[float, float]:
+    """Flexion and supination (radians) that best place the measured styloid markers, near the
+    prediction: Gauss-Newton on ``sum |marker - model|^2 / sigma_m^2 + (theta - theta_pred)^2 /
+    sigma_theta^2 + (psi - psi_pred)^2 / sigma_psi^2``.
+
+    One styloid marker leaves flexion and supination confounded where its line is near the flexion
+    axis (palm up or down: the marker's motion along the forearm's front is R dtheta + half dpsi);
+    the prediction settles what the marker cannot.
+
+    Args:
+        measured: (slot, position) pairs, slot 0 for the first styloid marker, 1 for the second.
+        sigma_m: marker noise (m); sigma_theta, sigma_psi: prediction uncertainty (rad).
+    """
+    geo = (frame.centre.tolist(), frame.n.tolist(), frame.r1.tolist(), frame.r2.tolist(),
+           shape.along, shape.radius, shape.half, shape.tilt)
+    obs = [(slot, pos.tolist()) for slot, pos in measured]
+    wm, wt, wp = 1.0 / sigma_m, 1.0 / sigma_theta, 1.0 / sigma_psi
+
+    def residual(th: float, ps: float) -> list[float]:
+        pts = _forearm_points_f(*geo, th, ps)
+        res = [(pts[slot][i] - pos[i]) * wm for slot, pos in obs for i in range(3)]
+        res += [(th - theta_pred) * wt, (ps - psi_pred) * wp]
+        return res
+
+    th, ps, h = theta_pred, psi_pred, 1e-6
+    for _ in range(iterations):
+        r0 = residual(th, ps)
+        ja = [(x - y) / h for x, y in zip(residual(th + h, ps), r0)]
+        jb = [(x - y) / h for x, y in zip(residual(th, ps + h), r0)]
+        aa = sum(x * x for x in ja)
+        ab = sum(x * y for x, y in zip(ja, jb))
+        bb = sum(x * x for x in jb)
+        ga = sum(x * y for x, y in zip(ja, r0))
+        gb = sum(x * y for x, y in zip(jb, r0))
+        det = aa * bb - ab * ab
+        if not det > 0:
+            break
+        dth = -(bb * ga - ab * gb) / det
+        dps = -(aa * gb - ab * ga) / det
+        th, ps = th + dth, ps + dps
+        if dth * dth + dps * dps < 1e-12:
+            break
+    return th, ps
+
+
 # ---------------------------------------------------------------------------------------------
 # The stateful estimator
 
@@ -438,6 +582,14 @@ class Estimator:
             neighbours (equation 6) plus its own velocity relative to them, which decays with
             this time constant (0: none; a scalar or one per marker).
         max_rigid_residual_m: see ``forearms``.
+        forearm_sigma_rad: uncertainty of the predicted flexion and supination of a forearm with a
+            hidden styloid marker (:func:`fit_forearm`).
+        forearm_decay_s: with both styloid markers hidden, the forearm's angular velocities decay
+            with this time constant.
+        scapular_rhythm: upward rotation of the scapula (deg) per degree of humerus elevation
+            within ``rhythm_deg`` (2:1 glenohumeral to scapulothoracic): the learned shoulder pivot
+            offset turns with it (0: a fixed offset).
+        rhythm_deg: the elevation range (deg) over which the scapula turns.
     """
 
     def __init__(
@@ -464,6 +616,10 @@ class Estimator:
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
         max_rigid_residual_m: float = 0.004,
+        forearm_sigma_rad: float = 0.1,
+        forearm_decay_s: float = 0.3,
+        scapular_rhythm: float = 0.5,
+        rhythm_deg: tuple[float, float] = (30.0, 150.0),
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -502,6 +658,26 @@ class Estimator:
         self._h_row = {h.marker: r for r, h in enumerate(hinges)}
         self._shoulder_slot = {sh: i for i, sh in enumerate(sorted({h.shoulder for h in hinges}))}
         self._h_shoulder_slot = np.array([self._shoulder_slot[h.shoulder] for h in hinges], dtype=np.intp)
+        # forearms as arms (styloid a, styloid b, epicondyle a, epicondyle b, shoulder): flexion and
+        # supination are tracked per arm when the arm's shoulder is known from a hinge
+        shoulder_of = {m_: h.shoulder for h in hinges for m_ in (h.marker, h.partner)}
+        self._arms: list[tuple[int, int, int, int, int]] = []
+        self._arm_of: dict[int, tuple[int, int]] = {}
+        for f in forearms:
+            wa, wb = sorted((f.marker, f.partner))
+            ea, eb = f.elbow
+            sh = shoulder_of.get(ea, -1)
+            if sh < 0 or shoulder_of.get(eb) != sh:
+                continue
+            arm = (wa, wb, ea, eb, sh)
+            if arm not in self._arms:
+                self._arms.append(arm)
+            self._arm_of[f.marker] = (self._arms.index(arm), 0 if f.marker == wa else 1)
+        self.forearm_sigma_rad = float(forearm_sigma_rad)
+        self.scapular_rhythm = float(scapular_rhythm)
+        self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
+        self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
+        self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
         pairs = np.array(length_pairs, dtype=np.intp).reshape(-1, 2)
         self._pair_mask = np.zeros((m, m), dtype=bool)
         self._pair_mask[pairs[:, 0], pairs[:, 1]] = True
@@ -561,9 +737,16 @@ class Estimator:
         # per forearm: wrist centre along the flexion axis and distance from it
         self.fore_along = np.full(len(self._f_idx), np.nan)
         self.fore_radius = np.full(len(self._f_idx), np.nan)
+        # per arm: learned shape, flexion and supination (rad) and their velocities (rad per frame)
+        self.arm_shape: list[ForearmShape | None] = [None] * len(self._arms)
+        self.arm_angles = np.full((len(self._arms), 2), np.nan)
+        self.arm_velocity = np.full((len(self._arms), 2), np.nan)
+        self._arm_seen: dict[int, tuple[float, float, bool]] = {}  # this frame: arm -> (theta, psi, measured)
+        self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
+        self._shoulder_side = np.ones(len(self._shoulder_slot))  # +1 right, -1 left (trunk x)
         self._trunk_rot: np.ndarray | None = None
 
     # ------------------------------------------------------------------ learning
@@ -586,6 +769,22 @@ class Estimator:
                 self._trunk_rot = trunk_rotation(*p[self.trunk])
             except ValueError:  # degenerate this frame: keep the last good frame
                 pass
+        self._arm_seen = {}
+        self._arm_points = {}
+        for r, (wa, wb, ea, eb, sh) in enumerate(self._arms):
+            if not (ok[wa] and ok[wb] and ok[ea] and ok[eb]):
+                continue
+            frame = self._elbow_frame(r, p, ok)
+            if frame is None:
+                continue
+            theta, psi, shape = forearm_angles(frame, p[wa], p[wb])
+            old = self.arm_shape[r]
+            if old is None:
+                self.arm_shape[r] = shape
+            else:
+                self.arm_shape[r] = ForearmShape(*(o + self._ema * (s - o) for o, s in zip(
+                    (old.along, old.radius, old.half, old.tilt), (shape.along, shape.radius, shape.half, shape.tilt))))
+            self._arm_seen[r] = (theta, psi, True)
         if not (len(self._f_idx) or len(self._h_idx)):
             return
         # a few 3-vectors per arm: plain floats are several times faster than numpy here
@@ -623,10 +822,17 @@ class Estimator:
             # accumulated with forgetting (normal equations per shoulder, solved when needed)
             if mk < pa:  # the other marker's hinge gives the same equation (n reversed)
                 continue
-            rhs = sum(n[i] * (0.5 * (pl[mk][i] + pl[pa][i]) - pl[sh][i]) for i in range(3))
+            centre = [0.5 * (pl[mk][i] + pl[pa][i]) for i in range(3)]
+            rhs = sum(n[i] * (centre[i] - pl[sh][i]) for i in range(3))
             rt = self.trunk_rot.tolist()
             a_t = [n[0] * rt[0][j] + n[1] * rt[1][j] + n[2] * rt[2][j] for j in range(3)]
             k = self._h_shoulder_slot[r]
+            if self.scapular_rhythm > 0:  # the equation for the offset at the scapula's rest
+                if self.trunk is not None and okl[self.trunk[0]]:
+                    lateral = sum((pl[sh][i] - pl[self.trunk[0]][i]) * rt[i][0] for i in range(3))
+                    self._shoulder_side[k] = 1.0 if lateral >= 0 else -1.0
+                turn = self._scapula_turn(k, p[sh], np.array(centre))
+                a_t = (turn.T @ np.array(a_t)).tolist()
             self._piv_a[k] = self._forget * self._piv_a[k] + np.array([[a_t[i] * a_t[j] for j in range(3)] for i in range(3)])
             self._piv_b[k] = self._forget * self._piv_b[k] + np.array([rhs * a_t[i] for i in range(3)])
 
@@ -635,10 +841,35 @@ class Estimator:
         """(3, 3) trunk -> world rotation of the last frame with the trunk markers measured."""
         return np.eye(3) if self._trunk_rot is None else self._trunk_rot
 
-    def pivot_offset(self, shoulder: int) -> np.ndarray:
-        """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame."""
-        k = self._shoulder_slot[shoulder]
+    def _rest_offset(self, k: int) -> np.ndarray:
         return np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
+
+    def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
+        """(3, 3) trunk-frame rotation of the pivot offset by the scapula's upward rotation for the
+        humerus elevation (shoulder slot k, the shoulder marker and the elbow centre now): the
+        scapulohumeral rhythm, ``scapular_rhythm`` degrees per degree of elevation between
+        ``rhythm_deg`` (the acromion marker turns medially over the humeral head as the arm rises)."""
+        rt = self.trunk_rot
+        g = self._rest_offset(k)
+        u = rt.T @ (elbow_m - shoulder_m) - g
+        lu = math.sqrt(float(u @ u))
+        if not lu > 1e-9:
+            return np.eye(3)
+        elevation = math.degrees(math.acos(max(-1.0, min(1.0, -float(u[1]) / lu))))
+        lo, hi = self.rhythm_deg
+        phi = math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * self._shoulder_side[k]
+        c, s = math.cos(phi), math.sin(phi)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def pivot_offset(self, shoulder: int, elbow_m: np.ndarray | None = None, shoulder_m: np.ndarray | None = None) -> np.ndarray:
+        """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame;
+        turned with the scapula for the humerus elevation when the elbow centre and the shoulder
+        marker are given."""
+        k = self._shoulder_slot[shoulder]
+        g = self._rest_offset(k)
+        if elbow_m is None or shoulder_m is None or self.scapular_rhythm <= 0:
+            return g
+        return self._scapula_turn(k, shoulder_m, elbow_m) @ g
 
     # ------------------------------------------------------------------ estimation
     def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
@@ -661,7 +892,7 @@ class Estimator:
             return None
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
-        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder)
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
         rows = [p[h.partner] - pivot]
         values = [-0.5 * length]
         wa, wb = h.wrists
@@ -672,7 +903,74 @@ class Estimator:
                        axis_prev=prev_axis)
         return p[h.partner] + length * n
 
+    def _elbow_frame(self, r: int, p: np.ndarray, ok: np.ndarray) -> ElbowFrame | None:
+        """Arm r's elbow frame now (the shoulder marker measured, else its last output)."""
+        _, _, ea, eb, sh = self._arms[r]
+        shoulder = p[sh] if ok[sh] else self.positions[sh]
+        if not np.all(np.isfinite(shoulder)):
+            return None
+        pivot = shoulder + self.trunk_rot @ self.pivot_offset(sh, 0.5 * (p[ea] + p[eb]), shoulder)
+        return elbow_frame(p[ea], p[eb], pivot)
+
+    def _arm_estimate(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
+        """Styloid marker k from its arm's flexion and supination: fitted to the arm's measured
+        styloid marker near their prediction, or (both hidden) the prediction alone, its angular
+        velocities decaying. None where the arm has no state (nothing learned, elbow unknown)."""
+        r, slot = self._arm_of[k]
+        if r in self._arm_points:
+            return self._arm_points[r][slot]
+        wa, wb, ea, eb, _ = self._arms[r]
+        shape = self.arm_shape[r]
+        angles, vel = self.arm_angles[r], self.arm_velocity[r]
+        if shape is None or not np.all(np.isfinite(angles)) or not (weight[ea] > 0 and weight[eb] > 0):
+            return None
+        frame = self._elbow_frame(r, p, ok)
+        if frame is None:
+            return None
+        measured = [(s, p[w]) for s, w in ((0, wa), (1, wb)) if ok[w]]
+        v = np.nan_to_num(vel) * (1.0 if measured else self._arm_decay)
+        pred = angles + v
+        if measured:
+            theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
+                                     self.forearm_sigma_rad, self.forearm_sigma_rad)
+        else:
+            theta, psi = float(pred[0]), float(pred[1])
+        self._arm_seen[r] = (theta, psi, bool(measured))
+        if not measured:
+            self.arm_velocity[r] = v  # decayed (the update below keeps it)
+        pts = forearm_markers(frame, shape, theta, psi)
+        self._arm_points[r] = pts
+        return pts[slot]
+
+    def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
+        """Carry the arms' flexion and supination to the next frame (lost where not seen)."""
+        for r, (wa, wb, ea, eb, _) in enumerate(self._arms):
+            seen = self._arm_seen.get(r)
+            if seen is None and ok[wa] and ok[wb] and np.all(np.isfinite(p[[ea, eb]])):
+                # styloids measured, an epicondyle estimated (by the hinge)
+                frame = self._elbow_frame(r, p, ok)
+                if frame is not None:
+                    theta, psi, _ = forearm_angles(frame, p[wa], p[wb])
+                    seen = (theta, psi, True)
+            if seen is None:
+                self.arm_angles[r] = np.nan
+                self.arm_velocity[r] = np.nan
+                continue
+            theta, psi, measured = seen
+            old = self.arm_angles[r]
+            if measured and np.all(np.isfinite(old)):
+                d = np.array([math.remainder(theta - old[0], math.tau), math.remainder(psi - old[1], math.tau)])
+                vel = self.arm_velocity[r]
+                self.arm_velocity[r] = np.where(np.isfinite(vel), vel + self._arm_beta * (d - vel), d)
+            elif measured:
+                self.arm_velocity[r] = 0.0
+            self.arm_angles[r] = (theta, psi)
+
     def _forearm(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        if k in self._arm_of:
+            est = self._arm_estimate(k, p, ok, weight)
+            if est is not None:
+                return est
         f = self.forearms[k]
         r = self._f_row[k]
         ea, eb = f.elbow
@@ -819,6 +1117,8 @@ class Estimator:
         else:
             p[~ok] = np.nan
 
+        if self._arms:
+            self._arm_update(p, ok)
         known = ok | hidden
         # a reappearing marker keeps the velocity of its estimate (its measured jump is estimate error)
         keep_v = ok & ~self.measured & has_base
