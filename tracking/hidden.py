@@ -66,6 +66,9 @@ import numpy as np
 from tracking.status import MarkerStatus
 
 
+_DROP = np.full(3, np.nan)  # an estimator's verdict: the body cannot pin this marker now (LOST)
+
+
 class Method(IntEnum):
     """How a hidden marker is estimated (each falls back to the one below it when ill-posed)."""
 
@@ -311,7 +314,7 @@ def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray,
 
 
 def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3,
-               axis_prev: np.ndarray | None = None) -> np.ndarray:
+               axis_prev: np.ndarray | None = None, fixed: list[int] | None = None) -> np.ndarray:
     """Unit vector n with ``rows @ n = values`` where they determine it, else nearest ``axis_pred``.
 
     Each row is a linear constraint ``a . n = b``, scaled to unit ``a`` (b becomes a cosine).
@@ -329,12 +332,16 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
         min_singular: singular values below this count as free directions.
         axis_prev: (3,) the previous frame's axis: where two constraints leave two mirror-image
             solutions, the one on its side is taken (continuity), not the prediction's.
+        fixed: a one-element list that receives how many directions the constraints fix (2: the
+            axis is pinned up to the mirror image; fewer: the prediction fills in).
     """
     scale = np.sqrt((rows * rows).sum(axis=1))
     a = rows / scale[:, None]
     b = values / scale
     u, sv, vt = np.linalg.svd(a)  # full: vt (3, 3), rows past len(sv) span the null space
     k = int((sv >= min_singular).sum())  # singular values come sorted, largest first
+    if fixed is not None:
+        fixed[0] = k
     coef = (u[:, :k].T @ b) / sv[:k]
     fixed = coef @ vt[:k]
     norm2 = float(coef @ coef)
@@ -590,6 +597,15 @@ class Estimator:
             within ``rhythm_deg`` (2:1 glenohumeral to scapulothoracic): the learned shoulder pivot
             offset turns with it (0: a fixed offset).
         rhythm_deg: the elevation range (deg) over which the scapula turns.
+        forearm_accel_deg_s2, max_forearm_sigma_deg: with neither styloid marker measured, the
+            forearm's angles are extrapolated; their uncertainty grows as an unknown angular
+            acceleration (``forearm_accel_deg_s2``) plus 30 % of the angular speed, and past
+            ``max_forearm_sigma_deg`` both styloid estimates are dropped to LOST.
+        max_hinge_sigma_deg: the same for an elbow marker whose axis the hinge's conditions do not
+            pin (elbow nearly straight, or the styloids hidden): the axis' turn about the arm is
+            extrapolated, and dropped past this uncertainty.
+        max_forearm_stale_s: a LOST styloid marker is estimated again from the other, measured,
+            while its forearm's angles are at most this old.
     """
 
     def __init__(
@@ -616,10 +632,14 @@ class Estimator:
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
         max_rigid_residual_m: float = 0.004,
-        forearm_sigma_rad: float = 0.1,
+        forearm_sigma_rad: float = 0.03,
         forearm_decay_s: float = 0.3,
         scapular_rhythm: float = 0.5,
         rhythm_deg: tuple[float, float] = (30.0, 150.0),
+        forearm_accel_deg_s2: float = 150.0,
+        max_forearm_sigma_deg: float = 3.0,
+        max_hinge_sigma_deg: float = 10.0,
+        max_forearm_stale_s: float = 0.5,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -673,8 +693,14 @@ class Estimator:
             if arm not in self._arms:
                 self._arms.append(arm)
             self._arm_of[f.marker] = (self._arms.index(arm), 0 if f.marker == wa else 1)
+        self._arm_of_elbow = {e: r for r, (_, _, ea, eb, _) in enumerate(self._arms) for e in (ea, eb)}
         self.forearm_sigma_rad = float(forearm_sigma_rad)
         self.scapular_rhythm = float(scapular_rhythm)
+        self.fps = float(fps)
+        self.forearm_accel_rad_s2 = math.radians(forearm_accel_deg_s2)
+        self.max_forearm_sigma_rad = math.radians(max_forearm_sigma_deg)
+        self.max_hinge_sigma_rad = math.radians(max_hinge_sigma_deg)
+        self.max_forearm_stale_frames = max_forearm_stale_s * float(fps)
         self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
         self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
         self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
@@ -734,6 +760,8 @@ class Estimator:
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
+        self.hinge_free = np.zeros(len(self._h_idx), dtype=np.int64)  # frames in a row with the axis extrapolated
+        self._hinge_free_now: set[int] = set()
         # per forearm: wrist centre along the flexion axis and distance from it
         self.fore_along = np.full(len(self._f_idx), np.nan)
         self.fore_radius = np.full(len(self._f_idx), np.nan)
@@ -741,6 +769,8 @@ class Estimator:
         self.arm_shape: list[ForearmShape | None] = [None] * len(self._arms)
         self.arm_angles = np.full((len(self._arms), 2), np.nan)
         self.arm_velocity = np.full((len(self._arms), 2), np.nan)
+        self.arm_age = np.zeros(len(self._arms), dtype=np.int64)         # frames since the angles were known
+        self.arm_unmeasured = np.zeros(len(self._arms), dtype=np.int64)  # frames with neither styloid measured
         self._arm_seen: dict[int, tuple[float, float, bool]] = {}  # this frame: arm -> (theta, psi, measured)
         self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         # per shoulder: normal equations of the pivot offset (trunk frame)
@@ -899,8 +929,17 @@ class Estimator:
         if ok[wa] and ok[wb]:
             rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
             values.append(self.hinge_fore[r])
+        fixed = [0]
         n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
-                       axis_prev=prev_axis)
+                       axis_prev=prev_axis, fixed=fixed)
+        if fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
+            free = self.hinge_free[r] + 1
+            arm = self._arm_of_elbow.get(k)
+            speed = abs(float(self.arm_velocity[arm][1])) * self.fps if arm is not None and np.isfinite(self.arm_velocity[arm][1]) else 0.0
+            t = free / self.fps
+            if 0.5 * self.forearm_accel_rad_s2 * t * t + 0.3 * speed * t > self.max_hinge_sigma_rad:
+                return _DROP
+            self._hinge_free_now.add(r)
         return p[h.partner] + length * n
 
     def _elbow_frame(self, r: int, p: np.ndarray, ok: np.ndarray) -> ElbowFrame | None:
@@ -912,10 +951,18 @@ class Estimator:
         pivot = shoulder + self.trunk_rot @ self.pivot_offset(sh, 0.5 * (p[ea] + p[eb]), shoulder)
         return elbow_frame(p[ea], p[eb], pivot)
 
-    def _arm_estimate(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
+    def _arm_sigma(self, r: int, frames: float) -> np.ndarray:
+        """(2,) uncertainty (rad) of arm r's flexion and supination extrapolated ``frames`` ahead:
+        an unknown angular acceleration up to ``forearm_accel`` plus a share of the speed."""
+        t = frames / self.fps
+        speed = np.abs(np.nan_to_num(self.arm_velocity[r])) * self.fps
+        return 0.5 * self.forearm_accel_rad_s2 * t * t + 0.3 * speed * t
+
+    def _arm_estimate(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray):
         """Styloid marker k from its arm's flexion and supination: fitted to the arm's measured
         styloid marker near their prediction, or (both hidden) the prediction alone, its angular
-        velocities decaying. None where the arm has no state (nothing learned, elbow unknown)."""
+        velocities decaying, until the extrapolation's uncertainty passes ``max_forearm_sigma_rad``
+        (then :data:`_DROP`). None where the arm has no state (nothing learned, elbow unknown)."""
         r, slot = self._arm_of[k]
         if r in self._arm_points:
             return self._arm_points[r][slot]
@@ -928,22 +975,27 @@ class Estimator:
         if frame is None:
             return None
         measured = [(s, p[w]) for s, w in ((0, wa), (1, wb)) if ok[w]]
-        v = np.nan_to_num(vel) * (1.0 if measured else self._arm_decay)
-        pred = angles + v
+        age = int(self.arm_age[r]) + 1  # frames since the angles were last known
         if measured:
+            pred = angles + np.nan_to_num(vel) * min(age, 2)
+            sigma = self.forearm_sigma_rad + self._arm_sigma(r, age - 1)
             theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
-                                     self.forearm_sigma_rad, self.forearm_sigma_rad)
+                                     float(sigma[0]), float(sigma[1]))
         else:
-            theta, psi = float(pred[0]), float(pred[1])
-        self._arm_seen[r] = (theta, psi, bool(measured))
-        if not measured:
+            unmeasured = int(self.arm_unmeasured[r]) + 1
+            if np.any(self._arm_sigma(r, unmeasured) > self.max_forearm_sigma_rad):
+                self._arm_points[r] = (_DROP, _DROP)
+                return _DROP
+            v = np.nan_to_num(vel) * self._arm_decay
+            theta, psi = (float(x) for x in angles + v)
             self.arm_velocity[r] = v  # decayed (the update below keeps it)
+        self._arm_seen[r] = (theta, psi, bool(measured))
         pts = forearm_markers(frame, shape, theta, psi)
         self._arm_points[r] = pts
         return pts[slot]
 
     def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
-        """Carry the arms' flexion and supination to the next frame (lost where not seen)."""
+        """Carry the arms' flexion and supination to the next frame."""
         for r, (wa, wb, ea, eb, _) in enumerate(self._arms):
             seen = self._arm_seen.get(r)
             if seen is None and ok[wa] and ok[wb] and np.all(np.isfinite(p[[ea, eb]])):
@@ -952,19 +1004,22 @@ class Estimator:
                 if frame is not None:
                     theta, psi, _ = forearm_angles(frame, p[wa], p[wb])
                     seen = (theta, psi, True)
-            if seen is None:
-                self.arm_angles[r] = np.nan
-                self.arm_velocity[r] = np.nan
+            measured_now = bool(ok[wa] or ok[wb])
+            self.arm_unmeasured[r] = 0 if measured_now else self.arm_unmeasured[r] + 1
+            if seen is None:  # the last angles stay, older by a frame
+                self.arm_age[r] += 1
                 continue
             theta, psi, measured = seen
             old = self.arm_angles[r]
             if measured and np.all(np.isfinite(old)):
-                d = np.array([math.remainder(theta - old[0], math.tau), math.remainder(psi - old[1], math.tau)])
+                steps = self.arm_age[r] + 1
+                d = np.array([math.remainder(theta - old[0], math.tau), math.remainder(psi - old[1], math.tau)]) / steps
                 vel = self.arm_velocity[r]
                 self.arm_velocity[r] = np.where(np.isfinite(vel), vel + self._arm_beta * (d - vel), d)
             elif measured:
                 self.arm_velocity[r] = 0.0
             self.arm_angles[r] = (theta, psi)
+            self.arm_age[r] = 0
 
     def _forearm(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
         if k in self._arm_of:
@@ -1065,6 +1120,10 @@ class Estimator:
         hidden_frames = np.where(ok, 0, self.hidden_frames + 1)
         alone = self._has_partner & ~(self._partners & ok[None, :]).any(axis=1)
         unsupported_frames = np.where(~ok & alone, self.unsupported_frames + 1, 0)
+        if self._arms:  # a lost styloid comes back from the other, measured, while its forearm is known
+            for r, (wa, wb, _, _, _) in enumerate(self._arms):
+                if ok[wa] != ok[wb] and self.arm_age[r] <= self.max_forearm_stale_frames and self.arm_shape[r] is not None:
+                    has_base[wb if ok[wa] else wa] = True
         hidden = (~ok & has_base & (hidden_frames <= self.max_hidden_frames)
                   & (unsupported_frames <= self.max_unsupported_frames))
         used = np.full(self.n_markers, -1, dtype=np.int8)
@@ -1088,6 +1147,9 @@ class Estimator:
                         est, how = self._model(k, p, ok, weight, prior[k], prev)
                     except np.linalg.LinAlgError:  # degenerate geometry (coincident markers)
                         est = None
+                if est is _DROP:
+                    hidden[k] = False
+                    continue
                 if est is None or not np.all(np.isfinite(est)):
                     if self.methods[k] == Method.CONSTANT_VELOCITY:
                         est, how = constant_velocity(prev[k], self.velocity[k]), Method.CONSTANT_VELOCITY
@@ -1117,6 +1179,10 @@ class Estimator:
         else:
             p[~ok] = np.nan
 
+        if len(self._h_idx):
+            self.hinge_free = np.array([self.hinge_free[r] + 1 if r in self._hinge_free_now else 0
+                                        for r in range(len(self._h_idx))], dtype=np.int64)
+            self._hinge_free_now = set()
         if self._arms:
             self._arm_update(p, ok)
         known = ok | hidden

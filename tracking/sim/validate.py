@@ -84,6 +84,8 @@ class AngleAccuracy:
             markers estimated.
         lost: share of those frames without a reported value (one of its markers lost).
         rmse_estimated_deg: RMSE over the frames with an estimated marker (NaN: none).
+        rmse_measured_deg: RMSE over the frames with all its markers measured (the floor that
+            measurement noise sets; NaN: none).
     """
 
     rmse_deg: float
@@ -91,6 +93,7 @@ class AngleAccuracy:
     estimated: float
     lost: float
     rmse_estimated_deg: float
+    rmse_measured_deg: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,7 +135,8 @@ class TrackingAccuracy:
         )
         if worst[0] in self.angles:
             a = self.angles[worst[0]]
-            text += f", its frames estimated {100 * a.estimated:.1f} % / lost {100 * a.lost:.1f} %"
+            text += (f", its frames estimated {100 * a.estimated:.1f} % / lost {100 * a.lost:.1f} %, "
+                     f"RMSE {a.rmse_measured_deg:.2f} deg where all its markers are measured")
         return text
 
 
@@ -178,6 +182,7 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
         defined = np.isfinite(true_angles[name])
         ok = np.isfinite(values) & defined
         with_est = ok & est[:, uses[name]].any(axis=1)
+        all_meas = ok & meas[:, uses[name]].all(axis=1)
         diff = (values - true_angles[name] + 180.0) % 360.0 - 180.0
         n = int(defined.sum())
         a_rmse = float(np.sqrt(np.mean(diff[ok] ** 2))) if ok.any() else float("nan")
@@ -189,6 +194,7 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
             estimated=float(with_est.sum() / n) if n else 0.0,
             lost=float((defined & ~np.isfinite(values)).sum() / n) if n else 0.0,
             rmse_estimated_deg=float(np.sqrt(np.mean(diff[with_est] ** 2))) if with_est.any() else float("nan"),
+            rmse_measured_deg=float(np.sqrt(np.mean(diff[all_meas] ** 2))) if all_meas.any() else float("nan"),
         )
     return TrackingAccuracy(
         frames=frames,
