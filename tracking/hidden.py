@@ -502,7 +502,7 @@ def _forearm_points_f(c0, n, r1, r2, along, radius, half, tilt, theta, psi):
 
 def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple[int, np.ndarray]],
                 theta_pred: float, psi_pred: float, sigma_theta: float, sigma_psi: float,
-                sigma_m: float = 0.002, iterations: int = 4) -> tuple[float, float]:
+                sigma_m: float = 0.002, iterations: int = 4, pinned: list[bool] | None = None) -> tuple[float, float]:
     """Flexion and supination (radians) that best place the measured styloid markers, near the
     prediction: Gauss-Newton on ``sum |marker - model|^2 / sigma_m^2 + (theta - theta_pred)^2 /
     sigma_theta^2 + (psi - psi_pred)^2 / sigma_psi^2``.
@@ -514,6 +514,9 @@ def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple
     Args:
         measured: (slot, position) pairs, slot 0 for the first styloid marker, 1 for the second.
         sigma_m: marker noise (m); sigma_theta, sigma_psi: prediction uncertainty (rad).
+        pinned: a one-element list that receives whether the markers alone pin both angles more
+            firmly than the prediction (the data's information in its weakest direction exceeds
+            the prior's), i.e. whether the answer is evidence rather than the prediction echoed.
     """
     geo = (frame.centre.tolist(), frame.n.tolist(), frame.r1.tolist(), frame.r2.tolist(),
            shape.along, shape.radius, shape.half, shape.tilt)
@@ -534,6 +537,10 @@ def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple
         aa = sum(x * x for x in ja)
         ab = sum(x * y for x, y in zip(ja, jb))
         bb = sum(x * x for x in jb)
+        if pinned is not None:  # the data's part of the normal matrix (without the two prior rows)
+            da, db = aa - wt * wt, bb - wp * wp
+            smallest = 0.5 * (da + db) - math.sqrt(max(0.25 * (da - db) ** 2 + ab * ab, 0.0))
+            pinned[0] = smallest > max(wt, wp) ** 2
         ga = sum(x * y for x, y in zip(ja, r0))
         gb = sum(x * y for x, y in zip(jb, r0))
         det = aa * bb - ab * ab
@@ -632,7 +639,7 @@ class Estimator:
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
         max_rigid_residual_m: float = 0.004,
-        forearm_sigma_rad: float = 0.03,
+        forearm_sigma_rad: float = 0.06,
         forearm_decay_s: float = 0.3,
         scapular_rhythm: float = 0.5,
         rhythm_deg: tuple[float, float] = (30.0, 150.0),
@@ -773,6 +780,7 @@ class Estimator:
         self.arm_unmeasured = np.zeros(len(self._arms), dtype=np.int64)  # frames with neither styloid measured
         self._arm_seen: dict[int, tuple[float, float, bool]] = {}  # this frame: arm -> (theta, psi, measured)
         self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._arm_pinned: set[int] = set()
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
@@ -801,6 +809,7 @@ class Estimator:
                 pass
         self._arm_seen = {}
         self._arm_points = {}
+        self._arm_pinned: set[int] = set()
         for r, (wa, wb, ea, eb, sh) in enumerate(self._arms):
             if not (ok[wa] and ok[wb] and ok[ea] and ok[eb]):
                 continue
@@ -979,16 +988,17 @@ class Estimator:
         if measured:
             pred = angles + np.nan_to_num(vel) * min(age, 2)
             sigma = self.forearm_sigma_rad + self._arm_sigma(r, age - 1)
+            pinned = [False]
             theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
-                                     float(sigma[0]), float(sigma[1]))
+                                     float(sigma[0]), float(sigma[1]), pinned=pinned)
+            if pinned[0]:
+                self._arm_pinned.add(r)
         else:
             unmeasured = int(self.arm_unmeasured[r]) + 1
             if np.any(self._arm_sigma(r, unmeasured) > self.max_forearm_sigma_rad):
                 self._arm_points[r] = (_DROP, _DROP)
                 return _DROP
-            v = np.nan_to_num(vel) * self._arm_decay
-            theta, psi = (float(x) for x in angles + v)
-            self.arm_velocity[r] = v  # decayed (the update below keeps it)
+            theta, psi = (float(x) for x in angles + np.nan_to_num(vel) * self._arm_decay)
         self._arm_seen[r] = (theta, psi, bool(measured))
         pts = forearm_markers(frame, shape, theta, psi)
         self._arm_points[r] = pts
@@ -1011,7 +1021,11 @@ class Estimator:
                 continue
             theta, psi, measured = seen
             old = self.arm_angles[r]
-            if measured and np.all(np.isfinite(old)):
+            if not (ok[wa] and ok[wb]) and r not in self._arm_pinned:
+                # a fit to one styloid that leans on the prediction: its step is no new evidence
+                # of speed (it would feed itself); the velocity decays instead
+                self.arm_velocity[r] = np.nan_to_num(self.arm_velocity[r]) * self._arm_decay
+            elif measured and np.all(np.isfinite(old)):
                 steps = self.arm_age[r] + 1
                 d = np.array([math.remainder(theta - old[0], math.tau), math.remainder(psi - old[1], math.tau)]) / steps
                 vel = self.arm_velocity[r]
@@ -1124,6 +1138,9 @@ class Estimator:
             for r, (wa, wb, _, _, _) in enumerate(self._arms):
                 if ok[wa] != ok[wb] and self.arm_age[r] <= self.max_forearm_stale_frames and self.arm_shape[r] is not None:
                     has_base[wb if ok[wa] else wa] = True
+        for mk, pa, sh, wa, wb in self._h_idx.tolist():  # a lost epicondyle where the hinge pins it
+            if not ok[mk] and ok[pa] and ok[sh] and ok[wa] and ok[wb] and self.methods[mk] == Method.HINGE:
+                has_base[mk] = True
         hidden = (~ok & has_base & (hidden_frames <= self.max_hidden_frames)
                   & (unsupported_frames <= self.max_unsupported_frames))
         used = np.full(self.n_markers, -1, dtype=np.int8)
