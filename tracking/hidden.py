@@ -465,16 +465,21 @@ def forearm_markers(frame: ElbowFrame, shape: ForearmShape, theta: float, psi: f
     return c - shape.half * u, c + shape.half * u
 
 
-def forearm_angles(frame: ElbowFrame, wrist_a_m: np.ndarray, wrist_b_m: np.ndarray) -> tuple[float, float, ForearmShape]:
-    """Inverse of :func:`forearm_markers`: (theta, psi, shape) of measured styloid markers."""
+def forearm_angles(frame: ElbowFrame, wrist_a_m: np.ndarray, wrist_b_m: np.ndarray
+                   ) -> tuple[float, float, ForearmShape] | None:
+    """Inverse of :func:`forearm_markers`: (theta, psi, shape) of measured styloid markers (None
+    for degenerate input: coincident styloids, or the wrist centre on the elbow centre)."""
     c = 0.5 * (wrist_a_m + wrist_b_m)
     v = c - frame.centre
+    w = wrist_b_m - wrist_a_m
+    half = 0.5 * math.sqrt(float(w @ w))
+    lv = math.sqrt(float(v @ v))
+    if not (half > 1e-6 and lv > 1e-6):
+        return None
     along = float(v @ frame.n)
     radial = v - along * frame.n
     theta = math.atan2(float(radial @ frame.r2), float(radial @ frame.r1))
-    a = _unit(v)
-    w = wrist_b_m - wrist_a_m
-    half = 0.5 * math.sqrt(float(w @ w))
+    a = v / lv
     u = w / (2.0 * half)
     p1 = _unit(frame.n - float(frame.n @ a) * a)
     p2 = _cross(a, p1)
@@ -816,7 +821,10 @@ class Estimator:
             frame = self._elbow_frame(r, p, ok)
             if frame is None:
                 continue
-            theta, psi, shape = forearm_angles(frame, p[wa], p[wb])
+            angles = forearm_angles(frame, p[wa], p[wb])
+            if angles is None:
+                continue
+            theta, psi, shape = angles
             old = self.arm_shape[r]
             if old is None:
                 self.arm_shape[r] = shape
@@ -1011,9 +1019,9 @@ class Estimator:
             if seen is None and ok[wa] and ok[wb] and np.all(np.isfinite(p[[ea, eb]])):
                 # styloids measured, an epicondyle estimated (by the hinge)
                 frame = self._elbow_frame(r, p, ok)
-                if frame is not None:
-                    theta, psi, _ = forearm_angles(frame, p[wa], p[wb])
-                    seen = (theta, psi, True)
+                angles = None if frame is None else forearm_angles(frame, p[wa], p[wb])
+                if angles is not None:
+                    seen = (angles[0], angles[1], True)
             measured_now = bool(ok[wa] or ok[wb])
             self.arm_unmeasured[r] = 0 if measured_now else self.arm_unmeasured[r] + 1
             if seen is None:  # the last angles stay, older by a frame
