@@ -49,8 +49,9 @@ learned while both were measured, widened by ``tolerance_m``; the marker hidden 
 ``max_unsupported_s``. A marker never measured is LOST, and a LOST marker stays LOST until it is
 measured again.
 
-Configuration is plain arrays and marker indices, so any marker set can carry it;
-:func:`default_config` gives the values measured for ``upper_limb_seated``.
+The Estimator takes plain arrays and marker indices; :func:`estimator_config` builds them from
+the marker set's ``hidden_markers:`` section (content/markersets/*.yaml), so every marker set
+chooses its own estimators, weights, rigid groups and limits.
 """
 
 from __future__ import annotations
@@ -65,13 +66,17 @@ import numpy as np
 from tracking.status import MarkerStatus
 
 
+_DROP = np.full(3, np.nan)  # an estimator's verdict: the body cannot pin this marker now (LOST)
+
+
 class Method(IntEnum):
     """How a hidden marker is estimated (each falls back to the one below it when ill-posed)."""
 
     CONSTANT_VELOCITY = 0  # equation 5
     NEIGHBOURS = 1         # equation 6
     RIGID = 2              # Kabsch on a segment, falls back to equation 6
-    HINGE = 3              # elbow axis (elbow markers) / wrist circle (wrist markers), falls back to RIGID
+    HINGE = 3              # elbow axis (epicondyle markers), falls back to RIGID
+    FOREARM = 4            # styloid markers from the elbow and the other styloid, falls back to RIGID
 
     @classmethod
     def parse(cls, value: "Method | str | int") -> "Method":
@@ -309,7 +314,7 @@ def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray,
 
 
 def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3,
-               axis_prev: np.ndarray | None = None) -> np.ndarray:
+               axis_prev: np.ndarray | None = None, fixed: list[int] | None = None) -> np.ndarray:
     """Unit vector n with ``rows @ n = values`` where they determine it, else nearest ``axis_pred``.
 
     Each row is a linear constraint ``a . n = b``, scaled to unit ``a`` (b becomes a cosine).
@@ -327,12 +332,16 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
         min_singular: singular values below this count as free directions.
         axis_prev: (3,) the previous frame's axis: where two constraints leave two mirror-image
             solutions, the one on its side is taken (continuity), not the prediction's.
+        fixed: a one-element list that receives how many directions the constraints fix (2: the
+            axis is pinned up to the mirror image; fewer: the prediction fills in).
     """
     scale = np.sqrt((rows * rows).sum(axis=1))
     a = rows / scale[:, None]
     b = values / scale
     u, sv, vt = np.linalg.svd(a)  # full: vt (3, 3), rows past len(sv) span the null space
     k = int((sv >= min_singular).sum())  # singular values come sorted, largest first
+    if fixed is not None:
+        fixed[0] = k
     coef = (u[:, :k].T @ b) / sv[:k]
     fixed = coef @ vt[:k]
     norm2 = float(coef @ coef)
@@ -394,6 +403,162 @@ def wrist_centre(
     return centre + along_m * n + radius_m * (math.cos(theta) * a + math.sin(theta) * b)
 
 
+@dataclass(frozen=True, slots=True)
+class ElbowFrame:
+    """The elbow's flexion axis with a reference direction fixed in the humerus.
+
+    Attributes:
+        centre: (3,) elbow centre (midpoint of the epicondyle markers), world metres.
+        n: (3,) unit flexion axis (first epicondyle marker -> second).
+        r1: (3,) unit humerus direction (shoulder pivot -> elbow) made perpendicular to n.
+        r2: (3,) ``n x r1``; the forearm's flexion angle theta is measured from r1 towards r2.
+    """
+
+    centre: np.ndarray
+    n: np.ndarray
+    r1: np.ndarray
+    r2: np.ndarray
+
+
+def elbow_frame(elbow_a_m: np.ndarray, elbow_b_m: np.ndarray, pivot_m: np.ndarray) -> ElbowFrame | None:
+    """The :class:`ElbowFrame` from the two epicondyle markers and the shoulder pivot (None if
+    degenerate: coincident markers, or the humerus along the flexion axis)."""
+    centre = 0.5 * (elbow_a_m + elbow_b_m)
+    e = elbow_b_m - elbow_a_m
+    le = math.sqrt(float(e @ e))
+    if not le > 1e-6:
+        return None
+    n = e / le
+    h = centre - pivot_m
+    h = h - float(h @ n) * n
+    lh = math.sqrt(float(h @ h))
+    if not lh > 1e-6:
+        return None
+    r1 = h / lh
+    return ElbowFrame(centre, n, r1, _cross(n, r1))
+
+
+@dataclass(frozen=True, slots=True)
+class ForearmShape:
+    """Constants of one forearm, learned while its four markers are measured.
+
+    The wrist centre C (midpoint of the styloid markers) is ``along`` along the flexion axis from
+    the elbow centre and ``radius`` from the axis; the styloid markers are ``half`` either side of
+    C along u, whose component along the forearm axis (elbow centre -> C) is ``tilt``.
+    """
+
+    along: float
+    radius: float
+    half: float
+    tilt: float
+
+
+def forearm_markers(frame: ElbowFrame, shape: ForearmShape, theta: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
+    """The two styloid markers for flexion ``theta`` (about n, from r1) and supination ``psi``
+    (u about the forearm axis, from the flexion axis), radians."""
+    c = frame.centre + shape.along * frame.n + shape.radius * (math.cos(theta) * frame.r1 + math.sin(theta) * frame.r2)
+    a = _unit(c - frame.centre)
+    p1 = _unit(frame.n - float(frame.n @ a) * a)
+    p2 = _cross(a, p1)
+    side = math.sqrt(max(1.0 - shape.tilt * shape.tilt, 0.0))
+    u = shape.tilt * a + side * (math.cos(psi) * p1 + math.sin(psi) * p2)
+    return c - shape.half * u, c + shape.half * u
+
+
+def forearm_angles(frame: ElbowFrame, wrist_a_m: np.ndarray, wrist_b_m: np.ndarray
+                   ) -> tuple[float, float, ForearmShape] | None:
+    """Inverse of :func:`forearm_markers`: (theta, psi, shape) of measured styloid markers (None
+    for degenerate input: coincident styloids, or the wrist centre on the elbow centre)."""
+    c = 0.5 * (wrist_a_m + wrist_b_m)
+    v = c - frame.centre
+    w = wrist_b_m - wrist_a_m
+    half = 0.5 * math.sqrt(float(w @ w))
+    lv = math.sqrt(float(v @ v))
+    if not (half > 1e-6 and lv > 1e-6):
+        return None
+    along = float(v @ frame.n)
+    radial = v - along * frame.n
+    theta = math.atan2(float(radial @ frame.r2), float(radial @ frame.r1))
+    a = v / lv
+    u = w / (2.0 * half)
+    p1 = _unit(frame.n - float(frame.n @ a) * a)
+    p2 = _cross(a, p1)
+    psi = math.atan2(float(u @ p2), float(u @ p1))
+    return theta, psi, ForearmShape(along, math.sqrt(float(radial @ radial)), half, float(u @ a))
+
+
+def _forearm_points_f(c0, n, r1, r2, along, radius, half, tilt, theta, psi):
+    """:func:`forearm_markers` in plain floats (tuples): the inner loop of :func:`fit_forearm`."""
+    ct, st = math.cos(theta), math.sin(theta)
+    v = [along * n[i] + radius * (ct * r1[i] + st * r2[i]) for i in range(3)]
+    lv = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    a = [x / lv for x in v]
+    na = n[0] * a[0] + n[1] * a[1] + n[2] * a[2]
+    p1 = [n[i] - na * a[i] for i in range(3)]
+    lp = math.sqrt(p1[0] * p1[0] + p1[1] * p1[1] + p1[2] * p1[2])
+    p1 = [x / lp for x in p1]
+    p2 = [a[1] * p1[2] - a[2] * p1[1], a[2] * p1[0] - a[0] * p1[2], a[0] * p1[1] - a[1] * p1[0]]
+    side = math.sqrt(max(1.0 - tilt * tilt, 0.0))
+    cp, sp = math.cos(psi), math.sin(psi)
+    u = [tilt * a[i] + side * (cp * p1[i] + sp * p2[i]) for i in range(3)]
+    c = [c0[i] + v[i] for i in range(3)]
+    return [c[i] - half * u[i] for i in range(3)], [c[i] + half * u[i] for i in range(3)]
+
+
+def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple[int, np.ndarray]],
+                theta_pred: float, psi_pred: float, sigma_theta: float, sigma_psi: float,
+                sigma_m: float = 0.002, iterations: int = 4, pinned: list[bool] | None = None) -> tuple[float, float]:
+    """Flexion and supination (radians) that best place the measured styloid markers, near the
+    prediction: Gauss-Newton on ``sum |marker - model|^2 / sigma_m^2 + (theta - theta_pred)^2 /
+    sigma_theta^2 + (psi - psi_pred)^2 / sigma_psi^2``.
+
+    One styloid marker leaves flexion and supination confounded where its line is near the flexion
+    axis (palm up or down: the marker's motion along the forearm's front is R dtheta + half dpsi);
+    the prediction settles what the marker cannot.
+
+    Args:
+        measured: (slot, position) pairs, slot 0 for the first styloid marker, 1 for the second.
+        sigma_m: marker noise (m); sigma_theta, sigma_psi: prediction uncertainty (rad).
+        pinned: a one-element list that receives whether the markers alone pin both angles more
+            firmly than the prediction (the data's information in its weakest direction exceeds
+            the prior's), i.e. whether the answer is evidence rather than the prediction echoed.
+    """
+    geo = (frame.centre.tolist(), frame.n.tolist(), frame.r1.tolist(), frame.r2.tolist(),
+           shape.along, shape.radius, shape.half, shape.tilt)
+    obs = [(slot, pos.tolist()) for slot, pos in measured]
+    wm, wt, wp = 1.0 / sigma_m, 1.0 / sigma_theta, 1.0 / sigma_psi
+
+    def residual(th: float, ps: float) -> list[float]:
+        pts = _forearm_points_f(*geo, th, ps)
+        res = [(pts[slot][i] - pos[i]) * wm for slot, pos in obs for i in range(3)]
+        res += [(th - theta_pred) * wt, (ps - psi_pred) * wp]
+        return res
+
+    th, ps, h = theta_pred, psi_pred, 1e-6
+    for _ in range(iterations):
+        r0 = residual(th, ps)
+        ja = [(x - y) / h for x, y in zip(residual(th + h, ps), r0)]
+        jb = [(x - y) / h for x, y in zip(residual(th, ps + h), r0)]
+        aa = sum(x * x for x in ja)
+        ab = sum(x * y for x, y in zip(ja, jb))
+        bb = sum(x * x for x in jb)
+        if pinned is not None:  # the data's part of the normal matrix (without the two prior rows)
+            da, db = aa - wt * wt, bb - wp * wp
+            smallest = 0.5 * (da + db) - math.sqrt(max(0.25 * (da - db) ** 2 + ab * ab, 0.0))
+            pinned[0] = smallest > max(wt, wp) ** 2
+        ga = sum(x * y for x, y in zip(ja, r0))
+        gb = sum(x * y for x, y in zip(jb, r0))
+        det = aa * bb - ab * ab
+        if not det > 0:
+            break
+        dth = -(bb * ga - ab * gb) / det
+        dps = -(aa * gb - ab * ga) / det
+        th, ps = th + dth, ps + dps
+        if dth * dth + dps * dps < 1e-12:
+            break
+    return th, ps
+
+
 # ---------------------------------------------------------------------------------------------
 # The stateful estimator
 
@@ -409,7 +574,7 @@ class Estimator:
         segments: groups of marker indices treated as rigid (RIGID and the hinge's fallback); a
             marker tries the groups that contain it in the order given.
         hinges: elbow hinges (elbow markers with method HINGE).
-        forearms: forearms (styloid markers with method HINGE): the rigid forearm fit, or where
+        forearms: forearms (styloid markers with method FOREARM): the rigid forearm fit, or where
             its misfit exceeds ``max_rigid_residual_m`` (the forearm turned), the wrist circle.
         length_pairs: (i, j) marker pairs of near-constant distance, checked for drift.
         trunk: (upper, lower, left, right) marker indices of the trunk frame in which the
@@ -436,6 +601,23 @@ class Estimator:
             neighbours (equation 6) plus its own velocity relative to them, which decays with
             this time constant (0: none; a scalar or one per marker).
         max_rigid_residual_m: see ``forearms``.
+        forearm_sigma_rad: uncertainty of the predicted flexion and supination of a forearm with a
+            hidden styloid marker (:func:`fit_forearm`).
+        forearm_decay_s: with both styloid markers hidden, the forearm's angular velocities decay
+            with this time constant.
+        scapular_rhythm: upward rotation of the scapula (deg) per degree of humerus elevation
+            within ``rhythm_deg`` (2:1 glenohumeral to scapulothoracic): the learned shoulder pivot
+            offset turns with it (0: a fixed offset).
+        rhythm_deg: the elevation range (deg) over which the scapula turns.
+        forearm_accel_deg_s2, max_forearm_sigma_deg: with neither styloid marker measured, the
+            forearm's angles are extrapolated; their uncertainty grows as an unknown angular
+            acceleration (``forearm_accel_deg_s2``) plus 30 % of the angular speed, and past
+            ``max_forearm_sigma_deg`` both styloid estimates are dropped to LOST.
+        max_hinge_sigma_deg: the same for an elbow marker whose axis the hinge's conditions do not
+            pin (elbow nearly straight, or the styloids hidden): the axis' turn about the arm is
+            extrapolated, and dropped past this uncertainty.
+        max_forearm_stale_s: a LOST styloid marker is estimated again from the other, measured,
+            while its forearm's angles are at most this old.
     """
 
     def __init__(
@@ -462,6 +644,14 @@ class Estimator:
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
         max_rigid_residual_m: float = 0.004,
+        forearm_sigma_rad: float = 0.06,
+        forearm_decay_s: float = 0.3,
+        scapular_rhythm: float = 0.5,
+        rhythm_deg: tuple[float, float] = (30.0, 150.0),
+        forearm_accel_deg_s2: float = 150.0,
+        max_forearm_sigma_deg: float = 3.0,
+        max_hinge_sigma_deg: float = 10.0,
+        max_forearm_stale_s: float = 0.5,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -485,8 +675,11 @@ class Estimator:
         self.hinges = {h.marker: h for h in hinges}
         self.forearms = {f.marker: f for f in forearms}
         for i in np.flatnonzero(self.methods == Method.HINGE):
-            if int(i) not in self.hinges and int(i) not in self.forearms:
-                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge or forearm")
+            if int(i) not in self.hinges:
+                raise ValueError(f"marker {int(i)} uses the hinge estimator but has no hinge")
+        for i in np.flatnonzero(self.methods == Method.FOREARM):
+            if int(i) not in self.forearms:
+                raise ValueError(f"marker {int(i)} uses the forearm estimator but has no forearm")
         self._f_idx = np.array([[f.marker, f.partner, *f.elbow] for f in forearms], dtype=np.intp).reshape(-1, 4)
         self._f_row = {f.marker: r for r, f in enumerate(forearms)}
         # estimation order: elbows first (the wrists' fits may lean on them), then by method
@@ -497,6 +690,32 @@ class Estimator:
         self._h_row = {h.marker: r for r, h in enumerate(hinges)}
         self._shoulder_slot = {sh: i for i, sh in enumerate(sorted({h.shoulder for h in hinges}))}
         self._h_shoulder_slot = np.array([self._shoulder_slot[h.shoulder] for h in hinges], dtype=np.intp)
+        # forearms as arms (styloid a, styloid b, epicondyle a, epicondyle b, shoulder): flexion and
+        # supination are tracked per arm when the arm's shoulder is known from a hinge
+        shoulder_of = {m_: h.shoulder for h in hinges for m_ in (h.marker, h.partner)}
+        self._arms: list[tuple[int, int, int, int, int]] = []
+        self._arm_of: dict[int, tuple[int, int]] = {}
+        for f in forearms:
+            wa, wb = sorted((f.marker, f.partner))
+            ea, eb = f.elbow
+            sh = shoulder_of.get(ea, -1)
+            if sh < 0 or shoulder_of.get(eb) != sh:
+                continue
+            arm = (wa, wb, ea, eb, sh)
+            if arm not in self._arms:
+                self._arms.append(arm)
+            self._arm_of[f.marker] = (self._arms.index(arm), 0 if f.marker == wa else 1)
+        self._arm_of_elbow = {e: r for r, (_, _, ea, eb, _) in enumerate(self._arms) for e in (ea, eb)}
+        self.forearm_sigma_rad = float(forearm_sigma_rad)
+        self.scapular_rhythm = float(scapular_rhythm)
+        self.fps = float(fps)
+        self.forearm_accel_rad_s2 = math.radians(forearm_accel_deg_s2)
+        self.max_forearm_sigma_rad = math.radians(max_forearm_sigma_deg)
+        self.max_hinge_sigma_rad = math.radians(max_hinge_sigma_deg)
+        self.max_forearm_stale_frames = max_forearm_stale_s * float(fps)
+        self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
+        self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
+        self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
         pairs = np.array(length_pairs, dtype=np.intp).reshape(-1, 2)
         self._pair_mask = np.zeros((m, m), dtype=bool)
         self._pair_mask[pairs[:, 0], pairs[:, 1]] = True
@@ -553,12 +772,24 @@ class Estimator:
         # per hinge: axis length, and n . (wrist centre - partner)
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
+        self.hinge_free = np.zeros(len(self._h_idx), dtype=np.int64)  # frames in a row with the axis extrapolated
+        self._hinge_free_now: set[int] = set()
         # per forearm: wrist centre along the flexion axis and distance from it
         self.fore_along = np.full(len(self._f_idx), np.nan)
         self.fore_radius = np.full(len(self._f_idx), np.nan)
+        # per arm: learned shape, flexion and supination (rad) and their velocities (rad per frame)
+        self.arm_shape: list[ForearmShape | None] = [None] * len(self._arms)
+        self.arm_angles = np.full((len(self._arms), 2), np.nan)
+        self.arm_velocity = np.full((len(self._arms), 2), np.nan)
+        self.arm_age = np.zeros(len(self._arms), dtype=np.int64)         # frames since the angles were known
+        self.arm_unmeasured = np.zeros(len(self._arms), dtype=np.int64)  # frames with neither styloid measured
+        self._arm_seen: dict[int, tuple[float, float, bool]] = {}  # this frame: arm -> (theta, psi, measured)
+        self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._arm_pinned: set[int] = set()
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
+        self._shoulder_side = np.ones(len(self._shoulder_slot))  # +1 right, -1 left (trunk x)
         self._trunk_rot: np.ndarray | None = None
 
     # ------------------------------------------------------------------ learning
@@ -581,6 +812,26 @@ class Estimator:
                 self._trunk_rot = trunk_rotation(*p[self.trunk])
             except ValueError:  # degenerate this frame: keep the last good frame
                 pass
+        self._arm_seen = {}
+        self._arm_points = {}
+        self._arm_pinned: set[int] = set()
+        for r, (wa, wb, ea, eb, sh) in enumerate(self._arms):
+            if not (ok[wa] and ok[wb] and ok[ea] and ok[eb]):
+                continue
+            frame = self._elbow_frame(r, p, ok)
+            if frame is None:
+                continue
+            angles = forearm_angles(frame, p[wa], p[wb])
+            if angles is None:
+                continue
+            theta, psi, shape = angles
+            old = self.arm_shape[r]
+            if old is None:
+                self.arm_shape[r] = shape
+            else:
+                self.arm_shape[r] = ForearmShape(*(o + self._ema * (s - o) for o, s in zip(
+                    (old.along, old.radius, old.half, old.tilt), (shape.along, shape.radius, shape.half, shape.tilt))))
+            self._arm_seen[r] = (theta, psi, True)
         if not (len(self._f_idx) or len(self._h_idx)):
             return
         # a few 3-vectors per arm: plain floats are several times faster than numpy here
@@ -618,10 +869,17 @@ class Estimator:
             # accumulated with forgetting (normal equations per shoulder, solved when needed)
             if mk < pa:  # the other marker's hinge gives the same equation (n reversed)
                 continue
-            rhs = sum(n[i] * (0.5 * (pl[mk][i] + pl[pa][i]) - pl[sh][i]) for i in range(3))
+            centre = [0.5 * (pl[mk][i] + pl[pa][i]) for i in range(3)]
+            rhs = sum(n[i] * (centre[i] - pl[sh][i]) for i in range(3))
             rt = self.trunk_rot.tolist()
             a_t = [n[0] * rt[0][j] + n[1] * rt[1][j] + n[2] * rt[2][j] for j in range(3)]
             k = self._h_shoulder_slot[r]
+            if self.scapular_rhythm > 0:  # the equation for the offset at the scapula's rest
+                if self.trunk is not None and okl[self.trunk[0]]:
+                    lateral = sum((pl[sh][i] - pl[self.trunk[0]][i]) * rt[i][0] for i in range(3))
+                    self._shoulder_side[k] = 1.0 if lateral >= 0 else -1.0
+                turn = self._scapula_turn(k, p[sh], np.array(centre))
+                a_t = (turn.T @ np.array(a_t)).tolist()
             self._piv_a[k] = self._forget * self._piv_a[k] + np.array([[a_t[i] * a_t[j] for j in range(3)] for i in range(3)])
             self._piv_b[k] = self._forget * self._piv_b[k] + np.array([rhs * a_t[i] for i in range(3)])
 
@@ -630,10 +888,35 @@ class Estimator:
         """(3, 3) trunk -> world rotation of the last frame with the trunk markers measured."""
         return np.eye(3) if self._trunk_rot is None else self._trunk_rot
 
-    def pivot_offset(self, shoulder: int) -> np.ndarray:
-        """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame."""
-        k = self._shoulder_slot[shoulder]
+    def _rest_offset(self, k: int) -> np.ndarray:
         return np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
+
+    def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
+        """(3, 3) trunk-frame rotation of the pivot offset by the scapula's upward rotation for the
+        humerus elevation (shoulder slot k, the shoulder marker and the elbow centre now): the
+        scapulohumeral rhythm, ``scapular_rhythm`` degrees per degree of elevation between
+        ``rhythm_deg`` (the acromion marker turns medially over the humeral head as the arm rises)."""
+        rt = self.trunk_rot
+        g = self._rest_offset(k)
+        u = rt.T @ (elbow_m - shoulder_m) - g
+        lu = math.sqrt(float(u @ u))
+        if not lu > 1e-9:
+            return np.eye(3)
+        elevation = math.degrees(math.acos(max(-1.0, min(1.0, -float(u[1]) / lu))))
+        lo, hi = self.rhythm_deg
+        phi = math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * self._shoulder_side[k]
+        c, s = math.cos(phi), math.sin(phi)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    def pivot_offset(self, shoulder: int, elbow_m: np.ndarray | None = None, shoulder_m: np.ndarray | None = None) -> np.ndarray:
+        """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame;
+        turned with the scapula for the humerus elevation when the elbow centre and the shoulder
+        marker are given."""
+        k = self._shoulder_slot[shoulder]
+        g = self._rest_offset(k)
+        if elbow_m is None or shoulder_m is None or self.scapular_rhythm <= 0:
+            return g
+        return self._scapula_turn(k, shoulder_m, elbow_m) @ g
 
     # ------------------------------------------------------------------ estimation
     def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
@@ -656,18 +939,115 @@ class Estimator:
             return None
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
-        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder)
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
         rows = [p[h.partner] - pivot]
         values = [-0.5 * length]
         wa, wb = h.wrists
         if ok[wa] and ok[wb]:
             rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
             values.append(self.hinge_fore[r])
+        fixed = [0]
         n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
-                       axis_prev=prev_axis)
+                       axis_prev=prev_axis, fixed=fixed)
+        if fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
+            free = self.hinge_free[r] + 1
+            arm = self._arm_of_elbow.get(k)
+            speed = abs(float(self.arm_velocity[arm][1])) * self.fps if arm is not None and np.isfinite(self.arm_velocity[arm][1]) else 0.0
+            t = free / self.fps
+            if 0.5 * self.forearm_accel_rad_s2 * t * t + 0.3 * speed * t > self.max_hinge_sigma_rad:
+                return _DROP
+            self._hinge_free_now.add(r)
         return p[h.partner] + length * n
 
+    def _elbow_frame(self, r: int, p: np.ndarray, ok: np.ndarray) -> ElbowFrame | None:
+        """Arm r's elbow frame now (the shoulder marker measured, else its last output)."""
+        _, _, ea, eb, sh = self._arms[r]
+        shoulder = p[sh] if ok[sh] else self.positions[sh]
+        if not np.all(np.isfinite(shoulder)):
+            return None
+        pivot = shoulder + self.trunk_rot @ self.pivot_offset(sh, 0.5 * (p[ea] + p[eb]), shoulder)
+        return elbow_frame(p[ea], p[eb], pivot)
+
+    def _arm_sigma(self, r: int, frames: float) -> np.ndarray:
+        """(2,) uncertainty (rad) of arm r's flexion and supination extrapolated ``frames`` ahead:
+        an unknown angular acceleration up to ``forearm_accel`` plus a share of the speed."""
+        t = frames / self.fps
+        speed = np.abs(np.nan_to_num(self.arm_velocity[r])) * self.fps
+        return 0.5 * self.forearm_accel_rad_s2 * t * t + 0.3 * speed * t
+
+    def _arm_estimate(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray):
+        """Styloid marker k from its arm's flexion and supination: fitted to the arm's measured
+        styloid marker near their prediction, or (both hidden) the prediction alone, its angular
+        velocities decaying, until the extrapolation's uncertainty passes ``max_forearm_sigma_rad``
+        (then :data:`_DROP`). None where the arm has no state (nothing learned, elbow unknown)."""
+        r, slot = self._arm_of[k]
+        if r in self._arm_points:
+            return self._arm_points[r][slot]
+        wa, wb, ea, eb, _ = self._arms[r]
+        shape = self.arm_shape[r]
+        angles, vel = self.arm_angles[r], self.arm_velocity[r]
+        if shape is None or not np.all(np.isfinite(angles)) or not (weight[ea] > 0 and weight[eb] > 0):
+            return None
+        frame = self._elbow_frame(r, p, ok)
+        if frame is None:
+            return None
+        measured = [(s, p[w]) for s, w in ((0, wa), (1, wb)) if ok[w]]
+        age = int(self.arm_age[r]) + 1  # frames since the angles were last known
+        if measured:
+            pred = angles + np.nan_to_num(vel) * min(age, 2)
+            sigma = self.forearm_sigma_rad + self._arm_sigma(r, age - 1)
+            pinned = [False]
+            theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
+                                     float(sigma[0]), float(sigma[1]), pinned=pinned)
+            if pinned[0]:
+                self._arm_pinned.add(r)
+        else:
+            unmeasured = int(self.arm_unmeasured[r]) + 1
+            if np.any(self._arm_sigma(r, unmeasured) > self.max_forearm_sigma_rad):
+                self._arm_points[r] = (_DROP, _DROP)
+                return _DROP
+            theta, psi = (float(x) for x in angles + np.nan_to_num(vel) * self._arm_decay)
+        self._arm_seen[r] = (theta, psi, bool(measured))
+        pts = forearm_markers(frame, shape, theta, psi)
+        self._arm_points[r] = pts
+        return pts[slot]
+
+    def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
+        """Carry the arms' flexion and supination to the next frame."""
+        for r, (wa, wb, ea, eb, _) in enumerate(self._arms):
+            seen = self._arm_seen.get(r)
+            if seen is None and ok[wa] and ok[wb] and np.all(np.isfinite(p[[ea, eb]])):
+                # styloids measured, an epicondyle estimated (by the hinge)
+                frame = self._elbow_frame(r, p, ok)
+                angles = None if frame is None else forearm_angles(frame, p[wa], p[wb])
+                if angles is not None:
+                    seen = (angles[0], angles[1], True)
+            measured_now = bool(ok[wa] or ok[wb])
+            self.arm_unmeasured[r] = 0 if measured_now else self.arm_unmeasured[r] + 1
+            if seen is None:  # the last angles stay, older by a frame
+                self.arm_age[r] += 1
+                continue
+            theta, psi, measured = seen
+            old = self.arm_angles[r]
+            if not (ok[wa] and ok[wb]) and r not in self._arm_pinned:
+                # a fit to one styloid that leans on the prediction: its step is no new evidence
+                # of speed (it would feed itself); the velocity decays instead
+                self.arm_velocity[r] = np.nan_to_num(self.arm_velocity[r]) * self._arm_decay
+            elif measured and np.all(np.isfinite(old)):
+                steps = self.arm_age[r] + 1
+                d = np.array([math.remainder(theta - old[0], math.tau), math.remainder(psi - old[1], math.tau)]) / steps
+                vel = self.arm_velocity[r]
+                self.arm_velocity[r] = np.where(np.isfinite(vel), vel + self._arm_beta * (d - vel), d)
+            elif measured:
+                self.arm_velocity[r] = 0.0
+            self.arm_angles[r] = (theta, psi)
+            self.arm_age[r] = 0
+
     def _forearm(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray) -> np.ndarray | None:
+        if k in self._arm_of:
+            est = self._arm_estimate(k, p, ok, weight)
+            if est is not None:
+                return est
         f = self.forearms[k]
         r = self._f_row[k]
         ea, eb = f.elbow
@@ -687,11 +1067,11 @@ class Estimator:
                base: np.ndarray) -> tuple[np.ndarray | None, int]:
         """Hinge or rigid estimate of marker k as its method allows, and the method used."""
         method = self.methods[k]
-        if method == Method.HINGE:
-            est = (self._hinge(k, p, ok, weight, prior, base) if k in self.hinges
+        if method in (Method.HINGE, Method.FOREARM):
+            est = (self._hinge(k, p, ok, weight, prior, base) if method == Method.HINGE
                    else self._forearm(k, p, ok, weight, prior))
             if est is not None:
-                return est, Method.HINGE
+                return est, method
             method = Method.RIGID
         if method == Method.RIGID:
             est = self._rigid(k, p, weight, prior)
@@ -762,6 +1142,13 @@ class Estimator:
         hidden_frames = np.where(ok, 0, self.hidden_frames + 1)
         alone = self._has_partner & ~(self._partners & ok[None, :]).any(axis=1)
         unsupported_frames = np.where(~ok & alone, self.unsupported_frames + 1, 0)
+        if self._arms:  # a lost styloid comes back from the other, measured, while its forearm is known
+            for r, (wa, wb, _, _, _) in enumerate(self._arms):
+                if ok[wa] != ok[wb] and self.arm_age[r] <= self.max_forearm_stale_frames and self.arm_shape[r] is not None:
+                    has_base[wb if ok[wa] else wa] = True
+        for mk, pa, sh, wa, wb in self._h_idx.tolist():  # a lost epicondyle where the hinge pins it
+            if not ok[mk] and ok[pa] and ok[sh] and ok[wa] and ok[wb] and self.methods[mk] == Method.HINGE:
+                has_base[mk] = True
         hidden = (~ok & has_base & (hidden_frames <= self.max_hidden_frames)
                   & (unsupported_frames <= self.max_unsupported_frames))
         used = np.full(self.n_markers, -1, dtype=np.int8)
@@ -785,6 +1172,9 @@ class Estimator:
                         est, how = self._model(k, p, ok, weight, prior[k], prev)
                     except np.linalg.LinAlgError:  # degenerate geometry (coincident markers)
                         est = None
+                if est is _DROP:
+                    hidden[k] = False
+                    continue
                 if est is None or not np.all(np.isfinite(est)):
                     if self.methods[k] == Method.CONSTANT_VELOCITY:
                         est, how = constant_velocity(prev[k], self.velocity[k]), Method.CONSTANT_VELOCITY
@@ -814,6 +1204,12 @@ class Estimator:
         else:
             p[~ok] = np.nan
 
+        if len(self._h_idx):
+            self.hinge_free = np.array([self.hinge_free[r] + 1 if r in self._hinge_free_now else 0
+                                        for r in range(len(self._h_idx))], dtype=np.int64)
+            self._hinge_free_now = set()
+        if self._arms:
+            self._arm_update(p, ok)
         known = ok | hidden
         # a reappearing marker keeps the velocity of its estimate (its measured jump is estimate error)
         keep_v = ok & ~self.measured & has_base
@@ -829,147 +1225,51 @@ class Estimator:
 
 
 # ---------------------------------------------------------------------------------------------
-# Recommended configuration (docs/HIDDEN_MARKERS.md). '*' is a side letter (L or R), '#' the
-# other side's letter; the tables hold for both arms.
-
-#: Equation 6 weights S: marker -> {neighbour: S}.
-WEIGHTS: dict[str, dict[str, float]] = {
-    "MB": {"MP": 1.0, "MLS": 0.25, "MRS": 0.25},
-    "MP": {"MB": 1.0, "MLS": 0.25, "MRS": 0.25},
-    "M*S": {"MB": 1.0, "MP": 0.5, "M*E1": 0.25, "M*E2": 0.25},
-    "M*E1": {"M*E2": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
-    "M*E2": {"M*E1": 1.0, "M*S": 1.0, "M*W1": 0.25, "M*W2": 0.25},
-    "M*W1": {"M*W2": 4.0, "M*E1": 0.5, "M*E2": 0.5},
-    "M*W2": {"M*W1": 4.0, "M*E1": 0.5, "M*E2": 0.5},
-    "M*H": {"M#H": 1.0},
-}
-
-#: Rigid groups, in the order a hidden marker tries them.
-SEGMENTS: tuple[tuple[str, ...], ...] = (
-    ("MB", "MP", "MLS", "MRS"),
-    ("M*E1", "M*E2", "M*W1", "M*W2"),
-    ("M*S", "M*E1", "M*E2", "M*W1", "M*W2"),
-    ("MLH", "MRH"),
-)
-
-#: The estimator of each marker.
-METHODS: dict[str, Method] = {
-    "MB": Method.RIGID, "MP": Method.RIGID, "M*S": Method.NEIGHBOURS,
-    "M*E1": Method.HINGE, "M*E2": Method.HINGE, "M*W1": Method.HINGE, "M*W2": Method.HINGE,
-    "M*H": Method.NEIGHBOURS,
-}
-
-#: Near-rigid pairs whose distance is checked for drift.
-LENGTH_PAIRS: tuple[tuple[str, str], ...] = (
-    ("MB", "MP"), ("MLH", "MRH"), ("M*E1", "M*E2"), ("M*W1", "M*W2"),
-    ("M*E1", "M*W1"), ("M*E1", "M*W2"), ("M*E2", "M*W1"), ("M*E2", "M*W2"),
-    ("MB", "M*S"), ("MP", "M*S"),
-)
-
-#: Time constant (s) of the own relative velocity kept in free directions of a fit
-#: (``velocity_decay_s``): wrists swing with the forearm, elbows move with the humerus.
-VELOCITY_DECAY_S: dict[str, float] = {"M*E1": 0.0, "M*E2": 0.0, "M*H": 0.0}
-DEFAULT_VELOCITY_DECAY_S = 0.15
-
-#: Longest occlusion an estimate is reported for, per estimator (seconds).
-MAX_HIDDEN_S: dict[Method, float] = {
-    Method.CONSTANT_VELOCITY: 0.5, Method.NEIGHBOURS: 2.0, Method.RIGID: 5.0, Method.HINGE: 20.0,
-}
-
-SIDE_LETTERS = ("L", "R")
+# Configuration from the marker set (content/markersets/*.yaml, ``hidden_markers:``)
 
 
-def _expand(pattern: str) -> list[tuple[str, str]]:
-    """'M*E1' -> [(side, 'MLE1'), (side, 'MRE1')]; a name without '*' or '#' -> [('', name)]."""
-    if "*" not in pattern and "#" not in pattern:
-        return [("", pattern)]
-    out = []
-    for s, o in zip(SIDE_LETTERS, SIDE_LETTERS[::-1]):
-        out.append((s, pattern.replace("*", s).replace("#", o)))
-    return out
-
-
-def _side(pattern: str, side: str) -> str:
-    other = {"L": "R", "R": "L", "": ""}[side]
-    return pattern.replace("*", side).replace("#", other)
-
-
-def default_config(markerset, *, method: Method | str | None = None, own_velocity: bool = False) -> dict:
-    """Keyword arguments of :class:`Estimator` for a marker set: ``Estimator(**default_config(ms), fps=...)``.
-
-    ``upper_limb_seated`` markers get the measured tables above (:data:`WEIGHTS`,
-    :data:`SEGMENTS`, :data:`METHODS`, :data:`LENGTH_PAIRS`, :data:`MAX_HIDDEN_S`); markers of
-    other sets get equation 6 with weight 1 for the markers of their own ``segment``.
+def estimator_config(markerset, *, method: Method | str | None = None, own_velocity: bool = False) -> dict:
+    """Keyword arguments of :class:`Estimator` from a marker set's ``hidden_markers:`` section.
 
     Args:
-        markerset: a :class:`~tracking.markerset.MarkerSet` (names, segments).
-        method: one estimator for every marker instead of the recommended ones (comparisons).
+        markerset: a :class:`~tracking.markerset.MarkerSet` (its ``hidden`` configuration and
+            body ``segments``).
+        method: one estimator for every marker instead of the file's choice (comparisons).
         own_velocity: equation 6 as the paper writes it (with the marker's own last velocity).
     """
+    from tracking.markerset import default_hidden
+
     names = list(markerset.names)
     index = {n: i for i, n in enumerate(names)}
+    cfg = markerset.hidden if markerset.hidden is not None else default_hidden(names, markerset.segments)
     m = len(names)
-    seg = np.array(markerset.segments)
-    weights = ((seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)).astype(np.float64)
-    methods = [Method.NEIGHBOURS] * m
-    for pattern, row in WEIGHTS.items():
-        for side, name in _expand(pattern):
-            if name in index and all(_side(k, side) in index for k in row):
-                i = index[name]
-                weights[i] = 0.0
-                for k, s in row.items():
-                    weights[i, index[_side(k, side)]] = s
-    for pattern, meth in METHODS.items():
-        for _, name in _expand(pattern):
-            if name in index:
-                methods[index[name]] = meth
-    segments = []
-    for group in SEGMENTS:
-        for side in (SIDE_LETTERS if any("*" in g for g in group) else ("",)):
-            names_g = [_side(g, side) for g in group]
-            if all(n in index for n in names_g):
-                segments.append(tuple(index[n] for n in names_g))
-    hinges = []
-    for side in SIDE_LETTERS:
-        arm = [f"M{side}{k}" for k in ("S", "E1", "E2", "W1", "W2")]
-        if all(n in index for n in arm):
-            s, e1, e2, w1, w2 = (index[n] for n in arm)
-            hinges += [Hinge(e1, e2, s, (w1, w2)), Hinge(e2, e1, s, (w1, w2))]
-    forearms = []
-    for side in SIDE_LETTERS:
-        arm = [f"M{side}{k}" for k in ("E1", "E2", "W1", "W2")]
-        if all(n in index for n in arm):
-            e1, e2, w1, w2 = (index[n] for n in arm)
-            forearms += [Forearm(w1, w2, (e1, e2)), Forearm(w2, w1, (e1, e2))]
-    hinge_markers = {h.marker for h in hinges} | {f.marker for f in forearms}
-    methods = [Method.RIGID if (x == Method.HINGE and i not in hinge_markers) else x for i, x in enumerate(methods)]
-    pairs = []
-    for a, b in LENGTH_PAIRS:
-        for side in (SIDE_LETTERS if "*" in a + b else ("",)):
-            na, nb = _side(a, side), _side(b, side)
-            if na in index and nb in index:
-                pairs.append((index[na], index[nb]))
+    weights = np.zeros((m, m))
+    for name, row in cfg.weights.items():
+        for other, s in row.items():
+            weights[index[name], index[other]] = s
+    methods = [Method.parse(e) for e in cfg.estimators]
     if method is not None:
         methods = [Method.parse(method)] * m
-    max_hidden = [MAX_HIDDEN_S[Method(x)] for x in methods]
-    decay = [DEFAULT_VELOCITY_DECAY_S] * m
-    for pattern, tau in VELOCITY_DECAY_S.items():
-        for _, name in _expand(pattern):
-            if name in index:
-                decay[index[name]] = tau
-    trunk = None
-    if all(n in index for n in ("MB", "MP", "MLH", "MRH")):
-        trunk = (index["MB"], index["MP"], index["MLH"], index["MRH"])
+    hinges = []
+    for a, b, shoulder, wa, wb in cfg.elbows:
+        a, b, s, wa, wb = (index[n] for n in (a, b, shoulder, wa, wb))
+        hinges += [Hinge(a, b, s, (wa, wb)), Hinge(b, a, s, (wa, wb))]
+    forearms = []
+    for wa, wb, ea, eb in cfg.forearms:
+        wa, wb, ea, eb = (index[n] for n in (wa, wb, ea, eb))
+        forearms += [Forearm(wa, wb, (ea, eb)), Forearm(wb, wa, (ea, eb))]
     return {
         "methods": methods,
-        "trunk": trunk,
-        "body_segments": list(markerset.segments),
         "weights": weights,
-        "segments": segments,
+        "segments": [tuple(index[n] for n in g) for g in cfg.rigid_groups],
         "hinges": hinges,
         "forearms": forearms,
-        "length_pairs": pairs,
+        "length_pairs": [(index[a], index[b]) for a, b in cfg.length_pairs],
+        "trunk": None if cfg.trunk is None else tuple(index[n] for n in cfg.trunk),
+        "body_segments": list(markerset.segments),
         "own_velocity": own_velocity,
-        "max_hidden_s": max_hidden,
-        "velocity_decay_s": decay,
+        "tolerance_m": cfg.drift_tolerance_m,
+        "max_hidden_s": [cfg.max_hidden_s[x.name.lower()] for x in methods],
+        "max_unsupported_s": cfg.max_unsupported_s,
+        "velocity_decay_s": list(cfg.velocity_decay_s),
     }

@@ -13,7 +13,7 @@ import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Sequence
 
 import numpy as np
 import pydantic
@@ -135,6 +135,78 @@ class _IdentificationSpec(StrictModel):
     rules: list[_RuleSpec] = pydantic.Field(min_length=1)
 
 
+ESTIMATORS = ("constant_velocity", "neighbours", "rigid", "hinge", "forearm")
+_Estimator = Literal["constant_velocity", "neighbours", "rigid", "hinge", "forearm"]
+_PATTERN = r"^[A-Za-z*#][A-Za-z0-9_*#]*$"
+
+
+class _HiddenMarkerSpec(StrictModel):
+    estimator: _Estimator = pydantic.Field(description="how the marker is estimated while hidden")
+    neighbours: dict[str, float] = pydantic.Field(
+        default={}, description="equation 6 weights S_i: neighbour marker -> weight (> 0)"
+    )
+    velocity_decay_s: float | None = pydantic.Field(
+        default=None, ge=0, le=10, description="overrides hidden_markers.velocity_decay_s for this marker"
+    )
+
+    @pydantic.field_validator("neighbours")
+    @classmethod
+    def _positive(cls, v: dict[str, float]) -> dict[str, float]:
+        for name, s in v.items():
+            if not (s > 0 and s < 1e6):
+                raise ValueError(f"weight of {name!r} is {s}: give a positive number")
+        return v
+
+
+class _ElbowSpec(StrictModel):
+    markers: tuple[str, str] = pydantic.Field(description="the two epicondyle markers (on the flexion axis)")
+    shoulder: str = pydantic.Field(description="the acromion marker of that arm")
+    wrist: tuple[str, str] = pydantic.Field(description="the two styloid markers of that forearm")
+
+
+class _ForearmSpec(StrictModel):
+    markers: tuple[str, str] = pydantic.Field(description="the two styloid markers")
+    elbow: tuple[str, str] = pydantic.Field(description="the two epicondyle markers of that arm")
+
+
+class _TrunkSpec(StrictModel):
+    upper: str
+    lower: str
+    left: str
+    right: str
+
+
+class _LimitsSpec(StrictModel):
+    length_pairs: list[tuple[str, str]] = pydantic.Field(
+        default=[], description="near-rigid marker pairs whose distance is checked for drift"
+    )
+    drift_tolerance_mm: float = pydantic.Field(default=30.0, gt=0, le=500)
+    max_hidden_s: dict[_Estimator, float] = pydantic.Field(
+        default={}, description="longest occlusion reported, per estimator (seconds)"
+    )
+    max_unsupported_s: float = pydantic.Field(default=0.5, gt=0, le=60)
+
+    @pydantic.field_validator("max_hidden_s")
+    @classmethod
+    def _times(cls, v: dict[str, float]) -> dict[str, float]:
+        for name, s in v.items():
+            if not 0 < s <= 600:
+                raise ValueError(f"max_hidden_s of {name} is {s}: give seconds in (0, 600]")
+        return v
+
+
+class _HiddenSpec(StrictModel):
+    markers: dict[str, _HiddenMarkerSpec] = pydantic.Field(
+        default={}, description="per marker (or '*' pattern): estimator and equation 6 weights"
+    )
+    rigid_groups: list[list[str]] = pydantic.Field(default=[], description="groups treated as rigid, in order")
+    trunk: _TrunkSpec | None = None
+    elbows: list[_ElbowSpec] = []
+    forearms: list[_ForearmSpec] = []
+    velocity_decay_s: float = pydantic.Field(default=0.15, ge=0, le=10)
+    limits: _LimitsSpec = _LimitsSpec()
+
+
 class _MarkerSetSpec(StrictModel):
     name: str
     description: str = ""
@@ -143,6 +215,7 @@ class _MarkerSetSpec(StrictModel):
     colours: dict[str, tuple[int, int, int]] = {}
     markers: list[_MarkerSpec] = pydantic.Field(min_length=2)
     identification: _IdentificationSpec | None = None
+    hidden_markers: _HiddenSpec | None = None
 
     @pydantic.field_validator("colours")
     @classmethod
@@ -218,6 +291,46 @@ class IdentificationRules:
 
 
 @dataclass(frozen=True, slots=True)
+class HiddenMarkerConfig:
+    """How hidden markers are estimated and when an estimate is dropped (``hidden_markers:``).
+
+    Marker names throughout, side wildcards expanded; :mod:`tracking.hidden` turns them into
+    indices. A marker the file does not configure gets equation 6 (``neighbours``) with weight 1
+    for every other marker of its body segment.
+
+    Attributes:
+        estimators: (M,) estimator name of each marker, one of :data:`ESTIMATORS`.
+        weights: marker -> {neighbour: S}, the equation 6 weights.
+        velocity_decay_s: (M,) time constant of the own relative velocity kept in free directions.
+        rigid_groups: groups of markers treated as rigid, in the order a hidden marker tries them.
+        trunk: (upper, lower, left, right) markers of the trunk frame, or None.
+        elbows: (marker a, marker b, shoulder, wrist a, wrist b) per elbow.
+        forearms: (styloid a, styloid b, epicondyle a, epicondyle b) per forearm.
+        length_pairs: near-rigid pairs checked for drift.
+        drift_tolerance_m: allowed excursion beyond the learned distance range.
+        max_hidden_s: estimator -> longest occlusion reported (seconds).
+        max_unsupported_s: longest time an estimate is reported with no marker of its body segment
+            measured.
+    """
+
+    estimators: tuple[str, ...]
+    weights: dict[str, dict[str, float]]
+    velocity_decay_s: tuple[float, ...]
+    rigid_groups: tuple[tuple[str, ...], ...]
+    trunk: tuple[str, str, str, str] | None
+    elbows: tuple[tuple[str, str, str, str, str], ...]
+    forearms: tuple[tuple[str, str, str, str], ...]
+    length_pairs: tuple[tuple[str, str], ...]
+    drift_tolerance_m: float
+    max_hidden_s: dict[str, float]
+    max_unsupported_s: float
+
+
+#: Longest occlusion reported per estimator where the marker set says nothing (seconds).
+DEFAULT_MAX_HIDDEN_S = {"constant_velocity": 0.5, "neighbours": 2.0, "rigid": 5.0, "hinge": 20.0, "forearm": 20.0}
+
+
+@dataclass(frozen=True, slots=True)
 class MarkerSet:
     """A validated marker set.
 
@@ -231,6 +344,8 @@ class MarkerSet:
         soft_tissue_m: skin/soft-tissue thickness between bone landmark and ball surface.
         identification: rules for identifying the markers in the reference pose, or None if the
             marker set has none.
+        hidden: how hidden markers are estimated (every marker set has one: without
+            ``hidden_markers:`` equation 6 with weight 1 for the markers of the same segment).
     """
 
     name: str
@@ -241,6 +356,7 @@ class MarkerSet:
     radius_m: float
     soft_tissue_m: float
     identification: IdentificationRules | None = None
+    hidden: HiddenMarkerConfig | None = None
 
     @property
     def n_markers(self) -> int:
@@ -308,6 +424,107 @@ def load_markerset(name_or_path: str | Path = "upper_limb_seated") -> MarkerSet:
         radius_m=spec.marker_diameter_mm / 2000.0,
         soft_tissue_m=spec.soft_tissue_mm / 1000.0,
         identification=None if spec.identification is None else _identification(path, spec.identification, names),
+        hidden=_hidden(path, spec, names),
+    )
+
+
+def default_hidden(names: Sequence[str], segments: Sequence[str]) -> HiddenMarkerConfig:
+    """The configuration of a marker set without ``hidden_markers:``: equation 6, every marker of
+    the same body segment a neighbour of weight 1, no rigid groups, no length checks."""
+    weights = {n: {o: 1.0 for o, so in zip(names, segments) if so == s and o != n} for n, s in zip(names, segments)}
+    return HiddenMarkerConfig(
+        estimators=("neighbours",) * len(names), weights={n: w for n, w in weights.items() if w},
+        velocity_decay_s=(0.15,) * len(names), rigid_groups=(), trunk=None, elbows=(), forearms=(),
+        length_pairs=(), drift_tolerance_m=0.03, max_hidden_s=dict(DEFAULT_MAX_HIDDEN_S), max_unsupported_s=0.5,
+    )
+
+
+def _hidden(path: Path, spec: _MarkerSetSpec, names: list[str]) -> HiddenMarkerConfig:
+    """Expand the side wildcards of ``hidden_markers:`` and check every name and estimator."""
+    segments = [m.segment for m in spec.markers]
+    if spec.hidden_markers is None:
+        return default_hidden(names, segments)
+    h = spec.hidden_markers
+    known = set(names)
+    letters = list(spec.identification.sides) if spec.identification is not None else []
+
+    def sides_of(where: str, patterns: Sequence[str]) -> list[str]:
+        """The side letters a group of patterns expands over ('' if it has no wildcard)."""
+        if not any("*" in p or "#" in p for p in patterns):
+            return [""]
+        if not letters:
+            raise ContentError(f"{path}: hidden_markers.{where}: '*' needs identification.sides (e.g. {{L: left, R: right}})")
+        if any("#" in p for p in patterns) and len(letters) != 2:
+            raise ContentError(f"{path}: hidden_markers.{where}: '#' (the other side) needs exactly two sides")
+        return letters
+
+    def expand(where: str, pattern: str, side: str) -> str:
+        other = "".join(s for s in letters if s != side) if side else ""
+        name = pattern.replace("*", side).replace("#", other)
+        if not re.fullmatch(_PATTERN, pattern) or name not in known:
+            raise ContentError(f"{path}: hidden_markers.{where}: unknown marker {name!r}; the markers are {', '.join(names)}")
+        return name
+
+    def groups(where: str, patterns: Sequence[str]) -> list[tuple[str, ...]]:
+        out = []
+        for side in sides_of(where, patterns):
+            group = tuple(expand(where, p, side) for p in patterns)
+            if len(set(group)) != len(group):
+                raise ContentError(f"{path}: hidden_markers.{where}: a marker appears twice in {list(group)}")
+            out.append(group)
+        return out
+
+    estimators = ["neighbours"] * len(names)
+    decay = [h.velocity_decay_s] * len(names)
+    weights: dict[str, dict[str, float]] = {}
+    set_by: dict[str, str] = {}
+    for pattern, m in h.markers.items():
+        where = f"markers.{pattern}"
+        for side in sides_of(where, [pattern, *m.neighbours]):
+            name = expand(where, pattern, side)
+            if name in set_by:
+                raise ContentError(f"{path}: hidden_markers.{where}: {name} is already configured by {set_by[name]!r}")
+            set_by[name] = pattern
+            row = {expand(f"{where}.neighbours", k, side): s for k, s in m.neighbours.items()}
+            if name in row:
+                raise ContentError(f"{path}: hidden_markers.{where}.neighbours: {name} cannot be its own neighbour")
+            i = names.index(name)
+            estimators[i] = m.estimator
+            if row:
+                weights[name] = row
+            if m.velocity_decay_s is not None:
+                decay[i] = m.velocity_decay_s
+    rigid = [g for i, pats in enumerate(h.rigid_groups) for g in groups(f"rigid_groups.{i}", pats)]
+    if any(len(g) < 2 for g in rigid):
+        raise ContentError(f"{path}: hidden_markers.rigid_groups: a rigid group needs at least two markers")
+    elbows = [g for i, e in enumerate(h.elbows) for g in groups(f"elbows.{i}", [*e.markers, e.shoulder, *e.wrist])]
+    forearms = [g for i, f in enumerate(h.forearms) for g in groups(f"forearms.{i}", [*f.markers, *f.elbow])]
+    pairs = [g for i, p in enumerate(h.limits.length_pairs) for g in groups(f"limits.length_pairs.{i}", p)]
+    trunk = None
+    if h.trunk is not None:
+        trunk = groups("trunk", [h.trunk.upper, h.trunk.lower, h.trunk.left, h.trunk.right])[0]
+    in_elbow = {n for e in elbows for n in e[:2]}
+    in_forearm = {n for f in forearms for n in f[:2]}
+    for name, est in zip(names, estimators):
+        if est == "hinge" and name not in in_elbow:
+            raise ContentError(f"{path}: hidden_markers.markers.{set_by[name]}: estimator hinge needs {name} in an 'elbows' entry")
+        if est == "forearm" and name not in in_forearm:
+            raise ContentError(f"{path}: hidden_markers.markers.{set_by[name]}: estimator forearm needs {name} in a 'forearms' entry")
+    # a marker the file does not configure: equation 6 over its own body segment
+    fallback = default_hidden(names, segments).weights
+    weights.update({n: row for n, row in fallback.items() if n not in set_by})
+    return HiddenMarkerConfig(
+        estimators=tuple(estimators),
+        weights=weights,
+        velocity_decay_s=tuple(decay),
+        rigid_groups=tuple(rigid),
+        trunk=trunk,
+        elbows=tuple(elbows),
+        forearms=tuple(forearms),
+        length_pairs=tuple(pairs),
+        drift_tolerance_m=h.limits.drift_tolerance_mm / 1000.0,
+        max_hidden_s={**DEFAULT_MAX_HIDDEN_S, **h.limits.max_hidden_s},
+        max_unsupported_s=h.limits.max_unsupported_s,
     )
 
 

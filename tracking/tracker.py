@@ -151,7 +151,7 @@ class Tracker:
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, table: ColourTable | None = None,
                  params: TrackerParams = TrackerParams(), fps: float = 30.0):
-        from tracking.hidden import Estimator, default_config
+        from tracking.hidden import Estimator, estimator_config
         from tracking.identify import Identifier
 
         self.cameras = tuple(cameras)
@@ -166,15 +166,15 @@ class Tracker:
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
-        self._estimator_factory = lambda: Estimator(**default_config(markerset), fps=self.fps)
+        self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
         self.times = StageTimes(STEP_STAGES)
         m = markerset.n_markers
         # pairs of markers whose distance is (nearly) constant: markers of one segment, and the
-        # near-rigid pairs across a joint that the hidden-marker model knows (elbow to wrist)
+        # near-rigid pairs across a joint that the marker set names (hidden_markers.limits)
         seg = np.array(markerset.segments)
         self._same_segment = (seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)
-        for i, j in default_config(markerset)["length_pairs"]:
+        for i, j in estimator_config(markerset)["length_pairs"]:
             self._same_segment[i, j] = self._same_segment[j, i] = True
         self.reset()
 

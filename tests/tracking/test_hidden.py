@@ -11,9 +11,15 @@ from hypothesis import strategies as st
 from tracking.hidden import (
     Estimator,
     Forearm,
+    Hinge,
     Method,
+    ForearmShape,
     constant_velocity,
-    default_config,
+    elbow_frame,
+    fit_forearm,
+    forearm_angles,
+    forearm_markers,
+    estimator_config,
     hinge_axis,
     kabsch,
     neighbour_motion,
@@ -168,6 +174,120 @@ def test_wrist_centre_follows_flexion_and_supination(flexion, supination):
     np.testing.assert_allclose(2 * wc - w2, w1, atol=1e-9)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-2.5, 2.5), st.floats(-3.0, 3.0), st.integers(0, 1000))
+def test_forearm_angles_invert_forearm_markers(theta, psi, seed):
+    rng = np.random.default_rng(seed)
+    e1 = rng.normal(0.0, 0.2, 3)
+    e2 = e1 + 0.1 * _unit_vec(rng.normal(size=3))
+    frame = elbow_frame(e1, e2, e1 + 0.3 * _unit_vec(rng.normal(size=3)))
+    if frame is None:
+        return
+    shape = ForearmShape(along=0.004, radius=0.24, half=0.05, tilt=0.05)
+    wa, wb = forearm_markers(frame, shape, theta, psi)
+    th, ps, learned = forearm_angles(frame, wa, wb)
+    assert math.remainder(th - theta, math.tau) == pytest.approx(0.0, abs=1e-9)
+    assert math.remainder(ps - psi, math.tau) == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose([learned.along, learned.radius, learned.half, learned.tilt],
+                               [shape.along, shape.radius, shape.half, shape.tilt], atol=1e-9)
+
+
+def _unit_vec(v):
+    return v / np.linalg.norm(v)
+
+
+def test_fit_forearm_finds_both_angles_from_one_styloid_and_keeps_the_prediction_where_confounded():
+    frame = elbow_frame(np.array([0.055, 0.0, 0.0]), np.array([-0.055, 0.0, 0.0]), np.array([0.0, 0.3, 0.0]))
+    shape = ForearmShape(0.0, 0.24, 0.05, 0.0)
+    # styloid line across the flexion axis (thumb up): one styloid fixes flexion and supination
+    wa, _ = forearm_markers(frame, shape, 1.2, 1.5)
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.17, 1.47, 1.0, 1.0)  # weak prior: the styloid alone
+    assert th == pytest.approx(1.2, abs=1e-4) and ps == pytest.approx(1.5, abs=1e-3)
+    # a firm prior (0.03 rad against 2 mm: a styloid only 5 cm off the axis) smooths supination
+    # between the prediction and the styloid; flexion (24 cm lever) still follows the styloid
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.17, 1.47, 0.03, 0.03)
+    assert th == pytest.approx(1.2, abs=0.002) and 1.47 < ps < 1.5
+    # styloid line along the flexion axis (palm up): the styloid moves by R dtheta + half dpsi, so a
+    # supination the prediction does not know is read as a little flexion, not the other way round
+    wa, _ = forearm_markers(frame, shape, 1.2, 0.0)
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.2, 0.1, 0.03, 0.03)
+    assert abs(th - 1.2) < 0.03 and abs(ps) < 0.1
+
+
+def forearm_run(measured_rows, n=60, fps=30.0, **kw):
+    """Shoulder, elbows and styloids (markers 0-4) of an arm flexing and supinating; returns
+    (truth, positions, status) with the rows of ``measured_rows`` hidden as given."""
+    truth = []
+    for i in range(n):
+        t = i / fps
+        e1, e2, w1, w2 = forearm_pose(0.4 + 0.8 * t, 1.3 * math.sin(1.5 * t))
+        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+    truth = np.array(truth)
+    cfg = dict(methods=[Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+               weights=np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+               hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+               forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=fps, scapular_rhythm=0.0)
+    cfg.update(kw)
+    p, s = run(Estimator(**cfg), truth, measured_rows, noise_m=0.0005)
+    return truth, p, s
+
+
+def test_forearm_estimator_follows_flexion_and_supination_with_one_styloid_hidden():
+    measured = np.ones((60, 5), dtype=bool)
+    measured[15:, 4] = False
+    truth, p, s = forearm_run(measured)
+    assert (s[15:, 4] == ESTIMATED).all()
+    err = np.linalg.norm(p[15:, 4] - truth[15:, 4], axis=1)
+    # supination up to 110 deg/s, through palm up and down (where one styloid cannot tell
+    # supination from flexion): no runaway, a few millimetres
+    assert err.mean() < 0.005 and err.max() < 0.02, (err.mean(), err.max())
+
+
+def test_forearm_with_both_styloids_hidden_is_dropped_when_its_turn_is_guesswork():
+    measured = np.ones((60, 5), dtype=bool)
+    measured[20:50, 3:] = False
+    truth, p, s = forearm_run(measured)
+    assert (s[20:22, 3:] == ESTIMATED).all()  # a short gap: extrapolated
+    assert (s[35:50, 3:] == LOST).all()       # the forearm keeps turning: lost, not a guess
+    assert (s[50:, 3:] == MEASURED).all()
+
+
+def test_a_lost_styloid_comes_back_from_the_other():
+    measured = np.ones((60, 5), dtype=bool)
+    measured[20:32, 3:] = False  # both hidden: lost
+    measured[32:, 4] = False     # one styloid back: the other is estimated again
+    truth, p, s = forearm_run(measured)
+    assert (s[30:32, 4] == LOST).all()
+    assert (s[33:, 4] == ESTIMATED).all()
+    assert np.linalg.norm(p[40:, 4] - truth[40:, 4], axis=1).max() < 0.015
+
+
+def test_the_shoulder_pivot_turns_with_the_scapula_when_the_arm_rises():
+    """Reach of the simulated patient (truth from the body model): the inner elbow marker hidden
+    whenever the arm is raised; the scapulohumeral rhythm keeps the hinge's humerus condition."""
+    from tracking.angles import joint_angles
+    from tracking.sim.body import BodyDimensions, BodyModel
+    from tracking.sim.motions import load_motion
+
+    ms = load_markerset("upper_limb_seated")
+    dims = BodyDimensions.from_percentile(50, "female")
+    body, motion = BodyModel(dims, ms), load_motion("reach", dims)
+    fps = 15.0
+    truth = np.array([body.markers_m(motion.pose_at(i / fps)) for i in range(int(5.0 * fps))])
+    k = ms.index("MRE2")
+    elevation = joint_angles(truth, ms.names)["right_shoulder_elevation"]
+    measured = np.ones(truth.shape[:2], dtype=bool)
+    measured[:, k] = elevation < 25.0
+    assert (~measured[:, k]).sum() > 10
+    errs = {}
+    for rhythm in (0.0, 0.5):
+        est = Estimator(**{**estimator_config(ms), "scapular_rhythm": rhythm}, fps=fps)
+        p, s = run(est, truth, measured, noise_m=0.0005)
+        hid = ~measured[:, k]
+        errs[rhythm] = np.linalg.norm(p[hid, k] - truth[hid, k], axis=1).mean()
+    assert errs[0.5] < 0.006 and errs[0.5] < 0.6 * errs[0.0], errs
+
+
 # ---------------------------------------------------------------------------------- the Estimator
 
 def rigid_estimator(method, **kw):
@@ -288,9 +408,9 @@ def test_configuration_errors():
 
 # ---------------------------------------------------------------------------------- configuration
 
-def test_default_config_for_the_seed_marker_set():
+def test_config_of_the_seed_marker_set_from_its_yaml():
     ms = load_markerset("upper_limb_seated")
-    cfg = default_config(ms)
+    cfg = estimator_config(ms)
     m = ms.n_markers
     w = cfg["weights"]
     assert w.shape == (m, m) and np.all(np.diag(w) == 0)
@@ -299,26 +419,100 @@ def test_default_config_for_the_seed_marker_set():
     perm = [ms.index(mirror[n]) for n in ms.names]
     np.testing.assert_array_equal(w, w[np.ix_(perm, perm)])  # both arms alike
     assert all(w[i].sum() > 0 for i in range(m))             # every marker has neighbours
+    assert w[ms.index("MRW1"), ms.index("MRW2")] == 4.0 and w[ms.index("MRW1"), ms.index("MRE1")] == 0.5
     methods = cfg["methods"]
-    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.HINGE
+    assert methods[ms.index("MRE2")] == Method.HINGE and methods[ms.index("MRW1")] == Method.FOREARM
     assert {f.marker for f in cfg["forearms"]} == {ms.index(n) for n in ("MLW1", "MLW2", "MRW1", "MRW2")}
     assert all(isinstance(f, Forearm) for f in cfg["forearms"])
     assert {h.marker for h in cfg["hinges"]} == {ms.index(n) for n in ("MLE1", "MLE2", "MRE1", "MRE2")}
+    assert (ms.index("MRE1"), ms.index("MRW2")) in cfg["length_pairs"]
+    assert cfg["tolerance_m"] == pytest.approx(0.03)
     Estimator(**cfg, fps=15.0)
-    eq5 = default_config(ms, method="constant_velocity")
+    eq5 = estimator_config(ms, method="constant_velocity")
     assert set(eq5["methods"]) == {Method.CONSTANT_VELOCITY}
 
 
-def test_default_config_for_another_marker_set_uses_its_segments():
-    class Tiny:
-        names = ("A", "B", "C")
-        segments = ("arm", "arm", "leg")
+TINY_SET = """
+name: tiny
+marker_diameter_mm: 40
+markers:
+  - {name: A, colour: [255, 0, 0], segment: arm}
+  - {name: B, colour: [0, 255, 0], segment: arm}
+  - {name: C, colour: [0, 0, 255], segment: arm}
+  - {name: D, colour: [255, 255, 0], segment: leg}
+"""
 
-    cfg = default_config(Tiny())
-    np.testing.assert_array_equal(cfg["weights"], [[0, 1, 0], [1, 0, 0], [0, 0, 0]])
+
+def write_set(tmp_path, text):
+    path = tmp_path / "tiny.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_a_marker_set_without_hidden_markers_gets_equation_6_on_its_segments(tmp_path):
+    ms = load_markerset(write_set(tmp_path, TINY_SET))
+    cfg = estimator_config(ms)
+    np.testing.assert_array_equal(cfg["weights"], [[0, 1, 1, 0], [1, 0, 1, 0], [1, 1, 0, 0], [0, 0, 0, 0]])
     assert set(cfg["methods"]) == {Method.NEIGHBOURS} and cfg["hinges"] == cfg["forearms"] == []
-    assert cfg["trunk"] is None
+    assert cfg["trunk"] is None and cfg["length_pairs"] == []
     Estimator(**cfg)
+
+
+def test_another_marker_set_chooses_its_own_estimators(tmp_path):
+    """A marker set file decides estimators, weights, rigid groups and limits; the Estimator
+    built from it behaves accordingly (a hidden marker follows its rigid group exactly)."""
+    text = TINY_SET + """
+hidden_markers:
+  markers:
+    A: {estimator: rigid, neighbours: {B: 2, C: 0.5}}
+    D: {estimator: constant_velocity}
+  rigid_groups: [[A, B, C, D]]
+  limits:
+    length_pairs: [[A, B]]
+    drift_tolerance_mm: 10
+    max_hidden_s: {rigid: 1.5}
+"""
+    ms = load_markerset(write_set(tmp_path, text))
+    cfg = estimator_config(ms)
+    assert cfg["methods"] == [Method.RIGID, Method.NEIGHBOURS, Method.NEIGHBOURS, Method.CONSTANT_VELOCITY]
+    np.testing.assert_array_equal(cfg["weights"][0], [0, 2, 0.5, 0])
+    np.testing.assert_array_equal(cfg["weights"][1], [1, 0, 1, 0])  # not listed: its segment, weight 1
+    assert cfg["segments"] == [(0, 1, 2, 3)] and cfg["length_pairs"] == [(0, 1)]
+    assert cfg["tolerance_m"] == pytest.approx(0.01) and cfg["max_hidden_s"][0] == 1.5
+    truth = rigid_motion(60)
+    measured = np.ones((60, 4), dtype=bool)
+    measured[20:50, 0] = False
+    p, s = run(Estimator(**cfg, fps=30.0), truth, measured)
+    assert (s[20:50, 0] == ESTIMATED).all() and (s[:, 1:] == MEASURED).all()
+    np.testing.assert_allclose(p[20:50, 0], truth[20:50, 0], atol=1e-9)
+    measured[:, 0] = True
+    measured[10:59, 3] = False  # constant velocity, 1.5 s limit not its own: 0.5 s (15 frames)
+    _, s = run(Estimator(**cfg, fps=30.0), truth, measured)
+    assert (s[10:25, 3] == ESTIMATED).all() and (s[26:59, 3] == LOST).all()
+
+
+@pytest.mark.parametrize("section, expected", [
+    ("  markers:\n    A: {estimator: spline}", "hidden_markers.markers.A.estimator"),
+    ("  markers:\n    A: {estimator: rigid, neighbours: {Z: 1}}", "hidden_markers.markers.A.neighbours: unknown marker 'Z'"),
+    ("  markers:\n    A: {estimator: rigid, neighbours: {B: -1}}", "hidden_markers.markers.A.neighbours"),
+    ("  markers:\n    A: {estimator: hinge}", "hidden_markers.markers.A: estimator hinge needs A in an 'elbows' entry"),
+    ("  markers:\n    A: {estimator: forearm}", "estimator forearm needs A in a 'forearms' entry"),
+    ("  rigid_groups: [[A, Q]]", "hidden_markers.rigid_groups.0: unknown marker 'Q'"),
+    ("  rigid_groups: [[A, A]]", "hidden_markers.rigid_groups.0: a marker appears twice"),
+    ("  limits: {length_pairs: [[A, M*B]]}", "hidden_markers.limits.length_pairs.0: '*' needs identification.sides"),
+    ("  limits: {drift_tolerance_mm: 0}", "hidden_markers.limits.drift_tolerance_mm"),
+    ("  limits: {max_hidden_s: {rigid: -1}}", "hidden_markers.limits.max_hidden_s"),
+    ("  limits: {max_hiden_s: {rigid: 1}}", "hidden_markers.limits.max_hiden_s: unknown key"),
+    ("  markers:\n    A: {estimator: rigid}\n  elbows: [{markers: [A, B], shoulder: C}]", "hidden_markers.elbows.0.wrist"),
+])
+def test_bad_hidden_marker_sections_are_one_line_errors(tmp_path, section, expected):
+    from tracking.errors import ContentError
+
+    path = write_set(tmp_path, TINY_SET + "hidden_markers:\n" + section + "\n")
+    with pytest.raises(ContentError) as info:
+        load_markerset(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path)) and expected in message, message
 
 
 def test_hinge_estimator_on_the_simulated_arm_without_rendering():
@@ -335,7 +529,7 @@ def test_hinge_estimator_on_the_simulated_arm_without_rendering():
     k = ms.index("MRE2")
     measured = np.ones(truth.shape[:2], dtype=bool)
     measured[30:90, k] = False  # 2 s to 6 s: elbow to the side and flexed, forearm turned out
-    est = Estimator(**default_config(ms), fps=fps)
+    est = Estimator(**estimator_config(ms), fps=fps)
     p, s = run(est, truth, measured, noise_m=0.001)
     assert (s[30:90, k] == ESTIMATED).all()
     err = np.linalg.norm(p[30:90, k] - truth[30:90, k], axis=1)
@@ -401,7 +595,7 @@ def test_forearm_switches_to_the_wrist_circle_when_the_forearm_turns():
     cfg = dict(methods=[Method.HINGE, Method.HINGE, Method.HINGE, Method.HINGE], weights=np.ones((4, 4)),
                segments=[(0, 1, 2, 3)], forearms=[Forearm(2, 3, (0, 1)), Forearm(3, 2, (0, 1))],
                hinges=[], fps=30.0)
-    cfg["methods"] = [Method.RIGID, Method.RIGID, Method.HINGE, Method.HINGE]
+    cfg["methods"] = [Method.RIGID, Method.RIGID, Method.FOREARM, Method.FOREARM]
     p, s = run(Estimator(**cfg), truth, measured)
     assert (s[10:, 3] == ESTIMATED).all()
     np.testing.assert_allclose(p[10:30, 3], truth[10:30, 3], atol=1e-9)  # flexion: rigid, exact
@@ -420,7 +614,7 @@ def test_any_input_gives_consistent_statuses(seed, p_hidden):
     """Random (even degenerate) positions and masks never raise; status and NaN agree."""
     ms = load_markerset("upper_limb_seated")
     rng = np.random.default_rng(seed)
-    est = Estimator(**default_config(ms), fps=15.0)
+    est = Estimator(**estimator_config(ms), fps=15.0)
     base = rng.normal(0.0, 0.3, (ms.n_markers, 3))
     for t in range(25):
         x = base + rng.normal(0.0, 0.01, base.shape) * (t % 5 != 0)  # every 5th frame: a repeat

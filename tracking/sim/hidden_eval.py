@@ -33,7 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tracking.hidden import Estimator, Method, default_config
+from tracking.hidden import Estimator, Method, estimator_config
 from tracking.markerset import MarkerSet
 from tracking.status import MarkerStatus
 
@@ -176,10 +176,11 @@ ESTIMATORS: dict[str, tuple[Method | None, bool]] = {
 }
 
 
-def make_estimator(markerset: MarkerSet | Sequence[str], label: str, fps: float, *, gates: bool = False) -> Estimator:
-    """An estimator of :data:`ESTIMATORS`; without ``gates`` nothing is dropped to LOST (raw accuracy)."""
+def make_estimator(markerset: MarkerSet, label: str, fps: float, *, gates: bool = False) -> Estimator:
+    """An estimator of :data:`ESTIMATORS` configured by the marker set (``hidden_markers:``);
+    without ``gates`` nothing is dropped to LOST (raw accuracy)."""
     method, own = ESTIMATORS[label]
-    cfg = default_config(markerset, method=method, own_velocity=own)
+    cfg = estimator_config(markerset, method=method, own_velocity=own)
     if not gates:
         cfg["max_hidden_s"] = np.inf
         cfg["max_unsupported_s"] = np.inf

@@ -7,8 +7,9 @@ the simulator's truth by :func:`tracking.evaluate.evaluate_points`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Iterator, Sequence
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 from tqdm import tqdm
@@ -72,6 +73,30 @@ def combine(results: Sequence[PointAccuracy]) -> PointAccuracy:
 
 
 @dataclass(frozen=True, slots=True)
+class AngleAccuracy:
+    """One joint angle over a tracked motion, against the truth.
+
+    Attributes:
+        rmse_deg: RMSE over the frames where the angle has a tracked and a true value, i.e. where
+            all its markers are measured or estimated (NaN: no such frame).
+        frames: frames with a true value (the angle is defined for the true pose).
+        estimated: share of those frames in which the angle was reported with at least one of its
+            markers estimated.
+        lost: share of those frames without a reported value (one of its markers lost).
+        rmse_estimated_deg: RMSE over the frames with an estimated marker (NaN: none).
+        rmse_measured_deg: RMSE over the frames with all its markers measured (the floor that
+            measurement noise sets; NaN: none).
+    """
+
+    rmse_deg: float
+    frames: int
+    estimated: float
+    lost: float
+    rmse_estimated_deg: float
+    rmse_measured_deg: float = float("nan")
+
+
+@dataclass(frozen=True, slots=True)
 class TrackingAccuracy:
     """The tracker on one simulated motion, against the truth.
 
@@ -80,7 +105,9 @@ class TrackingAccuracy:
         swaps: (frame, marker) cases where a marker was measured on another marker's ball.
         measured, estimated, lost: shares of marker positions by status after identification.
         measured_rmse_mm, estimated_mean_mm: position errors by status.
-        angle_rmse_deg: per angle, RMSE over frames where both tracked and true angles exist.
+        angle_rmse_deg: per angle, RMSE over frames where both tracked and true angles exist
+            (all the angle's markers measured or estimated).
+        angles: per angle, the RMSE with the shares of frames estimated and lost.
     """
 
     frames: int
@@ -92,69 +119,192 @@ class TrackingAccuracy:
     measured_rmse_mm: float
     estimated_mean_mm: float
     angle_rmse_deg: dict[str, float]
+    angles: dict[str, AngleAccuracy] = field(default_factory=dict)
+
+    def worst_angle(self) -> tuple[str, float]:
+        """(name, RMSE) of the angle with the largest RMSE (("-", NaN) without angles)."""
+        return max(self.angle_rmse_deg.items(), key=lambda kv: kv[1], default=("-", float("nan")))
 
     def summary(self) -> str:
-        worst = max(self.angle_rmse_deg.items(), key=lambda kv: kv[1], default=("-", float("nan")))
-        return (
+        worst = self.worst_angle()
+        text = (
             f"{self.frames} frames, identified at frame {self.identified_at}, {self.swaps} swaps; "
             f"measured {100 * self.measured:.1f} % (RMSE {self.measured_rmse_mm:.2f} mm), estimated "
             f"{100 * self.estimated:.1f} % (mean error {self.estimated_mean_mm:.1f} mm), lost {100 * self.lost:.1f} %; "
             f"worst angle RMSE {worst[1]:.2f} deg ({worst[0]})"
         )
+        if worst[0] in self.angles:
+            a = self.angles[worst[0]]
+            text += (f", its frames estimated {100 * a.estimated:.1f} % / lost {100 * a.lost:.1f} %, "
+                     f"RMSE {a.rmse_measured_deg:.2f} deg where all its markers are measured")
+        return text
 
 
-def validate_tracking(settings: SimulationSettings, *, progress: bool = False) -> TrackingAccuracy:
-    """Render one motion and run the tracker on it, frame by frame, as ``rehab track`` does."""
+def angle_markers(truth_m: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
+    """Which markers each joint angle reads: angle -> (M,) bool.
+
+    Found on the true poses: an angle reads marker m if hiding m (NaN) makes it undefined in a
+    frame where it is defined. Shape of ``truth_m``: (T, M, 3) world metres.
+    """
+    from tracking.angles import joint_angles
+
+    base = joint_angles(truth_m, names)
+    uses = {name: np.zeros(len(names), dtype=bool) for name in base}
+    for m in range(len(names)):
+        hidden = truth_m.copy()
+        hidden[:, m] = np.nan
+        for name, values in joint_angles(hidden, names).items():
+            uses[name][m] = bool(np.any(np.isfinite(base[name]) & ~np.isfinite(values)))
+    return uses
+
+
+def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndarray, names: Sequence[str], *,
+                   frames: int, identified_at: int, swaps: int) -> TrackingAccuracy:
+    """Compare a tracked motion with the truth.
+
+    Args:
+        positions_m: (T, M, 3) tracked positions after identification, NaN where LOST.
+        status: (T, M) uint8 :class:`~tracking.status.MarkerStatus`.
+        truth_m: (T, M, 3) true marker centres.
+        names: the M marker names.
+        frames, identified_at, swaps: passed through to the result.
+    """
     from tracking.angles import joint_angles
     from tracking.status import MarkerStatus
-    from tracking.tracker import Tracker, TrackingState
 
-    studio, motion = studio_from_settings(settings)
-    with studio:
-        ms = studio.markerset
-        tracker = Tracker(studio.cameras, ms, fps=settings.fps)
-        positions, status, truth = [], [], []
-        identified_at, swaps = -1, 0
-        frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
-                             brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
-                             seed=settings.seed, with_visibility=False)
-        total = studio.n_frames(motion, settings.fps, settings.seconds)
-        for sf in tqdm(frames, total=total, unit="frame", desc=settings.motion, leave=False, disable=not progress):
-            s = tracker.step(sf.frames.images, sf.frames.time_s)
-            if s.state != TrackingState.TRACKING:
-                continue
-            if identified_at < 0:
-                identified_at = s.frame_index
-            d = np.linalg.norm(s.positions_m[:, None, :] - sf.markers_m[None, :, :], axis=-1)
-            has = s.status != MarkerStatus.LOST
-            # an identity swap: a marker measured on another marker's ball (an estimate that
-            # drifts near another ball is an estimation error, counted in estimated_mean_mm)
-            meas_now = s.status == MarkerStatus.MEASURED
-            own = np.diag(d)
-            swaps += int(np.sum(meas_now & (own > 0.02) & (d.min(axis=1) < 0.02) & (d.argmin(axis=1) != np.arange(len(own)))))
-            positions.append(np.where(has[:, None], s.positions_m, np.nan))
-            status.append(s.status)
-            truth.append(sf.markers_m)
-    if not positions:
-        return TrackingAccuracy(total, -1, 0, 0.0, 0.0, 1.0, float("nan"), float("nan"), {})
-    pos, st, tru = np.stack(positions), np.stack(status), np.stack(truth)
-    err = np.linalg.norm(pos - tru, axis=-1) * 1000.0
-    meas, est = st == MarkerStatus.MEASURED, st == MarkerStatus.ESTIMATED
-    tracked_angles, true_angles = joint_angles(pos, ms.names), joint_angles(tru, ms.names)
-    rmse = {}
+    pos = np.where((status != MarkerStatus.LOST)[..., None], positions_m, np.nan)
+    err = np.linalg.norm(pos - truth_m, axis=-1) * 1000.0
+    meas, est = status == MarkerStatus.MEASURED, status == MarkerStatus.ESTIMATED
+    tracked_angles, true_angles = joint_angles(pos, names), joint_angles(truth_m, names)
+    uses = angle_markers(truth_m, names)
+    rmse, angles = {}, {}
     for name, values in tracked_angles.items():
-        ok = np.isfinite(values) & np.isfinite(true_angles[name])
+        defined = np.isfinite(true_angles[name])
+        ok = np.isfinite(values) & defined
+        with_est = ok & est[:, uses[name]].any(axis=1)
+        all_meas = ok & meas[:, uses[name]].all(axis=1)
+        diff = (values - true_angles[name] + 180.0) % 360.0 - 180.0
+        n = int(defined.sum())
+        a_rmse = float(np.sqrt(np.mean(diff[ok] ** 2))) if ok.any() else float("nan")
         if ok.any():
-            diff = (values[ok] - true_angles[name][ok] + 180.0) % 360.0 - 180.0
-            rmse[name] = float(np.sqrt(np.mean(diff**2)))
+            rmse[name] = a_rmse
+        angles[name] = AngleAccuracy(
+            rmse_deg=a_rmse,
+            frames=n,
+            estimated=float(with_est.sum() / n) if n else 0.0,
+            lost=float((defined & ~np.isfinite(values)).sum() / n) if n else 0.0,
+            rmse_estimated_deg=float(np.sqrt(np.mean(diff[with_est] ** 2))) if with_est.any() else float("nan"),
+            rmse_measured_deg=float(np.sqrt(np.mean(diff[all_meas] ** 2))) if all_meas.any() else float("nan"),
+        )
     return TrackingAccuracy(
-        frames=total,
+        frames=frames,
         identified_at=identified_at,
         swaps=swaps,
         measured=float(meas.mean()),
         estimated=float(est.mean()),
-        lost=float((st == MarkerStatus.LOST).mean()),
+        lost=float((status == MarkerStatus.LOST).mean()),
         measured_rmse_mm=float(np.sqrt(np.mean(err[meas] ** 2))) if meas.any() else float("nan"),
         estimated_mean_mm=float(err[est].mean()) if est.any() else float("nan"),
         angle_rmse_deg=rmse,
+        angles=angles,
     )
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class TrackedRun:
+    """The tracker's output over one motion, frame by frame, with the truth.
+
+    Attributes:
+        names: the M marker names.
+        positions_m: (T, M, 3) tracked positions after identification (NaN where lost).
+        status: (T, M) uint8 marker status.
+        truth_m: (T, M, 3) true marker centres of the same frames.
+        frames: all frame sets processed (identification included).
+        identified_at: first frame with names (-1: never).
+        swaps: (frame, marker) cases where a marker was measured on another marker's ball.
+    """
+
+    names: tuple[str, ...]
+    positions_m: np.ndarray
+    status: np.ndarray
+    truth_m: np.ndarray
+    frames: int
+    identified_at: int
+    swaps: int
+
+    def score(self) -> TrackingAccuracy:
+        if not len(self.positions_m):
+            return TrackingAccuracy(self.frames, -1, 0, 0.0, 0.0, 1.0, float("nan"), float("nan"), {})
+        return score_tracking(self.positions_m, self.status, self.truth_m, self.names, frames=self.frames,
+                              identified_at=self.identified_at, swaps=self.swaps)
+
+
+def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np.ndarray]]) -> TrackedRun:
+    """Run ``tracker`` over (images, time_s, true (M, 3) marker centres) frame sets."""
+    from tracking.status import MarkerStatus
+    from tracking.tracker import TrackingState
+
+    positions, status, truth = [], [], []
+    identified_at, swaps, total = -1, 0, 0
+    for images, time_s, truth_m in frames:
+        total += 1
+        s = tracker.step(images, time_s)
+        if s.state != TrackingState.TRACKING:
+            continue
+        if identified_at < 0:
+            identified_at = s.frame_index
+        d = np.linalg.norm(s.positions_m[:, None, :] - truth_m[None, :, :], axis=-1)
+        # an identity swap: a marker measured on another marker's ball (an estimate that drifts
+        # near another ball is an estimation error, counted in estimated_mean_mm)
+        meas_now = s.status == MarkerStatus.MEASURED
+        own = np.diag(d)
+        swaps += int(np.sum(meas_now & (own > 0.02) & (d.min(axis=1) < 0.02) & (d.argmin(axis=1) != np.arange(len(own)))))
+        positions.append(np.where((s.status != MarkerStatus.LOST)[:, None], s.positions_m, np.nan))
+        status.append(s.status)
+        truth.append(truth_m)
+    m = len(tracker.markerset.names)
+    stack = (lambda rows, shape: np.stack(rows) if rows else np.zeros(shape))
+    return TrackedRun(tuple(tracker.markerset.names), stack(positions, (0, m, 3)), stack(status, (0, m)).astype(np.uint8),
+                      stack(truth, (0, m, 3)), total, identified_at, swaps)
+
+
+def validate_tracking(settings: SimulationSettings, *, progress: bool = False) -> TrackingAccuracy:
+    """Render one motion and run the tracker on it, frame by frame, as ``rehab track`` does."""
+    return track_simulated(settings, progress=progress).score()
+
+
+def track_simulated(settings: SimulationSettings, *, progress: bool = False) -> TrackedRun:
+    """Render one motion and run the tracker on it; the frame-by-frame output with the truth."""
+    from tracking.tracker import Tracker
+
+    studio, motion = studio_from_settings(settings)
+    with studio:
+        tracker = Tracker(studio.cameras, studio.markerset, fps=settings.fps)
+        frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
+                             brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
+                             seed=settings.seed, with_visibility=False)
+        total = studio.n_frames(motion, settings.fps, settings.seconds)
+        bar = tqdm(frames, total=total, unit="frame", desc=settings.motion, leave=False, disable=not progress)
+        return track_frames(tracker, ((sf.frames.images, sf.frames.time_s, sf.markers_m) for sf in bar))
+
+
+def track_recording_with_truth(folder: Path, *, progress: bool = False) -> TrackedRun:
+    """Run the tracker on a simulated recording folder (``rehab simulate``) against its truth.trc.
+
+    Tracking a cached recording gives the same figures as :func:`validate_tracking` on the same
+    settings (the videos are lossless) without rendering again.
+    """
+    from tracking.markerset import load_markerset
+    from tracking.recording import Recording
+    from tracking.tracker import Tracker
+    from tracking.trc import read_trc
+
+    folder = Path(folder)
+    truth = read_trc(folder / "truth.trc")
+    with Recording(folder) as rec:
+        ms = load_markerset(rec.meta.markerset)
+        tracker = Tracker(rec.cameras, ms, fps=rec.fps)
+        index = [truth.names.index(n) for n in ms.names]
+        truth_m = truth.positions_mm[:, index] / 1000.0
+        bar = tqdm(rec, total=rec.n_frames, unit="frame", desc=folder.name, leave=False, disable=not progress)
+        return track_frames(tracker, ((fs.images, fs.time_s, truth_m[fs.index]) for fs in bar))

@@ -1,0 +1,64 @@
+"""The tracker's scoring against the truth (rehab validate --tracker), on poses of the body model
+without rendering: which markers each angle reads, the per-angle RMSE over frames where its
+markers are measured or estimated, and the shares of estimated and lost angle frames."""
+
+import numpy as np
+import pytest
+
+from tracking.angles import joint_angles
+from tracking.markerset import load_markerset
+from tracking.sim.body import BodyDimensions, BodyModel
+from tracking.sim.motions import load_motion
+from tracking.sim.validate import angle_markers, score_tracking
+from tracking.status import MarkerStatus
+
+
+@pytest.fixture(scope="module")
+def motion_truth():
+    ms = load_markerset("upper_limb_seated")
+    dims = BodyDimensions.from_percentile(50, "female")
+    body, motion = BodyModel(dims, ms), load_motion("elbow_flexion_supination", dims)
+    truth = np.array([body.markers_m(motion.pose_at(i / 15.0)) for i in range(int(motion.duration_s * 15.0))])
+    return ms, truth
+
+
+def test_angle_markers_are_the_spec_definitions(motion_truth):
+    ms, truth = motion_truth
+    uses = angle_markers(truth, ms.names)
+    names = lambda angle: {ms.names[i] for i in np.flatnonzero(uses[angle])}  # noqa: E731
+    assert names("right_forearm_supination") == {"MRE1", "MRE2", "MRW1", "MRW2"}
+    assert names("trunk_forward_lean") == {"MB", "MP"}
+    assert {"MRE1", "MRE2", "MRW1", "MRW2"} <= names("right_elbow_flexion")
+    assert not names("left_elbow_flexion") & {"MRE1", "MRE2", "MRW1", "MRW2"}
+
+
+def test_angle_rmse_counts_measured_and_estimated_frames_and_reports_lost_ones(motion_truth):
+    ms, truth = motion_truth
+    t = len(truth)
+    status = np.full(truth.shape[:2], MarkerStatus.MEASURED, dtype=np.uint8)
+    pos = truth.copy()
+    w2, e2 = ms.index("MRW2"), ms.index("MRE2")
+    est = slice(10, 40)
+    status[est, w2] = MarkerStatus.ESTIMATED
+    pos[est, w2] += np.array([0.0, 0.0, 0.01])  # a 1 cm estimate error
+    lost = slice(60, 70)
+    status[lost, e2] = MarkerStatus.LOST
+    pos[lost, e2] = np.nan
+    acc = score_tracking(pos, status, truth, ms.names, frames=t, identified_at=0, swaps=0)
+
+    true_sup = joint_angles(truth, ms.names)["right_forearm_supination"]
+    sup = joint_angles(pos, ms.names)["right_forearm_supination"]
+    diff = (sup - true_sup + 180.0) % 360.0 - 180.0
+    a = acc.angles["right_forearm_supination"]
+    assert a.frames == t
+    assert a.rmse_deg == pytest.approx(np.sqrt(np.nanmean(diff**2)))
+    assert a.rmse_deg > 0.1 and a.rmse_measured_deg == pytest.approx(0.0, abs=1e-9)
+    assert a.rmse_estimated_deg == pytest.approx(np.sqrt(np.mean(diff[est] ** 2)))
+    assert a.estimated == pytest.approx(30 / t) and a.lost == pytest.approx(10 / t)
+    # the other arm is untouched; the right shoulder angles read the elbow, not the wrist
+    assert acc.angles["left_forearm_supination"].lost == 0.0
+    assert acc.angles["right_shoulder_abduction"].estimated == 0.0
+    assert acc.angles["right_shoulder_abduction"].lost == pytest.approx(10 / t)
+    assert acc.estimated == pytest.approx(30 / (t * ms.n_markers))
+    assert acc.estimated_mean_mm == pytest.approx(10.0)
+    assert acc.worst_angle()[0] in acc.angle_rmse_deg
