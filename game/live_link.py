@@ -137,6 +137,11 @@ class LiveLink:
         return self.tracker.cameras if self.ready else ()
 
     @property
+    def warning(self) -> str:
+        """The source's warning line (e.g. a camera that stopped delivering frames), "" if none."""
+        return getattr(self.status, "warning", "") if self.status is not None and self.ready else ""
+
+    @property
     def source_fps(self) -> float:
         return self.status.source_fps if self.status is not None else math.nan
 
@@ -154,7 +159,8 @@ class LiveLink:
         if self.state is LinkState.RUNNING:
             kind = getattr(getattr(self.tracker, "source", None), "kind", "sim")
             what = "Simulated patient" if kind == "sim" else "Cameras"
-            return f"{what}: tracker running, {self.source_fps:.0f} frame sets/s"
+            line = f"{what}: tracker running, {self.source_fps:.0f} frame sets/s"
+            return f"{line}; {self.warning}" if self.warning else line
         return ""
 
     # ------------------------------------------------------------------ commands

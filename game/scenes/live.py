@@ -457,6 +457,9 @@ class LiveScene(BaseScene):
             return "No new images from the cameras...", theme.ATTENTION
         if sample.state != TRACKING:
             return sample.message or "Finding the markers...", theme.ATTENTION
+        warning = getattr(self.link, "warning", "")
+        if warning:  # e.g. a camera stopped: tracking goes on with the others, the therapist must know
+            return warning[:1].upper() + warning[1:], theme.ATTENTION
         return None
 
     def _draw_banner(self, frame: Frame, sample) -> None:

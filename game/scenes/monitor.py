@@ -120,6 +120,10 @@ class MonitorScene(BaseScene):
         w, h = frame.size_px
         s = min(w / 1280.0, h / 720.0)
         c.text("Camera check", (theme.MARGIN * s, 18 * s), round(theme.MEDIUM * s), theme.TEXT)
+        warning = getattr(self.link, "warning", "")
+        if warning:  # a camera that stopped or fell out of step: say which, beside the title
+            c.text(warning[:1].upper() + warning[1:], (w - theme.MARGIN * s, 26 * s), round(theme.SMALL * s),
+                   theme.ATTENTION, anchor="topright")
         legend = "Marker colours painted where the colour table finds them   Squares: where the tracker looks   Esc: back"
         c.text(legend, (w / 2, h - 8 * s), round(theme.SMALL * 0.85 * s), theme.TEXT_FAINT, anchor="midbottom")
         self._refresh()

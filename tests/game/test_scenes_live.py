@@ -37,6 +37,7 @@ class BodyLink:
         self.clock = clock
         self.state = LinkState.RUNNING
         self.error = ""
+        self.warning = ""
         self.latest = None
         self.new_samples: list = []
         self.sent: list = []
@@ -199,6 +200,13 @@ def test_motions_reidentify_camera_check_and_back(screen):
     app.dispatch(Press(Action.MONITOR))
     assert isinstance(app.scene, MonitorScene)
     run_frames(app, clock, 2)                       # no images yet: draws the waiting line
+    quiet = app.screen.read_rgb().astype(np.int32)
+    link.warning = "camera cam2 stopped: tracking goes on with cam1, cam3, cam4"
+    run_frames(app, clock, 1)                       # the warning is written top right, in the title band
+    changed = np.abs(app.screen.read_rgb().astype(np.int32) - quiet).sum(axis=2) > 60
+    h, w = changed.shape
+    assert changed[: h // 10, w // 2:].sum() > 100 and changed[h // 10:].sum() == 0
+    link.warning = ""
     app.dispatch(Press(Action.BACK))
     assert app.scene is scene
     app.dispatch(Press(Action.BACK))
@@ -237,6 +245,9 @@ def test_banners_say_what_the_tracker_is_doing(screen):
     link.feed(reference_pose())
     run_frames(app, clock, 1)
     assert scene.banner(link.latest) is None
+    link.warning = "camera cam2 (device '1') stopped (no frame for 1.0 s): tracking goes on with cam1, cam3, cam4"
+    assert scene.banner(link.latest)[0].startswith("Camera cam2 (device '1') stopped")
+    link.warning = ""
     clock.now_s += 2.0                                       # no sample for 2 s
     assert "No new images" in scene.banner(link.latest)[0]
     link.state = LinkState.RESTARTING
