@@ -37,6 +37,7 @@ import numpy as np
 from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
+from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
 from tracking.sim.meshes import cone_band, icosphere
 
 
@@ -70,30 +71,7 @@ _TRANSLUCENT = 0.01  # lost-look amount above which a solid is drawn in the tran
 
 
 # ----------------------------------------------------------------------------- camera helpers
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> np.ndarray:
-    """(4, 4) float64 view matrix (OpenGL: the camera looks down its -z) from world points."""
-    f = np.asarray(target, float) - np.asarray(eye, float)
-    f /= np.linalg.norm(f)
-    s = np.cross(f, up)
-    s /= np.linalg.norm(s)
-    u = np.cross(s, f)
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = s, u, -f
-    view[:3, 3] = -view[:3, :3] @ np.asarray(eye, float)
-    return view
-
-
-def perspective(fov_y_deg: float, aspect: float, near_m: float = 0.1, far_m: float = 50.0) -> np.ndarray:
-    """(4, 4) float64 OpenGL projection (depth -1..1), vertical field of view in degrees."""
-    f = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
-    p = np.zeros((4, 4))
-    p[0, 0], p[1, 1] = f / aspect, f
-    p[2, 2] = (far_m + near_m) / (near_m - far_m)
-    p[2, 3] = 2.0 * far_m * near_m / (near_m - far_m)
-    p[3, 2] = -1.0
-    return p
-
-
+# look_at and perspective are game.gfx.view3d's (re-exported here for the avatar's callers)
 def mirror_view(
     pose: SkeletonPose,
     aspect: float,

@@ -34,7 +34,7 @@ def look_at(eye_m, target_m, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     return view
 
 
-def perspective(fovy_deg: float, aspect: float, near_m: float, far_m: float) -> np.ndarray:
+def perspective(fovy_deg: float, aspect: float, near_m: float = 0.1, far_m: float = 50.0) -> np.ndarray:
     """(4, 4) OpenGL perspective projection (clip from camera)."""
     f = 1.0 / math.tan(math.radians(fovy_deg) / 2.0)
     proj = np.zeros((4, 4))
