@@ -1,0 +1,429 @@
+"""The calibration scene: each camera's lens and focal length from a checkerboard, with live feedback.
+
+A helper moves a printed checkerboard in front of one camera at a time. The scene shows that
+camera's image with the corners found drawn over it (green; a red line when the board is not
+found), a coverage map (the cells of the picture where captured views had corners, tinted), the
+number of views captured and how many are needed, and a hint in plain words saying where to
+move the board next (the empty regions, :mod:`calibration.intrinsics`).
+
+Keys (the shared key map, :mod:`game.input`): Space or Enter captures the current view (only
+when the board is found), A switches auto-capture on or off (a view is captured when the board
+is found and has moved since the last capture), C calibrates the camera and shows the result
+(RMS reprojection error, focal length, and for the simulated feed the error against the true
+focal length), Tab goes to the next camera, S saves the calibrated cameras (two or more) as a
+TOML file, Esc goes back. The buttons at the bottom do the same with the mouse.
+
+Images come from a :class:`BoardFeed`; :class:`SimBoardFeed` is the simulated one (a board moved
+by a simulated helper in front of one camera of the simulated studio, with the true camera known),
+so a real camera plugs in by implementing the same three members.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol, Sequence
+
+import cv2
+import numpy as np
+
+from calibration.board import Checkerboard, Detection, detect_board
+from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
+from calibration.errors import RehabError
+from calibration.intrinsics import COVERAGE_GRID, COVERAGE_WARN, IntrinsicsResult, _empty_regions, calibrate_intrinsics, coverage_of
+from game.app import BaseScene, Frame
+from game.gfx import theme
+from game.input import Action, InputEvent, Pointer, PointerKind, Press
+
+log = logging.getLogger(__name__)
+
+Rect = tuple[float, float, float, float]
+
+#: Views to capture before calibrating (OpenCV needs 4; 8 spread views give a steady focal length).
+NEED_VIEWS = 8
+#: Auto-capture: the corners must have moved this share of the image diagonal (mean) since the last capture.
+AUTO_MIN_MOVE = 0.08
+#: How often the feed gives a new image and the board is looked for, per second.
+FEED_RATE_HZ = 10.0
+
+
+class BoardFeed(Protocol):
+    """One camera's images for calibration.
+
+    Attributes:
+        name: the camera's name (as in the calibration file).
+        size_px: (width, height) of its images.
+        truth: the true camera when known (a simulation), else None.
+    """
+
+    name: str
+    size_px: tuple[int, int]
+    truth: Camera | None
+
+    def next_frame(self) -> np.ndarray:
+        """The next (H, W, 3) BGR uint8 image."""
+        ...
+
+
+def _between(a, b, f: float):
+    """Board pose a fraction ``f`` of the way from ``a`` to ``b`` (position linear, rotation geodesic)."""
+    from tracking.sim.calibration_material import BoardPose
+
+    rel = rvec_from_rotation(b.R @ a.R.T)
+    return BoardPose(rotation_from_rvec(f * rel) @ a.R, (1 - f) * a.t_m + f * b.t_m)
+
+
+class SimBoardFeed:
+    """A simulated helper moving the board in front of one simulated camera.
+
+    The board holds still at each pose of :func:`tracking.sim.calibration_material.intrinsics_poses`
+    for ``hold`` frames, then is carried to the next one in ``move`` frames; every third move
+    first swings half of the board out of the picture (the "board not found" case).
+
+    Args:
+        camera: the true camera.
+        background: (H, W, 3) BGR image of the room seen by it.
+        board: the board.
+        n_poses: poses before the round repeats.
+        hold, move: frames per still pose and per move.
+        seed: random seed (poses and noise).
+        noise_sigma: image noise, grey levels.
+    """
+
+    def __init__(self, camera: Camera, background: np.ndarray, board: Checkerboard, *, n_poses: int = 12,
+                 hold: int = 6, move: int = 4, seed: int = 0, noise_sigma: float = 1.5) -> None:
+        from tracking.sim.calibration_material import BoardRaycaster, intrinsics_poses
+
+        self.name = camera.name
+        self.size_px = camera.size_px
+        self.truth = camera
+        self.board = board
+        self._rng = np.random.default_rng(seed)
+        self._caster = BoardRaycaster(camera, board, supersample=2)
+        self._background = background
+        self._noise = float(noise_sigma)
+        self._path = self._make_path(intrinsics_poses(camera, board, n_poses, self._rng), hold, move)
+        self._k = 0
+
+    def _make_path(self, poses, hold: int, move: int) -> list:
+        path = []
+        bw = (self.board.cols + 1) * self.board.square_m
+        for i, pose in enumerate(poses):
+            path += [pose] * hold
+            nxt = poses[(i + 1) % len(poses)]
+            if i % 3 == 2:  # swing out sideways (along the board's own x) first: half of it leaves the picture
+                from tracking.sim.calibration_material import BoardPose
+
+                out = BoardPose(pose.R, pose.t_m + pose.R[:, 0] * 0.6 * bw)
+                path += [out] * max(move, 2)
+                pose = out
+            path += [_between(pose, nxt, (k + 1) / (move + 1)) for k in range(move)]
+        return path
+
+    def next_frame(self) -> np.ndarray:
+        from tracking.sim.calibration_material import _add_noise, _board_light
+
+        pose = self._path[self._k % len(self._path)]
+        self._k += 1
+        image = self._caster.draw(self._background, pose, light=_board_light(pose))
+        return _add_noise(image, self._noise, self._rng)
+
+
+def sim_feeds(rig: str = "ring4", size_px: tuple[int, int] = (640, 480), board: Checkerboard | None = None,
+              *, seed: int = 0, **kwargs) -> list[SimBoardFeed]:
+    """One simulated feed per camera of a built-in rig, over the empty studio room (GL rendered)."""
+    from tracking.sim.calibration_material import DEFAULT_BOARD, room_backgrounds
+    from tracking.sim.renderer import DEMO_LENS
+    from tracking.sim.rigs import load_rig
+
+    board = board or DEFAULT_BOARD
+    cams = [Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in load_rig(rig, size_px)]
+    backgrounds = room_backgrounds(cams)
+    return [SimBoardFeed(c, bg, board, seed=seed + i, **kwargs) for i, (c, bg) in enumerate(zip(cams, backgrounds))]
+
+
+def default_calibration_path() -> Path:
+    """``calibration.toml`` in the user's data directory (beside the database)."""
+    from game.db import default_db_path
+
+    return default_db_path().parent / "calibration.toml"
+
+
+@dataclass
+class CameraProgress:
+    """What was captured and computed for one camera."""
+
+    views: list[Detection]
+    result: IntrinsicsResult | None = None
+
+
+def coverage_hint(views: Sequence[Detection], size_px: tuple[int, int]) -> str:
+    """Where to move the board next, in plain words."""
+    if not views:
+        return "Hold the whole board in front of the camera"
+    fraction, hit = coverage_of(views, size_px)
+    empty = _empty_regions(hit)
+    if empty:
+        first = empty.split(", ")[0]
+        where = "the centre" if first == "centre" else f"the {first} {'edge' if first in ('top', 'bottom', 'left', 'right') else 'corner'}"
+        return f"Move the board into {where} of the picture"
+    if fraction < COVERAGE_WARN:
+        return "Move the board closer to the edges of the picture"
+    return "Good coverage: tilt the board a little differently for each view"
+
+
+def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequence[Detection],
+                  board: Checkerboard) -> np.ndarray:
+    """The camera image with the coverage cells tinted and the corners found drawn (a new image)."""
+    out = image.copy()
+    h, w = out.shape[:2]
+    gx, gy = COVERAGE_GRID
+    if views:
+        _, hit = coverage_of(views, (w, h))
+        tint = np.zeros_like(out)
+        for j, i in zip(*np.nonzero(hit)):
+            x0, x1 = round(i * w / gx), round((i + 1) * w / gx)
+            y0, y1 = round(j * h / gy), round((j + 1) * h / gy)
+            tint[y0:y1, x0:x1] = (190, 200, 94)  # teal (BGR of theme.ACCENT)
+        covered = tint.any(axis=2)
+        out[covered] = (0.72 * out[covered] + 0.28 * tint[covered]).astype(np.uint8)
+    for i in range(1, gx):
+        cv2.line(out, (round(i * w / gx), 0), (round(i * w / gx), h - 1), (80, 80, 80), 1)
+    for j in range(1, gy):
+        cv2.line(out, (0, round(j * h / gy)), (w - 1, round(j * h / gy)), (80, 80, 80), 1)
+    if detection is not None:
+        uv = detection.uv_px.reshape(board.rows, board.cols, 2)
+        thick = max(1, round(w / 320))
+        for r in range(board.rows):
+            cv2.polylines(out, [np.rint(uv[r]).astype(np.int32)], False, (120, 220, 90), thick, cv2.LINE_AA)
+        for p in detection.uv_px:
+            cv2.circle(out, (round(p[0]), round(p[1])), 2 * thick + 1, (90, 230, 80), -1, cv2.LINE_AA)
+    return out
+
+
+BUTTONS = (("Capture", "Space"), ("Auto", "A"), ("Calibrate", "C"), ("Next camera", "Tab"), ("Save", "S"), ("Back", "Esc"))
+
+
+class CalibrateScene(BaseScene):
+    """Intrinsic calibration of each camera with live feedback.
+
+    Args:
+        feeds: one :class:`BoardFeed` per camera.
+        board: the board being shown.
+        out_path: where S saves (None: :func:`default_calibration_path`).
+        auto: start with auto-capture on.
+        need_views: views to capture before calibrating.
+    """
+
+    def __init__(self, feeds: Sequence[BoardFeed], board: Checkerboard, *, out_path: Path | None = None,
+                 auto: bool = False, need_views: int = NEED_VIEWS) -> None:
+        if not feeds:
+            raise RehabError("no camera to calibrate: connect a camera or use the simulated studio")
+        self.feeds = list(feeds)
+        self.board = board
+        self.out_path = out_path
+        self.auto = auto
+        self.need_views = int(need_views)
+        self.index = 0
+        self.progress = [CameraProgress([]) for _ in self.feeds]
+        self.image: np.ndarray | None = None
+        self.detection: Detection | None = None
+        self.reason = ""
+        self.message = ""
+        self.message_colour = theme.TEXT_DIM
+        self.overlay: np.ndarray | None = None
+        self._since = 1.0 / FEED_RATE_HZ   # the first update reads a frame
+        self._buttons: list[Rect] = []
+        self.saved_path: Path | None = None
+
+    # ----------------------------------------------------------------- state
+    @property
+    def feed(self) -> BoardFeed:
+        return self.feeds[self.index]
+
+    @property
+    def current(self) -> CameraProgress:
+        return self.progress[self.index]
+
+    def _say(self, text: str, colour=theme.TEXT_DIM) -> None:
+        self.message, self.message_colour = text, colour
+
+    def next_frame(self) -> None:
+        """Read the feed's next image and look for the board in it."""
+        self.image = self.feed.next_frame()
+        self.detection, self.reason = detect_board(self.image, self.board)
+        if self.auto and self.detection is not None and self._moved_enough():
+            self.capture()
+        self.overlay = None
+
+    def _moved_enough(self) -> bool:
+        views = self.current.views
+        if not views:
+            return True
+        w, h = self.feed.size_px
+        move = float(np.mean(np.linalg.norm(self.detection.uv_px - views[-1].uv_px, axis=1)))
+        return move > AUTO_MIN_MOVE * float(np.hypot(w, h))
+
+    def capture(self) -> bool:
+        """Keep the current view if the board is found in it. Returns whether it was kept."""
+        if self.detection is None:
+            self._say("Board not found: show the whole board to capture", theme.FAILURE)
+            return False
+        self.current.views.append(self.detection)
+        self.current.result = None
+        self._say(f"View {len(self.current.views)} captured", theme.ACCENT)
+        self.overlay = None
+        return True
+
+    def calibrate(self) -> IntrinsicsResult | None:
+        """Calibrate the current camera from its captured views (shown large)."""
+        views = self.current.views
+        if len(views) < self.need_views:
+            self._say(f"Capture {self.need_views - len(views)} more views first", theme.ATTENTION)
+            return None
+        try:
+            self.current.result = calibrate_intrinsics(self.feed.name, views, self.board)
+        except RehabError as exc:
+            self._say(str(exc), theme.FAILURE)
+            return None
+        self._say(f"{self.feed.name} calibrated", theme.ACCENT)
+        return self.current.result
+
+    def save(self) -> Path | None:
+        """Write every calibrated camera (2 or more) as TOML; returns the path written."""
+        from calibration.files import save_calibration_toml
+
+        done = [p.result for p in self.progress if p.result is not None]
+        if len(done) < 2:
+            self._say(f"Calibrate at least 2 cameras before saving ({len(done)} done; Tab: next camera)",
+                      theme.ATTENTION)
+            return None
+        path = Path(self.out_path or default_calibration_path())
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            save_calibration_toml(path, [r.camera for r in done], error=float(np.mean([r.rms_px for r in done])))
+        except (RehabError, OSError) as exc:
+            self._say(f"Not saved: {exc}", theme.FAILURE)
+            return None
+        self.saved_path = path
+        self._say(f"Saved {len(done)} cameras to {path}", theme.ACCENT)
+        return path
+
+    def next_camera(self) -> None:
+        self.index = (self.index + 1) % len(self.feeds)
+        self._since = 1.0 / FEED_RATE_HZ
+        self._say(f"Now {self.feed.name}")
+        self.image = None
+
+    # ----------------------------------------------------------------- scene
+    def handle(self, event: InputEvent) -> None:
+        if isinstance(event, Press) and event.down:
+            action = {Action.SELECT: "Capture", Action.LEFT: "Auto", Action.MONITOR: "Calibrate",
+                      Action.SWITCH_ARM: "Next camera", Action.DOWN: "Save", Action.BACK: "Back"}.get(event.action)
+            if action:
+                self.do(action)
+        elif isinstance(event, Pointer) and event.kind == PointerKind.PRESS and event.button == 1 and self._buttons:
+            w, h = self.app.screen.size_px
+            for (label, _), (x, y, bw, bh) in zip(BUTTONS, self._buttons):
+                if x <= event.x * w < x + bw and y <= event.y * h < y + bh:
+                    self.do(label)
+
+    def do(self, what: str) -> None:
+        """Run a button's action by its label."""
+        if what == "Capture":
+            self.capture()
+        elif what == "Auto":
+            self.auto = not self.auto
+            self._say(f"Auto-capture {'on' if self.auto else 'off'}")
+        elif what == "Calibrate":
+            self.calibrate()
+        elif what == "Next camera":
+            self.next_camera()
+        elif what == "Save":
+            self.save()
+        elif what == "Back":
+            self.app.pop()
+
+    def update(self, dt_s: float) -> None:
+        self._since += dt_s
+        if self._since >= 1.0 / FEED_RATE_HZ:
+            self._since = 0.0
+            self.next_frame()
+
+    def render_2d(self, frame: Frame) -> None:
+        c = frame.canvas
+        w, h = frame.size_px
+        s = min(w / 1280.0, h / 720.0)
+        m = theme.MARGIN * s
+        c.text(f"Calibrate cameras: {self.feed.name} ({self.index + 1} of {len(self.feeds)})", (m, 18 * s),
+               round(theme.MEDIUM * s), theme.TEXT)
+        if self.image is None:
+            c.text("Waiting for the camera...", (w / 2, h / 2), round(theme.BODY * s), theme.ATTENTION, anchor="center")
+            return
+        if self.overlay is None:
+            self.overlay = draw_feedback(self.image, self.detection, self.current.views, self.board)
+        iw, ih = self.feed.size_px
+        area_h = h - 170 * s
+        img_w = min(0.6 * w, area_h * iw / ih)
+        rect = (m, 72 * s, img_w, img_w * ih / iw)
+        c.image("calibrate-camera", self.overlay, rect)
+        x = m + img_w + 28 * s
+        y = 76 * s
+        if self.detection is not None:
+            c.text("Board found", (x, y), round(theme.BODY * s), theme.ACCENT)
+        else:
+            c.text("Board not found: show the whole board", (x, y), round(theme.BODY * s), theme.FAILURE)
+        y += 48 * s
+        n = len(self.current.views)
+        c.text(f"{n} views captured", (x, y), round(theme.LARGE * s), theme.TEXT)
+        y += 62 * s
+        c.text(f"need at least {self.need_views}" + ("   auto-capture on" if self.auto else ""), (x, y),
+               round(theme.SMALL * s), theme.ACCENT if n >= self.need_views else theme.TEXT_DIM)
+        y += 40 * s
+        col_w = w - x - m
+        for line in c.wrap(coverage_hint(self.current.views, self.feed.size_px), round(theme.BODY * s), col_w)[:2]:
+            c.text(line, (x, y), round(theme.BODY * s), theme.ATTENTION)
+            y += 38 * s
+        y += 10 * s
+        result = self.current.result
+        if result is not None:
+            y = self._draw_result(c, result, x, y, s, col_w)
+        for line in c.wrap(self.message, round(theme.SMALL * s), col_w)[:2]:
+            c.text(line, (x, y), round(theme.SMALL * s), self.message_colour)
+            y += 30 * s
+        self._draw_buttons(c, w, h, s)
+
+    def _draw_result(self, c, result: IntrinsicsResult, x: float, y: float, s: float, col_w: float) -> float:
+        cam = result.camera
+        f = float(np.mean(np.diag(cam.K)[:2]))
+        good = result.rms_px < 0.5
+        c.text(f"RMS error {result.rms_px:.2f} px", (x, y), round(theme.MEDIUM * s), theme.ACCENT if good else theme.ATTENTION)
+        y += 46 * s
+        c.text(f"Focal length {f:.1f} px", (x, y), round(theme.MEDIUM * s), theme.TEXT)
+        y += 46 * s
+        truth = self.feed.truth
+        if truth is not None:
+            f_true = float(np.mean(np.diag(truth.K)[:2]))
+            c.text(f"{100 * (f - f_true) / f_true:+.2f} % from the true {f_true:.1f} px", (x, y),
+                   round(theme.SMALL * s), theme.TEXT_DIM)
+            y += 32 * s
+        for warning in result.warnings[:2]:
+            text = warning.split(": ", 1)[-1]
+            for line in c.wrap(text, round(theme.SMALL * 0.85 * s), col_w)[:2]:
+                c.text(line, (x, y), round(theme.SMALL * 0.85 * s), theme.ATTENTION)
+                y += 26 * s
+        return y + 8 * s
+
+    def _draw_buttons(self, c, w: float, h: float, s: float) -> None:
+        n = len(BUTTONS)
+        gap = 14 * s
+        bw = (w - 2 * theme.MARGIN * s - (n - 1) * gap) / n
+        bh = 64 * s
+        y = h - bh - 18 * s
+        self._buttons = [(theme.MARGIN * s + i * (bw + gap), y, bw, bh) for i in range(n)]
+        for (label, key), rect in zip(BUTTONS, self._buttons):
+            on = label == "Auto" and self.auto
+            c.rect(rect, theme.ACCENT_DARK if on else theme.PANEL, radius=12 * s, border=2 * s, border_colour=theme.PANEL_EDGE)
+            c.text(f"{label} ({key})", (rect[0] + rect[2] / 2, rect[1] + rect[3] / 2), round(theme.SMALL * s),
+                   theme.TEXT, anchor="center")
