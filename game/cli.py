@@ -239,9 +239,10 @@ def _add_play(sub) -> None:
     p.add_argument("--mute", action="store_true", help="no sound")
     p.add_argument("--max-level", type=int, choices=range(1, 11), default=None, metavar="1..10",
                    help="the therapist's highest level of the games (default: each game's own limit)")
-    p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress", "game"), default=None,
+    p.add_argument("--scene", choices=("home", "live", "cameras", "rom", "progress", "game", "calibrate"), default=None,
                    help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
-                   "--test playing its demo motion; progress: the progress review of --patient")
+                   "--test playing its demo motion; progress: the progress review of --patient; calibrate: the "
+                   "camera calibration on the simulated board")
     p.add_argument("--db", type=Path, default=None,
                    help="database of patients and results (default: the user's data directory)")
     p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress, or --game")

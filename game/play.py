@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 #: What headless runs play when no motion is named.
 DEFAULT_HEADLESS_MOTION = "shoulder_abduction"
-SCENES = ("home", "live", "cameras", "rom", "progress", "game")
+SCENES = ("home", "live", "cameras", "rom", "progress", "game", "calibrate")
 #: The test ``--scene rom`` opens when none is named.
 DEFAULT_ROM_TEST = "shoulder_flexion"
 #: The game ``--scene game`` opens when none is named.
@@ -54,6 +54,8 @@ class PlayOptions:
         auto: the simulated patient plays the game by itself (the automatic demo).
         mute: no sound.
         max_level: the therapist's highest level of the games, 1..10 (None: each game's own limit).
+        calibration_path: where the calibration scene saves (None: ``calibration.toml`` in the
+            user's data directory).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -73,6 +75,7 @@ class PlayOptions:
     auto: bool = False
     mute: bool = False
     max_level: int | None = None
+    calibration_path: Path | None = None
 
 
 def make_avatar(ctx, marker_names):
@@ -133,12 +136,21 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
                                                                   max_level=options.max_level),
                              title="Games: choose the patient")
 
+    def open_calibrate():
+        from game.scenes.calibrate import CalibrateScene, sim_feeds
+        from tracking.sim.calibration_material import DEFAULT_BOARD
+
+        rig = getattr(options.source, "rig", "ring4") or "ring4"
+        return CalibrateScene(sim_feeds(rig, (640, 480), DEFAULT_BOARD, ctx=app.screen.ctx), DEFAULT_BOARD,
+                              out_path=options.calibration_path, auto=options.headless)
+
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),
         MenuEntry("Games", "Exercise inside the measured range", open_games),
         MenuEntry("ROM test", "Measure a range of motion", open_rom),
         MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
+        MenuEntry("Calibrate cameras", "Lens and focal length of each camera from a checkerboard", open_calibrate),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
     app.push(home)
@@ -146,6 +158,8 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         app.push(open_live())
     elif options.scene == "cameras":
         app.push(open_monitor())
+    elif options.scene == "calibrate":
+        app.push(open_calibrate())
     elif options.scene == "game" or options.game:
         from game.exergames.spec import load_game
 

@@ -8,7 +8,8 @@ move the board next (the empty regions, :mod:`calibration.intrinsics`).
 
 Keys (the shared key map, :mod:`game.input`): Space or Enter captures the current view (only
 when the board is found), A switches auto-capture on or off (a view is captured when the board
-is found and has moved since the last capture), C calibrates the camera and shows the result
+is found and has moved since the last capture, and the camera is calibrated again after each new
+view once there are enough), C calibrates the camera and shows the result
 (RMS reprojection error, focal length, and for the simulated feed the error against the true
 focal length), Tab goes to the next camera, S saves the calibrated cameras (two or more) as a
 TOML file, Esc goes back. The buttons at the bottom do the same with the mouse.
@@ -131,15 +132,24 @@ class SimBoardFeed:
 
 
 def sim_feeds(rig: str = "ring4", size_px: tuple[int, int] = (640, 480), board: Checkerboard | None = None,
-              *, seed: int = 0, **kwargs) -> list[SimBoardFeed]:
-    """One simulated feed per camera of a built-in rig, over the empty studio room (GL rendered)."""
-    from tracking.sim.calibration_material import DEFAULT_BOARD, room_backgrounds
-    from tracking.sim.renderer import DEMO_LENS
+              *, seed: int = 0, ctx=None, **kwargs) -> list[SimBoardFeed]:
+    """One simulated feed per camera of a built-in rig (with the demo lens distortion), over the
+    empty studio room rendered once by GL.
+
+    Args:
+        ctx: the application's moderngl context to render the room with (its framebuffer and
+            state are changed: the screen rebinds its own every frame); None: a standalone one.
+        kwargs: passed to :class:`SimBoardFeed`.
+    """
+    from tracking.sim.calibration_material import DEFAULT_BOARD
+    from tracking.sim.renderer import DEMO_LENS, StudioRenderer
     from tracking.sim.rigs import load_rig
+    from tracking.sim.scene import SceneFrame
 
     board = board or DEFAULT_BOARD
     cams = [Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in load_rig(rig, size_px)]
-    backgrounds = room_backgrounds(cams)
+    with StudioRenderer(cams, ctx=ctx) as renderer:
+        backgrounds = list(renderer.render(SceneFrame.empty(), with_visibility=False).images)
     return [SimBoardFeed(c, bg, board, seed=seed + i, **kwargs) for i, (c, bg) in enumerate(zip(cams, backgrounds))]
 
 
@@ -255,6 +265,8 @@ class CalibrateScene(BaseScene):
         self.detection, self.reason = detect_board(self.image, self.board)
         if self.auto and self.detection is not None and self._moved_enough():
             self.capture()
+            if len(self.current.views) >= self.need_views:
+                self.calibrate()   # auto: the result follows every new view once there are enough
         self.overlay = None
 
     def _moved_enough(self) -> bool:
