@@ -22,6 +22,8 @@ so a real camera plugs in by implementing the same three members.
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol, Sequence
@@ -106,6 +108,8 @@ class SimBoardFeed:
         self._noise = float(noise_sigma)
         self._path = self._make_path(intrinsics_poses(camera, board, n_poses, self._rng), hold, move)
         self._k = 0
+        self._last_pose = None
+        self._clean = background
 
     def _make_path(self, poses, hold: int, move: int) -> list:
         path = []
@@ -127,8 +131,14 @@ class SimBoardFeed:
 
         pose = self._path[self._k % len(self._path)]
         self._k += 1
-        image = self._caster.draw(self._background, pose, light=_board_light(pose))
-        return _add_noise(image, self._noise, self._rng)
+        if pose is not self._last_pose:   # the board held still: the clean image is drawn once
+            self._last_pose = pose
+            self._clean = self._caster.draw(self._background, pose, light=_board_light(pose))
+        return _add_noise(self._clean, self._noise, self._rng)
+
+    def true_corners_px(self) -> np.ndarray:
+        """(N, 2) true pixel positions of the inner corners in the last image (may lie outside it)."""
+        return self._caster.corners_px(self._last_pose)
 
 
 def sim_feeds(rig: str = "ring4", size_px: tuple[int, int] = (640, 480), board: Checkerboard | None = None,
@@ -224,10 +234,12 @@ class CalibrateScene(BaseScene):
         out_path: where S saves (None: :func:`default_calibration_path`).
         auto: start with auto-capture on.
         need_views: views to capture before calibrating.
+        threaded: read the feed and look for the board on a helper thread (the window stays
+            smooth); False: in :meth:`update`, one image per ``1 / FEED_RATE_HZ`` of updates (tests).
     """
 
     def __init__(self, feeds: Sequence[BoardFeed], board: Checkerboard, *, out_path: Path | None = None,
-                 auto: bool = False, need_views: int = NEED_VIEWS) -> None:
+                 auto: bool = False, need_views: int = NEED_VIEWS, threaded: bool = True) -> None:
         if not feeds:
             raise RehabError("no camera to calibrate: connect a camera or use the simulated studio")
         self.feeds = list(feeds)
@@ -246,6 +258,13 @@ class CalibrateScene(BaseScene):
         self._since = 1.0 / FEED_RATE_HZ   # the first update reads a frame
         self._buttons: list[Rect] = []
         self.saved_path: Path | None = None
+        self.image_rect: Rect | None = None   # where the camera image was last drawn, screen pixels
+        self.threaded = threaded
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._latest = None
+        self._failed = ""
 
     # ----------------------------------------------------------------- state
     @property
@@ -259,10 +278,34 @@ class CalibrateScene(BaseScene):
     def _say(self, text: str, colour=theme.TEXT_DIM) -> None:
         self.message, self.message_colour = text, colour
 
+    def _grab(self, index: int) -> tuple[int, np.ndarray, Detection | None, str]:
+        image = self.feeds[index].next_frame()
+        detection, reason = detect_board(image, self.board)
+        return index, image, detection, reason
+
     def next_frame(self) -> None:
-        """Read the feed's next image and look for the board in it."""
-        self.image = self.feed.next_frame()
-        self.detection, self.reason = detect_board(self.image, self.board)
+        """Read the feed's next image and look for the board in it (on this thread)."""
+        self._show(*self._grab(self.index))
+
+    def _worker(self) -> None:
+        """The feed read and the board looked for off the drawing thread, ``FEED_RATE_HZ`` times a second."""
+        period = 1.0 / FEED_RATE_HZ
+        while not self._stop.is_set():
+            t0 = time.perf_counter()
+            try:
+                got = self._grab(self.index)
+            except Exception as exc:   # a feed that fails: said on the screen, the thread ends
+                log.exception("calibration feed failed")
+                self._failed = f"The camera stopped: {exc}"
+                return
+            with self._lock:
+                self._latest = got
+            self._stop.wait(max(0.0, period - (time.perf_counter() - t0)))
+
+    def _show(self, index: int, image: np.ndarray, detection: Detection | None, reason: str) -> None:
+        if index != self.index:   # grabbed just before the switch to another camera
+            return
+        self.image, self.detection, self.reason = image, detection, reason
         if self.auto and self.detection is not None and self._moved_enough():
             self.capture()
             if len(self.current.views) >= self.need_views:
@@ -327,6 +370,7 @@ class CalibrateScene(BaseScene):
         self._since = 1.0 / FEED_RATE_HZ
         self._say(f"Now {self.feed.name}")
         self.image = None
+        self.detection = None
 
     # ----------------------------------------------------------------- scene
     def handle(self, event: InputEvent) -> None:
@@ -357,7 +401,28 @@ class CalibrateScene(BaseScene):
         elif what == "Back":
             self.app.pop()
 
+    def enter(self, app) -> None:
+        super().enter(app)
+        if self.threaded and self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._worker, name="rehab-calibration-feed", daemon=True)
+            self._thread.start()
+
+    def exit(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
     def update(self, dt_s: float) -> None:
+        if self._failed:
+            self._say(self._failed, theme.FAILURE)
+        if self.threaded:
+            with self._lock:
+                got, self._latest = self._latest, None
+            if got is not None:
+                self._show(*got)
+            return
         self._since += dt_s
         if self._since >= 1.0 / FEED_RATE_HZ:
             self._since = 0.0
@@ -379,6 +444,7 @@ class CalibrateScene(BaseScene):
         area_h = h - 170 * s
         img_w = min(0.6 * w, area_h * iw / ih)
         rect = (m, 72 * s, img_w, img_w * ih / iw)
+        self.image_rect = rect
         c.image("calibrate-camera", self.overlay, rect)
         x = m + img_w + 28 * s
         y = 76 * s

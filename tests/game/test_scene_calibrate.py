@@ -1,0 +1,122 @@
+"""The calibration scene driven through actions on the simulated board feed (small images, the
+feed read on the test's thread, a fake clock): the corners drawn where the board truly is, a view
+captured only when the board is found, eight views giving the true focal length within 1 %, the
+saved TOML read back, and Esc going back."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from calibration.files import load_calibration
+from game.app import App, BaseScene, Settings
+from game.gfx.screen import GraphicsUnavailable, open_screen
+from game.input import Action, Press
+from game.scenes.calibrate import CalibrateScene, coverage_hint, sim_feeds
+from game.scenes.monitor import image_to_screen
+from tracking.sim.calibration_material import DEFAULT_BOARD
+
+SIZE = (640, 360)
+CAMERA_PX = (320, 240)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.now_s = 0.0
+
+    def __call__(self) -> float:
+        return self.now_s
+
+
+@pytest.fixture(scope="module")
+def screen():
+    mp = pytest.MonkeyPatch()
+    mp.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        s = open_screen(SIZE, "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        mp.undo()
+        pytest.skip(str(exc))
+    yield s
+    s.close()
+    mp.undo()
+
+
+def make_app(screen, tmp_path, *, auto=False):
+    feeds = sim_feeds("ring4", CAMERA_PX, DEFAULT_BOARD, ctx=screen.ctx, n_poses=10, hold=3, move=2)[:2]
+    clock = Clock()
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=clock, sleep=lambda s: None, events=lambda: [])
+    app.push(BaseScene())
+    scene = CalibrateScene(feeds, DEFAULT_BOARD, out_path=tmp_path / "cal.toml", auto=auto, threaded=False)
+    app.push(scene)
+    return app, scene, clock
+
+
+def step(app, clock, frames=1):
+    """Frames of 0.1 s: one new camera image each."""
+    for _ in range(frames):
+        clock.now_s += 0.1
+        app.frame()
+
+
+def test_corners_drawn_where_the_board_is_and_capture_only_when_found(screen, tmp_path):
+    app, scene, clock = make_app(screen, tmp_path)
+    found_seen = lost_seen = 0
+    for _ in range(24):
+        step(app, clock)
+        before = len(scene.current.views)
+        found = scene.detection is not None
+        app.dispatch(Press(Action.SELECT))
+        assert len(scene.current.views) == before + found
+        if found and not found_seen:
+            # the drawn corners (green) sit on the board's true corners in the window
+            rgb = screen.read_rgb()
+            truth = scene.feeds[0].true_corners_px()
+            xy = image_to_screen(truth, scene.image_rect, CAMERA_PX)
+            green = [rgb[int(round(y - 0.5)), int(round(x - 0.5))] for x, y in xy]
+            share = np.mean([g[1] > 170 and g[1] > g[0] + 60 and g[1] > g[2] + 60 for g in green])
+            assert share > 0.8, share
+        found_seen += found
+        lost_seen += not found
+    assert found_seen >= 5 and lost_seen >= 1     # both cases were met
+    app.dispatch(Press(Action.BACK))
+    assert not isinstance(app.scene, CalibrateScene)
+
+
+def test_eight_views_give_the_true_focal_length_and_the_file_loads_back(screen, tmp_path):
+    app, scene, clock = make_app(screen, tmp_path, auto=True)
+    for k in range(2):
+        for _ in range(80):
+            step(app, clock)
+            if len(scene.current.views) >= 8:
+                break
+        assert len(scene.current.views) >= 8
+        app.dispatch(Press(Action.MONITOR))   # C: calibrate
+        result = scene.current.result
+        truth = scene.feed.truth
+        assert result is not None and result.rms_px < 0.5
+        assert abs(result.camera.K[0, 0] / truth.K[0, 0] - 1) < 0.01
+        assert abs(result.camera.K[1, 1] / truth.K[1, 1] - 1) < 0.01
+        app.frame()
+        if k == 0:
+            app.dispatch(Press(Action.DOWN))   # S: save needs two cameras
+            assert scene.saved_path is None and "at least 2 cameras" in scene.message
+            app.dispatch(Press(Action.SWITCH_ARM))   # Tab: the next camera
+            assert scene.index == 1 and not scene.current.views
+    app.dispatch(Press(Action.DOWN))
+    assert scene.saved_path == tmp_path / "cal.toml"
+    cams = load_calibration(scene.saved_path)
+    assert [c.name for c in cams] == [f.name for f in scene.feeds]
+    for cam, feed in zip(cams, scene.feeds):
+        assert cam.size_px == CAMERA_PX
+        assert abs(cam.K[0, 0] / feed.truth.K[0, 0] - 1) < 0.01
+
+
+def test_hint_names_the_empty_corner():
+    assert coverage_hint([], CAMERA_PX).startswith("Hold the whole board")
+    from calibration.board import Detection
+
+    uv = np.array([[x, y] for x in np.linspace(170, 310, 8) for y in np.linspace(10, 230, 6)]
+                  + [[x, y] for x in np.linspace(5, 160, 8) for y in np.linspace(10, 110, 3)])
+    hint = coverage_hint([Detection(uv, CAMERA_PX)], CAMERA_PX)
+    assert hint == "Move the board into the bottom-left corner of the picture"
