@@ -460,8 +460,9 @@ class CalibrateScene(BaseScene):
                round(theme.SMALL * s), theme.ACCENT if n >= self.need_views else theme.TEXT_DIM)
         y += 40 * s
         col_w = w - x - m
-        for line in c.wrap(coverage_hint(self.current.views, self.feed.size_px), round(theme.BODY * s), col_w)[:2]:
-            c.text(line, (x, y), round(theme.BODY * s), theme.ATTENTION)
+        hint = coverage_hint(self.current.views, self.feed.size_px)
+        for line in c.wrap(hint, round(theme.BODY * s), col_w)[:2]:
+            c.text(line, (x, y), round(theme.BODY * s), theme.ACCENT if hint.startswith("Good") else theme.ATTENTION)
             y += 38 * s
         y += 10 * s
         result = self.current.result
