@@ -120,3 +120,38 @@ def test_hint_names_the_empty_corner():
                   + [[x, y] for x in np.linspace(5, 160, 8) for y in np.linspace(10, 110, 3)])
     hint = coverage_hint([Detection(uv, CAMERA_PX)], CAMERA_PX)
     assert hint == "Move the board into the bottom-left corner of the picture"
+
+
+class IdleLink:
+    """Stands in for :class:`game.live_link.LiveLink` where the calibration scene does not need one."""
+
+    markerset = None
+
+    def tick(self) -> None:
+        pass
+
+    def summary(self) -> str:
+        return "test link"
+
+
+def test_play_opens_the_scene_from_home_and_its_thread_stops_on_close(screen, tmp_path):
+    import time
+
+    from game.play import PlayOptions, build_app
+    from game.scenes.home import HomeScene
+
+    options = PlayOptions(settings=Settings(window_px=SIZE, max_fps=0, show_fps=False), scene="calibrate",
+                          calibration_path=tmp_path / "cal.toml")
+    app = build_app(screen, options, IdleLink())
+    scene = app.scene
+    try:
+        assert isinstance(scene, CalibrateScene) and scene.out_path == tmp_path / "cal.toml"
+        assert "Calibrate cameras" in [e.label for e in app.stack[0].entries] and isinstance(app.stack[0], HomeScene)
+        deadline = time.perf_counter() + 20
+        while scene.image is None and time.perf_counter() < deadline:   # the helper thread's first image
+            app.frame()
+            time.sleep(0.02)
+        assert scene.image is not None and scene.image.shape == (480, 640, 3)
+    finally:
+        app.close()
+    assert scene._thread is None
