@@ -50,6 +50,9 @@ def menu_rects(size_px: tuple[int, int], n: int) -> list[Rect]:
         bw = min(bw, (w - 2 * theme.MARGIN * scale - gap) / 2)
     total = rows * bh + (rows - 1) * gap
     top = max(210 * scale, (h - total) / 2 + 60 * scale)
+    if total > room:   # still too many: lower buttons from just below the subtitle, above the status line
+        top = 180 * scale
+        bh = (h - 100 * scale - top - (rows - 1) * gap) / rows
     x0 = (w - columns * bw - (columns - 1) * gap) / 2
     return [(x0 + (i % columns) * (bw + gap), top + (i // columns) * (bh + gap), bw, bh) for i in range(n)]
 
@@ -135,12 +138,13 @@ class HomeScene(BaseScene):
                 c.rect((x, y, bw, bh), theme.PANEL, radius=theme.RADIUS * scale, border=2 * scale,
                        border_colour=theme.PANEL_EDGE)
             label_colour = theme.TEXT if chosen else theme.TEXT_DIM
+            k = scale * min(1.0, bh / (BUTTON_H * scale))   # lowered buttons (many entries): smaller text
             if not entry.hint:
-                c.text(entry.label, (x + 34 * scale, y + bh / 2), round(theme.LARGE * scale), label_colour,
+                c.text(entry.label, (x + 34 * scale, y + bh / 2), round(theme.LARGE * k), label_colour,
                        anchor="midleft")
                 continue
-            c.text(entry.label, (x + 34 * scale, y + 18 * scale), round(theme.LARGE * scale), label_colour)
-            c.text(entry.hint, (x + 36 * scale, y + bh - 16 * scale), round(theme.SMALL * scale),
+            c.text(entry.label, (x + 34 * scale, y + 18 * k), round(theme.LARGE * k), label_colour)
+            c.text(entry.hint, (x + 36 * scale, y + bh - 16 * k), round(theme.SMALL * k),
                    theme.TEXT_DIM if chosen else theme.TEXT_FAINT, anchor="bottomleft")
         footer_y = h - 24 * scale
         c.text("Up / Down to choose, Enter to open, Esc to quit; or use the mouse", (w / 2, footer_y),
