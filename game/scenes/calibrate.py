@@ -112,14 +112,14 @@ class SimBoardFeed:
         self._clean = background
 
     def _make_path(self, poses, hold: int, move: int) -> list:
+        from tracking.sim.calibration_material import BoardPose
+
         path = []
         bw = (self.board.cols + 1) * self.board.square_m
         for i, pose in enumerate(poses):
             path += [pose] * hold
             nxt = poses[(i + 1) % len(poses)]
             if i % 3 == 2:  # swing out sideways (along the board's own x) first: half of it leaves the picture
-                from tracking.sim.calibration_material import BoardPose
-
                 out = BoardPose(pose.R, pose.t_m + pose.R[:, 0] * 0.6 * bw)
                 path += [out] * max(move, 2)
                 pose = out

@@ -11,7 +11,7 @@ import pytest
 from calibration.files import load_calibration
 from game.app import App, BaseScene, Settings
 from game.gfx.screen import GraphicsUnavailable, open_screen
-from game.input import Action, Press
+from game.input import Action, Pointer, PointerKind, Press
 from game.scenes.calibrate import CalibrateScene, coverage_hint, sim_feeds
 from game.scenes.monitor import image_to_screen
 from tracking.sim.calibration_material import DEFAULT_BOARD
@@ -79,6 +79,10 @@ def test_corners_drawn_where_the_board_is_and_capture_only_when_found(screen, tm
         found_seen += found
         lost_seen += not found
     assert found_seen >= 5 and lost_seen >= 1     # both cases were met
+    # a click on the Auto button turns auto-capture on
+    x, y, bw, bh = scene._buttons[1]
+    app.dispatch(Pointer(PointerKind.PRESS, (x + bw / 2) / SIZE[0], (y + bh / 2) / SIZE[1], button=1))
+    assert scene.auto
     app.dispatch(Press(Action.BACK))
     assert not isinstance(app.scene, CalibrateScene)
 
