@@ -169,9 +169,11 @@ class BaseScene:
         pass
 
     def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None:
-        """The GL rectangle (x, y from the bottom, w, h) the frame must clear first; None: all.
+        """The GL rectangle (x, y from the bottom, w, h) the 3D pass leaves; None: clear all first.
 
-        A scene whose 3D pass repaints part of the window (colour and depth) leaves it out.
+        A scene whose 3D pass repaints the rest of the window (colour and depth) returns it: the
+        app then skips the clear and paints this rectangle with :attr:`background` as the first
+        item of the 2D layer (cheaper on llvmpipe than a scissored clear, which also stalls).
         """
         return None
 
@@ -335,9 +337,14 @@ class App:
     def render(self, scene: BaseScene) -> None:
         """Draw ``scene`` (3D pass, then the 2D layer and the overlay) into the screen's target."""
         frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
-        self.screen.begin(scene.background, scene.clear_rect(frame))
+        clear_rect = scene.clear_rect(frame)
+        self.screen.begin(scene.background if clear_rect is None else None)
         scene.render_3d(frame)
         self.canvas.begin()
+        if clear_rect is not None:
+            # The part the 3D pass leaves, painted as the first 2D item (see Screen.begin).
+            x, y, w, h = clear_rect
+            self.canvas.rect((x, frame.size_px[1] - y - h, w, h), tuple(255.0 * c for c in scene.background))
         scene.render_2d(frame)
         if self.show_fps:
             self._draw_fps()

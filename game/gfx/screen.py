@@ -91,21 +91,20 @@ class Screen:
     def aspect(self) -> float:
         return self.size_px[0] / self.size_px[1]
 
-    def begin(self, clear_rgb: tuple[float, float, float],
-              clear_rect: tuple[int, int, int, int] | None = None) -> None:
+    def begin(self, clear_rgb: tuple[float, float, float] | None) -> None:
         """Bind the frame's target and clear it (colour and depth).
 
         Args:
-            clear_rgb: the clear colour, 0..1.
-            clear_rect: clear only this GL rectangle (x, y from the bottom, w, h): a scene whose
-                3D pass repaints the rest saves llvmpipe the work. None: everything.
+            clear_rgb: the clear colour, 0..1; None: bind only (the frame repaints every pixel).
+
+        The clear is of the whole target: llvmpipe clears a whole surface cheaply, tile by tile,
+        whereas a scissored clear is drawn like a quad and makes the next texture upload of the
+        frame (a new string in the text atlas) wait until everything queued is rasterized.
         """
         self.target.use()
         self.ctx.viewport = (0, 0, *self.size_px)
-        if clear_rect is not None:
-            self.ctx.scissor = clear_rect
-        self.target.clear(*clear_rgb, 1.0, depth=1.0)
-        self.ctx.scissor = None
+        if clear_rgb is not None:
+            self.target.clear(*clear_rgb, 1.0, depth=1.0)
 
     def present(self) -> None:
         """Show the frame (swap the window's buffers; offscreen, make sure the GPU finished)."""
