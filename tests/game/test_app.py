@@ -9,7 +9,7 @@ import pytest
 
 from game.app import App, BaseScene, FixedStep, Frame, Settings
 from game.gfx import theme
-from game.gfx.screen import GraphicsUnavailable, has_display, open_screen
+from game.gfx.screen import has_display
 from game.input import Action, InputMapper, Pointer, PointerKind, Press
 
 
@@ -27,14 +27,8 @@ class FakeClock:
 
 
 @pytest.fixture
-def screen(monkeypatch):
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    try:
-        s = open_screen((320, 180), "test", headless=True)
-    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
-        pytest.skip(str(exc))
-    yield s
-    s.close()
+def screen(open_headless):
+    return open_headless((320, 180))
 
 
 # ---------------------------------------------------------------------------- fixed step

@@ -10,7 +10,6 @@ import pytest
 
 from game.app import App, BaseScene, Settings
 from game.db import Database
-from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.input import Action, Press
 from game.rom.session import RomResult
 from game.scenes.progress import BAND_COLOUR, ProgressScene, rom_plot_rgb
@@ -41,14 +40,8 @@ def fill(path, *, games: bool) -> None:
 
 
 @pytest.fixture
-def screen(monkeypatch):
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    try:
-        s = open_screen(SIZE, "test", headless=True)
-    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
-        pytest.skip(str(exc))
-    yield s
-    s.close()
+def screen(open_headless):
+    return open_headless(SIZE)
 
 
 def band_rgb() -> np.ndarray:

@@ -13,7 +13,6 @@ import pytest
 
 from game.app import App, BaseScene, Services, Settings
 from game.db import Database
-from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState
 from game.rom.session import RomState
@@ -89,14 +88,8 @@ class MotionLink:
 
 
 @pytest.fixture
-def screen(monkeypatch):
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    try:
-        s = open_screen(SIZE, "test", headless=True)
-    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
-        pytest.skip(str(exc))
-    yield s
-    s.close()
+def screen(open_headless):
+    return open_headless(SIZE)
 
 
 @pytest.fixture

@@ -14,7 +14,6 @@ import pytest
 
 from game.app import App, BaseScene, Services, Settings
 from game.db import Database
-from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.input import Action, Press
 from game.live_link import LiveLink
 from game.play import make_avatar
@@ -27,14 +26,8 @@ pytestmark = pytest.mark.timeout(240)
 
 
 @pytest.fixture
-def screen(monkeypatch):
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    try:
-        s = open_screen((640, 360), "test", headless=True)
-    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
-        pytest.skip(str(exc))
-    yield s
-    s.close()
+def screen(open_headless):
+    return open_headless((640, 360))
 
 
 def test_rom_scene_on_the_tracker_process_stores_the_maximum_within_3_degrees(screen, tmp_path):

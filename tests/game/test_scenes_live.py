@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from game.app import App, BaseScene, Services, Settings
-from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState
@@ -93,14 +92,8 @@ class Clock:
 
 
 @pytest.fixture
-def screen(monkeypatch):
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    try:
-        s = open_screen(SIZE, "test", headless=True)
-    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
-        pytest.skip(str(exc))
-    yield s
-    s.close()
+def screen(open_headless):
+    return open_headless(SIZE)
 
 
 def make_app(screen, *, motion=None, avatar=True):
