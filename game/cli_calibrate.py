@@ -13,14 +13,13 @@ Every command writes the calibration as TOML (spec/INTERFACES.md) and, on reques
 
 from __future__ import annotations
 
-import argparse
 import logging
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from calibration.errors import CalibrationError, RehabError
+from calibration.errors import RehabError
 
 log = logging.getLogger("rehab")
 

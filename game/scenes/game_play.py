@@ -343,9 +343,7 @@ class GameScene(BaseScene):
     def clear_rect(self, frame: Frame):
         if self.avatar is None:
             return None
-        w, h = frame.size_px
-        x0 = round(self.view.x + self.view.w)
-        return (x0, 0, w - x0, h)
+        return self.view.right_of(frame.size_px)
 
     def render_3d(self, frame: Frame) -> None:
         self.consume()
@@ -379,7 +377,7 @@ class GameScene(BaseScene):
 
     def render_2d(self, frame: Frame) -> None:
         self.consume()
-        c, s = frame.canvas, self.scale
+        c = frame.canvas
         self._draw_target_ring(c)
         self._draw_panel(c, frame.size_px)
         self._draw_banner(c)

@@ -335,10 +335,7 @@ class LiveScene(BaseScene):
         """Only the panel: the avatar's background repaints the view (colour and depth)."""
         if self.avatar is None:
             return None
-        v = self.layout.view
-        w, h = frame.size_px
-        x0 = round(v.x + v.w)
-        return (x0, 0, w - x0, h)
+        return self.layout.view.right_of(frame.size_px)
 
     def render_3d(self, frame: Frame) -> None:
         self._consume_samples()

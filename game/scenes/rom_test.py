@@ -450,9 +450,7 @@ class RomTestScene(BaseScene):
         """Only the panel when the avatar repaints its view (colour and depth)."""
         if self.avatar is None:
             return None
-        w, h = frame.size_px
-        x0 = round(self.view.x + self.view.w)
-        return (x0, 0, w - x0, h)
+        return self.view.right_of(frame.size_px)
 
     def render_3d(self, frame: Frame) -> None:
         self.consume()

@@ -32,7 +32,6 @@ import cv2
 import numpy as np
 
 from calibration.camera import Camera
-from calibration.errors import CalibrationError
 from tracking.sources.base import SourceError, SourceFrameSet, black_image, camera_names
 
 log = logging.getLogger(__name__)
