@@ -42,7 +42,7 @@ def test_frames_of_the_same_instant_are_grouped():
     # machine stamps its frame late, rarely)
     assert np.mean(same) >= 0.85
     for fs in complete:
-        assert np.nanmax(fs.stamps_s) - np.nanmin(fs.stamps_s) <= 0.5 / fps
+        assert np.abs(fs.stamps_s - fs.time_s).max() <= 0.5 / fps + 1e-9  # within half a period of the set's instant
         assert all(img.shape == (SIZE[1], SIZE[0], 3) for img in fs.images)
     assert np.all(np.diff([fs.time_s for fs in sets]) > 0)
     assert [fs.index for fs in sets] == list(range(15))
@@ -83,18 +83,29 @@ def test_a_camera_that_comes_back_is_used_again():
     assert not sets[-1].missing.any() and len(set(frame_values(sets[-1]))) == 1
 
 
-def test_a_slow_reader_and_a_driver_gap_count_as_dropped_frames():
+def test_a_slow_reader_counts_dropped_frames():
     fps = 25.0
     t0 = time.perf_counter() + 0.05
-    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps, skip=(6, 7, 8))]
+    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps)]
     with make_source(devs, fps) as src:
         for _ in range(6):
             src.read()
             time.sleep(2.5 / fps)  # the tracker is slower than the cameras
         warnings = src.warnings()
-    assert src.dropped[0] >= 5
-    assert src.dropped[1] >= src.dropped[0]  # plus the frames its driver never delivered
+    assert src.dropped[0] >= 5 and src.dropped[1] >= 5
     assert any(w.startswith("camera cam1 dropped") for w in warnings)
+
+
+def test_a_driver_gap_counts_as_dropped_frames():
+    fps = 25.0
+    t0 = time.perf_counter() + 0.05
+    devs = [FakeDevice(t0, fps), FakeDevice(t0, fps, skip=(6, 7, 8))]  # its driver never delivers 6-8
+    with make_source(devs, fps) as src:
+        for _ in range(14):
+            src.read()
+        warnings = src.warnings()
+    assert src.dropped[1] >= 3
+    assert any(w.startswith("camera cam2 dropped") for w in warnings)
 
 
 def test_a_camera_out_of_step_is_left_out_and_warned_about():
@@ -103,11 +114,13 @@ def test_a_camera_out_of_step_is_left_out_and_warned_about():
     with make_source(devs, 20.0, stall_s=1.0) as src:
         sets = [src.read() for _ in range(30)]
         warnings = src.warnings()
-    assert src.out_of_step[2] > 0 and src.out_of_step[0] == 0
+    # cam3 is out of step again and again; the others only when a reader thread is not scheduled
+    # for a while on a loaded machine (it stamps its frame late), rarely
+    assert src.out_of_step[2] >= 3 and src.out_of_step[2] > 2 * src.out_of_step[:2].max()
     assert any("cam3 is out of step" in w for w in warnings)
-    for fs in sets:  # whatever is in a set lies within half a period of the others
+    for fs in sets:  # whatever is in a set lies within half a period of the set's instant
         s = fs.stamps_s[~fs.missing]
-        assert s.max() - s.min() <= 0.5 / 20.0 + 1e-9
+        assert np.abs(s - fs.time_s).max() <= 0.5 / 20.0 + 1e-9
 
 
 def test_open_errors_are_one_line():
