@@ -6,10 +6,12 @@ a patient expects (the avatar faces them and moves like their mirror image). It 
 OpenGL 3.3 core context and nothing of pygame, so the game's window and headless tests (EGL)
 use it alike.
 
-Geometry: ellipsoids are instanced icospheres (a finer one for the trunk, head and chair back),
-tapered capsules an instanced band tangent to two instanced end spheres (the simulator's band,
+Geometry: ellipsoids (and the capsules' end spheres) are ray-cast on instanced screen-space
+quads bounding their exact outline, as the simulator's cameras draw them (two triangles each
+instead of 80-320 for an icosphere: llvmpipe pays per triangle); tapered capsules are an
+instanced band tangent to the two end spheres (the simulator's band,
 ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are not drawn. About
-5k triangles in all.
+700 triangles in all.
 
 Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
@@ -38,7 +40,7 @@ from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
-from tracking.sim.meshes import cone_band, icosphere
+from tracking.sim.meshes import cone_band
 
 
 
@@ -159,10 +161,15 @@ vec3 shade(vec3 n, vec3 pos, vec3 srgb, vec2 look) {
 }
 """
 
+# Ellipsoids (and spheres) are ray-cast on a screen-space quad bounding their exact outline
+# (from the dual quadric, as the simulator's cameras draw them): two triangles each instead of an
+# 80-320 triangle icosphere. llvmpipe pays per triangle (setup and binning, ~0.3 us each) more
+# than per ray-cast pixel: the avatar's ~5.4k sphere triangles had cost ~5 ms CPU per frame.
+# Exact silhouettes, depths and normals; edges are hard at the pixel centre, like a mesh's.
 _VERTEX_ELLIPSOID = """
 #version 330
 uniform mat4 u_clip_from_world;
-in vec3 in_pos;  // unit sphere: position = normal
+uniform vec2 u_pad_ndc;  // 1.5 pixels in NDC units
 in vec3 i_centre;
 in vec3 i_ax0;
 in vec3 i_ax1;
@@ -172,17 +179,68 @@ in vec3 i_nrm1;
 in vec3 i_nrm2;
 in vec3 i_rgb;
 in vec2 i_style;  // estimated and lost look amounts
-out vec3 v_pos;
-out vec3 v_normal;
+flat out vec3 v_centre;
+flat out mat3 v_nrm;
 flat out vec3 v_rgb;
 flat out vec2 v_style;
+
+float dual(vec4 a, vec4 b) { return dot(a.xyz, b.xyz) - a.w * b.w; }
+
 void main() {
-    mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
-    v_pos = i_centre + axes * in_pos;
-    v_normal = mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos;
+    mat4 m = u_clip_from_world * mat4(vec4(i_ax0, 0.0), vec4(i_ax1, 0.0), vec4(i_ax2, 0.0), vec4(i_centre, 1.0));
+    vec4 rx = vec4(m[0][0], m[1][0], m[2][0], m[3][0]);  // rows x, y, w: clip from unit sphere
+    vec4 ry = vec4(m[0][1], m[1][1], m[2][1], m[3][1]);
+    vec4 rw = vec4(m[0][3], m[1][3], m[2][3], m[3][3]);
+    float cxx = dual(rx, rx), cyy = dual(ry, ry), cww = dual(rw, rw);
+    float cxw = dual(rx, rw), cyw = dual(ry, rw);
+    float disc_x = cxw * cxw - cxx * cww;
+    float disc_y = cyw * cyw - cyy * cww;
+    vec2 corner = vec2(float((gl_VertexID >> 1) & 1), float(gl_VertexID & 1));
+    vec2 ndc;
+    if (cww < 0.0 && disc_x >= 0.0 && disc_y >= 0.0) {  // wholly in front of the camera
+        vec2 k0 = vec2(cxw - sqrt(disc_x), cyw - sqrt(disc_y)) / cww;
+        vec2 k1 = vec2(cxw + sqrt(disc_x), cyw + sqrt(disc_y)) / cww;
+        ndc = clamp(mix(min(k0, k1) - u_pad_ndc, max(k0, k1) + u_pad_ndc, corner), -1.0, 1.0);
+    } else {  // straddles the camera plane: cover the viewport, the ray cast sorts it out
+        ndc = corner * 2.0 - 1.0;
+    }
+    v_centre = i_centre;
+    v_nrm = mat3(i_nrm0, i_nrm1, i_nrm2);
     v_rgb = i_rgb;
     v_style = i_style;
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    gl_Position = vec4(ndc, 0.0, 1.0);
+}
+"""
+
+_FRAGMENT_ELLIPSOID = """
+#version 330
+uniform mat4 u_clip_from_world;
+uniform mat3 u_ray_from_window;  // world ray direction through window position (x, y, 1)
+flat in vec3 v_centre;
+flat in mat3 v_nrm;  // inverse transpose of the axes: its transpose maps world to unit-sphere space
+flat in vec3 v_rgb;
+flat in vec2 v_style;
+out vec4 f_colour;
+""" + _LIGHTING + """
+void main() {
+    // In the unit-sphere space of the ellipsoid the ray o + t d meets |x| = 1 where
+    // a t^2 + 2 b t + c = 0; it hits in front of the eye iff b < 0 and the discriminant > 0.
+    mat3 inv = transpose(v_nrm);
+    vec3 ray = u_ray_from_window * vec3(gl_FragCoord.xy, 1.0);
+    vec3 o = inv * (u_eye - v_centre);
+    vec3 d = inv * ray;
+    float a = dot(d, d);
+    float b = dot(o, d);
+    float disc = b * b - a * (dot(o, o) - 1.0);
+    if (b >= 0.0 || disc <= 0.0) discard;
+    float t = (-b - sqrt(disc)) / a;
+    vec3 pos = u_eye + t * ray;
+    vec4 clip = u_clip_from_world * vec4(pos, 1.0);
+    float z_ndc = clip.z / clip.w;
+    if (z_ndc < -1.0 || z_ndc > 1.0) discard;
+    gl_FragDepth = 0.5 * z_ndc + 0.5;
+    vec3 n = normalize(v_nrm * (o + t * d));
+    f_colour = vec4(shade(n, pos, v_rgb, v_style), mix(1.0, u_lost_alpha, v_style.y));
 }
 """
 
@@ -286,14 +344,38 @@ _BAND_FORMAT = "3f 3f 2f 3f 2f/i"
 _BAND_NAMES = ("i_p0", "i_p1", "i_r", "i_rgb", "i_style")
 
 
-class _Instanced:
-    """One static mesh drawn with a growable per-instance float32 buffer."""
+def _ray_from_window(clip: np.ndarray, eye: np.ndarray, viewport: tuple[int, int, int, int]) -> bytes:
+    """The (3, 3) matrix taking window coordinates ``(x, y, 1)`` (``gl_FragCoord``) to the world
+    direction of the ray from ``eye`` through that pixel, as float32 column-major bytes.
 
-    def __init__(self, ctx: moderngl.Context, program: moderngl.Program, vertices: np.ndarray, triangles: np.ndarray,
-                 vertex_name: str, inst_format: str, inst_names: tuple[str, ...]) -> None:
+    The point where the ray crosses the near plane is ``clip^-1 (ndc_x, ndc_y, -1, 1)``; its
+    homogeneous w is the same all over the plane for any perspective projection (mirrored or
+    not), so the direction is affine in (x, y) and three pixels give the matrix.
+    """
+    vx, vy, vw, vh = viewport
+    inv = np.linalg.inv(clip)
+
+    def direction(x: float, y: float) -> np.ndarray:
+        p = inv @ np.array([2.0 * (x - vx) / vw - 1.0, 2.0 * (y - vy) / vh - 1.0, -1.0, 1.0])
+        return p[:3] / p[3] - eye
+
+    d00 = direction(0.0, 0.0)
+    m = np.column_stack([direction(1.0, 0.0) - d00, direction(0.0, 1.0) - d00, d00])
+    return np.ascontiguousarray(m.T, np.float32).tobytes()
+
+
+class _Instanced:
+    """One static mesh drawn with a growable per-instance float32 buffer; without a mesh
+    (``vertices`` None), a 4-vertex triangle strip per instance that the vertex shader places
+    from ``gl_VertexID`` (the ray-cast quads)."""
+
+    def __init__(self, ctx: moderngl.Context, program: moderngl.Program, vertices: np.ndarray | None,
+                 triangles: np.ndarray | None, vertex_name: str, inst_format: str, inst_names: tuple[str, ...]) -> None:
         self._ctx, self._program = ctx, program
-        self._vbo = ctx.buffer(np.ascontiguousarray(vertices, np.float32).tobytes())
-        self._ibo = ctx.buffer(np.ascontiguousarray(triangles, np.int32).tobytes())
+        self._vbo = self._ibo = None
+        if vertices is not None:
+            self._vbo = ctx.buffer(np.ascontiguousarray(vertices, np.float32).tobytes())
+            self._ibo = ctx.buffer(np.ascontiguousarray(triangles, np.int32).tobytes())
         self._vertex_name = vertex_name
         self._format, self._names = inst_format, inst_names
         self._floats = sum(int(n) for n in re.findall(r"(\d+)f", inst_format))
@@ -308,11 +390,12 @@ class _Instanced:
             self._buffer.release()
         self._capacity = capacity
         self._buffer = self._ctx.buffer(reserve=capacity * self._floats * 4, dynamic=True)
-        self._vao = self._ctx.vertex_array(
-            self._program,
-            [(self._vbo, "3f", self._vertex_name), (self._buffer, self._format, *self._names)],
-            index_buffer=self._ibo,
-        )
+        instances = (self._buffer, self._format, *self._names)
+        if self._vbo is None:
+            self._vao = self._ctx.vertex_array(self._program, [instances])
+        else:
+            self._vao = self._ctx.vertex_array(self._program, [(self._vbo, "3f", self._vertex_name), instances],
+                                               index_buffer=self._ibo)
 
     def draw(self, rows: np.ndarray) -> None:
         """rows: (N, floats) float32 instance data."""
@@ -322,7 +405,10 @@ class _Instanced:
         if n > self._capacity:
             self._grow(max(n, 2 * self._capacity))
         self._buffer.write(np.ascontiguousarray(rows, np.float32).tobytes())
-        self._vao.render(moderngl.TRIANGLES, instances=n)
+        if self._vbo is None:
+            self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+        else:
+            self._vao.render(moderngl.TRIANGLES, instances=n)
 
     def release(self) -> None:
         for obj in (self._vao, self._buffer, self._vbo, self._ibo):
@@ -409,19 +495,15 @@ class AvatarRenderer:
     def __init__(self, ctx: moderngl.Context, style: AvatarStyle = AvatarStyle()) -> None:
         self._ctx = ctx
         self.style = style
-        self._prog_ellipsoid = ctx.program(vertex_shader=_VERTEX_ELLIPSOID, fragment_shader=_FRAGMENT_BODY)
+        self._prog_ellipsoid = ctx.program(vertex_shader=_VERTEX_ELLIPSOID, fragment_shader=_FRAGMENT_ELLIPSOID)
         self._prog_band = ctx.program(vertex_shader=_VERTEX_BAND, fragment_shader=_FRAGMENT_BODY)
         self._prog_floor = ctx.program(vertex_shader=_VERTEX_COLOURED, fragment_shader=_FRAGMENT_COLOURED)
         self._prog_background = ctx.program(vertex_shader=_VERTEX_FULLSCREEN, fragment_shader=_FRAGMENT_BACKGROUND)
-        # 320 and 80 triangles: at the sizes the avatar appears on screen their outlines stay
-        # within half a pixel of the true ellipse.
-        fine_v, fine_t = icosphere(2)
-        coarse_v, coarse_t = icosphere(1)
+        self._ellipsoids = _Instanced(ctx, self._prog_ellipsoid, None, None, "", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         # 16 sides: a limb's outline is within half a pixel of round at its on-screen size, and
         # the band's long thin triangles are what llvmpipe spends the most on (32 sides: +2.4 ms).
+        # (Ray-casting the tapered capsules on quads along them cost ~1 ms more than the bands.)
         band_v, band_t = cone_band(16)
-        self._fine = _Instanced(ctx, self._prog_ellipsoid, fine_v, fine_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
-        self._coarse = _Instanced(ctx, self._prog_ellipsoid, coarse_v, coarse_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         self._band = _Instanced(ctx, self._prog_band, band_v, band_t, "in_ring", _BAND_FORMAT, _BAND_NAMES)
         self._floor = _Floor(ctx, self._prog_floor, style.floor_radius_m, style.floor_rgb)
         self._empty_vao_bg = ctx.vertex_array(self._prog_background, [])
@@ -480,6 +562,10 @@ class AvatarRenderer:
         key = cam @ np.array([-0.45, 0.75, 0.55])
         rim = cam @ np.array([0.3, 0.45, -0.85])
         clip_bytes = clip.T.astype(np.float32).tobytes()
+        vx, vy, vw, vh = ctx.viewport
+        ray_bytes = _ray_from_window(clip, eye, (vx, vy, vw, vh))
+        self._prog_ellipsoid["u_ray_from_window"].write(ray_bytes)
+        self._prog_ellipsoid["u_pad_ndc"].value = (3.0 / vw, 3.0 / vh)
         for prog in (self._prog_ellipsoid, self._prog_band):
             prog["u_clip_from_world"].write(clip_bytes)
             prog["u_eye"].value = tuple(float(x) for x in eye)
@@ -487,7 +573,7 @@ class AvatarRenderer:
             prog["u_rim_dir"].value = tuple(float(x) for x in rim / np.linalg.norm(rim))
 
         looks = state_looks(pose.state) if looks is None else np.asarray(looks, np.float32)
-        e_rows, e_lost, fine = self._ellipsoid_rows(looks, shapes)
+        e_rows, e_lost = self._ellipsoid_rows(looks, shapes)
         c_rows, c_lost = self._capsule_rows(looks, shapes)
         caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
         if floor:  # first, without depth: everything else stands on it
@@ -495,23 +581,23 @@ class AvatarRenderer:
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
         ctx.front_face = "cw" if mirrored else "ccw"
-        self._draw_solids(e_rows[~e_lost], fine[~e_lost], c_rows[~c_lost], caps[~cap_lost])
+        self._draw_solids(e_rows[~e_lost], c_rows[~c_lost], caps[~cap_lost])
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
         # its front surface (no inner overlaps), then its colour over it.
         if e_lost.any() or c_lost.any():
             ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
-            self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
+            self._draw_solids(e_rows[e_lost], c_rows[c_lost], caps[cap_lost])
             ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "<="
-            self._draw_solids(e_rows[e_lost], fine[e_lost], c_rows[c_lost], caps[cap_lost])
+            self._draw_solids(e_rows[e_lost], c_rows[c_lost], caps[cap_lost])
             ctx.depth_func = "<"
         ctx.front_face = "ccw"
         return shapes
 
     def release(self) -> None:
-        for obj in (self._fine, self._coarse, self._band, self._floor):
+        for obj in (self._ellipsoids, self._band, self._floor):
             obj.release()
         for obj in (self._empty_vao_bg, self._prog_ellipsoid, self._prog_band,
                     self._prog_floor, self._prog_background):
@@ -526,12 +612,12 @@ class AvatarRenderer:
         out[tracked] = looks[parts[tracked]]
         return out
 
-    def _ellipsoid_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _ellipsoid_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
         style = self._style_of(looks, s.ellipsoid_part)
         axes = np.transpose(s.ellipsoid_axes_m, (0, 2, 1)).reshape(-1, 9)  # columns ax0, ax1, ax2
         normal = np.linalg.inv(s.ellipsoid_axes_m).reshape(-1, 9)  # columns of inv(A)^T = rows of inv(A)
         rows = np.hstack([s.ellipsoid_centre_m, axes, normal, s.ellipsoid_rgb, style]).astype(np.float32)
-        return rows, style[:, 1] > _TRANSLUCENT, s.ellipsoid_fine
+        return rows, style[:, 1] > _TRANSLUCENT
 
     def _capsule_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
         style = self._style_of(looks, s.capsule_part)
@@ -553,9 +639,11 @@ class AvatarRenderer:
             flags.append(lost[keep])
         return np.concatenate(rows).astype(np.float32), np.concatenate(flags)
 
-    def _draw_solids(self, e_rows: np.ndarray, fine: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
-        self._fine.draw(e_rows[fine])
-        self._coarse.draw(np.concatenate([e_rows[~fine], caps]))
+    def _draw_solids(self, e_rows: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
+        # The ray-cast quads face either way (a mirrored projection flips them): no culling.
+        self._ctx.disable(moderngl.CULL_FACE)
+        self._ellipsoids.draw(np.concatenate([e_rows, caps]))
+        self._ctx.enable(moderngl.CULL_FACE)
         self._band.draw(c_rows)
 
     def _draw_floor(self, s: BodyShapes, clip_bytes: bytes) -> None:
