@@ -8,9 +8,16 @@ an explicit :class:`Services` object.
 Per frame (:meth:`App.frame`): pygame events -> :class:`game.input.InputMapper` -> the top
 scene's :meth:`Scene.handle`; then :class:`FixedStep` says how many fixed updates of
 ``1 / update_hz`` seconds fit in the time elapsed (the frame time is capped, so a stall never
-triggers a burst of catch-up steps); each calls :meth:`Scene.update`; finally
-:meth:`Scene.render` draws with ``alpha``, the fraction of an update step elapsed since the last
-one, so that motion is drawn between the last two updates rather than jumping at update rate.
+triggers a burst of catch-up steps); each calls :meth:`Scene.update`; finally the scene draws
+with ``alpha``, the fraction of an update step elapsed since the last one, so that motion is
+drawn between the last two updates rather than jumping at update rate.
+
+The frame is pipelined for a software rasterizer (Mesa llvmpipe rasterizes on threads of its own
+once commands are flushed): the scene's CPU-only work of frame k (:meth:`Scene.prepare`: tracker
+samples, skeleton, interpolation, solids) runs while llvmpipe still rasterizes frame k-1; then
+frame k-1 is presented (the swap waits for it), frame k's drawing commands are issued and flushed,
+and the loop goes on. A frame is shown one frame period later than when drawn serially; the
+machine's cores work on the Python side and the pixels at the same time.
 """
 
 from __future__ import annotations
@@ -141,6 +148,7 @@ class Scene(Protocol):
     def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None: ...
     def handle(self, event: InputEvent) -> None: ...
     def update(self, dt_s: float) -> None: ...
+    def prepare(self, frame: Frame) -> None: ...
     def render_3d(self, frame: Frame) -> None: ...
     def render_2d(self, frame: Frame) -> None: ...
 
@@ -167,6 +175,10 @@ class BaseScene:
 
     def update(self, dt_s: float) -> None:
         pass
+
+    def prepare(self, frame: "Frame") -> None:
+        """CPU-only work of this frame's drawing (no GL calls): runs while the previous frame is
+        still being rasterized. ``render_3d`` / ``render_2d`` then issue the GL commands."""
 
     def clear_rect(self, frame: "Frame") -> tuple[int, int, int, int] | None:
         """The GL rectangle (x, y from the bottom, w, h) the 3D pass leaves; None: clear all first.
@@ -264,6 +276,7 @@ class App:
         self._step = FixedStep(1.0 / settings.update_hz, settings.max_frame_s, clock())
         self._last_frame_s = clock()
         self._work_total_s = 0.0
+        self._pending = False  # a frame drawn and flushed but not presented yet
 
     # ------------------------------------------------------------------ scenes
     @property
@@ -303,7 +316,8 @@ class App:
 
     # ------------------------------------------------------------------ loop
     def frame(self, screenshot: Path | None = None) -> bool:
-        """One frame: events, fixed updates, drawing, (``screenshot``: saving it,) presenting.
+        """One frame: events, fixed updates, preparing, presenting the previous frame, drawing
+        this one (``screenshot``: saving it) and flushing it to the rasterizer.
 
         Returns:
             Whether a frame was drawn (not when the events quit the app or left no scene).
@@ -322,11 +336,15 @@ class App:
         dt_s = self._step.step_s
         for _ in range(steps):
             scene.update(dt_s)
-        self.render(scene)
+        frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+        scene.prepare(frame)  # while the previous frame is rasterized
+        self.present()
+        self.render(scene, frame)
         if screenshot is not None:
             # A window's back buffer is undefined after the swap: read it before presenting.
             self.screen.save_png(screenshot)
-        self.screen.present()
+        self.screen.flush()
+        self._pending = True
         end_s = self.clock()
         self.rate.add(end_s - self._last_frame_s, end_s - start_s)
         self._work_total_s += end_s - start_s
@@ -334,9 +352,17 @@ class App:
         self.frames += 1
         return True
 
-    def render(self, scene: BaseScene) -> None:
+    def present(self) -> None:
+        """Show the frame drawn last, if not shown yet (waits until it is rasterized)."""
+        if self._pending:
+            self._pending = False
+            self.screen.present()
+
+    def render(self, scene: BaseScene, frame: Frame | None = None) -> None:
         """Draw ``scene`` (3D pass, then the 2D layer and the overlay) into the screen's target."""
-        frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+        if frame is None:
+            frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+            scene.prepare(frame)
         clear_rect = scene.clear_rect(frame)
         self.screen.begin(scene.background if clear_rect is None else None)
         scene.render_3d(frame)
@@ -394,8 +420,10 @@ class App:
                     self._sleep(wait_s)
         if screenshot is not None and saved is None:  # quit early: save what the scene shows now
             if self.scene is not None:
+                self.present()
                 self.render(self.scene)
             self.screen.save_png(screenshot)
+        self.present()  # the last frame drawn: shown, and its rasterizing counted in the run's time
         n = self.frames - first_frame
         wall_s = self.clock() - start_s
         work_ms = 1000.0 * (self._work_total_s - work_before_s) / n if n else math.nan

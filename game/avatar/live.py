@@ -44,6 +44,7 @@ class LiveAvatar:
         self.yaw_deg, self.mirror = float(yaw_deg), bool(mirror)
         self._camera: tuple[np.ndarray, np.ndarray] | None = None
         self._camera_key: tuple[np.ndarray, float, float] | None = None  # pelvis, stature, aspect
+        self._prepared = None  # (size, pose, PreparedAvatar) of the next render
 
     def reset(self) -> None:
         """Forget the patient (a new patient, or the tracker identified the markers again)."""
@@ -51,6 +52,7 @@ class LiveAvatar:
         self.interpolator.clear()
         self.fader.reset()
         self._camera = self._camera_key = None
+        self._prepared = None
 
     def push(self, time_s: float, positions_m: np.ndarray, status: np.ndarray) -> SkeletonPose:
         """One tracker sample: (M, 3) positions (NaN lost), (M,) MarkerStatus, its time stamp
@@ -73,9 +75,25 @@ class LiveAvatar:
             self._camera_key = key
         return self._camera
 
+    def prepare(self, size: tuple[int, int], display_time_s: float | None = None) -> SkeletonPose | None:
+        """The CPU side of :meth:`render` for the frame at ``display_time_s`` (no GL calls): the
+        interpolated pose, its camera and its solids, kept for the next :meth:`render` of the same
+        size. Returns the pose (None before the first sample)."""
+        now = time.perf_counter() if display_time_s is None else float(display_time_s)
+        pose = self.interpolator.sample(now)
+        if pose is None:
+            self._prepared = None
+            return None
+        view, proj = self.camera(pose, size[0] / size[1])
+        looks = self.fader.update(pose.state, now)
+        self._prepared = (tuple(size), pose, self.renderer.prepare(pose, view, proj, looks=looks))
+        return pose
+
     def render(self, size: tuple[int, int], display_time_s: float | None = None, *, background: bool = True,
                floor: bool = True) -> SkeletonPose | None:
-        """Draw the avatar as it should look at ``display_time_s`` into the bound framebuffer.
+        """Draw the avatar as it should look at ``display_time_s`` into the bound framebuffer:
+        what :meth:`prepare` made for this size if it was called since the last render (its
+        time then counts, not ``display_time_s``), else prepared now.
 
         Args:
             size: (width, height) of the viewport, for the aspect ratio.
@@ -86,14 +104,15 @@ class LiveAvatar:
         Returns:
             The pose drawn, or None before the first sample (nothing is drawn but the background).
         """
-        now = time.perf_counter() if display_time_s is None else float(display_time_s)
+        if self._prepared is None or self._prepared[0] != tuple(size):
+            self.prepare(size, display_time_s)
+        prepared, self._prepared = self._prepared, None
         if background:
             self.renderer.render_background()
-        pose = self.interpolator.sample(now)
-        if pose is None:
+        if prepared is None:
             return None
-        view, proj = self.camera(pose, size[0] / size[1])
-        self.renderer.render(pose, view, proj, floor=floor, looks=self.fader.update(pose.state, now))
+        _, pose, ready = prepared
+        self.renderer.draw(ready, floor=floor)
         return pose
 
     def release(self) -> None:

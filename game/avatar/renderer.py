@@ -452,12 +452,9 @@ class _Floor:
         self._ibo = ctx.buffer(np.concatenate([tris[opaque], tris[~opaque]]).astype(np.int32).tobytes())
         self._vao = ctx.vertex_array(program, [(self._vbo, "3f 4f", "in_pos", "in_rgba")], index_buffer=self._ibo)
 
-    def draw(self, centre: np.ndarray, floor_y: float, blobs: np.ndarray) -> None:
-        """Draw over what is there, without depth (the floor is behind everything on it).
-
-        centre: (3,) world point the disc is centred on (its y is ignored); blobs: (B, 4) x, z,
-        radius, darkness. Leaves blending enabled.
-        """
+    def rows(self, centre: np.ndarray, floor_y: float, blobs: np.ndarray) -> np.ndarray:
+        """The vertex rows (x, y, z, r, g, b, a) float32 of the disc centred on ``centre`` (its y
+        is ignored) at height ``floor_y``, with ``blobs`` (B, 4: x, z, radius, darkness) shaded in."""
         xz = centre[[0, 2]] + self._radius * self._unit
         shadow = np.zeros(len(xz))
         for bx, bz, br, dark in blobs:
@@ -469,6 +466,11 @@ class _Floor:
         rows[:, 2] = xz[:, 1]
         rows[:, 3:6] = self._rgb[None, :] * (self._shade * (1.0 - 0.55 * shadow))[:, None]
         rows[:, 6] = self._alpha
+        return rows
+
+    def draw_rows(self, rows: np.ndarray) -> None:
+        """Draw the disc of :meth:`rows` over what is there, without depth (the floor is behind
+        everything on it). Leaves blending enabled."""
         self._vbo.write(rows.tobytes())
         ctx = self._vao.ctx
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE | moderngl.BLEND)
@@ -477,9 +479,39 @@ class _Floor:
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         self._vao.render(moderngl.TRIANGLES, vertices=self._n_rim, first=self._n_opaque)
 
+    def draw(self, centre: np.ndarray, floor_y: float, blobs: np.ndarray) -> None:
+        """:meth:`rows` then :meth:`draw_rows`."""
+        self.draw_rows(self.rows(centre, floor_y, blobs))
+
     def release(self) -> None:
         for obj in (self._vao, self._vbo, self._ibo):
             obj.release()
+
+@dataclass(frozen=True, slots=True, eq=False)
+class PreparedAvatar:
+    """One frame of the avatar made ready to draw (:meth:`AvatarRenderer.prepare`).
+
+    Attributes:
+        shapes: the solids.
+        clip: (4, 4) clip-from-world matrix; eye: (3,) camera centre; key_dir, rim_dir: (3,)
+            unit directions towards the lights (world).
+        mirrored: the view is a mirror image (front faces wind the other way).
+        ellipsoids: float32 instance rows of (opaque ellipsoids, opaque end caps, lost
+            ellipsoids, lost end caps).
+        bands: float32 instance rows of (opaque capsule bands, lost ones).
+        floor_rows: the floor mesh's vertex rows (positions and colours).
+    """
+
+    shapes: BodyShapes
+    clip: np.ndarray
+    eye: np.ndarray
+    key_dir: np.ndarray
+    rim_dir: np.ndarray
+    mirrored: bool
+    ellipsoids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    bands: tuple[np.ndarray, np.ndarray]
+    floor_rows: np.ndarray
+
 
 class AvatarRenderer:
     """Draws the avatar into the bound framebuffer of ``ctx`` (needs a depth attachment).
@@ -532,9 +564,77 @@ class AvatarRenderer:
         self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
         ctx.depth_func = "<"
 
+    def prepare(self, pose: SkeletonPose, view: np.ndarray, proj: np.ndarray, *, shapes: BodyShapes | None = None,
+                looks: np.ndarray | None = None) -> PreparedAvatar:
+        """The CPU side of :meth:`render` (no GL calls): solids, instance rows, matrices, floor
+        colours. The app prepares a frame while the previous one is still being rasterized."""
+        shapes = body_shapes(pose) if shapes is None else shapes
+        view = np.asarray(view, np.float64)
+        proj = np.asarray(proj, np.float64)
+        clip = proj @ view
+        eye_from_world_inv = np.linalg.inv(view)
+        # Lights fixed to the camera: key above the viewer's left shoulder, rim from behind.
+        cam = eye_from_world_inv[:3, :3]
+        key = cam @ np.array([-0.45, 0.75, 0.55])
+        rim = cam @ np.array([0.3, 0.45, -0.85])
+        looks = state_looks(pose.state) if looks is None else np.asarray(looks, np.float32)
+        e_rows, e_lost = self._ellipsoid_rows(looks, shapes)
+        c_rows, c_lost = self._capsule_rows(looks, shapes)
+        caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
+        centre = np.array([shapes.shadow_blobs[0, 0], shapes.floor_y_m, shapes.shadow_blobs[0, 1]])
+        return PreparedAvatar(
+            shapes=shapes,
+            clip=clip,
+            eye=eye_from_world_inv[:3, 3].copy(),
+            key_dir=key / np.linalg.norm(key),
+            rim_dir=rim / np.linalg.norm(rim),
+            mirrored=bool(np.linalg.det(proj[:3, :3] @ view[:3, :3]) > 0),
+            ellipsoids=(e_rows[~e_lost], caps[~cap_lost], e_rows[e_lost], caps[cap_lost]),
+            bands=(c_rows[~c_lost], c_rows[c_lost]),
+            floor_rows=self._floor.rows(centre, shapes.floor_y_m, shapes.shadow_blobs),
+        )
+
+    def draw(self, prepared: PreparedAvatar, *, floor: bool = True) -> BodyShapes:
+        """The GL side of :meth:`render`: draw what :meth:`prepare` made into the bound
+        framebuffer's viewport. Returns the solids drawn."""
+        ctx = self._ctx
+        p = prepared
+        clip_bytes = p.clip.T.astype(np.float32).tobytes()
+        vx, vy, vw, vh = ctx.viewport
+        self._prog_ellipsoid["u_ray_from_window"].write(_ray_from_window(p.clip, p.eye, (vx, vy, vw, vh)))
+        self._prog_ellipsoid["u_pad_ndc"].value = (3.0 / vw, 3.0 / vh)
+        for prog in (self._prog_ellipsoid, self._prog_band):
+            prog["u_clip_from_world"].write(clip_bytes)
+            prog["u_eye"].value = tuple(float(x) for x in p.eye)
+            prog["u_key_dir"].value = tuple(float(x) for x in p.key_dir)
+            prog["u_rim_dir"].value = tuple(float(x) for x in p.rim_dir)
+        if floor:  # first, without depth: everything else stands on it
+            self._prog_floor["u_clip_from_world"].write(clip_bytes)
+            self._floor.draw_rows(p.floor_rows)
+        e_opaque, caps_opaque, e_lost, caps_lost = p.ellipsoids
+        c_opaque, c_lost = p.bands
+        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+        ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
+        ctx.front_face = "cw" if p.mirrored else "ccw"
+        self._draw_solids(e_opaque, c_opaque, caps_opaque)
+        ctx.enable(moderngl.BLEND)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
+        # its front surface (no inner overlaps), then its colour over it.
+        if len(e_lost) or len(c_lost) or len(caps_lost):
+            ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
+            self._draw_solids(e_lost, c_lost, caps_lost)
+            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+            ctx.depth_func = "<="
+            self._draw_solids(e_lost, c_lost, caps_lost)
+            ctx.depth_func = "<"
+        ctx.front_face = "ccw"
+        return p.shapes
+
     def render(self, pose: SkeletonPose, view: np.ndarray, proj: np.ndarray, *, floor: bool = True,
                shapes: BodyShapes | None = None, looks: np.ndarray | None = None) -> BodyShapes:
-        """Draw the avatar (and the floor) with depth testing into the bound framebuffer.
+        """Draw the avatar (and the floor) with depth testing into the bound framebuffer
+        (:meth:`prepare` then :meth:`draw`).
 
         Args:
             pose: the pose to show.
@@ -549,52 +649,7 @@ class AvatarRenderer:
         Returns:
             The solids drawn (for picking or tests).
         """
-        ctx = self._ctx
-        shapes = body_shapes(pose) if shapes is None else shapes
-        view = np.asarray(view, np.float64)
-        proj = np.asarray(proj, np.float64)
-        clip = proj @ view
-        mirrored = np.linalg.det(proj[:3, :3] @ view[:3, :3]) > 0
-        eye_from_world_inv = np.linalg.inv(view)
-        eye = eye_from_world_inv[:3, 3]
-        # Lights fixed to the camera: key above the viewer's left shoulder, rim from behind.
-        cam = eye_from_world_inv[:3, :3]
-        key = cam @ np.array([-0.45, 0.75, 0.55])
-        rim = cam @ np.array([0.3, 0.45, -0.85])
-        clip_bytes = clip.T.astype(np.float32).tobytes()
-        vx, vy, vw, vh = ctx.viewport
-        ray_bytes = _ray_from_window(clip, eye, (vx, vy, vw, vh))
-        self._prog_ellipsoid["u_ray_from_window"].write(ray_bytes)
-        self._prog_ellipsoid["u_pad_ndc"].value = (3.0 / vw, 3.0 / vh)
-        for prog in (self._prog_ellipsoid, self._prog_band):
-            prog["u_clip_from_world"].write(clip_bytes)
-            prog["u_eye"].value = tuple(float(x) for x in eye)
-            prog["u_key_dir"].value = tuple(float(x) for x in key / np.linalg.norm(key))
-            prog["u_rim_dir"].value = tuple(float(x) for x in rim / np.linalg.norm(rim))
-
-        looks = state_looks(pose.state) if looks is None else np.asarray(looks, np.float32)
-        e_rows, e_lost = self._ellipsoid_rows(looks, shapes)
-        c_rows, c_lost = self._capsule_rows(looks, shapes)
-        caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
-        if floor:  # first, without depth: everything else stands on it
-            self._draw_floor(shapes, clip_bytes)
-        ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
-        ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
-        ctx.front_face = "cw" if mirrored else "ccw"
-        self._draw_solids(e_rows[~e_lost], c_rows[~c_lost], caps[~cap_lost])
-        ctx.enable(moderngl.BLEND)
-        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
-        # its front surface (no inner overlaps), then its colour over it.
-        if e_lost.any() or c_lost.any():
-            ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
-            self._draw_solids(e_rows[e_lost], c_rows[c_lost], caps[cap_lost])
-            ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-            ctx.depth_func = "<="
-            self._draw_solids(e_rows[e_lost], c_rows[c_lost], caps[cap_lost])
-            ctx.depth_func = "<"
-        ctx.front_face = "ccw"
-        return shapes
+        return self.draw(self.prepare(pose, view, proj, shapes=shapes, looks=looks), floor=floor)
 
     def release(self) -> None:
         for obj in (self._ellipsoids, self._band, self._floor):
@@ -645,8 +700,3 @@ class AvatarRenderer:
         self._ellipsoids.draw(np.concatenate([e_rows, caps]))
         self._ctx.enable(moderngl.CULL_FACE)
         self._band.draw(c_rows)
-
-    def _draw_floor(self, s: BodyShapes, clip_bytes: bytes) -> None:
-        self._prog_floor["u_clip_from_world"].write(clip_bytes)
-        centre = np.array([s.shadow_blobs[0, 0], s.floor_y_m, s.shadow_blobs[0, 1]])
-        self._floor.draw(centre, s.floor_y_m, s.shadow_blobs)

@@ -11,12 +11,14 @@ same, but the OpenGL context is a standalone EGL one rendering into a framebuffe
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import logging
 import os
 import sys
 import warnings
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import cv2
 import moderngl
@@ -65,6 +67,23 @@ def has_display(environ: Mapping[str, str], platform: str) -> bool:
     return bool(environ.get("DISPLAY") or environ.get("WAYLAND_DISPLAY"))
 
 
+@functools.cache
+def _gl_flush_function() -> Callable[[], None]:
+    """glFlush of the current context (libglvnd dispatches it for GLX windows and EGL alike);
+    a no-op where no GL library exposes it (moderngl has no flush of its own)."""
+    for name in ("libOpenGL.so.0", "libGL.so.1", "opengl32", "/System/Library/Frameworks/OpenGL.framework/OpenGL"):
+        try:
+            return getattr(ctypes.CDLL(name), "glFlush")
+        except (OSError, AttributeError):
+            continue
+    log.debug("no glFlush found: frames are rasterized when presented")
+    return lambda: None
+
+
+def _gl_flush() -> None:
+    _gl_flush_function()()
+
+
 class Screen:
     """An OpenGL context and the framebuffer a frame is drawn into.
 
@@ -105,6 +124,11 @@ class Screen:
         self.ctx.viewport = (0, 0, *self.size_px)
         if clear_rgb is not None:
             self.target.clear(*clear_rgb, 1.0, depth=1.0)
+
+    def flush(self) -> None:
+        """Hand the commands issued so far to the rasterizer without waiting for them (glFlush):
+        Mesa llvmpipe then rasterizes on its own threads while this thread goes on."""
+        _gl_flush()
 
     def present(self) -> None:
         """Show the frame (swap the window's buffers; offscreen, make sure the GPU finished)."""

@@ -337,8 +337,14 @@ class LiveScene(BaseScene):
             return None
         return self.layout.view.right_of(frame.size_px)
 
-    def render_3d(self, frame: Frame) -> None:
+    def prepare(self, frame: Frame) -> None:
+        """This frame's samples into the avatar and its solids made (while the last frame rasterizes)."""
         self._consume_samples()
+        if self.avatar is not None:
+            v = self.layout.view
+            self.avatar.prepare((v.w, v.h), self.app.clock())
+
+    def render_3d(self, frame: Frame) -> None:
         if self.avatar is None:
             return
         ctx = frame.screen.ctx

@@ -452,8 +452,14 @@ class RomTestScene(BaseScene):
             return None
         return self.view.right_of(frame.size_px)
 
-    def render_3d(self, frame: Frame) -> None:
+    def prepare(self, frame: Frame) -> None:
+        """This frame's samples into the test and the avatar, its solids made (while the last
+        frame rasterizes)."""
         self.consume()
+        if self.avatar is not None:
+            self.avatar.prepare((self.view.w, self.view.h), self.app.clock())
+
+    def render_3d(self, frame: Frame) -> None:
         if self.avatar is None:
             return
         ctx = frame.screen.ctx
