@@ -62,7 +62,11 @@ def slerp_frames(r0: np.ndarray, r1: np.ndarray, w: float) -> np.ndarray:
     w = 0 gives r0, w = 1 gives r1; the result turns from r0 by ``w`` times the (shortest)
     angle between them, about their relative axis.
     """
-    q0, q1 = _quat_from_matrix(r0), _quat_from_matrix(r1)
+    return _slerp_quats(_quat_from_matrix(r0), _quat_from_matrix(r1), w)
+
+
+def _slerp_quats(q0: np.ndarray, q1: np.ndarray, w: float) -> np.ndarray:
+    """:func:`slerp_frames` of rotations given as unit quaternions (..., 4)."""
     dot = np.sum(q0 * q1, axis=-1)
     q1 = np.where((dot < 0)[..., None], -q1, q1)
     dot = np.abs(dot)
@@ -76,18 +80,20 @@ def slerp_frames(r0: np.ndarray, r1: np.ndarray, w: float) -> np.ndarray:
     return _matrix_from_quat(q / np.linalg.norm(q, axis=-1, keepdims=True))
 
 
-def lerp_pose(a: SkeletonPose, b: SkeletonPose, w: float) -> SkeletonPose:
+def lerp_pose(a: SkeletonPose, b: SkeletonPose, w: float, quats: tuple[np.ndarray, np.ndarray] | None = None) -> SkeletonPose:
     """The pose a fraction ``w`` (clipped to 0..1) of the way from ``a`` to ``b``.
 
     Joints move linearly, segment frames by slerp; the state and the proportions are those of
     the nearer pose (the state of a segment switches at the midpoint, not gradually).
+    ``quats``: the two poses' frames as unit quaternions, if known (saves converting them).
     """
     w = float(min(max(w, 0.0), 1.0))
     near = a if w < 0.5 else b
+    q0, q1 = quats if quats is not None else (_quat_from_matrix(a.frames), _quat_from_matrix(b.frames))
     return replace(
         near,
         joints_m=(1.0 - w) * a.joints_m + w * b.joints_m,
-        frames=slerp_frames(a.frames, b.frames, w),
+        frames=_slerp_quats(q0, q1, w),
     )
 
 
@@ -103,7 +109,8 @@ class PoseInterpolator:
     def __init__(self, capacity: int = 8, *, min_delay_s: float = 1.0 / 120.0, max_delay_s: float = 0.2) -> None:
         if capacity < 2:
             raise ValueError(f"capacity must be at least 2, got {capacity}")
-        self._samples: deque[tuple[float, SkeletonPose]] = deque(maxlen=capacity)
+        # (time, pose, its frames as quaternions: converted once per sample, not per frame)
+        self._samples: deque[tuple[float, SkeletonPose, np.ndarray]] = deque(maxlen=capacity)
         self._min_delay, self._max_delay = min_delay_s, max_delay_s
 
     def clear(self) -> None:
@@ -116,14 +123,14 @@ class PoseInterpolator:
         """Add the pose sampled at ``time_s``; a sample not newer than the newest is ignored."""
         if self._samples and time_s <= self._samples[-1][0]:
             return
-        self._samples.append((float(time_s), pose))
+        self._samples.append((float(time_s), pose, _quat_from_matrix(pose.frames)))
 
     @property
     def delay_s(self) -> float:
         """How far behind the display time the shown pose is: one sample interval."""
         if len(self._samples) < 2:
             return self._min_delay
-        times = np.array([t for t, _ in self._samples])
+        times = np.array([t for t, _, _ in self._samples])
         return float(np.clip(np.median(np.diff(times)), self._min_delay, self._max_delay))
 
     def sample(self, display_time_s: float) -> SkeletonPose | None:
@@ -136,9 +143,9 @@ class PoseInterpolator:
             return samples[-1][1]
         if t <= samples[0][0]:
             return samples[0][1]
-        for (t0, p0), (t1, p1) in zip(list(samples)[-2::-1], list(samples)[::-1]):
+        for (t0, p0, q0), (t1, p1, q1) in zip(list(samples)[-2::-1], list(samples)[::-1]):
             if t0 <= t:
-                return lerp_pose(p0, p1, (t - t0) / (t1 - t0))
+                return lerp_pose(p0, p1, (t - t0) / (t1 - t0), (q0, q1))
         return samples[0][1]
 
 
