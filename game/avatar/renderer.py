@@ -40,6 +40,7 @@ from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
+from tracking.sim.glsl import OUTLINE_BOX_GLSL
 from tracking.sim.meshes import cone_band
 
 
@@ -184,26 +185,10 @@ flat out mat3 v_nrm;
 flat out vec3 v_rgb;
 flat out vec2 v_style;
 
-float dual(vec4 a, vec4 b) { return dot(a.xyz, b.xyz) - a.w * b.w; }
-
+""" + OUTLINE_BOX_GLSL + """
 void main() {
     mat4 m = u_clip_from_world * mat4(vec4(i_ax0, 0.0), vec4(i_ax1, 0.0), vec4(i_ax2, 0.0), vec4(i_centre, 1.0));
-    vec4 rx = vec4(m[0][0], m[1][0], m[2][0], m[3][0]);  // rows x, y, w: clip from unit sphere
-    vec4 ry = vec4(m[0][1], m[1][1], m[2][1], m[3][1]);
-    vec4 rw = vec4(m[0][3], m[1][3], m[2][3], m[3][3]);
-    float cxx = dual(rx, rx), cyy = dual(ry, ry), cww = dual(rw, rw);
-    float cxw = dual(rx, rw), cyw = dual(ry, rw);
-    float disc_x = cxw * cxw - cxx * cww;
-    float disc_y = cyw * cyw - cyy * cww;
-    vec2 corner = vec2(float((gl_VertexID >> 1) & 1), float(gl_VertexID & 1));
-    vec2 ndc;
-    if (cww < 0.0 && disc_x >= 0.0 && disc_y >= 0.0) {  // wholly in front of the camera
-        vec2 k0 = vec2(cxw - sqrt(disc_x), cyw - sqrt(disc_y)) / cww;
-        vec2 k1 = vec2(cxw + sqrt(disc_x), cyw + sqrt(disc_y)) / cww;
-        ndc = clamp(mix(min(k0, k1) - u_pad_ndc, max(k0, k1) + u_pad_ndc, corner), -1.0, 1.0);
-    } else {  // straddles the camera plane: cover the viewport, the ray cast sorts it out
-        ndc = corner * 2.0 - 1.0;
-    }
+    vec2 ndc = outline_quad_corner(m, u_pad_ndc);
     v_centre = i_centre;
     v_nrm = mat3(i_nrm0, i_nrm1, i_nrm2);
     v_rgb = i_rgb;

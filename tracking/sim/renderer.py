@@ -60,6 +60,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import RehabError
+from tracking.sim.glsl import OUTLINE_BOX_GLSL
 from tracking.sim.meshes import cone_band
 from tracking.sim.room import build_room
 from tracking.sim.scene import SceneFrame
@@ -328,29 +329,11 @@ flat out vec3 v_rgb;
 flat out float v_spec;
 flat out uint v_id;
 
-float dual(vec4 a, vec4 b) { return dot(a.xyz, b.xyz) - a.w * b.w; }
-
+""" + OUTLINE_BOX_GLSL + """
 void main() {
     mat4 m = u_clip_from_world * mat4(vec4(i_ax0, 0.0), vec4(i_ax1, 0.0), vec4(i_ax2, 0.0), vec4(i_centre, 1.0));
-    vec4 rx = vec4(m[0][0], m[1][0], m[2][0], m[3][0]);  // rows x, y, w: clip from unit sphere
-    vec4 ry = vec4(m[0][1], m[1][1], m[2][1], m[3][1]);
-    vec4 rw = vec4(m[0][3], m[1][3], m[2][3], m[3][3]);
-    float cxx = dual(rx, rx), cyy = dual(ry, ry), cww = dual(rw, rw);
-    float cxw = dual(rx, rw), cyw = dual(ry, rw);
-    float disc_x = cxw * cxw - cxx * cww;
-    float disc_y = cyw * cyw - cyy * cww;
-    // Strip order (0,0), (0,1), (1,0), (1,1): clockwise, i.e. front-facing here (see render()).
-    vec2 corner = vec2(float((gl_VertexID >> 1) & 1), float(gl_VertexID & 1));
-    vec2 ndc;
-    if (cww < 0.0 && disc_x >= 0.0 && disc_y >= 0.0) {  // wholly in front of the camera
-        vec2 k0 = vec2(cxw - sqrt(disc_x), cyw - sqrt(disc_y)) / cww;
-        vec2 k1 = vec2(cxw + sqrt(disc_x), cyw + sqrt(disc_y)) / cww;
-        vec2 lo = min(k0, k1) - u_pad_ndc;
-        vec2 hi = max(k0, k1) + u_pad_ndc;
-        ndc = clamp(mix(lo, hi, corner), -1.0, 1.0);
-    } else {  // straddles the camera plane: cover the viewport, the ray cast sorts it out
-        ndc = corner * 2.0 - 1.0;
-    }
+    // The quad winds clockwise, i.e. front-facing here (see render()).
+    vec2 ndc = outline_quad_corner(m, u_pad_ndc);
     v_centre = i_centre;
     v_inv = mat3(i_inv0, i_inv1, i_inv2);
     v_rgb = i_rgb;
