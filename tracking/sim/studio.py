@@ -60,14 +60,15 @@ class SimFrame:
         markers_m: (M, 3) true marker centres, world metres.
         visible_fraction: (C, M) fraction of each marker's disc visible in each camera (0..1).
         merged: (C, M) bool, the marker's disc touches that of another marker of the same colour in
-            that camera (one blob shows both: it is a view of neither).
+            that camera (one blob shows both: it is a view of neither); None when rendered
+            without visibility.
     """
 
     frames: FrameSet
     pose: Pose
     markers_m: np.ndarray
     visible_fraction: np.ndarray
-    merged: np.ndarray
+    merged: np.ndarray | None
 
 
 def merged_markers(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float, colour_index: np.ndarray) -> np.ndarray:
@@ -132,7 +133,9 @@ class Studio:
             vis = np.clip(vis, 0.0, 1.0)
         else:
             vis = np.full((len(self.cameras), self.markerset.n_markers), np.nan)
-        merged = merged_markers(self.cameras, markers, self.markerset.radius_m, self.markerset.colour_index)
+        merged = None  # an evaluation figure, like the visibility (the live source needs neither)
+        if with_visibility:
+            merged = merged_markers(self.cameras, markers, self.markerset.radius_m, self.markerset.colour_index)
         return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis, merged)
 
     def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
