@@ -331,12 +331,6 @@ class LiveScene(BaseScene):
                     self.avatar.push_sample(sample)
 
     # ------------------------------------------------------------------ drawing
-    def clear_rect(self, frame: Frame) -> tuple[int, int, int, int] | None:
-        """Only the panel: the avatar's background repaints the view (colour and depth)."""
-        if self.avatar is None:
-            return None
-        return self.layout.view.right_of(frame.size_px)
-
     def prepare(self, frame: Frame) -> None:
         """This frame's samples into the avatar and its solids made (while the last frame rasterizes)."""
         self._consume_samples()

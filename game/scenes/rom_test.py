@@ -446,12 +446,6 @@ class RomTestScene(BaseScene):
         bh = 64 * s
         return [(x + i * (bw + gap), bottom - bh, bw, bh) for i in range(n)]
 
-    def clear_rect(self, frame: Frame) -> tuple[int, int, int, int] | None:
-        """Only the panel when the avatar repaints its view (colour and depth)."""
-        if self.avatar is None:
-            return None
-        return self.view.right_of(frame.size_px)
-
     def prepare(self, frame: Frame) -> None:
         """This frame's samples into the test and the avatar, its solids made (while the last
         frame rasterizes)."""
