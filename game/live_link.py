@@ -109,7 +109,7 @@ class LiveLink:
                     log.error("%s", self.error)
                 return
             self.state = LinkState.RUNNING
-            for method, args in self._pending.values():
+            for method, args in self._pending.items():
                 getattr(self.tracker, method)(*args)
             self._pending.clear()
         self.new_samples = self.tracker.poll()
