@@ -372,3 +372,95 @@ def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
     spec = load_game("reach").difficulty
     a = LevelAdapter(spec, start=0.9, high=level_from_shown(3))
     assert a.level == pytest.approx(2 / 9)
+
+
+# ----------------------------------------------------------------------------- the rotation game's river
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_the_river_spans_the_measured_range_and_mirrors_the_left_arm(side):
+    from game.exergames.river import MARGIN_DEG, river_for
+
+    spec = load_game("rotation")
+    river = river_for(RomLimits(50.0, 40.0), spec.stretch_fraction, side)
+    assert river.out_deg == pytest.approx(50.0 * spec.stretch_fraction + MARGIN_DEG)
+    assert river.in_deg == pytest.approx(-(40.0 * spec.stretch_fraction + MARGIN_DEG))
+    out, inward = river.across(river.out_deg), river.across(river.in_deg)
+    # a mirror: the right arm turning out goes right on the screen, the left arm's goes left
+    assert (out, inward) == ((1.0, 0.0) if side == "right" else (0.0, 1.0))
+    assert river.across(500.0) == out                       # the boat stops at the bank
+    for v in (-30.0, 0.0, 12.5, 49.0):
+        assert river.rotation_at(river.across(v)) == pytest.approx(v)
+    assert river.width(river.span_deg / 4) == pytest.approx(0.25)
+
+
+def test_a_gate_drifts_down_to_the_boat_and_cannot_be_passed_before_it_arrives():
+    from game.exergames.river import gate_distance
+
+    spec = load_game("rotation")
+    s = GameSession(spec, RomLimits(60.0, 60.0), seed=4)
+    t = _until_target(s, _ready(s))
+    gate = s.target
+    assert gate.approach_s == pytest.approx(spec.difficulty.approach_share * gate.time_limit_s)
+    goal = gate.target.value_deg
+    on_goal = reading(elbow_at_side_hand_m(frame(), goal), er=goal)
+    distances, t0 = [], t
+    while s.log.reached == 0:        # the boat lined up from the start
+        s.update(t, on_goal)
+        if s.target is gate:
+            distances.append(gate_distance(gate))
+            if not gate.arrived:
+                assert gate.held_s == 0.0          # not before it reaches the boat
+        t += DT
+        assert t - t0 < gate.approach_s + gate.hold_s + 0.3
+    assert t - t0 >= gate.approach_s + gate.hold_s - 2 * DT
+    assert distances[0] == pytest.approx(1.0, abs=0.05) and min(distances) <= -0.9
+    assert all(b <= a + 1e-9 for a, b in zip(distances, distances[1:]))   # always towards and through the boat
+    assert s.log.targets[0]["reached"]
+
+
+def test_therapist_limits_bound_what_the_adaptation_asks_at_every_level():
+    from game.exergames.spec import TherapistLimits
+
+    for name in ("reach", "rotation", "turn_key"):
+        d = load_game(name).difficulty
+        limits = TherapistLimits(max_level=0.8, max_range=0.9, min_size=(d.size.easy + d.size.hard) / 2,
+                                 max_hold_s=(d.hold_s.easy + d.hold_s.hard) / 2,
+                                 min_time_s=(d.time_limit_s.easy + d.time_limit_s.hard) / 2)
+        a = LevelAdapter(d, start=0.0, limits=limits)
+        seen = []
+        for _ in range(12 * d.window):     # always successful: the level climbs as far as allowed
+            a.record(True)
+            seen.append((a.level, a.top_fraction, a.size, a.hold_s, a.time_limit_s, a.approach_s))
+        levels, tops, sizes, holds, times, approaches = map(np.array, zip(*seen))
+        assert levels.max() == pytest.approx(0.8)
+        assert (tops <= 0.9 + 1e-9).all() and tops.max() == pytest.approx(0.9)
+        assert (sizes >= limits.min_size - 1e-9).all() and (holds <= limits.max_hold_s + 1e-9).all()
+        assert (times >= limits.min_time_s - 1e-9).all()
+        assert (approaches >= d.approach_share * limits.min_time_s - 1e-9).all()
+        free = LevelAdapter(d, start=0.8)
+        assert free.size < limits.min_size and free.hold_s > limits.max_hold_s   # the limits did bind
+    # the session places its targets under the limited top
+    spec = load_game("rotation")
+    s = GameSession(spec, RomLimits(60.0, 60.0), seed=5, level=1.0, therapist=TherapistLimits(max_range=0.7))
+    t = _until_target(s, _ready(s))
+    assert s.target.target.fraction <= 0.7 and s.log.therapist == {"max_range": 0.7}
+
+
+def test_limits_out_of_a_games_bounds_are_one_line_naming_the_key(tmp_path):
+    text = (load_game("rotation").model_dump_json())
+    data = json.loads(text)
+    data["limits"] = {"max_range": 2.0}
+    path = tmp_path / "bad.yaml"
+    import yaml
+
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match=r"bad.yaml: limits.max_range"):
+        load_game(path)
+    data["limits"] = {"min_size": 40.0}
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match=r"limits.min_size 40 must lie in 6..24"):
+        load_game(path)
+    data["limits"] = {}
+    data["difficulty"]["approach_share"] = 0.0
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match="approach_share"):
+        load_game(path)
