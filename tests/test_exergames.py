@@ -363,15 +363,86 @@ def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
     for action in (Action.DOWN, Action.RIGHT, Action.NEXT_MOTION, Action.ROTATE_IN, Action.ROTATE_IN,
                    Action.ROTATE_IN, Action.SELECT):
         menu.handle(Press(action, True))
+    assert not opened and menu.column == 0     # Enter on a game: to its Play button and limits
+    menu.handle(Press(Action.SELECT, True))
     (name, pid, kw), = opened
     assert name == menu.games[1].name and pid == "P001"
-    assert kw == {"side": "left", "auto": True, "max_level": 8}
+    assert kw["side"] == "left" and kw["auto"] is True
+    assert level_shown(kw["limits"].max_level) == 7 and menu.max_level == 7   # 10 is no limit: 9, 8, 7
     menu.change_max_level(+5)
-    assert menu.max_level is None          # above 10: each game's own limit
+    assert menu.max_level is None          # above 10: no limit
     assert [level_shown(level_from_shown(k)) for k in range(1, 11)] == list(range(1, 11))
     spec = load_game("reach").difficulty
     a = LevelAdapter(spec, start=0.9, high=level_from_shown(3))
     assert a.level == pytest.approx(2 / 9)
+
+
+def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
+    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit
+    from game.exergames.spec import TherapistLimits, check_limits, limit_bounds
+
+    for name in available_games():
+        spec = load_game(name)
+        for key in LIMIT_KEYS:
+            lim = TherapistLimits()
+            lo, hi = limit_bounds(spec)[key]
+            values = []
+            for direction in (1, -1):
+                lim = TherapistLimits()
+                for _ in range(40):
+                    lim = step_limit(spec, lim, key, direction)
+                    check_limits(spec, lim)          # never outside the game's bounds
+                    values.append(getattr(lim, key))
+            assert None in values and any(v is not None for v in values), (name, key)
+            assert all(v is None or lo - 1e-9 <= v <= hi + 1e-9 for v in values)
+            assert "(no limit)" in describe(spec, TherapistLimits(), key)
+        # one step stricter than the game's own from unset
+        rot = load_game("rotation")
+        assert step_limit(rot, TherapistLimits(), "min_size", 1).min_size == free_value(rot, "min_size") + 1
+        assert step_limit(rot, TherapistLimits(), "min_size", -1).min_size is None
+    reach = load_game("reach")
+    lim = step_limit(reach, TherapistLimits(), "max_range", -1)
+    assert lim.max_range == pytest.approx(1.0) and describe(reach, lim, "max_range") == "100 % of the measured range"
+
+
+def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_them(tmp_path):
+    from game.exergames.limits import LIMIT_KEYS, load_limits
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+
+    db_path = tmp_path / "rehab.sqlite3"
+    with Database(db_path) as db:
+        db.add_patient("P001")
+        db.add_patient("P002")
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
+    menu.app = FakeApp()
+    rot = [g.name for g in menu.games].index("rotation")
+    for _ in range(rot):
+        menu.handle(Press(Action.DOWN, True))
+    menu.handle(Press(Action.SELECT, True))                      # the rotation game's column
+    for _ in range(1 + LIMIT_KEYS.index("max_range")):           # down from Play to the range limit
+        menu.handle(Press(Action.DOWN, True))
+    assert menu.game.name == "rotation" and menu.column == 1 + LIMIT_KEYS.index("max_range")
+    for _ in range(3):
+        menu.handle(Press(Action.LEFT, True))                    # 105 % -> 90 %
+    menu.handle(Press(Action.SELECT, True))                      # Enter plays
+    (spec, kw), = opened
+    assert spec.name == "rotation" and kw["limits"].max_range == pytest.approx(0.9)
+    again = load_limits(db_path, "P001", [spec])["rotation"]
+    assert again.max_range == pytest.approx(0.9)                 # stored for the patient
+    assert load_limits(db_path, "P002", [spec])["rotation"] == spec.limits   # not for another
+    menu2 = ChooseGameScene("P001", lambda spec, pid, **kw: None, db_path=db_path)
+    assert menu2.limits["rotation"].max_range == pytest.approx(0.9)
+    # a stored value the game no longer allows is ignored
+    with Database(db_path) as db:
+        db.set_game_limits("P001", "rotation", '{"max_range": 0.1}')
+    assert load_limits(db_path, "P001", [spec])["rotation"] == spec.limits
 
 
 # ----------------------------------------------------------------------------- the rotation game's river

@@ -501,7 +501,8 @@ class GameSession:
             "fraction": round(t.target.fraction, 4), "plane_deg": t.target.plane_deg,
             "elbow_deg": round(t.target.elbow_deg, 1), "hand_m": [round(float(x), 4) for x in t.hand_m],
             "level": round(t.level, 3), "size": round(t.size, 4), "hold_s": round(t.hold_s, 2),
-            "time_limit_s": round(t.time_limit_s, 2), "reached": success, "time_s": round(t.age_s, 2),
+            "time_limit_s": round(t.time_limit_s, 2), "approach_s": round(t.approach_s, 2), "reached": success,
+            "time_s": round(t.age_s, 2),
         })
         if success:
             self.log.reached += 1

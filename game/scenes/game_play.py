@@ -168,13 +168,14 @@ class GameScene(BaseScene):
         mute: no sound.
         seed: the targets' random generator.
         level, level_low, level_high: the therapist's start level and limits (None: the game's).
+        therapist: the therapist's limits of the adaptation (None: the game's own ``limits``).
         source: stored with the session (e.g. ``sim``).
     """
 
     def __init__(self, link, spec: GameSpec, side: str, db_path: Path, patient_id: str, *,
                  make_avatar: Callable | None = None, auto: bool = False, mute: bool = False, seed: int = 0,
                  level: float | None = None, level_low: float | None = None, level_high: float | None = None,
-                 source: str = "sim") -> None:
+                 therapist=None, source: str = "sim") -> None:
         self.link = link
         self.spec = spec
         self.side = side
@@ -186,7 +187,7 @@ class GameScene(BaseScene):
         self.source = source
         self.limits = load_limits(self.db_path, patient_id, spec, side)
         self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
-                                   level_high=level_high)
+                                   level_high=level_high, therapist=therapist)
         self.player = AutoPlayer(self.session)
         self.avatar = None
         self.sounds: Sounds | None = None
