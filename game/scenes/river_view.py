@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from collections import deque
 
+import moderngl
 import numpy as np
 
 from game.exergames.river import River, gate_distance
@@ -111,8 +112,11 @@ class RiverView:
         self.scale = scale
         self.colour = tuple(colour)
         x, y, w, h = self.rect
+        self.ctx = ctx
         self.water = surface_to_texture(ctx, _river_tile(pygame, round(w), round(h)))
         self.water.repeat_y = True
+        # drawn one texel per pixel: nearest sampling looks the same and costs less on a CPU rasteriser
+        self.water.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.boat_len = 80.0 * scale
         boat = _boat_surface(pygame, round(self.boat_len), self.colour)
         self.boat_half_w = boat.get_width() / 2.0
@@ -200,7 +204,10 @@ class RiverView:
         x, y, w, h = self.rect
         s = self.scale
         v0 = -self.scroll_px / h
+        c.flush()
+        self.ctx.disable(moderngl.BLEND)    # the tile is opaque: no blending over a third of the window
         c.texture(self.water, self.rect, uv=(0.0, v0, 1.0, v0 + 1.0))
+        self.ctx.enable(moderngl.BLEND)
         # where the arm points now along the river's width, from its ends: "in" and "out" banks
         size = round(theme.SMALL * 0.85 * s)
         out_left = river.side == "left"
