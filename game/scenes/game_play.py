@@ -70,7 +70,8 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
     Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body):
     reach frames from the hips to a hand raised above the head, turned 25 degrees towards the active
     side so forward reaches show their depth; the rotation games frame the trunk and the forearm
-    in front of it, turned 15 degrees and from higher up (the forearm swings in a horizontal plane).
+    in front of it, turned 15 degrees; the shoulder rotation game from higher up and a little
+    towards the active side (the forearm swings out in a horizontal plane).
     """
     from game.avatar.renderer import look_at, perspective
 
@@ -87,12 +88,14 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
         target = shoulders + np.array([0.0, 0.10, 0.0]) + 0.12 * fwd
         half = 0.80
     else:
-        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd
+        sign = 1.0 if side == "right" else -1.0
+        shift = 0.10 if kind == "rotation" else 0.0
+        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd + shift * sign * right
         half = 0.52
     half = max(half, half * 0.9 / aspect)
     fov = 30.0
     distance = half / math.tan(math.radians(fov) / 2.0)
-    pitch = math.radians(10.0 if kind == "reach" else 28.0)
+    pitch = math.radians(28.0 if kind == "rotation" else 10.0)
     eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
     proj = perspective(fov, aspect, near_m=0.1, far_m=distance + 6.0)
     return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
