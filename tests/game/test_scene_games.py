@@ -1,5 +1,7 @@
 """The game menu drawn: the games, the Play button and the therapist's limits in large type; the
-mouse changes a limit with its + and - and the change is stored for the patient."""
+mouse changes a limit with its + and - and the change is stored for the patient. The rotation
+game's river on the screen: the mouse steering, the boat on the water, gates that fit the boat
+exactly within their tolerance."""
 
 from __future__ import annotations
 
@@ -62,3 +64,32 @@ def test_mouse_sets_a_limit_stores_it_and_plays(menu_app, tmp_path):
     _click(menu, app, play[0] + play[2] / 2, play[1] + play[3] / 2)
     (name, kw), = opened
     assert name == "rotation" and kw["limits"].min_size == stored.min_size
+
+
+def test_river_geometry_on_the_screen_boat_fits_a_gate_exactly_within_its_tolerance(open_headless):
+    from game.exergames.river import river_for
+    from game.exergames.targets import RomLimits
+    from game.scenes.river_view import RiverView
+
+    screen = open_headless((640, 360))
+    for side in ("right", "left"):
+        river = river_for(RomLimits(50.0, 40.0), 1.05, side)
+        view = RiverView(screen.ctx, (230, 6, 200, 348), 0.5, (90, 210, 255))
+        try:
+            for v in (-35.0, -10.0, 0.0, 20.0, 48.0):
+                assert view.rotation_at_px(river, view.x_px(river, v)) == pytest.approx(v)   # the mouse steering
+            left, width = view.lane_px
+            # the boat never leaves the water: its hull stays off the banks at the extremes
+            assert left - view.boat_half_w >= 230 + view.bank - 1e-6
+            assert left + width + view.boat_half_w <= 430 - view.bank + 1e-6
+            # a gate of tolerance 8 at 20: the boat's hull is between the buoys from 12 to 28 degrees
+            gate_x, half = view.x_px(river, 20.0), view.half_width_px(river, 8.0)
+            for v, inside in ((12.5, True), (27.5, True), (11.0, False), (29.0, False)):
+                bx = view.x_px(river, v)
+                fits = gate_x - half <= bx - view.boat_half_w and bx + view.boat_half_w <= gate_x + half
+                assert fits == inside, (side, v)
+            # a gate comes down the river to the bow, then along the boat
+            ys = [view.gate_y(d) for d in (1.0, 0.5, 0.0, -0.5, -1.0)]
+            assert ys == sorted(ys) and ys[2] == pytest.approx(view.bow_y)
+        finally:
+            view.release()
