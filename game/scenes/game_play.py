@@ -489,8 +489,10 @@ class GameScene(BaseScene):
         lo, hi = -lim.negative_deg * sess.spec.stretch_fraction, lim.positive_deg * sess.spec.stretch_fraction
         span = max(hi, -lo, 1.0)
 
+        mirror = 1.0 if self.side == "right" else -1.0   # a mirror: the left arm's supination turns to the left
+
         def at(v: float, rr: float) -> tuple[float, float]:
-            a = math.radians(v / span * 90.0)   # 0 up, + to the right (out / supination)
+            a = math.radians(mirror * v / span * 90.0)   # 0 up, + to the arm's side (supination)
             return (cx + rr * math.sin(a), cy - rr * math.cos(a))
 
         for k in range(41):
@@ -527,7 +529,7 @@ class GameScene(BaseScene):
         else:
             return
         size = round(theme.BODY * s)
-        width = v.w - 2 * theme.MARGIN * s
+        width = self.panel_x - v.x - 2 * theme.MARGIN * s   # over the river too: the patient looks there
         lines = c.wrap(text, size, width - 40 * s)[:3]
         line_h = c.measure("Ag", size)[1] + 6 * s
         bh = len(lines) * line_h + 28 * s
@@ -547,5 +549,11 @@ class GameScene(BaseScene):
         s = self.scale
         v = self.view
         alpha = round(255 * (1.0 - age / FLASH_S))
-        c.text(text, (v.x + v.w / 2, v.h * 0.78 - 30 * s * age), round(theme.TITLE * s), (*colour[:3], alpha),
+        if self.river_view is not None:   # over the river, above the boat
+            rx, ry, rw, rh = self.river_view.rect
+            centre = (rx + rw / 2, self.river_view.bow_y - 90 * s - 30 * s * age)
+        else:
+            centre = (v.x + v.w / 2, v.h * 0.78 - 30 * s * age)
+        size = theme.LARGE if self.river_view is not None else theme.TITLE
+        c.text(text, centre, round(size * s), (*colour[:3], alpha),
                anchor="center")
