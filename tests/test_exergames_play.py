@@ -17,7 +17,7 @@ import pytest
 from game.app import App, Services, Settings
 from game.db import Database
 from game.exergames.session import Phase
-from game.exergames.spec import load_game
+from game.exergames.spec import TherapistLimits, load_game
 from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.live_link import LiveLink
 from game.play import make_avatar
@@ -88,7 +88,12 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
     screen, link, db_path = rig
     spec = load_game(name)
     app = App(screen, Settings(window_px=SIZE, max_fps=0, show_fps=False), services=Services(link))
-    scene = GameScene(link, spec, side, db_path, "P001", make_avatar=make_avatar, auto=True, mute=True, seed=11)
+    # the left-arm runs play under therapist's limits too: the targets must respect them
+    d = spec.difficulty
+    therapist = TherapistLimits(max_range=0.8, min_size=round((d.size.easy + d.size.hard) / 2, 3)) \
+        if side == "left" else None
+    scene = GameScene(link, spec, side, db_path, "P001", make_avatar=make_avatar, auto=True, mute=True, seed=11,
+                      therapist=therapist)
     app.push(scene)
     shot = tmp_path / f"{name}.png"
     try:
@@ -119,6 +124,8 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
             or spec.kind == "reach"
         assert spec.comfort_fraction - 1e-6 <= rec["fraction"] <= spec.stretch_fraction + 1e-6
         assert abs(rec["value_deg"]) <= spec.stretch_fraction * rec["limit_deg"] + 0.01
+        if therapist is not None:
+            assert rec["fraction"] <= therapist.max_range + 1e-6 and rec["size"] >= therapist.min_size - 1e-6
     if spec.kind == "reach":
         assert details["limits"]["positive_deg"] == stored["shoulder_flexion"]
         assert details["limits"]["negative_deg"] == stored["shoulder_abduction"]
