@@ -512,7 +512,7 @@ def test_therapist_limits_bound_what_the_adaptation_asks_at_every_level():
     # the session places its targets under the limited top
     spec = load_game("rotation")
     s = GameSession(spec, RomLimits(60.0, 60.0), seed=5, level=1.0, therapist=TherapistLimits(max_range=0.7))
-    t = _until_target(s, _ready(s))
+    _until_target(s, _ready(s))
     assert s.target.target.fraction <= 0.7 and s.log.therapist == {"max_range": 0.7}
 
 

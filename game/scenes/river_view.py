@@ -15,6 +15,7 @@ from collections import deque
 
 import moderngl
 import numpy as np
+import pygame
 
 from game.exergames.river import River, gate_distance
 from game.gfx import theme
@@ -33,7 +34,7 @@ BANK_SHARE = 0.09
 IDLE_FLOW_PX_S = 60.0
 
 
-def _boat_surface(pygame, length_px: int, colour) -> "pygame.Surface":
+def _boat_surface(length_px: int, colour) -> pygame.Surface:
     """A sailing boat seen from above, bow up: a wooden hull, a white sail filled by the wind, a coloured flag."""
     w, h = round(length_px * 0.66), length_px
     surf = pygame.Surface((w, h), pygame.SRCALPHA)
@@ -64,7 +65,7 @@ def _boat_surface(pygame, length_px: int, colour) -> "pygame.Surface":
     return surf
 
 
-def _river_tile(pygame, w: int, h: int, seed: int = 5) -> "pygame.Surface":
+def _river_tile(w: int, h: int, seed: int = 5) -> pygame.Surface:
     """Banks and water of the river's rectangle; tiles vertically (features wrap top to bottom)."""
     rng = np.random.default_rng(seed)
     surf = pygame.Surface((w, h), pygame.SRCALPHA)   # (a plain surface's RGBA bytes have no real alpha)
@@ -104,8 +105,6 @@ class RiverView:
     """
 
     def __init__(self, ctx, rect, scale: float, colour) -> None:
-        import pygame
-
         from game.gfx.canvas import surface_to_texture
 
         self.rect = tuple(float(v) for v in rect)
@@ -113,12 +112,12 @@ class RiverView:
         self.colour = tuple(colour)
         x, y, w, h = self.rect
         self.ctx = ctx
-        self.water = surface_to_texture(ctx, _river_tile(pygame, round(w), round(h)))
+        self.water = surface_to_texture(ctx, _river_tile(round(w), round(h)))
         self.water.repeat_y = True
         # drawn one texel per pixel: nearest sampling looks the same and costs less on a CPU rasteriser
         self.water.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.boat_len = 80.0 * scale
-        boat = _boat_surface(pygame, round(self.boat_len), self.colour)
+        boat = _boat_surface(round(self.boat_len), self.colour)
         self.boat_half_w = boat.get_width() / 2.0
         self.boats = {}
         for heading in HEADINGS_DEG:
@@ -131,7 +130,7 @@ class RiverView:
         self.boat_x: float | None = None
         self._heading = 0.0
         self._gate = None            # (target id, distance) of the last frame
-        self._ended: deque = deque(maxlen=3)   # (value, size, reached, time ended, y at the end)
+        self._ended: deque = deque(maxlen=3)   # (value, size, reached, time ended, y and scroll at the end)
         self._wake: deque = deque(maxlen=14)   # (x, scroll) behind the boat
         self._wake_s = 0.0
         self.gate_px: tuple[float, float] | None = None    # the current gate's centre (tests look there)
