@@ -208,7 +208,7 @@ def _cmd_patients(args) -> int:
 # --------------------------------------------------------------------------- export / import / backup
 def _add_export(sub) -> None:
     p = sub.add_parser("export", help="export the database (or one patient) to CSV files")
-    p.add_argument("--out", type=Path, required=True, help="folder for patients.csv, sessions.csv, rom_results.csv, exercise_results.csv")
+    p.add_argument("--out", type=Path, required=True, help="folder for patients.csv, sessions.csv, rom_results.csv, exercise_results.csv, game_limits.csv")
     p.add_argument("--patient", default=None, help="only this patient")
     _add_db(p)
     p.set_defaults(func=_cmd_export)

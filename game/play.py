@@ -122,18 +122,22 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return PatientsScene(db_path, lambda pid: ProgressScene(db_path, pid, standard=options.standard),
                              title="Progress: choose the patient", allow_new=False)
 
-    def open_game(spec, patient_id, side=options.side, auto=options.auto, max_level=options.max_level):
+    def open_game(spec, patient_id, side=options.side, auto=options.auto, limits=None):
+        from game.exergames.limits import load_limits
         from game.scenes.game_play import GameScene, level_from_shown
 
+        if limits is None:   # straight from the command line: the patient's stored limits, --max-level on top
+            limits = load_limits(db_path, patient_id, [spec])[spec.name]
+            if options.max_level is not None:
+                limits = limits.model_copy(update={"max_level": level_from_shown(options.max_level)})
         return GameScene(link, spec, side, db_path, patient_id, make_avatar=make_avatar, auto=auto,
-                         mute=options.mute, source=source_kind,
-                         level_high=None if max_level is None else level_from_shown(max_level))
+                         mute=options.mute, source=source_kind, therapist=limits)
 
     def open_games():
         from game.scenes.game_menu import ChooseGameScene
 
         return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side,
-                                                                  max_level=options.max_level),
+                                                                  max_level=options.max_level, db_path=db_path),
                              title="Games: choose the patient")
 
     def open_calibrate():

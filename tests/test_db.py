@@ -31,6 +31,8 @@ def filled(path: Path) -> Database:
     db.end_session(s1, "2026-01-05T10:10:00Z")
     s2 = db.start_session("P001", "exercise", "cameras", started_utc="2026-01-12T10:00:00Z")
     db.add_exercise_result(s2, "reach", 24, 310.0, 0.75, details='{"level": 2}', recorded_utc="2026-01-12T10:06:00Z")
+    db.set_game_limits("P001", "reach", '{"max_range":0.8}')
+    db.set_game_limits("P001", "reach", '{"max_range":0.9}')   # replaces
     return db
 
 
@@ -155,10 +157,11 @@ def test_csv_round_trip_and_import_is_idempotent(tmp_path):
     with filled(tmp_path / "a.sqlite3") as db:
         counts = db.export_csv(tmp_path / "csv")
         rom, ex, pats = db.rom_results(), db.exercise_results(), db.patients()
-    assert counts == {"patients": 2, "sessions": 2, "rom_results": 2, "exercise_results": 1}
+    assert counts == {"patients": 2, "sessions": 2, "rom_results": 2, "exercise_results": 1, "game_limits": 1}
     with Database(tmp_path / "b.sqlite3") as db:
         assert db.import_csv(tmp_path / "csv") == counts
         assert db.rom_results() == rom and db.exercise_results() == ex and db.patients() == pats
+        assert db.game_limits("P001") == {"reach": '{"max_range":0.9}'}
         assert db.import_csv(tmp_path / "csv") == {k: 0 for k in counts}
         assert len(db.rom_results()) == 2
 
@@ -166,7 +169,7 @@ def test_csv_round_trip_and_import_is_idempotent(tmp_path):
 def test_export_of_one_patient(tmp_path):
     with filled(tmp_path / "a.sqlite3") as db:
         counts = db.export_csv(tmp_path / "csv", "P002")
-    assert counts == {"patients": 1, "sessions": 0, "rom_results": 0, "exercise_results": 0}
+    assert counts == {"patients": 1, "sessions": 0, "rom_results": 0, "exercise_results": 0, "game_limits": 0}
 
 
 def test_a_bad_csv_imports_nothing(tmp_path):

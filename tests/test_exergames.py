@@ -363,12 +363,175 @@ def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
     for action in (Action.DOWN, Action.RIGHT, Action.NEXT_MOTION, Action.ROTATE_IN, Action.ROTATE_IN,
                    Action.ROTATE_IN, Action.SELECT):
         menu.handle(Press(action, True))
+    assert not opened and menu.column == 0     # Enter on a game: to its Play button and limits
+    menu.handle(Press(Action.SELECT, True))
     (name, pid, kw), = opened
     assert name == menu.games[1].name and pid == "P001"
-    assert kw == {"side": "left", "auto": True, "max_level": 8}
+    assert kw["side"] == "left" and kw["auto"] is True
+    assert level_shown(kw["limits"].max_level) == 7 and menu.max_level == 7   # 10 is no limit: 9, 8, 7
     menu.change_max_level(+5)
-    assert menu.max_level is None          # above 10: each game's own limit
+    assert menu.max_level is None          # above 10: no limit
     assert [level_shown(level_from_shown(k)) for k in range(1, 11)] == list(range(1, 11))
     spec = load_game("reach").difficulty
     a = LevelAdapter(spec, start=0.9, high=level_from_shown(3))
     assert a.level == pytest.approx(2 / 9)
+
+
+def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
+    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit
+    from game.exergames.spec import TherapistLimits, check_limits, limit_bounds
+
+    for name in available_games():
+        spec = load_game(name)
+        for key in LIMIT_KEYS:
+            lim = TherapistLimits()
+            lo, hi = limit_bounds(spec)[key]
+            values = []
+            for direction in (1, -1):
+                lim = TherapistLimits()
+                for _ in range(40):
+                    lim = step_limit(spec, lim, key, direction)
+                    check_limits(spec, lim)          # never outside the game's bounds
+                    values.append(getattr(lim, key))
+            assert None in values and any(v is not None for v in values), (name, key)
+            assert all(v is None or lo - 1e-9 <= v <= hi + 1e-9 for v in values)
+            assert "(no limit)" in describe(spec, TherapistLimits(), key)
+        # one step stricter than the game's own from unset
+        rot = load_game("rotation")
+        assert step_limit(rot, TherapistLimits(), "min_size", 1).min_size == free_value(rot, "min_size") + 1
+        assert step_limit(rot, TherapistLimits(), "min_size", -1).min_size is None
+    reach = load_game("reach")
+    lim = step_limit(reach, TherapistLimits(), "max_range", -1)
+    assert lim.max_range == pytest.approx(1.0) and describe(reach, lim, "max_range") == "100 % of the measured range"
+
+
+def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_them(tmp_path):
+    from game.exergames.limits import LIMIT_KEYS, load_limits
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+
+    db_path = tmp_path / "rehab.sqlite3"
+    with Database(db_path) as db:
+        db.add_patient("P001")
+        db.add_patient("P002")
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
+    menu.app = FakeApp()
+    rot = [g.name for g in menu.games].index("rotation")
+    for _ in range(rot):
+        menu.handle(Press(Action.DOWN, True))
+    menu.handle(Press(Action.SELECT, True))                      # the rotation game's column
+    for _ in range(1 + LIMIT_KEYS.index("max_range")):           # down from Play to the range limit
+        menu.handle(Press(Action.DOWN, True))
+    assert menu.game.name == "rotation" and menu.column == 1 + LIMIT_KEYS.index("max_range")
+    for _ in range(3):
+        menu.handle(Press(Action.LEFT, True))                    # 105 % -> 90 %
+    menu.handle(Press(Action.SELECT, True))                      # Enter plays
+    (spec, kw), = opened
+    assert spec.name == "rotation" and kw["limits"].max_range == pytest.approx(0.9)
+    again = load_limits(db_path, "P001", [spec])["rotation"]
+    assert again.max_range == pytest.approx(0.9)                 # stored for the patient
+    assert load_limits(db_path, "P002", [spec])["rotation"] == spec.limits   # not for another
+    menu2 = ChooseGameScene("P001", lambda spec, pid, **kw: None, db_path=db_path)
+    assert menu2.limits["rotation"].max_range == pytest.approx(0.9)
+    # a stored value the game no longer allows is ignored
+    with Database(db_path) as db:
+        db.set_game_limits("P001", "rotation", '{"max_range": 0.1}')
+    assert load_limits(db_path, "P001", [spec])["rotation"] == spec.limits
+
+
+# ----------------------------------------------------------------------------- the rotation game's river
+@pytest.mark.parametrize("side", ["right", "left"])
+def test_the_river_spans_the_measured_range_and_mirrors_the_left_arm(side):
+    from game.exergames.river import MARGIN_DEG, river_for
+
+    spec = load_game("rotation")
+    river = river_for(RomLimits(50.0, 40.0), spec.stretch_fraction, side)
+    assert river.out_deg == pytest.approx(50.0 * spec.stretch_fraction + MARGIN_DEG)
+    assert river.in_deg == pytest.approx(-(40.0 * spec.stretch_fraction + MARGIN_DEG))
+    out, inward = river.across(river.out_deg), river.across(river.in_deg)
+    # a mirror: the right arm turning out goes right on the screen, the left arm's goes left
+    assert (out, inward) == ((1.0, 0.0) if side == "right" else (0.0, 1.0))
+    assert river.across(500.0) == out                       # the boat stops at the bank
+    for v in (-30.0, 0.0, 12.5, 49.0):
+        assert river.rotation_at(river.across(v)) == pytest.approx(v)
+    assert river.width(river.span_deg / 4) == pytest.approx(0.25)
+
+
+def test_a_gate_drifts_down_to_the_boat_and_cannot_be_passed_before_it_arrives():
+    from game.exergames.river import gate_distance
+
+    spec = load_game("rotation")
+    s = GameSession(spec, RomLimits(60.0, 60.0), seed=4)
+    t = _until_target(s, _ready(s))
+    gate = s.target
+    assert gate.approach_s == pytest.approx(spec.difficulty.approach_share * gate.time_limit_s)
+    goal = gate.target.value_deg
+    on_goal = reading(elbow_at_side_hand_m(frame(), goal), er=goal)
+    distances, t0 = [], t
+    while s.log.reached == 0:        # the boat lined up from the start
+        s.update(t, on_goal)
+        if s.target is gate:
+            distances.append(gate_distance(gate))
+            if not gate.arrived:
+                assert gate.held_s == 0.0          # not before it reaches the boat
+        t += DT
+        assert t - t0 < gate.approach_s + gate.hold_s + 0.3
+    assert t - t0 >= gate.approach_s + gate.hold_s - 2 * DT
+    assert distances[0] == pytest.approx(1.0, abs=0.05) and min(distances) <= -0.9
+    assert all(b <= a + 1e-9 for a, b in zip(distances, distances[1:]))   # always towards and through the boat
+    assert s.log.targets[0]["reached"]
+
+
+def test_therapist_limits_bound_what_the_adaptation_asks_at_every_level():
+    from game.exergames.spec import TherapistLimits
+
+    for name in ("reach", "rotation", "turn_key"):
+        d = load_game(name).difficulty
+        limits = TherapistLimits(max_level=0.8, max_range=0.9, min_size=(d.size.easy + d.size.hard) / 2,
+                                 max_hold_s=(d.hold_s.easy + d.hold_s.hard) / 2,
+                                 min_time_s=(d.time_limit_s.easy + d.time_limit_s.hard) / 2)
+        a = LevelAdapter(d, start=0.0, limits=limits)
+        seen = []
+        for _ in range(12 * d.window):     # always successful: the level climbs as far as allowed
+            a.record(True)
+            seen.append((a.level, a.top_fraction, a.size, a.hold_s, a.time_limit_s, a.approach_s))
+        levels, tops, sizes, holds, times, approaches = map(np.array, zip(*seen))
+        assert levels.max() == pytest.approx(0.8)
+        assert (tops <= 0.9 + 1e-9).all() and tops.max() == pytest.approx(0.9)
+        assert (sizes >= limits.min_size - 1e-9).all() and (holds <= limits.max_hold_s + 1e-9).all()
+        assert (times >= limits.min_time_s - 1e-9).all()
+        assert (approaches >= d.approach_share * limits.min_time_s - 1e-9).all()
+        free = LevelAdapter(d, start=0.8)
+        assert free.size < limits.min_size and free.hold_s > limits.max_hold_s   # the limits did bind
+    # the session places its targets under the limited top
+    spec = load_game("rotation")
+    s = GameSession(spec, RomLimits(60.0, 60.0), seed=5, level=1.0, therapist=TherapistLimits(max_range=0.7))
+    _until_target(s, _ready(s))
+    assert s.target.target.fraction <= 0.7 and s.log.therapist == {"max_range": 0.7}
+
+
+def test_limits_out_of_a_games_bounds_are_one_line_naming_the_key(tmp_path):
+    text = (load_game("rotation").model_dump_json())
+    data = json.loads(text)
+    data["limits"] = {"max_range": 2.0}
+    path = tmp_path / "bad.yaml"
+    import yaml
+
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match=r"bad.yaml: limits.max_range"):
+        load_game(path)
+    data["limits"] = {"min_size": 40.0}
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match=r"limits.min_size 40 must lie in 6..24"):
+        load_game(path)
+    data["limits"] = {}
+    data["difficulty"]["approach_share"] = 0.0
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(ContentError, match="approach_share"):
+        load_game(path)

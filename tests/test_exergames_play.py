@@ -17,7 +17,7 @@ import pytest
 from game.app import App, Services, Settings
 from game.db import Database
 from game.exergames.session import Phase
-from game.exergames.spec import load_game
+from game.exergames.spec import TherapistLimits, load_game
 from game.gfx.screen import GraphicsUnavailable, open_screen
 from game.live_link import LiveLink
 from game.play import make_avatar
@@ -27,14 +27,17 @@ from game.scenes.game_play import GameScene
 pytestmark = pytest.mark.timeout(300)
 
 SIZE = (640, 360)
-#: The patient's stored ROM (right side): deliberately unlike the games' defaults.
-STORED = {"shoulder_flexion": 110.0, "shoulder_abduction": 100.0, "elbow_flexion": 130.0,
-          "shoulder_external_rotation": 50.0, "shoulder_internal_rotation": 45.0,
-          "forearm_supination": 70.0, "forearm_pronation": 65.0}
+#: The patient's stored ROM: deliberately unlike the games' defaults, and unlike between the sides.
+STORED = {"right": {"shoulder_flexion": 110.0, "shoulder_abduction": 100.0, "elbow_flexion": 130.0,
+                    "shoulder_external_rotation": 50.0, "shoulder_internal_rotation": 45.0,
+                    "forearm_supination": 70.0, "forearm_pronation": 65.0},
+          "left": {"shoulder_flexion": 100.0, "shoulder_abduction": 95.0, "elbow_flexion": 125.0,
+                   "shoulder_external_rotation": 44.0, "shoulder_internal_rotation": 52.0,
+                   "forearm_supination": 62.0, "forearm_pronation": 72.0}}
 
 
-def _result(test: str, value: float) -> RomResult:
-    return RomResult(test=test, title=test, side="right", angle=f"right_{test}", direction=1, mode="active",
+def _result(test: str, value: float, side: str) -> RomResult:
+    return RomResult(test=test, title=test, side=side, angle=f"{side}_{test}", direction=1, mode="active",
                      position="p", position_words="Seated.", standard="jarm", reference_deg=None, max_deg=value,
                      start_deg=0.0, range_deg=value, max_time_s=1.0, started_s=0.0, ended_s=5.0, compensations=(),
                      estimated_markers=(), n_samples=100)
@@ -56,8 +59,9 @@ def rig(tmp_path_factory):
     with Database(db_path) as db:
         db.add_patient("P001")
         session = db.start_session("P001", "rom", source="test")
-        for test, value in STORED.items():
-            db.add_rom_result(session, _result(test, value))
+        for side, values in STORED.items():
+            for test, value in values.items():
+                db.add_rom_result(session, _result(test, value, side))
         db.end_session(session)
     link = LiveLink(lambda: LiveTracker(SourceConfig(motion=None)))
     try:
@@ -78,12 +82,18 @@ def _play(app: App, scene: GameScene, until, budget_s: float) -> bool:
     return False
 
 
+@pytest.mark.parametrize("side", ["right", "left"])
 @pytest.mark.parametrize("name", ["reach", "rotation", "turn_key"])
-def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(rig, name, tmp_path):
+def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(rig, name, side, tmp_path):
     screen, link, db_path = rig
     spec = load_game(name)
     app = App(screen, Settings(window_px=SIZE, max_fps=0, show_fps=False), services=Services(link))
-    scene = GameScene(link, spec, "right", db_path, "P001", make_avatar=make_avatar, auto=True, mute=True, seed=11)
+    # the left-arm runs play under therapist's limits too: the targets must respect them
+    d = spec.difficulty
+    therapist = TherapistLimits(max_range=0.8, min_size=round((d.size.easy + d.size.hard) / 2, 3)) \
+        if side == "left" else None
+    scene = GameScene(link, spec, side, db_path, "P001", make_avatar=make_avatar, auto=True, mute=True, seed=11,
+                      therapist=therapist)
     app.push(scene)
     shot = tmp_path / f"{name}.png"
     try:
@@ -92,7 +102,10 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
         # a target on the screen for a moment: the screenshot shows it
         assert _play(app, scene, lambda s: s.session.target is not None and s.session.target.age_s > 0.3, 10.0)
         assert app.frame(screenshot=shot)
-        target_px = scene._project(scene.session.target.hand_m)
+        if scene.river_view is not None:   # the rotation game: the gate on the river, the boat below it
+            target_px, boat_px = scene.river_view.gate_px, scene.river_view.boat_px
+        else:
+            target_px = scene._project(scene.session.target.hand_m)
     finally:
         app.close()   # the scene exits: the session is stored
     assert scene.stored_uid is not None
@@ -101,6 +114,8 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
     (row,) = rows
     details = json.loads(row.details)
     assert row.game == name and row.repetitions == details["reached"] >= 2 and row.duration_s > 1.0
+    assert details["side"] == side
+    stored = STORED[side]
     sources = details["limits"]["sources"]
     assert all(v.startswith("stored") for v in sources.values()), sources
     for rec in details["targets"]:
@@ -109,24 +124,41 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
             or spec.kind == "reach"
         assert spec.comfort_fraction - 1e-6 <= rec["fraction"] <= spec.stretch_fraction + 1e-6
         assert abs(rec["value_deg"]) <= spec.stretch_fraction * rec["limit_deg"] + 0.01
+        if therapist is not None:
+            assert rec["fraction"] <= therapist.max_range + 1e-6 and rec["size"] >= therapist.min_size - 1e-6
     if spec.kind == "reach":
-        assert details["limits"]["positive_deg"] == STORED["shoulder_flexion"]
-        assert details["limits"]["negative_deg"] == STORED["shoulder_abduction"]
+        assert details["limits"]["positive_deg"] == stored["shoulder_flexion"]
+        assert details["limits"]["negative_deg"] == stored["shoulder_abduction"]
     elif spec.kind == "rotation":
-        assert (details["limits"]["positive_deg"], details["limits"]["negative_deg"]) == (50.0, 45.0)
+        assert (details["limits"]["positive_deg"], details["limits"]["negative_deg"]) == \
+            (stored["shoulder_external_rotation"], stored["shoulder_internal_rotation"])
     else:
-        assert (details["limits"]["positive_deg"], details["limits"]["negative_deg"]) == (70.0, 65.0)
+        assert (details["limits"]["positive_deg"], details["limits"]["negative_deg"]) == \
+            (stored["forearm_supination"], stored["forearm_pronation"])
     # the screenshot: the avatar's shirt in the view, the target's ring colour around the target
     rgb = cv2.imread(str(shot))[:, :, ::-1].astype(int)
-    view_w = round(SIZE[0] * 0.64)
+    view_w = round(scene.view.w)
     body = rgb[:, :view_w]
     shirt = (body[..., 2] > body[..., 0] + 50) & (body[..., 2] > 110) & (body[..., 1] < 170)
     assert shirt.sum() > 800
     x, y = (round(v) for v in target_px)
-    patch = rgb[max(0, y - 45):y + 45, max(0, x - 45):min(view_w, x + 45)]
-    colour = np.array(spec.colour)
-    near = (np.abs(patch - colour).max(axis=2) < 40).sum()
-    assert near > 30, near
+    if scene.river is None:
+        patch = rgb[max(0, y - 45):y + 45, max(0, x - 45):min(view_w, x + 45)]
+        colour = np.array(spec.colour)
+        near = (np.abs(patch - colour).max(axis=2) < 40).sum()
+        assert near > 30, near
+    else:
+        # the gate's buoys (the game's colour, green while the boat is lined up) and the boat's wooden hull
+        patch = rgb[max(0, y - 20):y + 20, max(0, x - 120):x + 120]
+        buoys = sum((np.abs(patch - np.array(c)).max(axis=2) < 40).sum() for c in (spec.colour, (120, 220, 120)))
+        assert buoys > 30, buoys
+        bx, by = (round(v) for v in boat_px)
+        hull = rgb[by - 25:by + 25, bx - 20:bx + 20]
+        wood = (hull[..., 0] > hull[..., 2] + 40) & (hull[..., 0] > 80)
+        assert wood.sum() > 40, wood.sum()
+        # the boat sits where the measured rotation puts it on the river, mirrored for the left arm
+        river = scene.river
+        assert (river.across(river.out_deg) == 1.0) == (side == "right")
 
 
 def test_a_stopped_tracker_pauses_the_game_with_a_message_and_it_resumes(rig):

@@ -275,6 +275,20 @@ class Database:
             ORDER BY s.started_utc, e.recorded_utc, e.id""", params).fetchall()
         return [ExerciseRow(*r) for r in rows]
 
+    # ------------------------------------------------------------------ game limits
+    def set_game_limits(self, patient_id: str, game: str, limits_json: str, updated_utc: str | None = None) -> None:
+        """Store the therapist's limits of one game for a patient (replacing the previous ones)."""
+        self.require_patient(patient_id)
+        self._write("INSERT INTO game_limits (patient_id, game, limits, updated_utc) VALUES (?, ?, ?, ?) "
+                    "ON CONFLICT (patient_id, game) DO UPDATE SET limits = excluded.limits, "
+                    "updated_utc = excluded.updated_utc", (patient_id, game, limits_json, updated_utc or utc_now()))
+
+    def game_limits(self, patient_id: str) -> dict[str, str]:
+        """The therapist's stored limits of each game for a patient: game -> JSON text."""
+        rows = self.conn.execute("SELECT game, limits FROM game_limits WHERE patient_id = ? ORDER BY game",
+                                 (patient_id,)).fetchall()
+        return {game: text for game, text in rows}
+
     # ------------------------------------------------------------------ backup
     def backup(self, dest: str | Path) -> Path:
         """Copy a consistent snapshot to ``dest`` (SQLite's online backup API); refuses to overwrite."""
@@ -291,7 +305,7 @@ class Database:
 
     # ------------------------------------------------------------------ CSV
     def export_csv(self, out_dir: str | Path, patient_id: str | None = None) -> dict[str, int]:
-        """Write ``patients.csv``, ``sessions.csv``, ``rom_results.csv``, ``exercise_results.csv``."""
+        """Write ``patients.csv``, ``sessions.csv``, ``rom_results.csv``, ``exercise_results.csv``, ``game_limits.csv``."""
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         if patient_id:
@@ -308,6 +322,9 @@ class Database:
             "exercise_results": _write_csv(out / "exercise_results.csv", [f.name for f in fields(ExerciseRow)],
                                            [tuple(getattr(r, f.name) for f in fields(ExerciseRow))
                                             for r in self.exercise_results(patient_id)]),
+            "game_limits": _write_csv(out / "game_limits.csv", _LIMIT_COLUMNS, [
+                row for p in pats for row in self.conn.execute(
+                    f"SELECT {', '.join(_LIMIT_COLUMNS)} FROM game_limits WHERE patient_id = ? ORDER BY game", (p.id,))]),
         }
         return counts
 
@@ -321,7 +338,9 @@ class Database:
         sess = _read_csv(src / "sessions.csv", [f.name for f in fields(SessionRow)])
         roms = _read_csv(src / "rom_results.csv", [f.name for f in fields(RomRow)])
         exes = _read_csv(src / "exercise_results.csv", [f.name for f in fields(ExerciseRow)])
-        added = {"patients": 0, "sessions": 0, "rom_results": 0, "exercise_results": 0}
+        # exports of schema 2 have no game limits
+        lims = _read_csv(src / "game_limits.csv", _LIMIT_COLUMNS) if (src / "game_limits.csv").is_file() else []
+        added = {"patients": 0, "sessions": 0, "rom_results": 0, "exercise_results": 0, "game_limits": 0}
         c = self.conn
         with _transaction(c):
             for line, p in pats:
@@ -356,7 +375,17 @@ class Database:
                     "details, recorded_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                     (e["uid"], sid, e["game"], int(_num(e["repetitions"], path, line)), _num(e["duration_s"], path, line),
                      _num(e["score"], path, line, True), e["details"], e["recorded_utc"])).rowcount
+            for line, g in lims:
+                if c.execute("SELECT 1 FROM patients WHERE id = ?", (g["patient_id"],)).fetchone() is None:
+                    raise DatabaseError(f"{src / 'game_limits.csv'} line {line}: patient {g['patient_id']!r} is not in "
+                                        "patients.csv")
+                added["game_limits"] += c.execute(
+                    "INSERT OR IGNORE INTO game_limits (patient_id, game, limits, updated_utc) VALUES (?, ?, ?, ?)",
+                    tuple(g[k] for k in _LIMIT_COLUMNS)).rowcount
         return added
+
+
+_LIMIT_COLUMNS = ("patient_id", "game", "limits", "updated_utc")
 
 
 # --------------------------------------------------------------------------------- helpers

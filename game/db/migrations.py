@@ -10,7 +10,7 @@ from __future__ import annotations
 from importlib import resources
 
 #: The schema version this code writes.
-LATEST_VERSION = 2
+LATEST_VERSION = 3
 
 
 def schema_v1_sql() -> str:
@@ -62,5 +62,17 @@ CREATE TABLE exercise_results (
 CREATE INDEX exercise_results_session ON exercise_results(session_id);
 """
 
+_V3 = """
+-- The therapist's limits of each exercise game for a patient (JSON of
+-- game.exergames.spec.TherapistLimits), set on the game menu; one row per patient and game.
+CREATE TABLE game_limits (
+    patient_id  TEXT NOT NULL REFERENCES patients(id),
+    game        TEXT NOT NULL,
+    limits      TEXT NOT NULL,
+    updated_utc TEXT NOT NULL,
+    PRIMARY KEY (patient_id, game)
+);
+"""
+
 #: version -> the SQL that brings version-1 to it (applied in order).
-STEPS: dict[int, str] = {2: _V2}
+STEPS: dict[int, str] = {2: _V2, 3: _V3}

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from game.exergames.spec import GameSpec
+from game.exergames.spec import GameSpec, TherapistLimits
 from game.exergames.targets import ArmFrame, RomLimits, Target, arm_frame_from_markers, place_target, target_hand_m
 
 #: Tracker sample states (tracking.tracker.TrackingState) and marker status (tracking.status).
@@ -127,17 +127,24 @@ class LevelAdapter:
 
     After every ``window`` targets the level rises by ``step`` when at least ``raise_above`` of
     them were collected, falls by ``step`` below ``lower_below``, and always stays within the
-    therapist's limits.
+    therapist's limits. The values a level maps to (the top of the target range, the target size,
+    the hold time, the time per target) are bounded by the therapist's :class:`TherapistLimits`
+    whatever the level.
 
     Args:
         spec: the game's ``difficulty``.
         start, low, high: override the content's start level and limits (the therapist's choice).
+        limits: the therapist's limits (None: none); its ``max_level`` caps ``high``.
     """
 
-    def __init__(self, spec, start: float | None = None, low: float | None = None, high: float | None = None) -> None:
+    def __init__(self, spec, start: float | None = None, low: float | None = None, high: float | None = None,
+                 limits: TherapistLimits | None = None) -> None:
         self.spec = spec
+        self.limits = limits if limits is not None else TherapistLimits()
         self.low = spec.min_level if low is None else float(low)
         self.high = spec.max_level if high is None else float(high)
+        if self.limits.max_level is not None:
+            self.high = min(self.high, self.limits.max_level)
         self.low = min(self.low, self.high)   # the therapist's highest level wins over the game's lowest
         self.level = min(max(spec.start if start is None else float(start), self.low), self.high)
         self.recent: list[bool] = []
@@ -162,19 +169,28 @@ class LevelAdapter:
 
     @property
     def top_fraction(self) -> float:
-        return self.spec.top_fraction.at(self.level)
+        top = self.spec.top_fraction.at(self.level)
+        return top if self.limits.max_range is None else min(top, self.limits.max_range)
 
     @property
     def size(self) -> float:
-        return self.spec.size.at(self.level)
+        size = self.spec.size.at(self.level)
+        return size if self.limits.min_size is None else max(size, self.limits.min_size)
 
     @property
     def hold_s(self) -> float:
-        return self.spec.hold_s.at(self.level)
+        hold = self.spec.hold_s.at(self.level)
+        return hold if self.limits.max_hold_s is None else min(hold, self.limits.max_hold_s)
 
     @property
     def time_limit_s(self) -> float:
-        return self.spec.time_limit_s.at(self.level)
+        time = self.spec.time_limit_s.at(self.level)
+        return time if self.limits.min_time_s is None else max(time, self.limits.min_time_s)
+
+    @property
+    def approach_s(self) -> float:
+        """Rotation: how long a gate drifts down to the boat (a share of its time limit); else 0."""
+        return self.spec.approach_share * self.time_limit_s
 
 
 # ============================================================================ the session
@@ -208,8 +224,14 @@ class ActiveTarget:
     hold_s: float
     time_limit_s: float
     level: float
+    approach_s: float = 0.0
     age_s: float = 0.0
     held_s: float = 0.0
+
+    @property
+    def arrived(self) -> bool:
+        """The target can be collected (a rotation gate has drifted down to the boat)."""
+        return self.age_s >= self.approach_s
 
     @property
     def hold_fraction(self) -> float:
@@ -233,6 +255,7 @@ class GameLog:
     level_end: float = math.nan
     limits: dict = field(default_factory=dict)
     fractions: dict = field(default_factory=dict)
+    therapist: dict = field(default_factory=dict)
     range_used: dict = field(default_factory=dict)
     targets: list = field(default_factory=list)
 
@@ -261,15 +284,18 @@ class GameSession:
         side: the active arm.
         seed: the targets' random generator (a session is reproducible).
         level, level_low, level_high: the therapist's start level and limits (None: the content's).
+        therapist: the therapist's limits on the adaptation (None: the content's ``limits``).
     """
 
     def __init__(self, spec: GameSpec, limits: RomLimits, side: str = "right", *, seed: int = 0,
-                 level: float | None = None, level_low: float | None = None, level_high: float | None = None) -> None:
+                 level: float | None = None, level_low: float | None = None, level_high: float | None = None,
+                 therapist: TherapistLimits | None = None) -> None:
         self.spec = spec
         self.limits = limits
         self.side = side
         self.rng = np.random.default_rng(seed)
-        self.adapter = LevelAdapter(spec.difficulty, level, level_low, level_high)
+        self.therapist = spec.limits if therapist is None else therapist
+        self.adapter = LevelAdapter(spec.difficulty, level, level_low, level_high, self.therapist)
         self.phase = Phase.GET_READY
         self.frame: ArmFrame | None = None
         self.target: ActiveTarget | None = None
@@ -286,7 +312,8 @@ class GameSession:
         self.log = GameLog(spec.name, side, level_start=self.adapter.level,
                            limits={"positive_deg": limits.positive_deg, "negative_deg": limits.negative_deg,
                                    "elbow_deg": limits.elbow_deg, "sources": dict(limits.sources)},
-                           fractions={"comfort": spec.comfort_fraction, "stretch": spec.stretch_fraction})
+                           fractions={"comfort": spec.comfort_fraction, "stretch": spec.stretch_fraction},
+                           therapist=self.therapist.model_dump(exclude_none=True))
 
     # ------------------------------------------------------------------ facts
     @property
@@ -450,6 +477,8 @@ class GameSession:
             self._end_target(False)
 
     def _inside(self, r: Reading, t: ActiveTarget) -> bool:
+        if not t.arrived:
+            return False
         if self.spec.kind == "reach":
             return bool(np.linalg.norm(r.hand_m - t.hand_m) <= t.size)
         v = self.value_now()
@@ -462,7 +491,7 @@ class GameSession:
                               elbow_range_deg=spec.elbow_flexion_deg)
         self._direction = -self._direction   # rotation games alternate out and in
         self.target = ActiveTarget(target, target_hand_m(spec.kind, target, self.frame), a.size, a.hold_s,
-                                   a.time_limit_s, a.level)
+                                   a.time_limit_s, a.level, a.approach_s)
         self.cues.append(Cue.NEW_TARGET)
 
     def _end_target(self, success: bool) -> None:
@@ -472,7 +501,8 @@ class GameSession:
             "fraction": round(t.target.fraction, 4), "plane_deg": t.target.plane_deg,
             "elbow_deg": round(t.target.elbow_deg, 1), "hand_m": [round(float(x), 4) for x in t.hand_m],
             "level": round(t.level, 3), "size": round(t.size, 4), "hold_s": round(t.hold_s, 2),
-            "time_limit_s": round(t.time_limit_s, 2), "reached": success, "time_s": round(t.age_s, 2),
+            "time_limit_s": round(t.time_limit_s, 2), "approach_s": round(t.approach_s, 2), "reached": success,
+            "time_s": round(t.age_s, 2),
         })
         if success:
             self.log.reached += 1

@@ -63,6 +63,9 @@ class Difficulty(StrictModel):
     size: Ramp = pydantic.Field(description="target radius (m, reach) or tolerance (deg, rotation and forearm)")
     hold_s: Ramp = pydantic.Field(description="time to hold a target to collect it")
     time_limit_s: Ramp = pydantic.Field(description="time a target waits before it is missed")
+    approach_share: float = pydantic.Field(
+        0.0, ge=0, le=0.6, description="rotation: share of a gate's time limit it drifts down the river to the boat "
+        "(it cannot be passed before it arrives); 0 for the other kinds")
 
     @pydantic.model_validator(mode="after")
     def _limits(self) -> "Difficulty":
@@ -71,6 +74,23 @@ class Difficulty(StrictModel):
         if self.lower_below >= self.raise_above:
             raise ValueError("lower_below must be smaller than raise_above")
         return self
+
+
+class TherapistLimits(StrictModel):
+    """The therapist's limits on what the adaptation may ask (``limits:`` in the YAML, or set per patient).
+
+    Each is optional (None: the difficulty ramp alone decides). The level still adapts from the
+    success rate; these bound the values it maps to, whatever the level.
+    """
+
+    max_level: float | None = pydantic.Field(None, ge=0, le=1, description="highest level (0..1) the adaptation reaches")
+    max_range: float | None = pydantic.Field(
+        None, gt=0, le=1.3, description="targets never beyond this fraction of the measured maximum")
+    min_size: float | None = pydantic.Field(
+        None, gt=0, description="smallest target: radius (m, reach) or tolerance (deg, rotation and forearm)")
+    max_hold_s: float | None = pydantic.Field(None, gt=0, le=10, description="longest time a target must be held")
+    min_time_s: float | None = pydantic.Field(
+        None, gt=0, le=120, description="the speed: the least time a target waits before it is missed")
 
 
 class Posture(StrictModel):
@@ -105,6 +125,8 @@ class GameSpec(StrictModel):
     planes_deg: tuple[float, ...] = pydantic.Field((0.0,), description="reach: elevation planes, 0 flexion .. 90 abduction")
     elbow_flexion_deg: tuple[float, float] = pydantic.Field((20.0, 40.0), description="reach: elbow bend of a target")
     difficulty: Difficulty
+    limits: TherapistLimits = pydantic.Field(TherapistLimits(), description="the content's therapist limits "
+                                             "(the game menu overrides them per patient)")
     posture: Posture | None = None
     compensation: Compensation = Compensation()
     duration_s: float = pydantic.Field(90.0, gt=5, le=1800, description="active play time of a session")
@@ -117,6 +139,16 @@ class GameSpec(StrictModel):
         for ramp in (self.difficulty.top_fraction.easy, self.difficulty.top_fraction.hard):
             if not self.comfort_fraction < ramp <= self.stretch_fraction:
                 raise ValueError(f"difficulty.top_fraction {ramp} must lie in (comfort_fraction, stretch_fraction]")
+        d = self.difficulty
+        if (self.kind == "rotation") != (d.approach_share > 0):
+            raise ValueError("difficulty.approach_share (the gates drift down the river) is needed by a rotation game "
+                             "and only by it")
+        for end in ("easy", "hard"):
+            moving = getattr(d.time_limit_s, end) * d.approach_share
+            if getattr(d.time_limit_s, end) <= moving + getattr(d.hold_s, end):
+                raise ValueError(f"difficulty.time_limit_s.{end} leaves no time to hold the target "
+                                 "(approach and hold take all of it)")
+        check_limits(self, self.limits)
         need = {"sagittal", "frontal"} if self.kind == "reach" else {"positive", "negative"}
         if set(self.rom) != need:
             raise ValueError(f"a {self.kind} game's rom needs exactly the keys {sorted(need)}")
@@ -128,6 +160,30 @@ class GameSpec(StrictModel):
         elif self.posture is None:
             raise ValueError(f"a {self.kind} game needs 'posture' (elbow at the side)")
         return self
+
+
+def limit_bounds(spec: GameSpec) -> dict[str, tuple[float, float]]:
+    """The values each therapist limit may take for this game (lowest, highest)."""
+    d = spec.difficulty
+    size_lo, size_hi = sorted((d.size.easy, d.size.hard))
+    time_lo, time_hi = sorted((d.time_limit_s.easy, d.time_limit_s.hard))
+    hold_lo, hold_hi = sorted((d.hold_s.easy, d.hold_s.hard))
+    return {
+        "max_level": (0.0, 1.0),
+        "max_range": (round(spec.comfort_fraction + 0.05, 4), spec.stretch_fraction),
+        "min_size": (size_lo, 2.0 * size_hi),
+        "max_hold_s": (min(0.2, hold_lo), hold_hi),
+        "min_time_s": (time_lo, 2.0 * time_hi),
+    }
+
+
+def check_limits(spec: GameSpec, limits: TherapistLimits) -> TherapistLimits:
+    """``limits`` if every value lies within :func:`limit_bounds`; ValueError naming the first that does not."""
+    for key, (lo, hi) in limit_bounds(spec).items():
+        value = getattr(limits, key)
+        if value is not None and not lo - 1e-9 <= value <= hi + 1e-9:
+            raise ValueError(f"limits.{key} {value:g} must lie in {lo:g}..{hi:g} for the game {spec.name}")
+    return limits
 
 
 def available_games() -> list[str]:

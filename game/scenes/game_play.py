@@ -30,16 +30,20 @@ from game.exergames.audio import Sounds
 from game.exergames.autoplay import AutoPlayer
 from game.exergames.session import Cue, GameSession, Phase, read_sample, store_log
 from game.exergames.spec import GameSpec
+from game.exergames.river import river_for
 from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
 from game.gfx import theme
 from game.gfx.view3d import Viewport, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState
 from game.scenes.live import MIN_KNOWN_MARKERS
+from game.scenes.river_view import RiverView
 
 log = logging.getLogger(__name__)
 
 VIEW_SHARE = 0.64
+#: The rotation game: the avatar's view, then the river up to this share of the width, then the panel.
+ROTATION_VIEW_SHARE, RIVER_END_SHARE = 0.36, 0.68
 INPUT_PERIOD_S = 1.0 / 60.0
 #: Samples stop for this long (the tracker publishes 30 a second): the game pauses rather than score an old pose.
 STALE_SAMPLE_S = 0.5
@@ -66,7 +70,8 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
     Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body):
     reach frames from the hips to a hand raised above the head, turned 25 degrees towards the active
     side so forward reaches show their depth; the rotation games frame the trunk and the forearm
-    in front of it, turned 15 degrees.
+    in front of it, turned 15 degrees; the shoulder rotation game from higher up and a little
+    towards the active side (the forearm swings out in a horizontal plane).
     """
     from game.avatar.renderer import look_at, perspective
 
@@ -83,12 +88,14 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
         target = shoulders + np.array([0.0, 0.10, 0.0]) + 0.12 * fwd
         half = 0.80
     else:
-        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd
+        sign = 1.0 if side == "right" else -1.0
+        shift = 0.10 if kind == "rotation" else 0.0
+        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd + shift * sign * right
         half = 0.52
     half = max(half, half * 0.9 / aspect)
     fov = 30.0
     distance = half / math.tan(math.radians(fov) / 2.0)
-    pitch = math.radians(10.0)
+    pitch = math.radians(28.0 if kind == "rotation" else 10.0)
     eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
     proj = perspective(fov, aspect, near_m=0.1, far_m=distance + 6.0)
     return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
@@ -123,15 +130,7 @@ def target_shapes(shapes, spec: GameSpec, session: GameSession):
         e_a.append(np.eye(3) * t.size * 0.7)
         e_rgb.append(glow)
     elif spec.kind == "rotation":
-        up = frame.trunk[:, 1]
-        for side in (-1.0, 1.0):
-            p = elbow_at_side_hand_m(frame, t.target.value_deg + side * t.size)
-            c_p0.append(p - 0.10 * up)
-            c_p1.append(p + 0.10 * up)
-            c_r.append(0.014)
-            e_c.append(p + 0.12 * up)
-            e_a.append(np.eye(3) * 0.028)
-            e_rgb.append(glow)
+        return shapes   # the gates are on the river beside the avatar (game.scenes.river_view)
     else:  # the lock: a flat disc beside the hand, on the side the key must turn to
         out = frame.out
         e_c.append(t.hand_m + 0.10 * frame.trunk[:, 1] + 0.02 * out)
@@ -172,13 +171,14 @@ class GameScene(BaseScene):
         mute: no sound.
         seed: the targets' random generator.
         level, level_low, level_high: the therapist's start level and limits (None: the game's).
+        therapist: the therapist's limits of the adaptation (None: the game's own ``limits``).
         source: stored with the session (e.g. ``sim``).
     """
 
     def __init__(self, link, spec: GameSpec, side: str, db_path: Path, patient_id: str, *,
                  make_avatar: Callable | None = None, auto: bool = False, mute: bool = False, seed: int = 0,
                  level: float | None = None, level_low: float | None = None, level_high: float | None = None,
-                 source: str = "sim") -> None:
+                 therapist=None, source: str = "sim") -> None:
         self.link = link
         self.spec = spec
         self.side = side
@@ -190,7 +190,7 @@ class GameScene(BaseScene):
         self.source = source
         self.limits = load_limits(self.db_path, patient_id, spec, side)
         self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
-                                   level_high=level_high)
+                                   level_high=level_high, therapist=therapist)
         self.player = AutoPlayer(self.session)
         self.avatar = None
         self.sounds: Sounds | None = None
@@ -206,13 +206,24 @@ class GameScene(BaseScene):
         self._hand_target = None
         self.view_m = self.proj_m = None
         self._camera_pelvis = None
+        self.river = river_for(self.limits, spec.stretch_fraction, side) if spec.kind == "rotation" else None
+        self.river_view: RiverView | None = None
+        self._river_clock_s = math.nan
 
     # ------------------------------------------------------------------ life cycle
     def enter(self, app) -> None:
         super().enter(app)
         w, h = app.screen.size_px
         self.scale = min(w / 1280.0, h / 720.0)
-        self.view = Viewport(0, 0, round(w * VIEW_SHARE), h)
+        share = ROTATION_VIEW_SHARE if self.river is not None else VIEW_SHARE
+        self.view = Viewport(0, 0, round(w * share), h)
+        self.panel_x = self.view.w
+        if self.river is not None:
+            gap = 12 * self.scale
+            right = round(w * RIVER_END_SHARE)
+            self.river_view = RiverView(app.screen.ctx, (self.view.w + gap, gap, right - self.view.w - 2 * gap, h - 2 * gap),
+                                        self.scale, self.spec.colour)
+            self.panel_x = right
         self.sounds = Sounds(self.mute)
         self.link.set_motion(None)   # the interactive patient: the mouse or the auto player moves the arm
 
@@ -221,6 +232,9 @@ class GameScene(BaseScene):
         if self.avatar is not None:
             self.avatar.release()
             self.avatar = None
+        if self.river_view is not None:
+            self.river_view.release()
+            self.river_view = None
 
     def save(self) -> str | None:
         """End the session and store its log (once; nothing for a session that never played)."""
@@ -260,6 +274,12 @@ class GameScene(BaseScene):
         """The mouse moves the simulated hand on a vertical plane through the target (or the rest position)."""
         v = self.view
         s = self.session
+        if self.river_view is not None and s.frame is not None:
+            rx, ry, rw, rh = self.river_view.rect
+            if rx <= x_px < rx + rw and ry <= y_px < ry + rh:   # on the river: the boat goes where the mouse is
+                rotation = self.river_view.rotation_at_px(self.river, x_px)
+                self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(s.frame, rotation))
+                return
         if self.proj_m is None or s.frame is None or not (v.x <= x_px < v.x + v.w):
             return
         origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
@@ -327,12 +347,19 @@ class GameScene(BaseScene):
         self.session.update(now, reading, reason)
         for cue in self.session.take_cues():
             self._cue(cue, now)
+        if self.river_view is not None:
+            dt = 0.0 if not math.isfinite(self._river_clock_s) else now - self._river_clock_s
+            self._river_clock_s = now
+            self.river_view.advance(dt, self.river, self.session.value_now(), self.session.target, self.session.paused)
         if self.session.phase is Phase.DONE and self.stored_uid is None and not self.store_error:
             self.save()
 
     def _cue(self, cue: Cue, now: float) -> None:
         if self.sounds is not None:
             self.sounds.play(cue)
+        if cue in (Cue.COLLECTED, Cue.MISSED) and self.river_view is not None and self.session.log.targets:
+            last = self.session.log.targets[-1]
+            self.river_view.target_ended(last["value_deg"], last["size"], last["reached"], now)
         words = {Cue.COLLECTED: ("Great!", GOOD), Cue.MISSED: ("Next one!", theme.TEXT_DIM),
                  Cue.LEVEL_UP: ("Level up!", theme.ACCENT), Cue.LEVEL_DOWN: ("A little easier", theme.TEXT_DIM),
                  Cue.READY: ("Go!", GOOD), Cue.DONE: ("Well done!", GOOD)}.get(cue)
@@ -378,7 +405,10 @@ class GameScene(BaseScene):
     def render_2d(self, frame: Frame) -> None:
         self.consume()
         c = frame.canvas
-        self._draw_target_ring(c)
+        if self.river_view is not None:
+            self.river_view.draw(c, self.river, self.session, self.app.clock())
+        else:
+            self._draw_target_ring(c)
         self._draw_panel(c, frame.size_px)
         self._draw_banner(c)
         self._draw_flash(c)
@@ -410,7 +440,7 @@ class GameScene(BaseScene):
     def _draw_panel(self, c, size_px) -> None:
         sess, s = self.session, self.scale
         w, h = size_px
-        x = self.view.w + 30 * s
+        x = self.panel_x + 30 * s
         right = w - theme.MARGIN * s
         y = theme.MARGIN * s
         c.text(self.spec.title, (x, y), round(theme.MEDIUM * s), theme.TEXT)
@@ -435,8 +465,14 @@ class GameScene(BaseScene):
         c.rect((x, y, right - x, 12 * s), (255, 255, 255, 30), radius=6 * s)
         c.rect((x, y, (right - x) * frac, 12 * s), theme.ACCENT, radius=6 * s)
         y += 36 * s
-        if self.spec.kind != "reach":
+        if self.spec.kind == "forearm":
             y = self._draw_gauge(c, x, y, right)
+        elif self.spec.kind == "rotation":
+            v = sess.value_now()
+            if math.isfinite(v):
+                words = "out" if v >= 0 else "in"
+                c.text(f"Turned {abs(round(v)):d}\N{DEGREE SIGN} {words}", (x, y), round(theme.BODY * s), theme.TEXT)
+            y += 50 * s
         size = round(theme.SMALL * s)
         for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
             c.text(line, (x, y), size, theme.TEXT_DIM)
@@ -453,8 +489,10 @@ class GameScene(BaseScene):
         lo, hi = -lim.negative_deg * sess.spec.stretch_fraction, lim.positive_deg * sess.spec.stretch_fraction
         span = max(hi, -lo, 1.0)
 
+        mirror = 1.0 if self.side == "right" else -1.0   # a mirror: the left arm's supination turns to the left
+
         def at(v: float, rr: float) -> tuple[float, float]:
-            a = math.radians(v / span * 90.0)   # 0 up, + to the right (out / supination)
+            a = math.radians(mirror * v / span * 90.0)   # 0 up, + to the arm's side (supination)
             return (cx + rr * math.sin(a), cy - rr * math.cos(a))
 
         for k in range(41):
@@ -491,7 +529,7 @@ class GameScene(BaseScene):
         else:
             return
         size = round(theme.BODY * s)
-        width = v.w - 2 * theme.MARGIN * s
+        width = self.panel_x - v.x - 2 * theme.MARGIN * s   # over the river too: the patient looks there
         lines = c.wrap(text, size, width - 40 * s)[:3]
         line_h = c.measure("Ag", size)[1] + 6 * s
         bh = len(lines) * line_h + 28 * s
@@ -511,5 +549,11 @@ class GameScene(BaseScene):
         s = self.scale
         v = self.view
         alpha = round(255 * (1.0 - age / FLASH_S))
-        c.text(text, (v.x + v.w / 2, v.h * 0.78 - 30 * s * age), round(theme.TITLE * s), (*colour[:3], alpha),
+        if self.river_view is not None:   # over the river, above the boat
+            rx, ry, rw, rh = self.river_view.rect
+            centre = (rx + rw / 2, self.river_view.bow_y - 90 * s - 30 * s * age)
+        else:
+            centre = (v.x + v.w / 2, v.h * 0.78 - 30 * s * age)
+        size = theme.LARGE if self.river_view is not None else theme.TITLE
+        c.text(text, centre, round(size * s), (*colour[:3], alpha),
                anchor="center")
