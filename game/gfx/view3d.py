@@ -64,13 +64,6 @@ class Viewport:
     def aspect(self) -> float:
         return self.w / self.h
 
-    def right_of(self, window_px: tuple[int, int]) -> tuple[int, int, int, int]:
-        """(x, y, w, h) of the window's full-height strip to the right of this rectangle (a side
-        panel), in whole pixels."""
-        w, h = window_px
-        x0 = round(self.x + self.w)
-        return (x0, 0, w - x0, h)
-
     def gl(self, window_h: int) -> tuple[int, int, int, int]:
         """The same rectangle for ``ctx.viewport`` (GL counts y from the bottom)."""
         return (round(self.x), round(window_h - self.y - self.h), round(self.w), round(self.h))

@@ -206,6 +206,7 @@ class GameScene(BaseScene):
         self._hand_target = None
         self.view_m = self.proj_m = None
         self._camera_pelvis = None
+        self._prepared = None  # the avatar and targets of this frame (prepare -> render_3d)
         self.river = river_for(self.limits, spec.stretch_fraction, side) if spec.kind == "rotation" else None
         self.river_view: RiverView | None = None
         self._river_clock_s = math.nan
@@ -367,32 +368,37 @@ class GameScene(BaseScene):
             self._flash = (*words, now)
 
     # ------------------------------------------------------------------ drawing
-    def clear_rect(self, frame: Frame):
-        if self.avatar is None:
-            return None
-        return self.view.right_of(frame.size_px)
-
-    def render_3d(self, frame: Frame) -> None:
+    def prepare(self, frame: Frame) -> None:
+        """This frame's samples, and the avatar with the targets made ready to draw (while the
+        previous frame is still being rasterized)."""
         self.consume()
+        self._prepared = None
         if self.avatar is None:
             return
         from game.avatar.shapes import body_shapes
 
         now = self.app.clock()
         pose = self.avatar.interpolator.sample(now)
+        if pose is None:
+            return
+        if self.proj_m is None or self._camera_pelvis is None or \
+                np.linalg.norm(pose.joint("pelvis") - self._camera_pelvis) > CAMERA_REAIM_M:
+            # a still camera: re-aimed only when the patient moves on the seat
+            self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.spec.kind, self.side)
+            self._camera_pelvis = pose.joint("pelvis").copy()
+        shapes = target_shapes(body_shapes(pose), self.spec, self.session)
+        self._prepared = self.avatar.renderer.prepare(pose, self.view_m, self.proj_m, shapes=shapes,
+                                                      looks=self.avatar.fader.update(pose.state, now))
+
+    def render_3d(self, frame: Frame) -> None:
+        if self.avatar is None:
+            return
         ctx = frame.screen.ctx
         ctx.viewport = self.view.gl(frame.size_px[1])
         try:
             self.avatar.renderer.render_background()
-            if pose is not None:
-                if self.proj_m is None or self._camera_pelvis is None or \
-                        np.linalg.norm(pose.joint("pelvis") - self._camera_pelvis) > CAMERA_REAIM_M:
-                    # a still camera: re-aimed only when the patient moves on the seat
-                    self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.spec.kind, self.side)
-                    self._camera_pelvis = pose.joint("pelvis").copy()
-                shapes = target_shapes(body_shapes(pose), self.spec, self.session)
-                self.avatar.renderer.render(pose, self.view_m, self.proj_m, shapes=shapes,
-                                            looks=self.avatar.fader.update(pose.state, now))
+            if self._prepared is not None:
+                self.avatar.renderer.draw(self._prepared)
         finally:
             ctx.viewport = (0, 0, *frame.size_px)
 
