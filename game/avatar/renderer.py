@@ -6,12 +6,13 @@ a patient expects (the avatar faces them and moves like their mirror image). It 
 OpenGL 3.3 core context and nothing of pygame, so the game's window and headless tests (EGL)
 use it alike.
 
-Geometry: ellipsoids (and the capsules' end spheres) are ray-cast on instanced screen-space
-quads bounding their exact outline, as the simulator's cameras draw them (two triangles each
-instead of 80-320 for an icosphere: llvmpipe pays per triangle); tapered capsules are an
-instanced band tangent to the two end spheres (the simulator's band,
-``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are not drawn. About
-700 triangles in all.
+Geometry: the small ellipsoids (eyes, nose, hands, shoes, joints) and the capsules' end spheres
+are ray-cast on instanced screen-space quads bounding their exact outline, as the simulator's
+cameras draw them (two triangles each instead of 80 for an icosphere: llvmpipe pays per
+triangle); the large ones (trunk, head, chair) are instanced 320-triangle icospheres, depth-tested
+before shading; tapered capsules are an instanced band tangent to the two end spheres (the
+simulator's band, ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are
+not drawn. About 4.2k triangles in all.
 
 Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
@@ -41,7 +42,7 @@ from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
 from tracking.sim.glsl import OUTLINE_BOX_GLSL
-from tracking.sim.meshes import cone_band
+from tracking.sim.meshes import cone_band, icosphere
 
 
 
@@ -226,6 +227,38 @@ void main() {
     gl_FragDepth = 0.5 * z_ndc + 0.5;
     vec3 n = normalize(v_nrm * (o + t * d));
     f_colour = vec4(shade(n, pos, v_rgb, v_style), mix(1.0, u_lost_alpha, v_style.y));
+}
+"""
+
+# The large ellipsoids (trunk, head, chair: the 'fine' ones) are icosphere meshes: in a close
+# view they fill many pixels, and a mesh is depth-tested before shading, whereas a ray cast
+# writes its depth and so shades every pixel of its quad (measured: the close game views
+# drew ~2-3 ms of CPU per frame faster with meshed large ellipsoids, the live view ~1 ms
+# faster with ray-cast small ones).
+_VERTEX_ELLIPSOID_MESH = """
+#version 330
+uniform mat4 u_clip_from_world;
+in vec3 in_pos;  // unit sphere: position = normal
+in vec3 i_centre;
+in vec3 i_ax0;
+in vec3 i_ax1;
+in vec3 i_ax2;
+in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
+in vec3 i_nrm1;
+in vec3 i_nrm2;
+in vec3 i_rgb;
+in vec2 i_style;  // estimated and lost look amounts
+out vec3 v_pos;
+out vec3 v_normal;
+flat out vec3 v_rgb;
+flat out vec2 v_style;
+void main() {
+    mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
+    v_pos = i_centre + axes * in_pos;
+    v_normal = mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos;
+    v_rgb = i_rgb;
+    v_style = i_style;
+    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
 }
 """
 
@@ -481,8 +514,8 @@ class PreparedAvatar:
         clip: (4, 4) clip-from-world matrix; eye: (3,) camera centre; key_dir, rim_dir: (3,)
             unit directions towards the lights (world).
         mirrored: the view is a mirror image (front faces wind the other way).
-        ellipsoids: float32 instance rows of (opaque ellipsoids, opaque end caps, lost
-            ellipsoids, lost end caps).
+        ellipsoids: float32 instance rows of (opaque ray-cast ellipsoids and end caps, opaque
+            meshed large ellipsoids, the same two when lost).
         bands: float32 instance rows of (opaque capsule bands, lost ones).
         floor_rows: the floor mesh's vertex rows (positions and colours).
     """
@@ -513,10 +546,15 @@ class AvatarRenderer:
         self._ctx = ctx
         self.style = style
         self._prog_ellipsoid = ctx.program(vertex_shader=_VERTEX_ELLIPSOID, fragment_shader=_FRAGMENT_ELLIPSOID)
+        self._prog_mesh = ctx.program(vertex_shader=_VERTEX_ELLIPSOID_MESH, fragment_shader=_FRAGMENT_BODY)
         self._prog_band = ctx.program(vertex_shader=_VERTEX_BAND, fragment_shader=_FRAGMENT_BODY)
         self._prog_floor = ctx.program(vertex_shader=_VERTEX_COLOURED, fragment_shader=_FRAGMENT_COLOURED)
         self._prog_background = ctx.program(vertex_shader=_VERTEX_FULLSCREEN, fragment_shader=_FRAGMENT_BACKGROUND)
         self._ellipsoids = _Instanced(ctx, self._prog_ellipsoid, None, None, "", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
+        # 320 triangles: at the sizes the avatar appears on screen the outline stays within half
+        # a pixel of the true ellipse.
+        fine_v, fine_t = icosphere(2)
+        self._fine = _Instanced(ctx, self._prog_mesh, fine_v, fine_t, "in_pos", _ELLIPSOID_FORMAT, _ELLIPSOID_NAMES)
         # 16 sides: a limb's outline is within half a pixel of round at its on-screen size, and
         # the band's long thin triangles are what llvmpipe spends the most on (32 sides: +2.4 ms).
         # (Ray-casting the tapered capsules on quads along them cost ~1 ms more than the bands.)
@@ -525,7 +563,7 @@ class AvatarRenderer:
         self._floor = _Floor(ctx, self._prog_floor, style.floor_radius_m, style.floor_rgb)
         self._empty_vao_bg = ctx.vertex_array(self._prog_background, [])
         est = np.asarray(style.estimated_rgb, np.float32) ** 2.2
-        for prog in (self._prog_ellipsoid, self._prog_band):
+        for prog in (self._prog_ellipsoid, self._prog_mesh, self._prog_band):
             prog["u_estimated_rgb"].value = tuple(float(x) for x in est)
             prog["u_estimated_tint"].value = float(style.estimated_tint)
             prog["u_lost_alpha"].value = float(style.lost_alpha)
@@ -563,7 +601,7 @@ class AvatarRenderer:
         key = cam @ np.array([-0.45, 0.75, 0.55])
         rim = cam @ np.array([0.3, 0.45, -0.85])
         looks = state_looks(pose.state) if looks is None else np.asarray(looks, np.float32)
-        e_rows, e_lost = self._ellipsoid_rows(looks, shapes)
+        e_rows, e_lost, fine = self._ellipsoid_rows(looks, shapes)
         c_rows, c_lost = self._capsule_rows(looks, shapes)
         caps, cap_lost = self._cap_rows(c_rows, c_lost, shapes.capsule_caps)  # end caps are spheres
         centre = np.array([shapes.shadow_blobs[0, 0], shapes.floor_y_m, shapes.shadow_blobs[0, 1]])
@@ -574,7 +612,8 @@ class AvatarRenderer:
             key_dir=key / np.linalg.norm(key),
             rim_dir=rim / np.linalg.norm(rim),
             mirrored=bool(np.linalg.det(proj[:3, :3] @ view[:3, :3]) > 0),
-            ellipsoids=(e_rows[~e_lost], caps[~cap_lost], e_rows[e_lost], caps[cap_lost]),
+            ellipsoids=(np.concatenate([e_rows[~e_lost & ~fine], caps[~cap_lost]]), e_rows[~e_lost & fine],
+                        np.concatenate([e_rows[e_lost & ~fine], caps[cap_lost]]), e_rows[e_lost & fine]),
             bands=(c_rows[~c_lost], c_rows[c_lost]),
             floor_rows=self._floor.rows(centre, shapes.floor_y_m, shapes.shadow_blobs),
         )
@@ -588,7 +627,7 @@ class AvatarRenderer:
         vx, vy, vw, vh = ctx.viewport
         self._prog_ellipsoid["u_ray_from_window"].write(_ray_from_window(p.clip, p.eye, (vx, vy, vw, vh)))
         self._prog_ellipsoid["u_pad_ndc"].value = (3.0 / vw, 3.0 / vh)
-        for prog in (self._prog_ellipsoid, self._prog_band):
+        for prog in (self._prog_ellipsoid, self._prog_mesh, self._prog_band):
             prog["u_clip_from_world"].write(clip_bytes)
             prog["u_eye"].value = tuple(float(x) for x in p.eye)
             prog["u_key_dir"].value = tuple(float(x) for x in p.key_dir)
@@ -596,22 +635,22 @@ class AvatarRenderer:
         if floor:  # first, without depth: everything else stands on it
             self._prog_floor["u_clip_from_world"].write(clip_bytes)
             self._floor.draw_rows(p.floor_rows)
-        e_opaque, caps_opaque, e_lost, caps_lost = p.ellipsoids
+        cast_opaque, fine_opaque, cast_lost, fine_lost = p.ellipsoids
         c_opaque, c_lost = p.bands
         ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         ctx.disable(moderngl.BLEND)  # blending costs a read per pixel on llvmpipe: opaque first
         ctx.front_face = "cw" if p.mirrored else "ccw"
-        self._draw_solids(e_opaque, c_opaque, caps_opaque)
+        self._draw_solids(cast_opaque, fine_opaque, c_opaque)
         ctx.enable(moderngl.BLEND)
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         # Lost segments, translucent: a depth-only pass first, so that a lost segment shows only
         # its front surface (no inner overlaps), then its colour over it.
-        if len(e_lost) or len(c_lost) or len(caps_lost):
+        if len(cast_lost) or len(fine_lost) or len(c_lost):
             ctx.blend_func = moderngl.ZERO, moderngl.ONE  # depth only: the colour stays as it is
-            self._draw_solids(e_lost, c_lost, caps_lost)
+            self._draw_solids(cast_lost, fine_lost, c_lost)
             ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
             ctx.depth_func = "<="
-            self._draw_solids(e_lost, c_lost, caps_lost)
+            self._draw_solids(cast_lost, fine_lost, c_lost)
             ctx.depth_func = "<"
         ctx.front_face = "ccw"
         return p.shapes
@@ -637,9 +676,9 @@ class AvatarRenderer:
         return self.draw(self.prepare(pose, view, proj, shapes=shapes, looks=looks), floor=floor)
 
     def release(self) -> None:
-        for obj in (self._ellipsoids, self._band, self._floor):
+        for obj in (self._ellipsoids, self._fine, self._band, self._floor):
             obj.release()
-        for obj in (self._empty_vao_bg, self._prog_ellipsoid, self._prog_band,
+        for obj in (self._empty_vao_bg, self._prog_ellipsoid, self._prog_mesh, self._prog_band,
                     self._prog_floor, self._prog_background):
             obj.release()
 
@@ -652,12 +691,12 @@ class AvatarRenderer:
         out[tracked] = looks[parts[tracked]]
         return out
 
-    def _ellipsoid_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
+    def _ellipsoid_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         style = self._style_of(looks, s.ellipsoid_part)
         axes = np.transpose(s.ellipsoid_axes_m, (0, 2, 1)).reshape(-1, 9)  # columns ax0, ax1, ax2
         normal = np.linalg.inv(s.ellipsoid_axes_m).reshape(-1, 9)  # columns of inv(A)^T = rows of inv(A)
         rows = np.hstack([s.ellipsoid_centre_m, axes, normal, s.ellipsoid_rgb, style]).astype(np.float32)
-        return rows, style[:, 1] > _TRANSLUCENT
+        return rows, style[:, 1] > _TRANSLUCENT, s.ellipsoid_fine
 
     def _capsule_rows(self, looks: np.ndarray, s: BodyShapes) -> tuple[np.ndarray, np.ndarray]:
         style = self._style_of(looks, s.capsule_part)
@@ -679,9 +718,10 @@ class AvatarRenderer:
             flags.append(lost[keep])
         return np.concatenate(rows).astype(np.float32), np.concatenate(flags)
 
-    def _draw_solids(self, e_rows: np.ndarray, c_rows: np.ndarray, caps: np.ndarray) -> None:
+    def _draw_solids(self, cast_rows: np.ndarray, fine_rows: np.ndarray, band_rows: np.ndarray) -> None:
+        self._fine.draw(fine_rows)  # the large ones first: depth-tested, they spare later pixels
+        self._band.draw(band_rows)
         # The ray-cast quads face either way (a mirrored projection flips them): no culling.
         self._ctx.disable(moderngl.CULL_FACE)
-        self._ellipsoids.draw(np.concatenate([e_rows, caps]))
+        self._ellipsoids.draw(cast_rows)
         self._ctx.enable(moderngl.CULL_FACE)
-        self._band.draw(c_rows)
