@@ -23,6 +23,8 @@ from calibration.errors import RehabError
 
 log = logging.getLogger("rehab")
 
+SIM_CHARUCO_SPEC = ("10x7", 40.0, 30.0, "DICT_4X4_50")  # the simulator's ChArUco board: squares, square mm, marker mm
+
 
 
 def add_commands(sub) -> None:
@@ -32,11 +34,13 @@ def add_commands(sub) -> None:
                        "views or a wand. See docs/CALIBRATION.md.")
     cal = p.add_subparsers(dest="calibrate_command", required=True, metavar="STEP")
 
-    q = cal.add_parser("intrinsics", help="lens and focal length of each camera from checkerboard images",
-                       description="Calibrate each camera's intrinsics from a folder of checkerboard images per "
-                       "camera (the folder name is the camera name), or from one folder holding such folders.")
+    q = cal.add_parser("intrinsics", help="lens and focal length of each camera from checkerboard or ChArUco images",
+                       description="Calibrate each camera's intrinsics from a folder of board images per "
+                       "camera (the folder name is the camera name), or from one folder holding such folders. "
+                       "--board charuco uses a ChArUco board (--squares, --marker-mm, --dictionary), which also "
+                       "counts views where the board is partly out of the picture.")
     q.add_argument("folders", nargs="+", type=Path, help="one folder of images per camera, or their parent folder")
-    _board_options(q)
+    _board_options(q, charuco=True)
     q.add_argument("--fit-k3", action="store_true", help="also fit the 3rd radial coefficient (wide-angle lenses)")
     _output_options(q)
     q.set_defaults(func=_cmd_intrinsics)
@@ -80,17 +84,45 @@ def add_commands(sub) -> None:
     p.add_argument("--wand-seconds", type=float, default=20.0, help="length of the wand recording (default: %(default)s)")
     p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--charuco", action="store_true",
+                   help="also render ChArUco intrinsics images (10x7 squares of 40 mm), some with the board partly out of view")
     p.add_argument("--check", action="store_true",
                    help="then calibrate from the material, compare with the truth and with tracking on the true calibration")
     p.set_defaults(func=_cmd_simulate_calibration)
 
 
 # --------------------------------------------------------------------------- options
-def _board_options(p, *, required: bool = True) -> None:
+def _board_options(p, *, required: bool = True, charuco: bool = False) -> None:
     p.add_argument("--board", default="9x6" if not required else None, required=required,
-                   help="inner corners COLSxROWS, one count even and one odd, e.g. 9x6")
+                   help="checkerboard inner corners COLSxROWS, one count even and one odd, e.g. 9x6"
+                   + ("; or 'charuco' for a ChArUco board" if charuco else ""))
     p.add_argument("--square-mm", type=float, default=None if required else 60.0, required=required,
                    help="printed square side in mm")
+    if charuco:
+        p.add_argument("--squares", default="10x7", help="ChArUco board: squares COLSxROWS (default: %(default)s)")
+        p.add_argument("--marker-mm", type=float, default=None,
+                       help="ChArUco board: printed marker side in mm (default: 0.75 of the square)")
+        p.add_argument("--dictionary", default="DICT_4X4_50", help="ChArUco board: OpenCV ArUco dictionary (default: %(default)s)")
+
+
+def board_from_args(args):
+    """The calibration board of the command line: a Checkerboard, or a CharucoBoard for ``--board charuco``."""
+    from calibration.board import Checkerboard
+
+    if args.board.lower() == "charuco":
+        if not hasattr(args, "squares"):
+            raise RehabError("--board charuco: ChArUco boards are used for intrinsics only; use a checkerboard (e.g. 9x6) here")
+        from calibration.charuco import CharucoBoard
+
+        return CharucoBoard.parse(args.squares, args.square_mm, args.marker_mm, args.dictionary)
+    return Checkerboard.parse(args.board, args.square_mm)
+
+
+def board_name(board) -> str:
+    """``9x6 checkerboard`` or ``10x7 ChArUco board`` for messages."""
+    if hasattr(board, "squares_x"):
+        return f"{board.squares_x}x{board.squares_y}-square ChArUco board"
+    return f"{board.cols}x{board.rows} board"
 
 
 def _floor_options(p) -> None:
@@ -165,8 +197,8 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
             raise RehabError(f"{folder}: no images (png, jpg, bmp, tif) in this folder")
         detections, skipped = detect_in_files(files, board)
         if not detections:
-            raise RehabError(f"{folder}: the {board.cols}x{board.rows} board was found in none of its {len(files)} images: "
-                             "check --board (inner corners, not squares) and that the whole board is in view")
+            raise RehabError(f"{folder}: the {board_name(board)} was found in none of its {len(files)} images: "
+                             "check --board (inner corners, not squares) and that the board is in view")
         res = calibrate_intrinsics(folder.name, list(detections.values()), board, fix_k3=not fit_k3,
                                    view_names=[Path(k).name for k in detections])
         results.append(res)
@@ -182,9 +214,7 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
 
 
 def _cmd_intrinsics(args) -> int:
-    from calibration.board import Checkerboard
-
-    board = Checkerboard.parse(args.board, args.square_mm)
+    board = board_from_args(args)
     results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
     worst = max(r.rms_px for r in results)
     _save(args, [r.camera for r in results], worst)
@@ -247,10 +277,9 @@ def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin
 
 
 def _cmd_extrinsics(args) -> int:
-    from calibration.board import Checkerboard
     from calibration.files import load_calibration
 
-    board = Checkerboard.parse(args.board, args.square_mm)
+    board = board_from_args(args)
     cameras = load_calibration(args.intrinsics)
     res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=_triple(args.origin, "--origin"),
                          turn_deg=args.turn_deg)
@@ -305,9 +334,7 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
 
 
 def _cmd_wand(args) -> int:
-    from calibration.board import Checkerboard
-
-    board = Checkerboard.parse(args.board, args.square_mm) if args.floor_views else None
+    board = board_from_args(args) if args.floor_views else None
     res, cameras = run_wand(args.recording, args.intrinsics, length_mm=args.length_mm, colours=args.colour,
                             ball_mm=args.ball_mm, floor_views=args.floor_views, board=board, floor=args.floor,
                             origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
@@ -319,6 +346,9 @@ def _cmd_wand(args) -> int:
 # --------------------------------------------------------------------------- simulator
 def _cmd_simulate_calibration(args) -> int:
     from calibration.camera import Camera
+    from calibration.charuco import CharucoBoard
+
+    charuco = CharucoBoard.parse(*SIM_CHARUCO_SPEC) if args.charuco else None
     from tracking.sim.calibration_material import write_calibration_material
     from tracking.sim.rigs import load_rig
 
@@ -332,7 +362,8 @@ def _cmd_simulate_calibration(args) -> int:
 
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
-                                     wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed, progress=True))
+                                     wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed,
+                                     charuco=charuco, progress=True))
     if args.check:
         for line in check_material(args.out_dir, seed=args.seed):
             print(line, flush=True)
@@ -358,6 +389,8 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     intr = run_intrinsics([folder / "intrinsics"], board, verbose=False)
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(intr, truth)])
     lines.append(f"intrinsics: focal length error max {focal.max():.3f} %, reprojection max {max(r.rms_px for r in intr):.3f} px")
+    if "charuco" in material:
+        lines.append(charuco_check(folder, material["charuco"], truth))
     cams = [r.camera for r in intr]
     ext = run_extrinsics(folder / "extrinsics", cams, board, floor="seat", origin_m=origin, turn_deg=0.0, verbose=False)
     pos, ang = rig_errors(ext.cameras, truth)
@@ -374,6 +407,17 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
                      f"{wpos.max():.2f} mm, orientation max {wang.max():.3f} deg, reprojection max {np.nanmax(wres.rms_px):.3f} px")
         lines.append(tracking_check(Path(tmp) / "rec", truth, ext.cameras, wcams, seconds=track_seconds, seed=seed))
     return lines
+
+
+def charuco_check(folder: Path, spec: dict, truth) -> str:
+    """ChArUco intrinsics from ``intrinsics_charuco/`` against the truth, as a report line."""
+    from calibration.charuco import CharucoBoard
+
+    board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
+    res = run_intrinsics([folder / "intrinsics_charuco"], board, verbose=False)
+    focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(res, truth)])
+    return (f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
+            f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %")
 
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:

@@ -34,7 +34,7 @@ import numpy as np
 from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import RehabError
-from calibration.intrinsics import COVERAGE_GRID, COVERAGE_WARN, IntrinsicsResult, _empty_regions, calibrate_intrinsics, coverage_of
+from calibration.intrinsics import COVERAGE_GRID, COVERAGE_WARN, IntrinsicsResult, empty_regions, calibrate_intrinsics, coverage_of
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -127,14 +127,14 @@ class SimBoardFeed:
         return path
 
     def next_frame(self) -> np.ndarray:
-        from tracking.sim.calibration_material import _add_noise, _board_light
+        from tracking.sim.calibration_material import add_noise, board_light
 
         pose = self._path[self._k % len(self._path)]
         self._k += 1
         if pose is not self._last_pose:   # the board held still: the clean image is drawn once
             self._last_pose = pose
-            self._clean = self._caster.draw(self._background, pose, light=_board_light(pose))
-        return _add_noise(self._clean, self._noise, self._rng)
+            self._clean = self._caster.draw(self._background, pose, light=board_light(pose))
+        return add_noise(self._clean, self._noise, self._rng)
 
     def true_corners_px(self) -> np.ndarray:
         """(N, 2) true pixel positions of the inner corners in the last image (may lie outside it)."""
@@ -183,7 +183,7 @@ def coverage_hint(views: Sequence[Detection], size_px: tuple[int, int]) -> str:
     if not views:
         return "Hold the whole board in front of the camera"
     fraction, hit = coverage_of(views, size_px)
-    empty = _empty_regions(hit)
+    empty = empty_regions(hit)
     if empty:
         first = empty.split(", ")[0]
         where = "the centre" if first == "centre" else f"the {first} {'edge' if first in ('top', 'bottom', 'left', 'right') else 'corner'}"
