@@ -39,9 +39,21 @@ def add_commands(sub) -> None:
                        "camera (the folder name is the camera name), or from one folder holding such folders. "
                        "--board charuco uses a ChArUco board (--squares, --marker-mm, --dictionary), which also "
                        "counts views where the board is partly out of the picture.")
-    q.add_argument("folders", nargs="+", type=Path, help="one folder of images per camera, or their parent folder")
+    q.add_argument("folders", nargs="*", type=Path, help="one folder of images per camera, or their parent folder")
     _board_options(q, charuco=True)
     q.add_argument("--fit-k3", action="store_true", help="also fit the 3rd radial coefficient (wide-angle lenses)")
+    live = q.add_argument_group("live capture (instead of folders)")
+    live.add_argument("--live", action="append", default=None, metavar="DEVICE",
+                      help="capture board views from a camera (index like 0, URL or video file), once per camera in "
+                      "rig order (cam1, cam2, ...); a view is kept when the board is held still in a new place")
+    live.add_argument("--views", type=int, default=12, help="live: views to keep at least (default: %(default)s)")
+    live.add_argument("--coverage", type=float, default=85.0,
+                      help="live: stop when the views cover this %% of the picture (default: %(default)s)")
+    live.add_argument("--max-views", type=int, default=30, help="live: stop after this many views (default: %(default)s)")
+    live.add_argument("--max-seconds", type=float, default=180.0,
+                      help="live: give up on a camera after this long (default: %(default)s)")
+    live.add_argument("--save-views", type=Path, default=None,
+                      help="live: also save the kept images as DIR/cam1/000.png ... (a folder to calibrate again from)")
     _output_options(q)
     q.set_defaults(func=_cmd_intrinsics)
 
@@ -215,11 +227,115 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
 
 def _cmd_intrinsics(args) -> int:
     board = board_from_args(args)
-    results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
+    if args.live and args.folders:
+        raise RehabError("give image folders or --live cameras, not both")
+    if args.live:
+        from tracking.sources.cameras import open_capture
+
+        captures = []
+        try:
+            for k, device in enumerate(args.live):
+                cap = open_capture(device, None, None)
+                captures.append((f"cam{k + 1}", cap))
+                if not cap.isOpened():
+                    raise RehabError(f"--live {device}: cannot open this camera or video (check the index, URL or path)")
+            results = run_live_intrinsics(captures, board, fit_k3=args.fit_k3, min_views=args.views,
+                                          target_coverage=args.coverage / 100.0, max_views=args.max_views,
+                                          max_seconds=args.max_seconds, save_views=args.save_views)
+        finally:
+            for _, cap in captures:
+                cap.release()
+    elif args.folders:
+        results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
+    else:
+        raise RehabError("give one folder of board images per camera, or --live DEVICE per camera")
     worst = max(r.rms_px for r in results)
     _save(args, [r.camera for r in results], worst)
     print(f"wrote the intrinsics of {len(results)} cameras to {args.out}")
     return 0
+
+
+def run_live_intrinsics(captures, board, *, fit_k3: bool = False, min_views: int = 12, target_coverage: float = 0.85,
+                        max_views: int = 30, max_seconds: float = 180.0, save_views: Path | None = None,
+                        clock=None, verbose: bool = True):
+    """Calibrate cameras one after the other from their live feeds.
+
+    For each camera the feed is read frame by frame; a :class:`calibration.view_selection.ViewSelector`
+    keeps the still, distinct board views, with a progress line per kept view (count, coverage,
+    where to move the board), until the views are enough, the feed ends (a video file) or
+    ``max_seconds`` pass.
+
+    Args:
+        captures: (camera name, capture) pairs; a capture has ``cv2.VideoCapture``'s ``read()``.
+        board: a Checkerboard or CharucoBoard.
+        save_views: folder to save each camera's kept images in (``save_views/<name>/000.png``).
+        clock: seconds, monotonic (default ``time.monotonic``).
+    Returns:
+        the IntrinsicsResults, in the order of ``captures``.
+    Raises:
+        RehabError: a camera gave too few views.
+    """
+    import time
+
+    import cv2
+
+    from calibration.board import detect_board
+    from calibration.intrinsics import MIN_VIEWS, calibrate_intrinsics
+    from calibration.view_selection import ViewSelector
+    from tracking.sources.cameras import FAILED_READS_TO_END
+
+    clock = clock or time.monotonic
+    results = []
+    for name, cap in captures:
+        selector = None
+        images: list[np.ndarray] = []
+        n_frames = failed = 0
+        t0 = clock()
+        ended = f"{max_seconds:g} s passed"
+        if verbose:
+            print(f"{name}: move the board slowly in front of the camera and hold it still in each new place", flush=True)
+        while clock() - t0 < max_seconds:
+            ok, image = cap.read()
+            if not ok or image is None:
+                failed += 1
+                if failed >= FAILED_READS_TO_END:
+                    ended = "the camera stopped delivering frames" if n_frames else "the camera delivered no frame"
+                    break
+                continue
+            failed = 0
+            n_frames += 1
+            if selector is None:
+                selector = ViewSelector((image.shape[1], image.shape[0]), min_views=min_views,
+                                        target_coverage=target_coverage, max_views=max_views)
+            detection, _ = detect_board(image, board)
+            if selector.offer(detection):
+                images.append(image)
+                prog = selector.progress()
+                if verbose:
+                    print(f"  {name}: view {prog.n_views} kept, coverage {100 * prog.coverage:.0f} %"
+                          + ("" if prog.done else f": {prog.hint}"), flush=True)
+                if prog.done:
+                    ended = "enough views"
+                    break
+        n = 0 if selector is None else len(selector.views)
+        if n < MIN_VIEWS:
+            raise RehabError(f"{name}: {n} board views kept from {n_frames} frames before {ended}: hold the board "
+                             f"still in at least {MIN_VIEWS} (better {min_views}) different places")
+        if save_views is not None:
+            folder = Path(save_views) / name
+            folder.mkdir(parents=True, exist_ok=True)
+            for k, image in enumerate(images):
+                cv2.imwrite(str(folder / f"{k:03d}.png"), image)
+        res = calibrate_intrinsics(name, selector.views, board, fix_k3=not fit_k3)
+        results.append(res)
+        if verbose:
+            K = res.camera.K
+            print(f"{name}: {n} views kept from {n_frames} frames ({ended}), reprojection {res.rms_px:.3f} px, "
+                  f"f = {K[0, 0]:.1f}/{K[1, 1]:.1f} px, centre ({K[0, 2]:.1f}, {K[1, 2]:.1f}), "
+                  f"coverage {100 * res.coverage:.0f} %", flush=True)
+            for w in res.warnings:
+                print(f"  warning: {w}")
+    return results
 
 
 # --------------------------------------------------------------------------- extrinsics

@@ -34,7 +34,8 @@ import numpy as np
 from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import RehabError
-from calibration.intrinsics import COVERAGE_GRID, COVERAGE_WARN, IntrinsicsResult, empty_regions, calibrate_intrinsics, coverage_of
+from calibration.intrinsics import COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of
+from calibration.view_selection import coverage_hint
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -176,21 +177,6 @@ class CameraProgress:
 
     views: list[Detection]
     result: IntrinsicsResult | None = None
-
-
-def coverage_hint(views: Sequence[Detection], size_px: tuple[int, int]) -> str:
-    """Where to move the board next, in plain words."""
-    if not views:
-        return "Hold the whole board in front of the camera"
-    fraction, hit = coverage_of(views, size_px)
-    empty = empty_regions(hit)
-    if empty:
-        first = empty.split(", ")[0]
-        where = "the centre" if first == "centre" else f"the {first} {'edge' if first in ('top', 'bottom', 'left', 'right') else 'corner'}"
-        return f"Move the board into {where} of the picture"
-    if fraction < COVERAGE_WARN:
-        return "Move the board closer to the edges of the picture"
-    return "Good coverage: tilt the board a little differently for each view"
 
 
 def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequence[Detection],
