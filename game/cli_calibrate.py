@@ -1,4 +1,4 @@
-"""``rehab calibrate intrinsics|extrinsics|wand`` and ``rehab simulate-calibration``.
+"""``rehab calibrate intrinsics|extrinsics|wand|colour`` and ``rehab simulate-calibration``.
 
 Folders, as a clinic records them and as the simulator writes them (docs/CALIBRATION.md):
 
@@ -82,6 +82,20 @@ def add_commands(sub) -> None:
     _floor_options(q)
     _output_options(q)
     q.set_defaults(func=_cmd_wand)
+
+    q = cal.add_parser("colour", help="learn the marker colours under this room's lighting into the calibration file",
+                       description="Identify the markers in the reference pose at the start of a recording, learn each "
+                       "marker colour from its balls (and what is not a marker from the rest of the images), and "
+                       "save the learnt colours in the calibration file ([metadata.marker_colours]); rehab track and "
+                       "the live tracker then use them. Same learning as `rehab colour learn`.")
+    q.add_argument("recording", type=Path, help="recording folder that starts in the reference pose")
+    q.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file to use and to add the colours to (default: RECORDING/calibration.toml)")
+    q.add_argument("--out", type=Path, default=None,
+                   help="write the calibration with the colours here instead of into --calibration")
+    q.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
+    q.add_argument("--frames", type=int, default=30, help="frame sets to learn from after identification (default 30)")
+    q.set_defaults(func=_cmd_colour)
 
     p = sub.add_parser("simulate-calibration", help="render calibration material of a virtual rig, with ground truth",
                        description="Render board images (intrinsics, extrinsics, seat board) and a wand recording "
@@ -456,6 +470,36 @@ def _cmd_wand(args) -> int:
                             origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
     _save(args, cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(cameras)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- colour
+def _cmd_colour(args) -> int:
+    import shutil
+
+    from tracking.colour_adapt import learn_colours, save_colours_to_calibration
+    from tracking.offline import markerset_for
+    from tracking.recording import Recording
+
+    if args.frames < 1:
+        raise RehabError(f"--frames {args.frames}: give at least 1")
+    with Recording(args.recording, args.calibration) as rec:
+        source = rec.calibration_path
+        target = args.out or source
+        if target.suffix.lower() != ".toml" or source.suffix.lower() != ".toml":
+            raise RehabError(f"{target if args.out else source}: the colours are saved in TOML calibrations only: "
+                             "give --out calibration.toml")
+        ms = markerset_for(rec, args.markerset, None)
+        adapter = learn_colours(rec, rec.cameras, ms, frames=args.frames)
+    if target.resolve() != source.resolve():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+    save_colours_to_calibration(target, ms, adapter.models, adapter.builder.label_hs)
+    for nominal, m in zip(ms.palette.tolist(), adapter.models):
+        print(f"colour {tuple(nominal)}: seen as hue {m.hue_deg:.0f} deg +- {m.hue_tol_deg:.0f}, "
+              f"saturation >= {m.sat_floor:.2f} (about {m.rgb})")
+    print(f"learned from {adapter.updates} frame sets; saved in {target} [metadata.marker_colours] "
+          "(rehab track and the live tracker use them from now on)")
     return 0
 
 
