@@ -89,6 +89,22 @@ def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet
     return tuple(load_rig(config.rig, tuple(config.size))), load_markerset(config.markerset)
 
 
+def learnt_colours_for(config: SourceConfig, markerset: MarkerSet):
+    """The marker colours learnt into the source's calibration file (``rehab calibrate colour``):
+    (models, label_hs), or None (none saved, or a simulated source: the nominal table)."""
+    from pathlib import Path
+
+    from tracking.colour_adapt import calibration_colours
+
+    if config.kind == "cameras" and config.calibration:
+        path = Path(config.calibration)
+    elif config.kind == "recording" and config.path:
+        path = Path(config.calibration) if config.calibration else Path(config.path) / "calibration.toml"
+    else:
+        return None
+    return calibration_colours(path, markerset)
+
+
 def _calibrated_cameras(config: SourceConfig) -> tuple[Camera, ...]:
     from calibration.files import check_camera_count, load_calibration
 
