@@ -82,3 +82,33 @@ def test_learnt_colours_in_the_calibration_are_used_live(drifting, tmp_path):
         assert not np.any(sample.status == MarkerStatus.MEASURED)
     finally:
         source.close()
+
+
+def test_taught_colours_sent_to_the_loop_replace_its_table(drifting):
+    from tracking.colour_adapt import nominal_models
+    from tracking.live.protocol import SetColours
+
+    config = SourceConfig(kind="recording", path=str(drifting), fps=15.0, adapt_colours=True)
+    source = open_source(config)
+    try:
+        tracker, adapter = make_tracker(config, source)
+        ring = RingLayout(source.markerset.n_markers, len(source.cameras), len(angle_names_for(source.markerset)), 8)
+        shm = shared_memory.SharedMemory(create=True, size=ring.nbytes)
+        try:
+            writer = RingWriter(shm.buf, ring, initialize=True)
+            reader = RingReader(shm.buf, ring)
+            loop = TrackerLoop(source, writer, None, fps=15.0, tracker=tracker, adapter=adapter)
+            models = nominal_models(source.markerset.palette)
+            labels = np.zeros((256, 256), np.uint8)
+            assert loop.handle(SetColours(tuple(models), labels))
+            assert loop.adapter is not adapter and tracker.table is loop.adapter.table
+            assert not tracker.table.lut.any()  # the table of the (empty) labels sent
+            assert loop.handle(SetColours(tuple(models[:2]), labels))  # wrong count: reported, table kept
+            assert tracker.table is loop.adapter.table and "colours error" in reader.error_line()
+            writer.release()
+            reader.release()
+        finally:
+            shm.close()
+            shm.unlink()
+    finally:
+        source.close()

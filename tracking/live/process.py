@@ -39,8 +39,8 @@ from typing import Callable
 
 import numpy as np
 
-from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
-                                    Stop)
+from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetColours, SetMotion, SetPatientInput,
+                                    SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
 from tracking.live.source import FrameSource, angle_names_for, learnt_colours_for, open_source
 
@@ -161,9 +161,30 @@ class TrackerLoop:
                 return True
             if isinstance(command, SetMotion):  # the new motion starts from the reference pose
                 self.tracker.reidentify()
+        elif isinstance(command, SetColours):
+            try:
+                self.set_colours(command.models, command.label_hs)
+            except Exception as exc:  # bad colours must not stop the tracker: it keeps its table
+                self._report("colours", exc)
         else:
             log.warning("unknown command %r ignored", command)
         return True
+
+    def set_colours(self, models, label_hs) -> None:
+        """Track with these colours from the next frame set (an adapter, if any, starts from them)."""
+        from tracking.colour_adapt import ColourAdapter, table_from_colours
+
+        models = list(models)
+        label_hs = np.asarray(label_hs, np.uint8).reshape(256, 256)
+        if len(models) != self.source.markerset.palette.shape[0] or int(label_hs.max()) > len(models):
+            raise LiveError(f"{len(models)} colours given for a marker set of {self.source.markerset.palette.shape[0]}")
+        if self.adapter is not None:
+            self.adapter = ColourAdapter(self.source.cameras, self.source.markerset, start=(models, label_hs),
+                                         every=self.adapter.every)
+            self.tracker.set_colour_table(self.adapter.table)
+        else:
+            self.tracker.set_colour_table(table_from_colours(models, label_hs))
+        log.info("tracking with taught colours")
 
     # ------------------------------------------------------------------ the step
     def step(self) -> bool:

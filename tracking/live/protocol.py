@@ -216,6 +216,19 @@ class SetMotion:
 
 
 @dataclass(frozen=True, slots=True)
+class SetColours:
+    """Track with these marker colours from now on (taught in the camera monitor).
+
+    Attributes:
+        models: one :class:`tracking.colour_learn.ColourModel` per marker colour.
+        label_hs: (256, 256) uint8 (hue byte, saturation byte) labels (:mod:`tracking.colour_learn`).
+    """
+
+    models: tuple
+    label_hs: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
 class SetPatientInput:
     """New input for the interactive patient."""
 
