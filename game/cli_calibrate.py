@@ -144,6 +144,25 @@ def board_from_args(args):
     return Checkerboard.parse(args.board, args.square_mm)
 
 
+def board_from_spec(spec: str):
+    """A board from one word: ``9x6:60`` (checkerboard inner corners : square mm) or
+    ``charuco:10x7:40[:30]`` (ChArUco squares : square mm [: marker mm], DICT_4X4_50)."""
+    from calibration.board import Checkerboard
+
+    parts = spec.lower().split(":")
+    try:
+        if parts[0] == "charuco" and len(parts) in (3, 4):
+            from calibration.charuco import CharucoBoard
+
+            return CharucoBoard.parse(parts[1], float(parts[2]), float(parts[3]) if len(parts) == 4 else None)
+        if len(parts) == 2:
+            return Checkerboard.parse(parts[0], float(parts[1]))
+    except ValueError:
+        pass
+    raise RehabError(f"board {spec!r}: write COLSxROWS:SQUARE_MM (checkerboard inner corners, e.g. 9x6:60) or "
+                     "charuco:COLSxROWS:SQUARE_MM[:MARKER_MM] (ChArUco squares, e.g. charuco:10x7:40)")
+
+
 def board_name(board) -> str:
     """``9x6 checkerboard`` or ``10x7 ChArUco board`` for messages."""
     if hasattr(board, "squares_x"):
