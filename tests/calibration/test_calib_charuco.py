@@ -48,7 +48,7 @@ def test_whole_and_partial_views_give_the_true_corners_with_their_ids(material):
         assert det is not None, reason
         true_uv = caster.corners_px(pose)[det.ids]
         err = np.linalg.norm(det.uv_px - true_uv, axis=1)
-        assert np.sqrt(np.mean(err**2)) < 0.3 and err.max() < 1.0
+        assert np.sqrt(np.mean(err**2)) < 0.35 and err.max() < 1.5  # a checkerboard: ~0.1 px RMS (module doc)
         assert np.all(np.diff(det.ids) > 0)
         counts.append(len(det.ids))
     assert all(c >= 0.9 * BOARD.n_corners for c in counts[:N_WHOLE])
