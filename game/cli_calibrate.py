@@ -40,7 +40,7 @@ def add_commands(sub) -> None:
                        "--board charuco uses a ChArUco board (--squares, --marker-mm, --dictionary), which also "
                        "counts views where the board is partly out of the picture.")
     q.add_argument("folders", nargs="*", type=Path, help="one folder of images per camera, or their parent folder")
-    _board_options(q, charuco=True)
+    _board_options(q)
     q.add_argument("--fit-k3", action="store_true", help="also fit the 3rd radial coefficient (wide-angle lenses)")
     live = q.add_argument_group("live capture (instead of folders)")
     live.add_argument("--live", action="append", default=None, metavar="DEVICE",
@@ -118,17 +118,16 @@ def add_commands(sub) -> None:
 
 
 # --------------------------------------------------------------------------- options
-def _board_options(p, *, required: bool = True, charuco: bool = False) -> None:
+def _board_options(p, *, required: bool = True) -> None:
     p.add_argument("--board", default="9x6" if not required else None, required=required,
-                   help="checkerboard inner corners COLSxROWS, one count even and one odd, e.g. 9x6"
-                   + ("; or 'charuco' for a ChArUco board" if charuco else ""))
+                   help="checkerboard inner corners COLSxROWS, one count even and one odd, e.g. 9x6; "
+                   "or 'charuco' for a ChArUco board")
     p.add_argument("--square-mm", type=float, default=None if required else 60.0, required=required,
                    help="printed square side in mm")
-    if charuco:
-        p.add_argument("--squares", default="10x7", help="ChArUco board: squares COLSxROWS (default: %(default)s)")
-        p.add_argument("--marker-mm", type=float, default=None,
-                       help="ChArUco board: printed marker side in mm (default: 0.75 of the square)")
-        p.add_argument("--dictionary", default="DICT_4X4_50", help="ChArUco board: OpenCV ArUco dictionary (default: %(default)s)")
+    p.add_argument("--squares", default="10x7", help="ChArUco board: squares COLSxROWS (default: %(default)s)")
+    p.add_argument("--marker-mm", type=float, default=None,
+                   help="ChArUco board: printed marker side in mm (default: 0.75 of the square)")
+    p.add_argument("--dictionary", default="DICT_4X4_50", help="ChArUco board: OpenCV ArUco dictionary (default: %(default)s)")
 
 
 def board_from_args(args):
@@ -136,8 +135,6 @@ def board_from_args(args):
     from calibration.board import Checkerboard
 
     if args.board.lower() == "charuco":
-        if not hasattr(args, "squares"):
-            raise RehabError("--board charuco: ChArUco boards are used for intrinsics only; use a checkerboard (e.g. 9x6) here")
         from calibration.charuco import CharucoBoard
 
         return CharucoBoard.parse(args.squares, args.square_mm, args.marker_mm, args.dictionary)

@@ -107,6 +107,37 @@ def test_calibrate_intrinsics_command_with_a_charuco_board(material, tmp_path, c
     assert f"cam2: {len(images)} of {len(images) + 1} images used" in text and "skipped blank.png" in text
     for cam in load_calibration(out):
         assert abs(cam.K[0, 0] / truth.K[0, 0] - 1) < 0.005
-    assert main(["calibrate", "extrinsics", str(tmp_path), "--intrinsics", str(out), "--board", "charuco",
-                 "--square-mm", "40", "--out", str(tmp_path / "x.toml")]) == 1
-    assert "intrinsics only" in capsys.readouterr().err
+    assert main(["calibrate", "extrinsics", str(tmp_path / "none"), "--intrinsics", str(out), "--board", "charuco",
+                 "--squares", "10x7", "--square-mm", "40", "--out", str(tmp_path / "x.toml")]) == 1
+    assert "no image named 'seat'" in capsys.readouterr().err  # the ChArUco board is accepted
+
+
+def test_extrinsics_from_partial_charuco_views_give_the_exact_rig():
+    """Exact corner projections, each camera keeping only the corners inside its picture (some views
+    hold half the board): the chain and bundle adjustment work on the corner ids."""
+    from calibration.board import Detection
+    from calibration.extrinsics import calibrate_extrinsics, rig_errors
+    from tracking.sim.calibration_material import extrinsics_poses, seat_board_pose
+    from tracking.sim.rigs import load_rig
+
+    board = CharucoBoard.parse("7x5", 80.0)
+    ring4 = load_rig("ring4", (480, 360))
+    poses = extrinsics_poses(ring4, board, 2, np.random.default_rng(1))
+    seat = seat_board_pose(board)
+    views, partial = {}, 0
+    for k, pose in enumerate([*poses, seat]):
+        row = []
+        for cam in ring4:
+            uv = cam.project(board.object_points() @ pose.R.T + pose.t_m)
+            front = float((cam.R @ pose.R)[:, 2] @ (cam.R @ pose.t_m + cam.t_m)) > 0
+            ids = np.flatnonzero(np.isfinite(uv).all(axis=1) & (uv[:, 0] > 0) & (uv[:, 0] < 0.62 * cam.size_px[0])
+                                 & (uv[:, 1] > 0) & (uv[:, 1] < cam.size_px[1]))  # the right 38 % of each picture cut off
+            keep = front and len(ids) >= 6
+            partial += keep and len(ids) < board.n_corners
+            row.append(Detection(uv[ids], cam.size_px, ids) if keep else None)
+        views["seat" if k == len(poses) else f"{k:03d}"] = row
+    assert partial >= 4
+    intr = [Camera(c.name, c.size_px, c.K, c.dist, np.zeros(3), np.zeros(3)) for c in ring4]
+    res = calibrate_extrinsics(intr, board, views, floor_view="seat", origin_m=seat.t_m)
+    pos, ang = rig_errors(res.cameras, ring4)
+    assert pos.max() < 1e-3 and ang.max() < 1e-4 and res.rms_px.max() < 1e-4
