@@ -10,7 +10,7 @@ from game.cli import main
 from tracking.colour_adapt import ColourAdapter
 from tracking.live.process import TrackerLoop, make_tracker
 from tracking.live.protocol import SourceConfig
-from tracking.live.ring import ImageLayout, ImageSlot, RingLayout, RingReader, RingWriter
+from tracking.live.ring import RingLayout, RingReader, RingWriter
 from tracking.live.source import angle_names_for, open_source
 from tracking.status import MarkerStatus
 

@@ -360,8 +360,6 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     """Entry of the tracker process (see the module docstring)."""
     from multiprocessing import shared_memory
 
-    from tracking.tracker import Tracker
-
     _die_with_parent(args.parent_pid, args.die_with_parent)
     # Ctrl-C in the terminal reaches the whole process group: the game decides when we stop.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
