@@ -100,10 +100,19 @@ class Detection:
     Attributes:
         uv_px: (N, 2) float64 corner positions in (distorted) pixels, canonical board order.
         size_px: (width, height) of the image.
+        ids: None when every corner of the board was found (``uv_px`` holds them all, in order);
+            else (N,) intp the corner ids (indices into the board's ``object_points()``) of the
+            corners found, sorted: a ChArUco board seen in part.
     """
 
     uv_px: np.ndarray
     size_px: tuple[int, int]
+    ids: np.ndarray | None = None
+
+    def object_points(self, board) -> np.ndarray:
+        """(N, 3) float64 board-frame positions (metres) of this detection's corners."""
+        pts = board.object_points()
+        return pts if self.ids is None else pts[self.ids]
 
 
 def read_gray(path: str | Path) -> tuple[np.ndarray | None, str]:
@@ -124,15 +133,20 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def detect_board(image: np.ndarray, board: Checkerboard) -> tuple[Detection | None, str]:
+def detect_board(image: np.ndarray, board) -> tuple[Detection | None, str]:
     """Find the board's inner corners in an image, in canonical order.
 
     Args:
         image: (H, W) grey or (H, W, 3) BGR uint8 image.
-        board: the board to look for.
+        board: the board to look for: a :class:`Checkerboard` (found whole or not at all) or a
+            :class:`calibration.charuco.CharucoBoard` (the corners in view, with their ids).
     Returns:
         (detection, "") or (None, reason) with a reason a person can act on.
     """
+    if not isinstance(board, Checkerboard):
+        from calibration.charuco import detect_charuco  # charuco imports this module
+
+        return detect_charuco(image, board)
     gray = to_gray(np.asarray(image))
     if gray.dtype != np.uint8 or gray.ndim != 2 or min(gray.shape) < 16:
         return None, f"not an 8-bit image of at least 16x16 pixels (got {gray.dtype} {gray.shape})"
@@ -191,7 +205,7 @@ def _outer_square_level(gray: np.ndarray, uv: np.ndarray, first: bool) -> float:
     return float(patch.mean()) if patch.size else 128.0
 
 
-def detect_in_files(paths, board: Checkerboard) -> tuple[dict[str, Detection], dict[str, str]]:
+def detect_in_files(paths, board) -> tuple[dict[str, Detection], dict[str, str]]:
     """Detect the board in image files.
 
     Returns:

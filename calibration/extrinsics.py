@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 
-from calibration.board import Checkerboard, Detection
+from calibration.board import Detection
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import CalibrationError
 
@@ -73,9 +73,9 @@ def invert(a: Pose) -> Pose:
     return a[0].T, -a[0].T @ a[1]
 
 
-def board_pose_in_camera(camera: Camera, det: Detection, board: Checkerboard) -> Pose:
+def board_pose_in_camera(camera: Camera, det: Detection, board) -> Pose:
     """T_cam_board from one detection (PnP with the camera's intrinsics and distortion)."""
-    obj = board.object_points()
+    obj = det.object_points(board)
     uv = det.uv_px.reshape(-1, 1, 2)
     ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
@@ -96,11 +96,10 @@ def _rms(res: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(res**2, axis=-1))))
 
 
-def _initial_camera_poses(cameras: Sequence[Camera], board: Checkerboard, views: Mapping[str, Sequence[Detection | None]],
+def _initial_camera_poses(cameras: Sequence[Camera], board, views: Mapping[str, Sequence[Detection | None]],
                           pnp: dict[tuple[str, int], Pose]) -> list[Pose]:
     """T_cam_ref for every camera (ref = camera 0) by chaining pair poses over a spanning tree."""
     n = len(cameras)
-    obj = board.object_points()
     shared: dict[tuple[int, int], list[str]] = {}
     for name, dets in views.items():
         seen = [c for c in range(n) if dets[c] is not None]
@@ -113,7 +112,8 @@ def _initial_camera_poses(cameras: Sequence[Camera], board: Checkerboard, views:
         best, best_err = None, np.inf
         for cand in names:  # T_j_i = T_j_board T_board_i
             T_ji = compose(pnp[cand, j], invert(pnp[cand, i]))
-            err = sum(_rms(_reprojection(cameras[j], compose(T_ji, pnp[v, i]), views[v][j], obj)) for v in names)
+            err = sum(_rms(_reprojection(cameras[j], compose(T_ji, pnp[v, i]), views[v][j], views[v][j].object_points(board)))
+                      for v in names)
             if err < best_err:
                 best, best_err = T_ji, err
         rel[i, j] = best
@@ -150,7 +150,7 @@ def _unpack(x: np.ndarray, n: int) -> list[Pose]:
 
 def calibrate_extrinsics(
     cameras: Sequence[Camera],
-    board: Checkerboard,
+    board,
     views: Mapping[str, Sequence[Detection | None]],
     *,
     floor_view: str | None = None,
@@ -161,7 +161,8 @@ def calibrate_extrinsics(
 
     Args:
         cameras: cameras with calibrated intrinsics (their extrinsics are ignored), in rig order.
-        board: the board.
+        board: the board (a Checkerboard, or a CharucoBoard whose detections may hold part of
+            its corners).
         views: view name -> one detection per camera (None where that camera did not find the
             board); one view is one instant, seen by several cameras.
         floor_view: the view of the board lying face up on the floor or seat, x along the
@@ -182,7 +183,6 @@ def calibrate_extrinsics(
     views = {name: dets for name, dets in views.items() if sum(d is not None for d in dets) >= 1}
     if floor_view is not None and floor_view not in views:
         raise CalibrationError(f"the floor board view {floor_view!r} was not found by any camera: check that image")
-    obj = board.object_points()
     pnp = {(name, c): board_pose_in_camera(cameras[c], d, board) for name, dets in views.items() for c, d in enumerate(dets) if d is not None}
     cam_poses = _initial_camera_poses(cameras, board, views, pnp)
     view_names = list(views)
@@ -192,19 +192,21 @@ def calibrate_extrinsics(
         c = max((c for c in range(n) if dets[c] is not None), key=lambda c: np.ptp(dets[c].uv_px, axis=0).prod())
         board_poses.append(compose(invert(cam_poses[c]), pnp[name, c]))
     obs = [(c, v) for v, name in enumerate(view_names) for c in range(n) if views[name][c] is not None]
-    n_pts = board.n_corners
+    objs = [views[view_names[v]][c].object_points(board) for c, v in obs]
+    starts = np.concatenate([[0], np.cumsum([2 * len(o) for o in objs])])  # residual rows of each observation
 
     def residuals(x: np.ndarray) -> np.ndarray:
         cams = [(np.eye(3), np.zeros(3))] + _unpack(x[: 6 * (n - 1)], n - 1)
         boards = _unpack(x[6 * (n - 1):], len(view_names))
-        out = np.empty((len(obs), n_pts, 2))
+        out = np.empty(starts[-1])
         for k, (c, v) in enumerate(obs):
-            out[k] = _reprojection(cameras[c], compose(cams[c], boards[v]), views[view_names[v]][c], obj)
-        return out.ravel()
+            out[starts[k] : starts[k + 1]] = _reprojection(cameras[c], compose(cams[c], boards[v]),
+                                                           views[view_names[v]][c], objs[k]).ravel()
+        return out
 
-    sparsity = lil_matrix((len(obs) * n_pts * 2, 6 * (n - 1) + 6 * len(view_names)), dtype=int)
+    sparsity = lil_matrix((int(starts[-1]), 6 * (n - 1) + 6 * len(view_names)), dtype=int)
     for k, (c, v) in enumerate(obs):
-        rows = slice(k * n_pts * 2, (k + 1) * n_pts * 2)
+        rows = slice(int(starts[k]), int(starts[k + 1]))
         if c > 0:
             sparsity[rows, 6 * (c - 1) : 6 * c] = 1
         sparsity[rows, 6 * (n - 1) + 6 * v : 6 * (n - 1) + 6 * v + 6] = 1
@@ -213,14 +215,13 @@ def calibrate_extrinsics(
                         xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
     cam_poses = [(np.eye(3), np.zeros(3))] + _unpack(sol.x[: 6 * (n - 1)], n - 1)
     board_poses = _unpack(sol.x[6 * (n - 1):], len(view_names))
-    res = sol.fun.reshape(len(obs), n_pts, 2)
     rms = np.full(n, np.nan)
     n_views = np.zeros(n, int)
     for c in range(n):
         mine = [k for k, (cc, _) in enumerate(obs) if cc == c]
         n_views[c] = len(mine)
         if mine:
-            rms[c] = _rms(res[mine])
+            rms[c] = _rms(np.concatenate([sol.fun[starts[k] : starts[k + 1]] for k in mine]).reshape(-1, 2))
     warnings = []
     if floor_view is not None:
         T_ref_world = compose(board_poses[view_names.index(floor_view)], board_from_world(origin_m, turn_deg))
@@ -249,7 +250,7 @@ def board_from_world(origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> Pose:
     return R_bw, -R_bw @ np.asarray(origin_m, float)
 
 
-def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detection | None], board: Checkerboard, *,
+def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detection | None], board, *,
                            origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> tuple[tuple[Camera, ...], float]:
     """Move a rig calibrated in any frame into the world frame of a floor board.
 
@@ -267,14 +268,14 @@ def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detec
     seen = [c for c, d in enumerate(detections) if d is not None]
     if not seen:
         raise CalibrationError("no camera found the floor board: check that it lies fully in view of at least one camera")
-    obj = board.object_points()
     c0 = max(seen, key=lambda c: np.ptp(detections[c].uv_px, axis=0).prod())
     cam_T = [(cam.R, cam.t_m) for cam in cameras]
     T_frame_board = compose(invert(cam_T[c0]), board_pose_in_camera(cameras[c0], detections[c0], board))
 
     def residuals(x: np.ndarray) -> np.ndarray:
         T = _unpack(x, 1)[0]
-        return np.concatenate([_reprojection(cameras[c], compose(cam_T[c], T), detections[c], obj).ravel() for c in seen])
+        return np.concatenate([_reprojection(cameras[c], compose(cam_T[c], T), detections[c],
+                                             detections[c].object_points(board)).ravel() for c in seen])
 
     sol = least_squares(residuals, _pack([T_frame_board]), loss="soft_l1", f_scale=1.0, x_scale="jac", xtol=1e-12, ftol=1e-12)
     T_frame_world = compose(_unpack(sol.x, 1)[0], board_from_world(origin_m, turn_deg))

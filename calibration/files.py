@@ -11,6 +11,12 @@ camera in file order with the keys ``name``, ``size`` ([width, height] px), ``ma
 ``adjusted`` and ``error`` (other metadata keys are tolerated). Every table except ``metadata`` is
 a camera, and a camera table with any other key is an error.
 
+Extensions: the project stores further calibration results (the learnt marker colours) as
+sub-tables of ``[metadata]`` (``[metadata.marker_colours]``): Pose2Sim and aniposelib skip
+``metadata`` when they read cameras, and this module tolerates any metadata key, so such a file
+stays a valid calibration for every reader (:func:`read_metadata_section`,
+:func:`write_metadata_section`).
+
 OpenCV FileStorage (``.yaml``, ``.yml``, ``.xml``), read and written with ``cv2.FileStorage``: a
 top-level sequence ``cameras`` with one map per camera, in calibration order::
 
@@ -63,6 +69,8 @@ from calibration.errors import CalibrationError
 
 __all__ = [
     "load_calibration",
+    "read_metadata_section",
+    "write_metadata_section",
     "save_calibration_toml",
     "save_calibration_opencv",
     "check_frame_sizes",
@@ -428,6 +436,70 @@ def _opencv_size(node, where: str) -> tuple[int, int]:
         h = _node_sized(h_node, (1,), where, "image_height", "a number of pixels")
         return _whole_size(np.concatenate([w, h]), where, "image_width/image_height")
     raise CalibrationError(f"{where} lacks 'image_size' ([width, height] in pixels): add it")
+
+
+# ===================================================================== extensions
+def read_metadata_section(path: str | os.PathLike, name: str) -> dict | None:
+    """The ``[metadata.<name>]`` table of a TOML calibration file, or None when it has none.
+
+    Raises:
+        CalibrationError: the file is missing or not valid TOML.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in TOML_SUFFIXES:
+        return None  # OpenCV files carry no extensions
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CalibrationError(f"{path}: calibration file not found: run 'rehab calibrate' or give --calibration FILE") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise CalibrationError(f"{path}: not valid TOML: {exc}: {_FIX_FILE}") from None
+    meta = doc.get("metadata")
+    section = meta.get(name) if isinstance(meta, dict) else None
+    return section if isinstance(section, dict) else None
+
+
+def write_metadata_section(path: str | os.PathLike, name: str, toml_text: str) -> None:
+    """Put (or replace) the ``[metadata.<name>]`` section of a TOML calibration file.
+
+    The rest of the file is kept line for line; the section is appended at the end, after the
+    lines of an older one are removed (its headers ``[metadata.<name>...]`` and
+    ``[[metadata.<name>...]]`` and the lines under them).
+
+    Args:
+        path: an existing TOML calibration file; replaced atomically.
+        name: the section name, e.g. ``"marker_colours"``.
+        toml_text: the section as TOML, every table header starting with ``[metadata.<name>``
+            or ``[[metadata.<name>``.
+    Raises:
+        CalibrationError: the file is not a calibration, or the section would make it invalid.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in TOML_SUFFIXES:
+        raise CalibrationError(f"{path}: results are added to TOML calibrations only: convert it with 'rehab calibrate'")
+    cameras = load_calibration(path, allow_fisheye=True)
+    prefix = f"metadata.{name}"
+    kept: list[str] = []
+    inside = False
+    for line in path.read_text(encoding="utf-8").splitlines():
+        head = line.strip()
+        if head.startswith("["):
+            key = head.strip("[] \t").split("]")[0].strip()
+            inside = key == prefix or key.startswith(prefix + ".")
+        if not inside:
+            kept.append(line)
+    while kept and not kept[-1].strip():
+        kept.pop()
+    text = "\n".join(kept) + "\n\n" + toml_text.strip() + "\n"
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CalibrationError(f"{path}: the [{prefix}] section is not valid TOML ({exc})") from None
+    if set(doc) - {"metadata"} != {k for k, v in tomllib.loads(path.read_text(encoding="utf-8")).items() if k != "metadata"}:
+        raise CalibrationError(f"{path}: the [{prefix}] section may only hold tables under [{prefix}]")
+    _write_atomically(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    if len(load_calibration(path, allow_fisheye=True)) != len(cameras):
+        raise CalibrationError(f"{path}: adding [{prefix}] changed the cameras read from it")  # pragma: no cover - guarded above
 
 
 # ===================================================================== saving

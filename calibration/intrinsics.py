@@ -1,4 +1,4 @@
-"""Intrinsic calibration of one camera from checkerboard corners (OpenCV ``calibrateCamera``).
+"""Intrinsic calibration of one camera from checkerboard or ChArUco corners (OpenCV ``calibrateCamera``).
 
 The result is a :class:`calibration.camera.Camera` with identity extrinsics, the RMS
 reprojection error over all corners and per image, and the share of the image that the corners
@@ -15,7 +15,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from calibration.board import Checkerboard, Detection
+from calibration.board import Detection
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 
@@ -62,7 +62,7 @@ def coverage_of(detections: Sequence[Detection], size_px: tuple[int, int], grid:
     return float(hit.mean()), hit
 
 
-def _empty_regions(hit: np.ndarray) -> str:
+def empty_regions(hit: np.ndarray) -> str:
     """Which image regions (corners, edges, centre in a 3 x 3 split) hold no corner, in words."""
     gy, gx = hit.shape
     names = (("top-left", "top", "top-right"), ("left", "centre", "right"), ("bottom-left", "bottom", "bottom-right"))
@@ -75,7 +75,7 @@ def _empty_regions(hit: np.ndarray) -> str:
 def calibrate_intrinsics(
     name: str,
     detections: Sequence[Detection],
-    board: Checkerboard,
+    board,
     *,
     fix_k3: bool = True,
     view_names: Sequence[str] | None = None,
@@ -84,8 +84,9 @@ def calibrate_intrinsics(
 
     Args:
         name: the camera's name.
-        detections: corners of the board in >= 4 images of this camera, all of one size.
-        board: the board.
+        detections: corners of the board in >= 4 images of this camera, all of one size (a
+            ChArUco detection may hold only part of the board's corners).
+        board: the board (:class:`Checkerboard` or :class:`calibration.charuco.CharucoBoard`).
         fix_k3: keep k3 at 0 (the 4-coefficient model k1, k2, p1, p2; enough for the usual
             lenses and safer with few views); False also fits k3.
         view_names: a name per detection (e.g. its file name) for the warnings.
@@ -101,8 +102,7 @@ def calibrate_intrinsics(
     if len(sizes) != 1:
         raise CalibrationError(f"{name}: the images have different sizes {sorted(sizes)}: use one camera setting")
     size = sizes.pop()
-    obj = board.object_points().astype(np.float32)
-    object_points = [obj] * len(detections)
+    object_points = [d.object_points(board).astype(np.float32) for d in detections]
     image_points = [d.uv_px.astype(np.float32).reshape(-1, 1, 2) for d in detections]
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
@@ -112,14 +112,14 @@ def calibrate_intrinsics(
         dist = dist[:4]
     cam = Camera(name, size, K, dist, np.zeros(3), np.zeros(3))
     per_view = np.empty(len(detections))
-    for k, (det, rvec, tvec) in enumerate(zip(detections, rvecs, tvecs)):
+    for k, (det, obj, rvec, tvec) in enumerate(zip(detections, object_points, rvecs, tvecs)):
         proj, _ = cv2.projectPoints(obj.astype(np.float64), rvec, tvec, K, dist)
         per_view[k] = np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - det.uv_px) ** 2, axis=1)))
     coverage, hit = coverage_of(detections, size)
     warnings = []
     if coverage < COVERAGE_WARN:
         warnings.append(
-            f"{name}: corners cover only {100 * coverage:.0f} % of the image (none in the {_empty_regions(hit)}): "
+            f"{name}: corners cover only {100 * coverage:.0f} % of the image (none in the {empty_regions(hit)}): "
             "add images with the board near the edges and corners of the picture"
         )
     if len(detections) < 10:

@@ -250,6 +250,14 @@ def _add_play(sub) -> None:
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
     p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
                    help="reference standard of the ROM tests and the progress band (default: %(default)s)")
+    p.add_argument("--adapt-colours", action="store_true",
+                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
+    p.add_argument("--calibrate-cameras", default=None, metavar="DEV,DEV,...",
+                   help="the calibration scene shows these cameras (OpenCV indices, URLs or video files) instead of the "
+                   "simulated studio")
+    p.add_argument("--calibration-board", default=None, metavar="SPEC",
+                   help="board of the calibration scene: COLSxROWS:SQUARE_MM (inner corners), or "
+                   "charuco:COLSxROWS:SQUARE_MM[:MARKER_MM] (squares); default 9x6:60")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
     p.add_argument("--seconds", type=_positive_float, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
@@ -290,7 +298,10 @@ def _cmd_play(args) -> int:
     if args.max_fps < 0:
         raise RehabError(f"--max-fps {args.max_fps:g}: give 0 (no cap) or a positive rate")
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
-    source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body)
+    source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
+                          adapt_colours=args.adapt_colours)
+    from game.cli_calibrate import board_from_spec
+
     options = PlayOptions(
         settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
         source=source,
@@ -308,6 +319,8 @@ def _cmd_play(args) -> int:
         auto=args.auto,
         mute=args.mute,
         max_level=args.max_level,
+        calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
+        calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
     )
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options

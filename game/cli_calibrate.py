@@ -1,4 +1,4 @@
-"""``rehab calibrate intrinsics|extrinsics|wand`` and ``rehab simulate-calibration``.
+"""``rehab calibrate intrinsics|extrinsics|wand|colour`` and ``rehab simulate-calibration``.
 
 Folders, as a clinic records them and as the simulator writes them (docs/CALIBRATION.md):
 
@@ -23,6 +23,8 @@ from calibration.errors import RehabError
 
 log = logging.getLogger("rehab")
 
+SIM_CHARUCO_SPEC = ("10x7", 40.0, 30.0, "DICT_4X4_50")  # the simulator's ChArUco board: squares, square mm, marker mm
+
 
 
 def add_commands(sub) -> None:
@@ -32,12 +34,26 @@ def add_commands(sub) -> None:
                        "views or a wand. See docs/CALIBRATION.md.")
     cal = p.add_subparsers(dest="calibrate_command", required=True, metavar="STEP")
 
-    q = cal.add_parser("intrinsics", help="lens and focal length of each camera from checkerboard images",
-                       description="Calibrate each camera's intrinsics from a folder of checkerboard images per "
-                       "camera (the folder name is the camera name), or from one folder holding such folders.")
-    q.add_argument("folders", nargs="+", type=Path, help="one folder of images per camera, or their parent folder")
+    q = cal.add_parser("intrinsics", help="lens and focal length of each camera from checkerboard or ChArUco images",
+                       description="Calibrate each camera's intrinsics from a folder of board images per "
+                       "camera (the folder name is the camera name), or from one folder holding such folders. "
+                       "--board charuco uses a ChArUco board (--squares, --marker-mm, --dictionary), which also "
+                       "counts views where the board is partly out of the picture.")
+    q.add_argument("folders", nargs="*", type=Path, help="one folder of images per camera, or their parent folder")
     _board_options(q)
     q.add_argument("--fit-k3", action="store_true", help="also fit the 3rd radial coefficient (wide-angle lenses)")
+    live = q.add_argument_group("live capture (instead of folders)")
+    live.add_argument("--live", action="append", default=None, metavar="DEVICE",
+                      help="capture board views from a camera (index like 0, URL or video file), once per camera in "
+                      "rig order (cam1, cam2, ...); a view is kept when the board is held still in a new place")
+    live.add_argument("--views", type=int, default=12, help="live: views to keep at least (default: %(default)s)")
+    live.add_argument("--coverage", type=float, default=85.0,
+                      help="live: stop when the views cover this %% of the picture (default: %(default)s)")
+    live.add_argument("--max-views", type=int, default=30, help="live: stop after this many views (default: %(default)s)")
+    live.add_argument("--max-seconds", type=float, default=180.0,
+                      help="live: give up on a camera after this long (default: %(default)s)")
+    live.add_argument("--save-views", type=Path, default=None,
+                      help="live: also save the kept images as DIR/cam1/000.png ... (a folder to calibrate again from)")
     _output_options(q)
     q.set_defaults(func=_cmd_intrinsics)
 
@@ -67,6 +83,20 @@ def add_commands(sub) -> None:
     _output_options(q)
     q.set_defaults(func=_cmd_wand)
 
+    q = cal.add_parser("colour", help="learn the marker colours under this room's lighting into the calibration file",
+                       description="Identify the markers in the reference pose at the start of a recording, learn each "
+                       "marker colour from its balls (and what is not a marker from the rest of the images), and "
+                       "save the learnt colours in the calibration file ([metadata.marker_colours]); rehab track and "
+                       "the live tracker then use them. Same learning as `rehab colour learn`.")
+    q.add_argument("recording", type=Path, help="recording folder that starts in the reference pose")
+    q.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file to use and to add the colours to (default: RECORDING/calibration.toml)")
+    q.add_argument("--out", type=Path, default=None,
+                   help="write the calibration with the colours here instead of into --calibration")
+    q.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
+    q.add_argument("--frames", type=int, default=30, help="frame sets to learn from after identification (default 30)")
+    q.set_defaults(func=_cmd_colour)
+
     p = sub.add_parser("simulate-calibration", help="render calibration material of a virtual rig, with ground truth",
                        description="Render board images (intrinsics, extrinsics, seat board) and a wand recording "
                        "of a virtual camera rig, with the true calibration, so that the calibration commands can be "
@@ -80,6 +110,8 @@ def add_commands(sub) -> None:
     p.add_argument("--wand-seconds", type=float, default=20.0, help="length of the wand recording (default: %(default)s)")
     p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--charuco", action="store_true",
+                   help="also render ChArUco intrinsics images (10x7 squares of 40 mm), some with the board partly out of view")
     p.add_argument("--check", action="store_true",
                    help="then calibrate from the material, compare with the truth and with tracking on the true calibration")
     p.set_defaults(func=_cmd_simulate_calibration)
@@ -88,9 +120,51 @@ def add_commands(sub) -> None:
 # --------------------------------------------------------------------------- options
 def _board_options(p, *, required: bool = True) -> None:
     p.add_argument("--board", default="9x6" if not required else None, required=required,
-                   help="inner corners COLSxROWS, one count even and one odd, e.g. 9x6")
+                   help="checkerboard inner corners COLSxROWS, one count even and one odd, e.g. 9x6; "
+                   "or 'charuco' for a ChArUco board")
     p.add_argument("--square-mm", type=float, default=None if required else 60.0, required=required,
                    help="printed square side in mm")
+    p.add_argument("--squares", default="10x7", help="ChArUco board: squares COLSxROWS (default: %(default)s)")
+    p.add_argument("--marker-mm", type=float, default=None,
+                   help="ChArUco board: printed marker side in mm (default: 0.75 of the square)")
+    p.add_argument("--dictionary", default="DICT_4X4_50", help="ChArUco board: OpenCV ArUco dictionary (default: %(default)s)")
+
+
+def board_from_args(args):
+    """The calibration board of the command line: a Checkerboard, or a CharucoBoard for ``--board charuco``."""
+    from calibration.board import Checkerboard
+
+    if args.board.lower() == "charuco":
+        from calibration.charuco import CharucoBoard
+
+        return CharucoBoard.parse(args.squares, args.square_mm, args.marker_mm, args.dictionary)
+    return Checkerboard.parse(args.board, args.square_mm)
+
+
+def board_from_spec(spec: str):
+    """A board from one word: ``9x6:60`` (checkerboard inner corners : square mm) or
+    ``charuco:10x7:40[:30]`` (ChArUco squares : square mm [: marker mm], DICT_4X4_50)."""
+    from calibration.board import Checkerboard
+
+    parts = spec.lower().split(":")
+    try:
+        if parts[0] == "charuco" and len(parts) in (3, 4):
+            from calibration.charuco import CharucoBoard
+
+            return CharucoBoard.parse(parts[1], float(parts[2]), float(parts[3]) if len(parts) == 4 else None)
+        if len(parts) == 2:
+            return Checkerboard.parse(parts[0], float(parts[1]))
+    except ValueError:
+        pass
+    raise RehabError(f"board {spec!r}: write COLSxROWS:SQUARE_MM (checkerboard inner corners, e.g. 9x6:60) or "
+                     "charuco:COLSxROWS:SQUARE_MM[:MARKER_MM] (ChArUco squares, e.g. charuco:10x7:40)")
+
+
+def board_name(board) -> str:
+    """``9x6 checkerboard`` or ``10x7 ChArUco board`` for messages."""
+    if hasattr(board, "squares_x"):
+        return f"{board.squares_x}x{board.squares_y}-square ChArUco board"
+    return f"{board.cols}x{board.rows} board"
 
 
 def _floor_options(p) -> None:
@@ -165,8 +239,8 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
             raise RehabError(f"{folder}: no images (png, jpg, bmp, tif) in this folder")
         detections, skipped = detect_in_files(files, board)
         if not detections:
-            raise RehabError(f"{folder}: the {board.cols}x{board.rows} board was found in none of its {len(files)} images: "
-                             "check --board (inner corners, not squares) and that the whole board is in view")
+            raise RehabError(f"{folder}: the {board_name(board)} was found in none of its {len(files)} images: "
+                             "check --board (inner corners, not squares) and that the board is in view")
         res = calibrate_intrinsics(folder.name, list(detections.values()), board, fix_k3=not fit_k3,
                                    view_names=[Path(k).name for k in detections])
         results.append(res)
@@ -182,14 +256,116 @@ def run_intrinsics(folders: Sequence[Path], board, *, fit_k3: bool = False, verb
 
 
 def _cmd_intrinsics(args) -> int:
-    from calibration.board import Checkerboard
+    board = board_from_args(args)
+    if args.live and args.folders:
+        raise RehabError("give image folders or --live cameras, not both")
+    if args.live:
+        from tracking.sources.cameras import open_capture
 
-    board = Checkerboard.parse(args.board, args.square_mm)
-    results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
+        captures = []
+        try:
+            for k, device in enumerate(args.live):
+                cap = open_capture(device, None, None)
+                captures.append((f"cam{k + 1}", cap))
+                if not cap.isOpened():
+                    raise RehabError(f"--live {device}: cannot open this camera or video (check the index, URL or path)")
+            results = run_live_intrinsics(captures, board, fit_k3=args.fit_k3, min_views=args.views,
+                                          target_coverage=args.coverage / 100.0, max_views=args.max_views,
+                                          max_seconds=args.max_seconds, save_views=args.save_views)
+        finally:
+            for _, cap in captures:
+                cap.release()
+    elif args.folders:
+        results = run_intrinsics(args.folders, board, fit_k3=args.fit_k3)
+    else:
+        raise RehabError("give one folder of board images per camera, or --live DEVICE per camera")
     worst = max(r.rms_px for r in results)
     _save(args, [r.camera for r in results], worst)
     print(f"wrote the intrinsics of {len(results)} cameras to {args.out}")
     return 0
+
+
+def run_live_intrinsics(captures, board, *, fit_k3: bool = False, min_views: int = 12, target_coverage: float = 0.85,
+                        max_views: int = 30, max_seconds: float = 180.0, save_views: Path | None = None,
+                        clock=None, verbose: bool = True):
+    """Calibrate cameras one after the other from their live feeds.
+
+    For each camera the feed is read frame by frame; a :class:`calibration.view_selection.ViewSelector`
+    keeps the still, distinct board views, with a progress line per kept view (count, coverage,
+    where to move the board), until the views are enough, the feed ends (a video file) or
+    ``max_seconds`` pass.
+
+    Args:
+        captures: (camera name, capture) pairs; a capture has ``cv2.VideoCapture``'s ``read()``.
+        board: a Checkerboard or CharucoBoard.
+        save_views: folder to save each camera's kept images in (``save_views/<name>/000.png``).
+        clock: seconds, monotonic (default ``time.monotonic``).
+    Returns:
+        the IntrinsicsResults, in the order of ``captures``.
+    Raises:
+        RehabError: a camera gave too few views.
+    """
+    import time
+
+    import cv2
+
+    from calibration.board import detect_board
+    from calibration.intrinsics import MIN_VIEWS, calibrate_intrinsics
+    from calibration.view_selection import ViewSelector
+    from tracking.sources.cameras import FAILED_READS_TO_END
+
+    clock = clock or time.monotonic
+    results = []
+    for name, cap in captures:
+        selector = None
+        images: list[np.ndarray] = []
+        n_frames = failed = 0
+        t0 = clock()
+        ended = f"{max_seconds:g} s passed"
+        if verbose:
+            print(f"{name}: move the board slowly in front of the camera and hold it still in each new place", flush=True)
+        while clock() - t0 < max_seconds:
+            ok, image = cap.read()
+            if not ok or image is None:
+                failed += 1
+                if failed >= FAILED_READS_TO_END:
+                    ended = "the camera stopped delivering frames" if n_frames else "the camera delivered no frame"
+                    break
+                continue
+            failed = 0
+            n_frames += 1
+            if selector is None:
+                selector = ViewSelector((image.shape[1], image.shape[0]), min_views=min_views,
+                                        target_coverage=target_coverage, max_views=max_views)
+            detection, _ = detect_board(image, board)
+            if selector.offer(detection):
+                images.append(image)
+                prog = selector.progress()
+                if verbose:
+                    print(f"  {name}: view {prog.n_views} kept, coverage {100 * prog.coverage:.0f} %"
+                          + ("" if prog.done else f": {prog.hint}"), flush=True)
+                if prog.done:
+                    ended = "enough views"
+                    break
+        n = 0 if selector is None else len(selector.views)
+        if n < MIN_VIEWS:
+            raise RehabError(f"{name}: {n} board views kept from {n_frames} frames before {ended}: hold the board "
+                             f"still in at least {MIN_VIEWS} (better {min_views}) different places")
+        if save_views is not None:
+            folder = Path(save_views) / name
+            folder.mkdir(parents=True, exist_ok=True)
+            for k, image in enumerate(images):
+                cv2.imwrite(str(folder / f"{k:03d}.png"), image)
+        res = calibrate_intrinsics(name, selector.views, board, fix_k3=not fit_k3)
+        results.append(res)
+        if verbose:
+            K = res.camera.K
+            print(f"{name}: {n} views kept from {n_frames} frames ({ended}), reprojection {res.rms_px:.3f} px, "
+                  f"f = {K[0, 0]:.1f}/{K[1, 1]:.1f} px, centre ({K[0, 2]:.1f}, {K[1, 2]:.1f}), "
+                  f"coverage {100 * res.coverage:.0f} %", flush=True)
+            for w in res.warnings:
+                print(f"  warning: {w}")
+    return results
 
 
 # --------------------------------------------------------------------------- extrinsics
@@ -247,10 +423,9 @@ def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin
 
 
 def _cmd_extrinsics(args) -> int:
-    from calibration.board import Checkerboard
     from calibration.files import load_calibration
 
-    board = Checkerboard.parse(args.board, args.square_mm)
+    board = board_from_args(args)
     cameras = load_calibration(args.intrinsics)
     res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=_triple(args.origin, "--origin"),
                          turn_deg=args.turn_deg)
@@ -305,9 +480,7 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
 
 
 def _cmd_wand(args) -> int:
-    from calibration.board import Checkerboard
-
-    board = Checkerboard.parse(args.board, args.square_mm) if args.floor_views else None
+    board = board_from_args(args) if args.floor_views else None
     res, cameras = run_wand(args.recording, args.intrinsics, length_mm=args.length_mm, colours=args.colour,
                             ball_mm=args.ball_mm, floor_views=args.floor_views, board=board, floor=args.floor,
                             origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
@@ -316,9 +489,42 @@ def _cmd_wand(args) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- colour
+def _cmd_colour(args) -> int:
+    import shutil
+
+    from tracking.colour_adapt import learn_colours, save_colours_to_calibration
+    from tracking.offline import markerset_for
+    from tracking.recording import Recording
+
+    if args.frames < 1:
+        raise RehabError(f"--frames {args.frames}: give at least 1")
+    with Recording(args.recording, args.calibration) as rec:
+        source = rec.calibration_path
+        target = args.out or source
+        if target.suffix.lower() != ".toml" or source.suffix.lower() != ".toml":
+            raise RehabError(f"{target if args.out else source}: the colours are saved in TOML calibrations only: "
+                             "give --out calibration.toml")
+        ms = markerset_for(rec, args.markerset, None)
+        adapter = learn_colours(rec, rec.cameras, ms, frames=args.frames)
+    if target.resolve() != source.resolve():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+    save_colours_to_calibration(target, ms, adapter.models, adapter.builder.label_hs)
+    for nominal, m in zip(ms.palette.tolist(), adapter.models):
+        print(f"colour {tuple(nominal)}: seen as hue {m.hue_deg:.0f} deg +- {m.hue_tol_deg:.0f}, "
+              f"saturation >= {m.sat_floor:.2f} (about {m.rgb})")
+    print(f"learned from {adapter.updates} frame sets; saved in {target} [metadata.marker_colours] "
+          "(rehab track and the live tracker use them from now on)")
+    return 0
+
+
 # --------------------------------------------------------------------------- simulator
 def _cmd_simulate_calibration(args) -> int:
     from calibration.camera import Camera
+    from calibration.charuco import CharucoBoard
+
+    charuco = CharucoBoard.parse(*SIM_CHARUCO_SPEC) if args.charuco else None
     from tracking.sim.calibration_material import write_calibration_material
     from tracking.sim.rigs import load_rig
 
@@ -332,7 +538,8 @@ def _cmd_simulate_calibration(args) -> int:
 
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
-                                     wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed, progress=True))
+                                     wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed,
+                                     charuco=charuco, progress=True))
     if args.check:
         for line in check_material(args.out_dir, seed=args.seed):
             print(line, flush=True)
@@ -358,6 +565,8 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     intr = run_intrinsics([folder / "intrinsics"], board, verbose=False)
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(intr, truth)])
     lines.append(f"intrinsics: focal length error max {focal.max():.3f} %, reprojection max {max(r.rms_px for r in intr):.3f} px")
+    if "charuco" in material:
+        lines.append(charuco_check(folder, material["charuco"], truth))
     cams = [r.camera for r in intr]
     ext = run_extrinsics(folder / "extrinsics", cams, board, floor="seat", origin_m=origin, turn_deg=0.0, verbose=False)
     pos, ang = rig_errors(ext.cameras, truth)
@@ -374,6 +583,17 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
                      f"{wpos.max():.2f} mm, orientation max {wang.max():.3f} deg, reprojection max {np.nanmax(wres.rms_px):.3f} px")
         lines.append(tracking_check(Path(tmp) / "rec", truth, ext.cameras, wcams, seconds=track_seconds, seed=seed))
     return lines
+
+
+def charuco_check(folder: Path, spec: dict, truth) -> str:
+    """ChArUco intrinsics from ``intrinsics_charuco/`` against the truth, as a report line."""
+    from calibration.charuco import CharucoBoard
+
+    board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
+    res = run_intrinsics([folder / "intrinsics_charuco"], board, verbose=False)
+    focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(res, truth)])
+    return (f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
+            f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %")
 
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:

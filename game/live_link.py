@@ -178,3 +178,7 @@ class LiveLink:
 
     def reidentify(self) -> None:
         self._command("reidentify")
+
+    def set_colours(self, models, label_hs) -> None:
+        """Track with taught marker colours (see :meth:`tracking.live.LiveTracker.set_colours`)."""
+        self._command("set_colours", models, label_hs)

@@ -56,6 +56,10 @@ class PlayOptions:
         max_level: the therapist's highest level of the games, 1..10 (None: each game's own limit).
         calibration_path: where the calibration scene saves (None: ``calibration.toml`` in the
             user's data directory).
+        calibrate_devices: cameras (OpenCV indices, URLs or video files) the calibration scene
+            shows, named cam1, cam2, ...; () : the simulated studio's.
+        calibration_board: the board held up in the calibration scene (a Checkerboard or
+            CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -76,6 +80,8 @@ class PlayOptions:
     mute: bool = False
     max_level: int | None = None
     calibration_path: Path | None = None
+    calibrate_devices: tuple[str, ...] = ()
+    calibration_board: object = None
 
 
 def make_avatar(ctx, marker_names):
@@ -141,12 +147,16 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
                              title="Games: choose the patient")
 
     def open_calibrate():
-        from game.scenes.calibrate import CalibrateScene, sim_feeds
+        from game.scenes.calibrate import CalibrateScene, camera_feeds, sim_feeds
         from tracking.sim.calibration_material import DEFAULT_BOARD
 
-        rig = getattr(options.source, "rig", "ring4") or "ring4"
-        return CalibrateScene(sim_feeds(rig, (640, 480), DEFAULT_BOARD, ctx=app.screen.ctx), DEFAULT_BOARD,
-                              out_path=options.calibration_path, auto=options.headless)
+        board = options.calibration_board or DEFAULT_BOARD
+        if options.calibrate_devices:
+            feeds = camera_feeds(options.calibrate_devices)
+        else:
+            rig = getattr(options.source, "rig", "ring4") or "ring4"
+            feeds = sim_feeds(rig, (640, 480), board, ctx=app.screen.ctx)
+        return CalibrateScene(feeds, board, out_path=options.calibration_path, auto=options.headless)
 
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),

@@ -220,33 +220,78 @@ def fit_models_partial(stats: ColourStats) -> list[ColourModel | None]:
     return out
 
 
-def save_colours(path: Path, markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray) -> None:
-    """Learned colours -> TOML: one table per colour name, and the packed hue-saturation labels."""
-    lines = ["# Marker colours learned by `rehab colour learn` (tracking/colour_adapt.py).",
-             f'markerset = "{markerset.name}"', ""]
+CALIBRATION_SECTION = "marker_colours"
+"""The learnt colours' section in a calibration file: ``[metadata.marker_colours]``."""
+
+
+def colours_toml(markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray, *, prefix: str = "") -> str:
+    """Learnt colours as TOML: ``markerset``, one ``[[colour]]`` table per colour (nominal RGB, the
+    learnt hue, band, saturation floor and a representative RGB, for people), and ``[table]`` with
+    the packed (hue, saturation) labels (for the tracker). ``prefix`` nests it all under a table
+    (``"metadata.marker_colours"``: ``[metadata.marker_colours]``, ``[[metadata.marker_colours.colour]]``, ...).
+    """
+    dot = f"{prefix}." if prefix else ""
+    lines = [f"[{prefix}]"] if prefix else []
+    lines += [f'markerset = "{markerset.name}"', ""]
     for nominal, m in zip(np.asarray(markerset.palette).tolist(), models):
-        lines += ["[[colour]]", f"nominal_rgb = {nominal}", f"rgb = {list(m.rgb)}",
+        lines += [f"[[{dot}colour]]", f"nominal_rgb = {nominal}", f"rgb = {list(m.rgb)}",
                   f"hue_deg = {m.hue_deg:.2f}", f"hue_tol_deg = {m.hue_tol_deg:.2f}", f"sat_floor = {m.sat_floor:.3f}", ""]
     packed = base64.b64encode(zlib.compress(np.ascontiguousarray(label_hs, np.uint8).tobytes(), 9)).decode()
-    lines += ["[table]", "# (hue byte, saturation byte) -> label, 256 x 256 uint8, zlib + base64",
+    lines += [f"[{dot}table]", "# (hue byte, saturation byte) -> label, 256 x 256 uint8, zlib + base64",
               f'label_hs = "{packed}"', ""]
-    Path(path).write_text("\n".join(lines), encoding="utf-8")
+    return "\n".join(lines)
+
+
+def save_colours(path: Path, markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray) -> None:
+    """Learned colours -> a TOML colour file of their own (:func:`colours_toml`)."""
+    header = "# Marker colours learned by `rehab colour learn` (tracking/colour_adapt.py).\n"
+    Path(path).write_text(header + colours_toml(markerset, models, label_hs), encoding="utf-8")
+
+
+def save_colours_to_calibration(path: Path, markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray) -> None:
+    """Learned colours -> the ``[metadata.marker_colours]`` section of a TOML calibration file
+    (replacing an older one; the cameras are kept as they are)."""
+    from calibration.files import write_metadata_section
+
+    text = ("# Marker colours learned by `rehab calibrate colour` (tracking/colour_adapt.py)\n"
+            + colours_toml(markerset, models, label_hs, prefix=f"metadata.{CALIBRATION_SECTION}"))
+    write_metadata_section(path, CALIBRATION_SECTION, text)
 
 
 def load_colours(path: Path, markerset: MarkerSet) -> ColourTable:
-    """A learned colour file -> a full :class:`ColourTable` for the tracker.
+    """A learned colour file (or a calibration file holding learnt colours) -> a full
+    :class:`ColourTable` for the tracker.
 
     Raises:
         ContentError: the file is missing, malformed, or for other colours.
     """
-    models, label_hs = read_colours(path, markerset)
+    return table_from_colours(*read_colours(path, markerset))
+
+
+def table_from_colours(models: Sequence[ColourModel], label_hs: np.ndarray) -> ColourTable:
+    """Learnt colours (models, (256, 256) labels) -> the full table."""
     builder = LutBuilder(len(models))
     builder.build(label_hs)
-    return builder.table(models)
+    return builder.table(list(models))
+
+
+def calibration_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], np.ndarray] | None:
+    """The learnt colours saved in a calibration file, or None when it holds none.
+
+    Raises:
+        ContentError: the section is malformed or for other colours.
+    """
+    from calibration.files import read_metadata_section
+
+    section = read_metadata_section(path, CALIBRATION_SECTION)
+    if section is None:
+        return None
+    return _colours_from_data(section, Path(path), markerset)
 
 
 def read_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], np.ndarray]:
-    """A learned colour file -> (models, (256, 256) hue-saturation labels).
+    """A learned colour file, or a calibration file with learnt colours -> (models, (256, 256)
+    hue-saturation labels).
 
     Raises:
         ContentError: the file is missing, malformed, or for another number of colours.
@@ -256,13 +301,25 @@ def read_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], n
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ContentError(f"{path}: no such colour file; make one with `rehab colour learn RECORDING --out {path.name}`") from None
+    except Exception as exc:
+        raise ContentError(f"{path}: not a learned colour file ({exc}); make it again with `rehab colour learn`") from None
+    meta = data.get("metadata")
+    if "colour" not in data and isinstance(meta, dict) and isinstance(meta.get(CALIBRATION_SECTION), dict):
+        data = meta[CALIBRATION_SECTION]
+    elif "colour" not in data and isinstance(meta, dict):
+        raise ContentError(f"{path}: this calibration holds no learnt colours: add them with `rehab calibrate colour`")
+    return _colours_from_data(data, path, markerset)
+
+
+def _colours_from_data(data: dict, path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], np.ndarray]:
+    try:
         colours = data["colour"]
         label_hs = np.frombuffer(zlib.decompress(base64.b64decode(data["table"]["label_hs"])), np.uint8).reshape(256, 256)
         models = [ColourModel(float(c["hue_deg"]), float(c["hue_tol_deg"]), float(c["sat_floor"]),
                               tuple(int(v) for v in c["rgb"])) for c in colours]
         nominal = [tuple(c["nominal_rgb"]) for c in colours]
-    except FileNotFoundError:
-        raise ContentError(f"{path}: no such colour file; make one with `rehab colour learn RECORDING --out {path.name}`") from None
     except Exception as exc:
         raise ContentError(f"{path}: not a learned colour file ({exc}); make it again with `rehab colour learn`") from None
     k = markerset.palette.shape[0]

@@ -49,7 +49,9 @@ def track_recording(
     ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``
     and ``c3d`` the labelled markers from the tracker (the online algorithm, no look-ahead).
     ``colours`` is a learned colour file (``rehab colour learn``) used instead of the nominal
-    table; ``adapt_colours`` lets the tracker's table follow the lighting (docs/COLOUR.md).
+    table; without it, the colours learnt into the calibration file (``rehab calibrate colour``)
+    are used when it holds them; ``adapt_colours`` lets the tracker's table follow the lighting
+    (docs/COLOUR.md).
     """
     if trc or status_csv or angles_csv or c3d:
         return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
@@ -57,7 +59,7 @@ def track_recording(
                                c3d=c3d, colours=colours, adapt_colours=adapt_colours, progress=progress)
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
-        table = _colour_table(ms, colours)
+        table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
         measurer = FrameMeasurer(rec.cameras, table, ms.radius_m)
         n_points = n_frames = 0
         out = open(points_csv, "w", newline="", encoding="utf-8") if points_csv else None
@@ -86,12 +88,26 @@ def track_recording(
     return f"{n_frames} frame sets, {n_points / max(n_frames, 1):.1f} points per frame ({timing})"
 
 
-def _colour_table(ms: MarkerSet, colours: Path | None) -> ColourTable:
-    if colours is None:
-        return ColourTable.build(ms.palette)
-    from tracking.colour_adapt import load_colours
+def learnt_colours(calibration: Path, ms: MarkerSet, colours: Path | None = None):
+    """The learnt colours to track with: ``colours`` (a colour file) if given, else those saved in
+    the calibration file, else None (the nominal table). Returns (models, label_hs) or None."""
+    from tracking.colour_adapt import calibration_colours, read_colours
 
-    return load_colours(colours, ms)
+    if colours is not None:
+        return read_colours(colours, ms)
+    found = calibration_colours(calibration, ms)
+    if found is not None:
+        log.info("using the marker colours learnt into %s", calibration)
+    return found
+
+
+def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
+    """The nominal table, or the table of ``learnt`` (models, label_hs) colours."""
+    if learnt is None:
+        return ColourTable.build(ms.palette)
+    from tracking.colour_adapt import table_from_colours
+
+    return table_from_colours(*learnt)
 
 
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
@@ -106,13 +122,14 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         adapter = None
+        learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
-            from tracking.colour_adapt import ColourAdapter, read_colours
+            from tracking.colour_adapt import ColourAdapter
 
-            adapter = ColourAdapter(rec.cameras, ms, start=read_colours(colours, ms) if colours else None)
+            adapter = ColourAdapter(rec.cameras, ms, start=learnt)
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
         else:
-            tracker = Tracker(rec.cameras, ms, table=_colour_table(ms, colours), fps=rec.fps)
+            tracker = Tracker(rec.cameras, ms, table=_colour_table(ms, learnt), fps=rec.fps)
         positions, status, frames, times = [], [], [], []
         waiting_message = ""
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)

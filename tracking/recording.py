@@ -153,6 +153,7 @@ class Recording:
             raise RecordingError(f"{self.folder}: no such recording folder")
         self.meta = read_meta(self.folder)
         calib_path = Path(calibration) if calibration else self.folder / "calibration.toml"
+        self.calibration_path = calib_path
         self.cameras: tuple[Camera, ...] = tuple(load_calibration(calib_path))
         found = sorted(
             p.stem if p.is_file() else p.name

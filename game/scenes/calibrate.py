@@ -14,9 +14,11 @@ view once there are enough), C calibrates the camera and shows the result
 focal length), Tab goes to the next camera, S saves the calibrated cameras (two or more) as a
 TOML file, Esc goes back. The buttons at the bottom do the same with the mouse.
 
-Images come from a :class:`BoardFeed`; :class:`SimBoardFeed` is the simulated one (a board moved
+Images come from a :class:`BoardFeed`: :class:`SimBoardFeed` is the simulated one (a board moved
 by a simulated helper in front of one camera of the simulated studio, with the true camera known),
-so a real camera plugs in by implementing the same three members.
+:class:`CameraBoardFeed` a real camera (or a video file) through OpenCV (:func:`camera_feeds`).
+The board may be a checkerboard or a ChArUco board (whose corners are found, and drawn, even when
+part of it is out of the picture).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ import numpy as np
 from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import RehabError
-from calibration.intrinsics import COVERAGE_GRID, COVERAGE_WARN, IntrinsicsResult, _empty_regions, calibrate_intrinsics, coverage_of
+from calibration.intrinsics import COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of
+from calibration.view_selection import coverage_hint
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -127,14 +130,14 @@ class SimBoardFeed:
         return path
 
     def next_frame(self) -> np.ndarray:
-        from tracking.sim.calibration_material import _add_noise, _board_light
+        from tracking.sim.calibration_material import add_noise, board_light
 
         pose = self._path[self._k % len(self._path)]
         self._k += 1
         if pose is not self._last_pose:   # the board held still: the clean image is drawn once
             self._last_pose = pose
-            self._clean = self._caster.draw(self._background, pose, light=_board_light(pose))
-        return _add_noise(self._clean, self._noise, self._rng)
+            self._clean = self._caster.draw(self._background, pose, light=board_light(pose))
+        return add_noise(self._clean, self._noise, self._rng)
 
     def true_corners_px(self) -> np.ndarray:
         """(N, 2) true pixel positions of the inner corners in the last image (may lie outside it)."""
@@ -163,6 +166,92 @@ def sim_feeds(rig: str = "ring4", size_px: tuple[int, int] = (640, 480), board: 
     return [SimBoardFeed(c, bg, board, seed=seed + i, **kwargs) for i, (c, bg) in enumerate(zip(cams, backgrounds))]
 
 
+class CameraBoardFeed:
+    """A real camera's images for calibration, from an OpenCV capture.
+
+    The first frame is read at once: it gives the image size, and a camera that delivers none
+    is refused here rather than on the screen.
+
+    Args:
+        name: the camera's name (``cam1``, ...).
+        capture: an opened capture with ``cv2.VideoCapture``'s ``read()`` and ``release()``.
+        max_failed_reads: consecutive failed reads after which :meth:`next_frame` raises.
+    Raises:
+        SourceError: the capture delivers no first frame.
+    """
+
+    def __init__(self, name: str, capture, *, max_failed_reads: int = 25) -> None:
+        from tracking.sources.base import SourceError
+
+        self.name = name
+        self.truth = None
+        self._capture = capture
+        self._max_failed = int(max_failed_reads)
+        for _ in range(self._max_failed):
+            ok, image = capture.read()
+            if ok and image is not None:
+                break
+        else:
+            capture.release()
+            raise SourceError(f"{name}: the camera delivered no image: check that it is plugged in and not used elsewhere")
+        self._last = self._colour(image)
+        self.size_px = (self._last.shape[1], self._last.shape[0])
+        self._given_first = False
+
+    @staticmethod
+    def _colour(image: np.ndarray) -> np.ndarray:
+        return cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image
+
+    def next_frame(self) -> np.ndarray:
+        """The camera's next image (the first one read at opening comes first).
+
+        Raises:
+            SourceError: the camera stopped delivering (``max_failed_reads`` reads in a row failed).
+        """
+        from tracking.sources.base import SourceError
+
+        if not self._given_first:
+            self._given_first = True
+            return self._last
+        for _ in range(self._max_failed):
+            ok, image = self._capture.read()
+            if ok and image is not None:
+                image = self._colour(image)
+                if (image.shape[1], image.shape[0]) != self.size_px:
+                    raise SourceError(f"{self.name}: the image size changed from {self.size_px[0]}x{self.size_px[1]} "
+                                      f"to {image.shape[1]}x{image.shape[0]}: keep one camera setting")
+                self._last = image
+                return image
+        raise SourceError(f"{self.name}: the camera stopped delivering images")
+
+    def close(self) -> None:
+        self._capture.release()
+
+
+def camera_feeds(devices: Sequence[str], *, size_px: tuple[int, int] | None = None) -> list[CameraBoardFeed]:
+    """One :class:`CameraBoardFeed` per device (index like ``"0"``, URL or video file), named cam1, cam2, ...
+
+    Raises:
+        SourceError: a device cannot be opened or delivers nothing (the ones opened are released).
+    """
+    from tracking.sources.base import SourceError
+    from tracking.sources.cameras import open_capture
+
+    feeds: list[CameraBoardFeed] = []
+    try:
+        for k, device in enumerate(devices):
+            cap = open_capture(str(device), size_px, None)
+            if not cap.isOpened():
+                cap.release()
+                raise SourceError(f"camera {device}: cannot be opened (check the index, URL or path)")
+            feeds.append(CameraBoardFeed(f"cam{k + 1}", cap))
+    except BaseException:
+        for feed in feeds:
+            feed.close()
+        raise
+    return feeds
+
+
 def default_calibration_path() -> Path:
     """``calibration.toml`` in the user's data directory (beside the database)."""
     from game.db import default_db_path
@@ -178,23 +267,8 @@ class CameraProgress:
     result: IntrinsicsResult | None = None
 
 
-def coverage_hint(views: Sequence[Detection], size_px: tuple[int, int]) -> str:
-    """Where to move the board next, in plain words."""
-    if not views:
-        return "Hold the whole board in front of the camera"
-    fraction, hit = coverage_of(views, size_px)
-    empty = _empty_regions(hit)
-    if empty:
-        first = empty.split(", ")[0]
-        where = "the centre" if first == "centre" else f"the {first} {'edge' if first in ('top', 'bottom', 'left', 'right') else 'corner'}"
-        return f"Move the board into {where} of the picture"
-    if fraction < COVERAGE_WARN:
-        return "Move the board closer to the edges of the picture"
-    return "Good coverage: tilt the board a little differently for each view"
-
-
 def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequence[Detection],
-                  board: Checkerboard) -> np.ndarray:
+                  board) -> np.ndarray:
     """The camera image with the coverage cells tinted and the corners found drawn (a new image)."""
     out = image.copy()
     h, w = out.shape[:2]
@@ -213,10 +287,13 @@ def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequenc
     for j in range(1, gy):
         cv2.line(out, (0, round(j * h / gy)), (w - 1, round(j * h / gy)), (80, 80, 80), 1)
     if detection is not None:
-        uv = detection.uv_px.reshape(board.rows, board.cols, 2)
         thick = max(1, round(w / 320))
-        for r in range(board.rows):
-            cv2.polylines(out, [np.rint(uv[r]).astype(np.int32)], False, (120, 220, 90), thick, cv2.LINE_AA)
+        ids = np.arange(board.n_corners) if detection.ids is None else detection.ids
+        for r in range(board.rows):  # the rows of corners found, as lines (a partial ChArUco view: its pieces)
+            in_row = (ids // board.cols) == r
+            if in_row.sum() >= 2:
+                cv2.polylines(out, [np.rint(detection.uv_px[in_row]).astype(np.int32)], False, (120, 220, 90), thick,
+                              cv2.LINE_AA)
         for p in detection.uv_px:
             cv2.circle(out, (round(p[0]), round(p[1])), 2 * thick + 1, (90, 230, 80), -1, cv2.LINE_AA)
     return out
@@ -230,7 +307,7 @@ class CalibrateScene(BaseScene):
 
     Args:
         feeds: one :class:`BoardFeed` per camera.
-        board: the board being shown.
+        board: the board being shown (a Checkerboard or a CharucoBoard).
         out_path: where S saves (None: :func:`default_calibration_path`).
         auto: start with auto-capture on.
         need_views: views to capture before calibrating.
@@ -238,7 +315,7 @@ class CalibrateScene(BaseScene):
             smooth); False: in :meth:`update`, one image per ``1 / FEED_RATE_HZ`` of updates (tests).
     """
 
-    def __init__(self, feeds: Sequence[BoardFeed], board: Checkerboard, *, out_path: Path | None = None,
+    def __init__(self, feeds: Sequence[BoardFeed], board, *, out_path: Path | None = None,
                  auto: bool = False, need_views: int = NEED_VIEWS, threaded: bool = True) -> None:
         if not feeds:
             raise RehabError("no camera to calibrate: connect a camera or use the simulated studio")
@@ -413,6 +490,10 @@ class CalibrateScene(BaseScene):
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
+        for feed in self.feeds:  # real cameras are released for the tracker to open
+            close = getattr(feed, "close", None)
+            if close is not None:
+                close()
 
     def update(self, dt_s: float) -> None:
         if self._failed:

@@ -33,7 +33,7 @@ import numpy as np
 
 from tracking.live.process import ProcessArgs, tracker_main
 from tracking.live.protocol import (Activate, LiveError, LiveSample, LiveStatus, PatientInput, Pause, Reidentify, Resume,
-                                    SetMotion, SetPatientInput, SourceConfig, Stop)
+                                    SetColours, SetMotion, SetPatientInput, SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingReader, RingWriter, decode_line
 from tracking.live.source import angle_names_for, resolve_config, source_geometry
 
@@ -214,6 +214,7 @@ class LiveTracker:
         self._motion = source.motion
         self._input = PatientInput()
         self._paused = False
+        self._colours: SetColours | None = None
         self._last_error = ""  # the newest of: why a process ended, the process's error line
         self._errors_seen = 0
         self._closed = True
@@ -416,6 +417,8 @@ class LiveTracker:
             log.info("standby tracker process %d takes over", spare.pid)
         else:
             self._child = self._spawn(standby=False)
+        if self._colours is not None:  # taught colours outlive the process (read after it is ready)
+            self._child.send(self._colours)
 
     @property
     def ready(self) -> bool:
@@ -569,6 +572,11 @@ class LiveTracker:
         """Drive the interactive patient (used when no scripted motion plays)."""
         self._input = value
         self._send(SetPatientInput(value))
+
+    def set_colours(self, models, label_hs) -> None:
+        """Track with these marker colours (models, (256, 256) uint8 labels; :mod:`tracking.colour_pick`)."""
+        self._colours = SetColours(tuple(models), np.asarray(label_hs, np.uint8))
+        self._send(self._colours)
 
     def pause(self) -> None:
         self._paused = True

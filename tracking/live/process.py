@@ -39,10 +39,10 @@ from typing import Callable
 
 import numpy as np
 
-from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig,
-                                    Stop)
+from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetColours, SetMotion, SetPatientInput,
+                                    SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
-from tracking.live.source import FrameSource, angle_names_for, open_source
+from tracking.live.source import FrameSource, angle_names_for, learnt_colours_for, open_source
 
 log = logging.getLogger(__name__)
 
@@ -109,10 +109,13 @@ class TrackerLoop:
         tracker: the tracker (default: one for the source's cameras and marker set).
         clock: ``time.perf_counter`` (injected in tests).
         notify_fd: non-blocking pipe end that gets one byte per published sample (or None).
+        adapter: a :class:`tracking.colour_adapt.ColourAdapter` whose table the tracker reads; it
+            learns from every tracked frame set (None: the colour table stays fixed).
     """
 
     def __init__(self, source: FrameSource, writer: RingWriter, images: ImageSlot | None, *, fps: float,
-                 tracker=None, clock: Callable[[], float] = time.perf_counter, notify_fd: int | None = None) -> None:
+                 tracker=None, clock: Callable[[], float] = time.perf_counter, notify_fd: int | None = None,
+                 adapter=None) -> None:
         from tracking.tracker import Tracker
 
         self.source = source
@@ -123,6 +126,7 @@ class TrackerLoop:
         self.angle_names = angle_names_for(source.markerset)
         self.clock = clock
         self.notify_fd = notify_fd
+        self.adapter = adapter
         self.paused = False
         self._fps_ema = math.nan
         self._step_ema = math.nan
@@ -157,9 +161,30 @@ class TrackerLoop:
                 return True
             if isinstance(command, SetMotion):  # the new motion starts from the reference pose
                 self.tracker.reidentify()
+        elif isinstance(command, SetColours):
+            try:
+                self.set_colours(command.models, command.label_hs)
+            except Exception as exc:  # bad colours must not stop the tracker: it keeps its table
+                self._report("colours", exc)
         else:
             log.warning("unknown command %r ignored", command)
         return True
+
+    def set_colours(self, models, label_hs) -> None:
+        """Track with these colours from the next frame set (an adapter, if any, starts from them)."""
+        from tracking.colour_adapt import ColourAdapter, table_from_colours
+
+        models = list(models)
+        label_hs = np.asarray(label_hs, np.uint8).reshape(256, 256)
+        if len(models) != self.source.markerset.palette.shape[0] or int(label_hs.max()) > len(models):
+            raise LiveError(f"{len(models)} colours given for a marker set of {self.source.markerset.palette.shape[0]}")
+        if self.adapter is not None:
+            self.adapter = ColourAdapter(self.source.cameras, self.source.markerset, start=(models, label_hs),
+                                         every=self.adapter.every)
+            self.tracker.set_colour_table(self.adapter.table)
+        else:
+            self.tracker.set_colour_table(table_from_colours(models, label_hs))
+        log.info("tracking with taught colours")
 
     # ------------------------------------------------------------------ the step
     def step(self) -> bool:
@@ -189,6 +214,11 @@ class TrackerLoop:
         except Exception as exc:
             self._report("tracker", exc, index)
             return False
+        if self.adapter is not None:
+            try:  # learning from this frame set's markers; a failure must not stop the tracking
+                self.adapter.observe(frame.images, sample.positions_m, sample.status)
+            except Exception as exc:
+                self._report("colour adaptation", exc, index)
         step_ms = (self.clock() - t0) * 1000.0
         self._publish(index, time_s, frame, sample, step_ms)
         if self.images is not None:
@@ -330,8 +360,6 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     """Entry of the tracker process (see the module docstring)."""
     from multiprocessing import shared_memory
 
-    from tracking.tracker import Tracker
-
     _die_with_parent(args.parent_pid, args.die_with_parent)
     # Mesa llvmpipe (the simulated cameras' renderer) rasterizes in this thread rather than on
     # threads of its own: its 4 small images fit the frame period on one core, and its extra
@@ -356,7 +384,7 @@ def tracker_main(args: ProcessArgs, conn) -> None:
         try:
             source = open_source(args.config)
             _check_geometry(source, args)
-            tracker = Tracker(source.cameras, source.markerset, fps=args.config.fps)
+            tracker, adapter = make_tracker(args.config, source)
             _warm_up(source, tracker)
         except Exception as exc:
             line = " ".join(str(exc).split()) or type(exc).__name__
@@ -380,7 +408,8 @@ def tracker_main(args: ProcessArgs, conn) -> None:
         if args.notify is not None:
             notify_fd = args.notify.fileno()
             os.set_blocking(notify_fd, False)
-        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker, notify_fd=notify_fd)
+        loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker, notify_fd=notify_fd,
+                           adapter=adapter)
         if motion != args.config.motion:
             loop.handle(SetMotion(motion))
         loop.handle(SetPatientInput(patient_input))
@@ -397,6 +426,36 @@ def tracker_main(args: ProcessArgs, conn) -> None:
                 part.release()
         sample_shm.close()
         image_shm.close()
+
+
+def make_tracker(config: SourceConfig, source: FrameSource):
+    """The tracker for a source, and its colour adapter (None unless ``config.adapt_colours``).
+
+    The colour table: the colours learnt into the source's calibration file when it holds them
+    (``rehab calibrate colour``), else the marker set's nominal table; with ``adapt_colours`` it
+    is the adapter's table, starting from the same colours.
+    """
+    from tracking.colour_table import ColourTable
+    from tracking.tracker import Tracker
+
+    learnt = learnt_colours_for(config, source.markerset)
+    if learnt is not None:
+        log.info("tracking with the marker colours learnt into the calibration")
+    adapter = None
+    if config.adapt_colours:
+        from tracking.colour_adapt import ColourAdapter
+
+        # learning once a second: a drift over a few seconds is followed (every 2 s lost markers on a 4-s
+        # ramp, tests/test_live_colours.py) for ~0.8 ms per frame set at 30 fps (docs/COLOUR.md)
+        adapter = ColourAdapter(source.cameras, source.markerset, start=learnt, every=max(1, round(config.fps)))
+        table = adapter.table
+    elif learnt is not None:
+        from tracking.colour_adapt import table_from_colours
+
+        table = table_from_colours(*learnt)
+    else:
+        table = ColourTable.build(source.markerset.palette)
+    return Tracker(source.cameras, source.markerset, table=table, fps=config.fps), adapter
 
 
 def _warm_up(source: FrameSource, tracker) -> None:

@@ -48,7 +48,11 @@ class SourceConfig:
         devices: OpenCV device indices (``"0"``), URLs or video files, one per calibrated camera,
             calibration order (kind ``"cameras"``).
         calibration: calibration file (kind ``"cameras"``; for ``"recording"`` it replaces
-            the folder's calibration.toml).
+            the folder's calibration.toml). Marker colours learnt into it (``rehab calibrate
+            colour``) replace the nominal colour table.
+        adapt_colours: the colour table follows lighting drift, learning from the pixels of the
+            tracked markers (:class:`tracking.colour_adapt.ColourAdapter`, docs/COLOUR.md); False:
+            the table stays as it starts.
     """
 
     kind: str = "sim"
@@ -63,6 +67,7 @@ class SourceConfig:
     path: str | None = None
     devices: tuple[str, ...] = ()
     calibration: str | None = None
+    adapt_colours: bool = False
 
     def body_percentile_sex(self) -> tuple[float, str]:
         """``"p50_male"`` -> (50.0, "male"); :class:`LiveError` if malformed."""
@@ -208,6 +213,19 @@ class SetMotion:
     """Play a scripted motion in a loop (from its start), or None for the interactive patient."""
 
     name: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class SetColours:
+    """Track with these marker colours from now on (taught in the camera monitor).
+
+    Attributes:
+        models: one :class:`tracking.colour_learn.ColourModel` per marker colour.
+        label_hs: (256, 256) uint8 (hue byte, saturation byte) labels (:mod:`tracking.colour_learn`).
+    """
+
+    models: tuple
+    label_hs: np.ndarray
 
 
 @dataclass(frozen=True, slots=True)

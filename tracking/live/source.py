@@ -89,6 +89,26 @@ def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet
     return tuple(load_rig(config.rig, tuple(config.size))), load_markerset(config.markerset)
 
 
+def calibration_file_for(config: SourceConfig):
+    """The calibration file of a camera or recording source (a Path), None for a simulated one."""
+    from pathlib import Path
+
+    if config.kind == "cameras" and config.calibration:
+        return Path(config.calibration)
+    if config.kind == "recording" and config.path:
+        return Path(config.calibration) if config.calibration else Path(config.path) / "calibration.toml"
+    return None
+
+
+def learnt_colours_for(config: SourceConfig, markerset: MarkerSet):
+    """The marker colours learnt into the source's calibration file (``rehab calibrate colour``):
+    (models, label_hs), or None (none saved, or a simulated source: the nominal table)."""
+    from tracking.colour_adapt import calibration_colours
+
+    path = calibration_file_for(config)
+    return None if path is None else calibration_colours(path, markerset)
+
+
 def _calibrated_cameras(config: SourceConfig) -> tuple[Camera, ...]:
     from calibration.files import check_camera_count, load_calibration
 

@@ -16,6 +16,7 @@ What is made (:func:`write_calibration_material`)::
       truth_calibration.toml        the rig's true cameras (world frame of spec/INTERFACES.md)
       material.yaml                 board, seat-board origin, wand length and colours
       intrinsics/cam1/000.png ...   the board close to each camera, in many places and tilts
+      intrinsics_charuco/cam1/...   on request: a ChArUco board likewise, some views partly out of the picture
       extrinsics/cam1/000.png ...   the board seen by neighbouring cameras at once (same name = same instant)
       extrinsics/cam1/seat.png ...  the board lying on the seat: sets the world frame
       wand/cam1.avi ... meta.yaml   the wand waved through the volume (lossless FFV1)
@@ -77,15 +78,16 @@ def seat_board_pose(board: Checkerboard) -> BoardPose:
 
 
 class BoardRaycaster:
-    """Draws a checkerboard into images of one camera by ray casting (cached sub-pixel rays).
+    """Draws a board into images of one camera by ray casting (cached sub-pixel rays).
 
     Args:
         camera: the camera (intrinsics, distortion and pose).
-        board: the board.
+        board: the board: a :class:`Checkerboard` or a :class:`calibration.charuco.CharucoBoard`
+            (anything with ``cols``, ``rows``, ``square_m``, ``object_points()`` and ``is_black()``).
         supersample: sub-samples per pixel along each axis.
     """
 
-    def __init__(self, camera: Camera, board: Checkerboard, supersample: int = 3):
+    def __init__(self, camera: Camera, board, supersample: int = 3):
         self.camera = camera
         self.board = board
         self.s = int(supersample)
@@ -154,14 +156,15 @@ class BoardRaycaster:
         return self.camera.project(self.board.object_points() @ pose.R.T + pose.t_m)
 
 
-def _add_noise(image: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+def add_noise(image: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
+    """Sensor noise: Gaussian, ``sigma`` in 8-bit units, on a (H, W, 3) uint8 image (a new one)."""
     if sigma <= 0:
         return image
     noisy = image.astype(np.float64) + rng.normal(0.0, sigma, image.shape)
     return np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
 
 
-def _board_light(pose: BoardPose) -> float:
+def board_light(pose: BoardPose) -> float:
     """Diffuse brightness of the board: ambient plus a ceiling light above and in front."""
     normal = -pose.R[:, 2]  # out of the printed face
     light = np.array([0.25, 0.65, -0.72])
@@ -186,6 +189,49 @@ def _fully_visible(cam: Camera, board: Checkerboard, pose: BoardPose, margin_px:
 
 def _rotation(axis_angle: np.ndarray) -> np.ndarray:
     return rotation_from_rvec(np.asarray(axis_angle, float))
+
+
+def visible_corner_share(cam: Camera, board, pose: BoardPose, margin_px: float = 3.0) -> float:
+    """Share 0..1 of the board's inner corners that project inside the image (0 from behind)."""
+    R_cb = cam.R @ pose.R
+    t_cb = cam.R @ pose.t_m + cam.t_m
+    if not float(R_cb[:, 2] @ t_cb) > 0.0:
+        return 0.0
+    uv = cam.project(board.object_points() @ pose.R.T + pose.t_m)
+    w, h = cam.size_px
+    with np.errstate(invalid="ignore"):
+        inside = (uv[:, 0] > margin_px) & (uv[:, 1] > margin_px) & (uv[:, 0] < w - 1 - margin_px) & (uv[:, 1] < h - 1 - margin_px)
+    return float(inside.mean())
+
+
+def partial_poses(cam: Camera, board, n: int, rng: np.random.Generator, *, share=(0.3, 0.75)) -> list[BoardPose]:
+    """``n`` board poses close to one camera, each partly out of the picture over an edge or corner.
+
+    Between ``share[0]`` and ``share[1]`` of the inner corners are in view: a ChArUco board still
+    gives those corners; a checkerboard would be lost.
+    """
+    w, h = cam.size_px
+    bw, bh = (board.cols - 1) * board.square_m, (board.rows - 1) * board.square_m
+    f = cam.K[0, 0]
+    places = [(-1, -1), (1, 1), (1, -1), (-1, 1), (-1, 0), (1, 0), (0, -1), (0, 1)]
+    poses: list[BoardPose] = []
+    attempts = 0
+    while len(poses) < n:
+        attempts += 1
+        if attempts > 200 * max(n, 1):
+            raise RecordingError(f"{cam.name}: cannot place the board partly in view {n} times")
+        g = np.asarray(places[len(poses) % len(places)], float)
+        width_frac = rng.uniform(0.45, 0.7)
+        fx, fy = 0.5 + g * rng.uniform(0.4, 0.55, 2)  # the board's centre near the edge of the picture
+        depth = f * bw / (width_frac * w)
+        xn = cam.undistort_points(np.array([[fx * w, fy * h]]))[0]
+        centre_cam = np.array([xn[0], xn[1], 1.0]) * depth
+        R_cb = _rotation([*rng.uniform(-0.5, 0.5, 2), 0.0]) @ _rotation([0.0, 0.0, rng.uniform(-0.35, 0.35)])
+        t_cb = centre_cam - R_cb @ np.array([bw / 2, bh / 2, 0.0])
+        pose = BoardPose(cam.R.T @ R_cb, cam.R.T @ (t_cb - cam.t_m))
+        if share[0] <= visible_corner_share(cam, board, pose) <= share[1]:
+            poses.append(pose)
+    return poses
 
 
 def intrinsics_poses(cam: Camera, board: Checkerboard, n: int, rng: np.random.Generator) -> list[BoardPose]:
@@ -266,13 +312,19 @@ def room_backgrounds(cams: Sequence[Camera]) -> list[np.ndarray]:
         return list(renderer.render(SceneFrame.empty(), with_visibility=False).images)
 
 
-def render_intrinsics_images(cam: Camera, background: np.ndarray, board: Checkerboard, n: int, *,
-                             seed: int = 0, noise_sigma: float = 1.5) -> tuple[list[np.ndarray], list[BoardPose]]:
-    """``n`` images of the board close to one camera, and the board poses."""
+def render_intrinsics_images(cam: Camera, background: np.ndarray, board, n: int, *, seed: int = 0,
+                             noise_sigma: float = 1.5, n_partial: int = 0) -> tuple[list[np.ndarray], list[BoardPose]]:
+    """``n`` images of the whole board close to one camera, then ``n_partial`` images of the board
+    partly out of the picture (:func:`partial_poses`), and the board poses.
+
+    ``board`` is a :class:`Checkerboard` or a :class:`calibration.charuco.CharucoBoard`.
+    """
     rng = np.random.default_rng(seed)
     caster = BoardRaycaster(cam, board)
     poses = intrinsics_poses(cam, board, n, rng)
-    images = [_add_noise(caster.draw(background, p, light=_board_light(p)), noise_sigma, rng) for p in poses]
+    if n_partial:
+        poses += partial_poses(cam, board, n_partial, rng)
+    images = [add_noise(caster.draw(background, p, light=board_light(p)), noise_sigma, rng) for p in poses]
     return images, poses
 
 
@@ -281,7 +333,7 @@ def render_views(cams: Sequence[Camera], backgrounds: Sequence[np.ndarray], boar
     """Each board pose imaged by every camera: ``images[view][camera]``."""
     rng = np.random.default_rng(seed)
     casters = [BoardRaycaster(c, board) for c in cams]
-    return [[_add_noise(cs.draw(bg, p, light=_board_light(p)), noise_sigma, rng) for cs, bg in zip(casters, backgrounds)]
+    return [[add_noise(cs.draw(bg, p, light=board_light(p)), noise_sigma, rng) for cs, bg in zip(casters, backgrounds)]
             for p in poses]
 
 
@@ -344,8 +396,13 @@ def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: flo
 def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: Checkerboard = DEFAULT_BOARD,
                                n_intrinsics: int = 15, per_pair: int = 4, wand_seconds: float = 20.0,
                                wand_fps: float = 15.0, noise_sigma: float = 1.5, seed: int = 0,
-                               progress: bool = False) -> str:
-    """Write board images, a wand sequence and the truth (module docstring). Returns a summary line."""
+                               charuco=None, n_partial: int = 5, progress: bool = False) -> str:
+    """Write board images, a wand sequence and the truth (module docstring). Returns a summary line.
+
+    With ``charuco`` (a :class:`calibration.charuco.CharucoBoard`), also ``intrinsics_charuco/``:
+    ``n_intrinsics`` images of the whole ChArUco board per camera and ``n_partial`` with the board
+    partly out of the picture.
+    """
     from tqdm import tqdm
 
     out_dir = Path(out_dir)
@@ -361,6 +418,14 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
         for i, img in enumerate(images):
             cv2.imwrite(str(folder / f"{i:03d}.png"), img)
         n_images += len(images)
+        if charuco is not None:
+            folder = out_dir / "intrinsics_charuco" / cam.name
+            folder.mkdir(parents=True, exist_ok=True)
+            images, _ = render_intrinsics_images(cam, bg, charuco, n_intrinsics, seed=seed * 101 + k + 50,
+                                                 noise_sigma=noise_sigma, n_partial=n_partial)
+            for i, img in enumerate(images):
+                cv2.imwrite(str(folder / f"{i:03d}.png"), img)
+            n_images += len(images)
     poses = extrinsics_poses(cams, board, per_pair, rng)
     seat = seat_board_pose(board)
     views = render_views(cams, backgrounds, board, [*poses, seat], seed=seed + 7, noise_sigma=noise_sigma)
@@ -382,6 +447,10 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
         "noise_sigma": noise_sigma,
         "seed": seed,
     }
+    if charuco is not None:
+        material["charuco"] = {"squares": f"{charuco.squares_x}x{charuco.squares_y}", "square_mm": charuco.square_m * 1000.0,
+                               "marker_mm": charuco.marker_m * 1000.0, "dictionary": charuco.dictionary,
+                               "images": "intrinsics_charuco/<camera>/", "partial_views": n_partial}
     (out_dir / "material.yaml").write_text(yaml.safe_dump(material, sort_keys=False), encoding="utf-8")
     return (f"wrote {n_images} board images and a {n_wand}-frame wand sequence from {len(cams)} cameras "
             f"to {out_dir} (truth in truth_calibration.toml)")
