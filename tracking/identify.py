@@ -77,9 +77,11 @@ _SATISFIED = -1e-12
 # relaxed bars for explaining a failure: the best near-assignment is looked for above each in turn
 _RELAXED_BARS_M = (-0.02, -0.05, -0.1, -0.15, -0.2, -0.3, -0.5, -math.inf)
 # a marker seen by one camera lies on the ray through its blob, between these multiples of the
-# distance that the blob's size gives (a partly hidden ball looks smaller, so farther: measured
-# 0.68-1.03 times it in the sweep's layouts)
-_RAY_NEAR, _RAY_FAR = 0.55, 1.2
+# distance that the blob's size gives: a whole (round) blob gives it within a few per cent, a
+# partly hidden ball looks smaller, so farther (measured 0.98-1.03 times it for blobs of roundness
+# 0.88 or more, 0.68-0.92 below, in the sweep's layouts)
+_RAY_NEAR_WHOLE, _RAY_FAR_WHOLE, _RAY_NEAR, _RAY_FAR = 0.92, 1.08, 0.55, 1.08
+_ROUND = 0.9
 # points along a ray are tried this far apart, within this margin around the seen points
 _RAY_STEP_M = 0.015
 _RAY_BOX_M = 0.4
@@ -122,12 +124,14 @@ class Rays:
         direction: (R, 3) float64 unit direction of the ray through the blob's centroid, world.
         colour: (R,) int64 palette index of the blob.
         range_m: (R, 2) float64 nearest and farthest distance of the ball's centre along the ray.
+        whole: (R,) bool the blob is round (the ball not partly hidden), or None if unknown (no).
     """
 
     origin_m: np.ndarray
     direction: np.ndarray
     colour: np.ndarray
     range_m: np.ndarray
+    whole: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.colour.shape[0])
@@ -139,8 +143,8 @@ def single_view_rays(cameras: Sequence[Camera], observations: Sequence[CameraObs
 
     A blob whose ray passes within a ball radius of a point of its colour is taken for that
     point's view (a partly hidden view the triangulation left out) and gives no ray. The range
-    along the ray comes from the blob's size (``r_px = f R / distance``), widened for a partly
-    hidden ball (smaller, so it looks farther).
+    along the ray comes from the blob's size (``r_px = f R / distance``), widened towards the
+    camera for a blob that is not round (a partly hidden ball: smaller, so it looks farther).
 
     Args:
         cameras: the calibrated cameras, in the order of ``observations``.
@@ -148,7 +152,7 @@ def single_view_rays(cameras: Sequence[Camera], observations: Sequence[CameraObs
         points: the 3D points measured from them (``obs_index`` says which centroids they use).
         radius_m: the marker balls' radius.
     """
-    origin, direction, colour, rng = [], [], [], []
+    origin, direction, colour, rng, whole = [], [], [], [], []
     for c, (cam, obs) in enumerate(zip(cameras, observations)):
         free = np.ones(len(obs.colour), bool)
         used = points.obs_index[:, c] if len(points) else np.zeros(0, np.int64)
@@ -169,11 +173,15 @@ def single_view_rays(cameras: Sequence[Camera], observations: Sequence[CameraObs
         origin.append(np.broadcast_to(centre, (int(keep.sum()), 3)))
         direction.append(d[keep])
         colour.append(np.asarray(obs.colour)[k][keep])
-        rng.append(np.stack([_RAY_NEAR * dist[keep], _RAY_FAR * dist[keep]], axis=1))
+        round_ = obs.roundness[k] >= _ROUND if obs.roundness is not None else np.zeros(len(k), bool)
+        near = np.where(round_, _RAY_NEAR_WHOLE, _RAY_NEAR)
+        far = np.where(round_, _RAY_FAR_WHOLE, _RAY_FAR)
+        rng.append(np.stack([near[keep] * dist[keep], far[keep] * dist[keep]], axis=1))
+        whole.append(round_[keep])
     if not colour:
-        return Rays(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 2)))
+        return Rays(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0, bool))
     return Rays(np.concatenate(origin).astype(np.float64), np.concatenate(direction), np.concatenate(colour).astype(np.int64),
-                np.concatenate(rng))
+                np.concatenate(rng), np.concatenate(whole))
 
 
 def colour_word(rgb: Iterable[int]) -> str:
@@ -719,20 +727,24 @@ class Identifier:
         """Name the seen points with the unseen markers placed on the rays of single-camera blobs.
 
         Each ray of an unseen colour is sampled every ``_RAY_STEP_M`` over its range, near the
-        seen points and not inside a seen ball; the samples of one ray are candidate points that
-        use each other up (a blob is one marker). A marker of a colour with fewer rays than unseen
-        markers may still take a stand-in point that satisfies every rule, at most
-        ``max_unseen`` of them. The names of the seen points are given under the same conditions
-        as with stand-ins only (:meth:`_certain`); the markers on rays are left for the tracker's
-        re-acquisition (``index`` -1), like the unseen ones.
+        seen points and not inside a seen ball; a ray is one candidate point of the search (a
+        blob is one marker), placed at its best sample (:meth:`_search`). A marker of a colour
+        with fewer rays than unseen markers may still take a stand-in point that satisfies every
+        rule, at most ``max_unseen`` of them. The names of the seen points are given under the
+        same conditions as with stand-ins only (:meth:`_certain`); the markers on rays are left
+        for the tracker's re-acquisition (``index`` -1), like the unseen ones.
+
+        Two rays that may be two views of one ball (:meth:`_merge_views`) may also be two balls
+        whose rays cross: both readings are searched, and the names are given only when one
+        reading is certain and every reading that fits the rules at all names the seen points
+        the same.
 
         Returns:
             The identification or None (nothing fits, or not beyond doubt: wait).
         """
-        n_seen = len(p_seen_m)
         lo, hi = p_seen_m.min(axis=0) - _RAY_BOX_M, p_seen_m.max(axis=0) + _RAY_BOX_M
         gap = 2.0 * self.markerset.radius_m - _RAY_STEP_M  # two balls do not overlap
-        samples, ray_col = [], []
+        samples, ray_col, ray_origin, ray_whole = [], [], [], []
         for r in range(len(rays)):
             c = int(rays.colour[r])
             if not 0 <= c < len(deficit) or deficit[c] <= 0:
@@ -745,10 +757,34 @@ class Identifier:
             if ok.any():
                 samples.append(p[ok])
                 ray_col.append(c)
+                ray_origin.append(rays.origin_m[r])
+                ray_whole.append(bool(rays.whole[r]) if rays.whole is not None else False)
         if not samples:
             log.debug("no ray of an unseen colour passes near the seen points")
             return None
-        samples, ray_col = self._merge_views(samples, np.array(ray_col, np.int64))
+        ray_col = np.array(ray_col, np.int64)
+        readings = [(samples, ray_col)]
+        merged = self._merge_views(samples, ray_col, np.array(ray_origin), np.array(ray_whole))
+        if len(merged[0]) < len(samples):
+            readings.append(merged)
+        named: list[tuple[_Found, bool, np.ndarray]] = []
+        for candidates, colours in readings:
+            attempt = self._search_on_rays(p_seen_m, col_seen, deficit, candidates, colours)
+            if attempt is not None:
+                named.append(attempt)
+        n_seen = len(p_seen_m)
+        sure = [a for a in named if a[1]]
+        if not sure or any(not np.array_equal(_seen_names(a[0], n_seen), _seen_names(sure[0][0], n_seen))
+                           for a in named):
+            return None
+        found, _, point_of_row = sure[0]
+        return self._result(found, np.append(keep, point_of_row))
+
+    def _search_on_rays(self, p_seen_m: np.ndarray, col_seen: np.ndarray, deficit: np.ndarray,
+                        samples: list[np.ndarray], ray_col: np.ndarray) -> tuple[_Found, bool, np.ndarray] | None:
+        """One reading of the rays (:meth:`_identify_on_rays`): the best naming, whether it is
+        certain, and the rows after the seen points (-1 each); None when no naming fits."""
+        n_seen = len(p_seen_m)
         stand_in = np.repeat(np.arange(len(deficit)),
                              np.maximum(deficit - np.bincount(ray_col, minlength=len(deficit)), 0))
         if len(stand_in) > self.max_unseen:
@@ -769,25 +805,26 @@ class Identifier:
             found = self._settle(pts, col, yaw, pools, on_rays)
             if found is not None:
                 break
-        if found is None or found.nodes > self.max_nodes:
+        if found is None:
             log.debug("no naming with markers on rays keeps the rules")
             return None
-        if abs(_yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)) > limit:
-            return None
-        if not self._certain(pts, col, found, n_seen, pools, on_rays) or self._inexact:
-            log.debug("the naming with markers on rays is not certain (worst margin %.0f mm)",
-                      1000 * self._rule_margins(found.slack_m).min())
-            return None
-        log.debug("identified with %d markers on single-camera rays, %d unseen",
-                  int(np.sum(found.index >= first)), len(stand_in))
-        return self._result(found, np.append(keep, np.full(len(pts) - n_seen, -1)))
+        certain = (found.nodes <= self.max_nodes
+                   and abs(_yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)) <= limit
+                   and self._certain(pts, col, found, n_seen, pools, on_rays) and not self._inexact)
+        log.debug("%s with %d markers on single-camera rays, %d unseen (worst margin %.0f mm)",
+                  "named" if certain else "not certain", int(np.sum(found.index >= first)), len(stand_in),
+                  1000 * self._rule_margins(found.slack_m).min())
+        return found, certain, np.full(len(pts) - n_seen, -1)
 
-    def _merge_views(self, samples: list[np.ndarray], ray_col: np.ndarray) -> tuple[list[np.ndarray], np.ndarray]:
-        """Two rays of one colour that pass within a ball's diameter of each other become one.
+    def _merge_views(self, samples: list[np.ndarray], ray_col: np.ndarray, origin_m: np.ndarray, whole: np.ndarray
+                     ) -> tuple[list[np.ndarray], np.ndarray]:
+        """Two rays of one colour from two cameras, one of a partly hidden ball, that pass within a
+        ball's diameter of each other become one.
 
         Two cameras that see a ball whose second view is partly hidden give two rays (a point
         needs two whole views): the ball is where they meet, so the pair is one candidate, its
-        samples those of either ray near the other. Pairs are taken closest first.
+        samples those of either ray near the other. Pairs are taken closest first. Two whole
+        views of one ball make a point already, so two rays of whole blobs are two balls.
 
         Returns:
             (the candidates' samples, their colours).
@@ -796,7 +833,8 @@ class Identifier:
         near: list[tuple[float, int, int]] = []
         for a in range(len(samples)):
             for b in range(a + 1, len(samples)):
-                if ray_col[a] == ray_col[b]:
+                if (ray_col[a] == ray_col[b] and not (whole[a] and whole[b])
+                        and not np.allclose(origin_m[a], origin_m[b])):
                     gap = float(np.linalg.norm(samples[a][:, None, :] - samples[b][None, :, :], axis=-1).min())
                     if gap < reach:
                         near.append((gap, a, b))
@@ -989,6 +1027,11 @@ def identify_over_frames(frames: Iterable[Points3D], markerset: MarkerSet, max_f
         finite = np.isfinite(points.p_world_m).all(axis=1)
         last = identifier.count_problem(np.asarray(points.colour)[finite]) or last
     raise IdentificationError(f"no frame of the first {max_frames} shows every marker: {last}")
+
+
+def _seen_names(found: _Found, n_seen: int) -> np.ndarray:
+    """(M,) the point each marker is named to, -1 where it is not one of the first ``n_seen``."""
+    return np.where(found.index < n_seen, found.index, -1)
 
 
 def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[list[tuple[int, int, bool]]],
