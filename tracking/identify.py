@@ -45,6 +45,16 @@ Unseen markers
     finds the unseen marker later, by the rules' distances to its named neighbours). A wrong pose
     often hides markers too: the stand-ins let the explanation name the broken rule anyway.
 
+Markers on rays
+    A stand-in checks nothing, so with more than three unseen the names are not given (wrong
+    poses fitted). But a marker seen by one camera is not unknown: it lies on the ray through
+    its blob, at a distance its blob's size bounds (:func:`single_view_rays`). Such a ray is a
+    candidate point of the search, sampled along its range; a naming puts its markers on rays
+    at the samples that keep the rules best, so the rules check them too, and the search stays
+    as small as with points (one candidate per ray). Two rays of one colour from two cameras
+    that meet are one ball whose second view is partly hidden, or two balls: both readings are
+    searched and must agree.
+
 For the tracker: :func:`try_identify` returns None while the names are not certain (too many
 markers unseen, a stray point: wait for the next frame) and raises :class:`IdentificationError`
 when the pose breaks the rules.
@@ -710,11 +720,15 @@ class Identifier:
         the others must hold clearly (a wrong pose, hands on the thighs with the inner wrist
         markers hidden, kept every rule within 4 mm with the elbow and wrist markers swapped).
         And no naming that gives a seen point another name may come within half a margin of
-        satisfying the rules.
+        satisfying the rules (with ``rays``, within half a margin and a sampling step).
         """
         if self._rule_margins(found.slack_m).min() < self.min_order_margin_m:
             return False
         bar = -0.5 * self.min_order_margin_m
+        if rays is not None:
+            # a naming is scored at its best samples, up to half a step from the best place on
+            # each of two rays: another naming may fit better than its samples say
+            bar -= _RAY_STEP_M
         for m, q in enumerate(found.index):
             if q < n_seen and self._search(pts, col, found.yaw, [bar], exclude=(m, int(q)), pools=pools,
                                            rays=rays) is not None:
