@@ -2,6 +2,7 @@
 positions and rays from real rig cameras (no rendering), and the rays taken from measured blobs."""
 
 import itertools
+import time
 
 import numpy as np
 import pytest
@@ -186,3 +187,19 @@ def test_rays_come_from_the_blobs_no_point_uses():
     along = rel @ rays.direction[0]
     assert np.linalg.norm(rel - along * rays.direction[0]) < 1e-6
     assert rays.range_m[0, 0] < along < rays.range_m[0, 1]
+
+
+def test_naming_with_rays_is_fast_enough_for_the_live_tracker():
+    """The most adducted pose with four markers on rays: a waiting frame's identification takes a
+    few tens of ms of CPU (measured 15-40 ms; the bound leaves room for a slow machine)."""
+    body = BodyModel(BodyDimensions.from_percentile(95, "male"), MS)
+    pts, col, point_marker, rays = _case(body.markers_m(perturbed_poses(n_corners=2, n_random=0)[2].pose),
+                                         ADDUCTED_UNSEEN, seed=2)
+    identifier = Identifier(MS)
+    times = []
+    for _ in range(5):
+        t0 = time.process_time()
+        result = identifier.identify_with_unseen(pts, col, rays)
+        times.append(time.process_time() - t0)
+    _check_named_right(result, point_marker, ADDUCTED_UNSEEN)
+    assert np.median(times) < 0.15, f"{np.median(times) * 1000:.1f} ms"
