@@ -203,3 +203,24 @@ def test_naming_with_rays_is_fast_enough_for_the_live_tracker():
         times.append(time.process_time() - t0)
     _check_named_right(result, point_marker, ADDUCTED_UNSEEN)
     assert np.median(times) < 0.15, f"{np.median(times) * 1000:.1f} ms"
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_stray_ray_of_an_unseen_colour_names_nothing_wrong(seed):
+    """Clutter of a marker colour seen by one camera: an extra ray of an unseen colour, through a
+    random place near the body. The names are right or not given."""
+    rng = np.random.default_rng(seed)
+    body = BodyModel(BodyDimensions.from_percentile(95, "male"), MS)
+    p_m = body.markers_m(perturbed_poses(n_corners=2, n_random=0)[2 if seed % 2 else 0].pose)
+    pts, col, point_marker, rays = _case(p_m, ADDUCTED_UNSEEN, seed=seed)
+    cam = CAMERAS[rng.integers(len(CAMERAS))]
+    target = p_m.mean(axis=0) + rng.uniform(-0.3, 0.3, 3)
+    d = target - cam.centre_m
+    dist = np.linalg.norm(d)
+    colour = MS.colour_index[MS.index(ADDUCTED_UNSEEN[rng.integers(4)])]
+    stray = Rays(np.vstack([rays.origin_m, cam.centre_m]), np.vstack([rays.direction, d / dist]),
+                 np.append(rays.colour, colour), np.vstack([rays.range_m, [0.55 * dist, 1.08 * dist]]),
+                 np.append(rays.whole, False))
+    result = Identifier(MS).identify_with_unseen(pts, col, stray)
+    if result is not None:
+        _check_named_right(result, point_marker, ADDUCTED_UNSEEN)
