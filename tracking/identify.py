@@ -134,7 +134,7 @@ class Rays:
         direction: (R, 3) float64 unit direction of the ray through the blob's centroid, world.
         colour: (R,) int64 palette index of the blob.
         range_m: (R, 2) float64 nearest and farthest distance of the ball's centre along the ray.
-        whole: (R,) bool the blob is round (the ball not partly hidden), or None if unknown (no).
+        whole: (R,) bool the blob is round (the ball not partly hidden); None: not known (taken as not).
     """
 
     origin_m: np.ndarray
@@ -262,7 +262,7 @@ def _yaw_from_pairs(p_world_m: np.ndarray, pairs: np.ndarray, default: float = 0
 
 
 @dataclass(frozen=True, slots=True)
-class Pools:
+class _Pools:
     """Groups of points of which a naming may take at most so many (for :func:`_branch_and_bound`).
 
     Attributes:
@@ -276,7 +276,7 @@ class Pools:
     of_point: dict[int, tuple[int, ...]]
 
     @staticmethod
-    def of(groups: Iterable[tuple[np.ndarray, int]]) -> "Pools":
+    def of(groups: Iterable[tuple[np.ndarray, int]]) -> "_Pools":
         """From (point indices, how many may be taken) per pool."""
         mask, size, of_point = [], [], {}
         for k, (rows, n) in enumerate(groups):
@@ -284,7 +284,7 @@ class Pools:
             size.append(int(n))
             for q in rows:
                 of_point[int(q)] = of_point.get(int(q), ()) + (k,)
-        return Pools(tuple(mask), tuple(size), of_point)
+        return _Pools(tuple(mask), tuple(size), of_point)
 
 
 @dataclass(frozen=True, slots=True)
@@ -500,7 +500,7 @@ class Identifier:
 
     def _search(self, p_world_m: np.ndarray, colour: np.ndarray, yaw: float, bars_m: Iterable[float],
                 hard_distances: bool = False, exclude: tuple[int, int] | None = None,
-                pools: Pools | None = None, rays: _RayRows | None = None) -> _Found | None:
+                pools: _Pools | None = None, rays: _RayRows | None = None) -> _Found | None:
         """The assignment with the largest worst slack, in the frame of ``yaw``.
 
         ``bars_m`` are lower and lower bars on the worst slack: the search stops at the first
@@ -712,7 +712,7 @@ class Identifier:
             return on_rays()
         return self._result(found, np.append(keep, np.full(n_unseen, -1)))
 
-    def _certain(self, pts: np.ndarray, col: np.ndarray, found: _Found, n_seen: int, pools: Pools | None = None,
+    def _certain(self, pts: np.ndarray, col: np.ndarray, found: _Found, n_seen: int, pools: _Pools | None = None,
                  rays: _RayRows | None = None) -> bool:
         """Whether the names of the seen points (rows below ``n_seen``) of ``found`` are beyond doubt.
 
@@ -810,7 +810,7 @@ class Identifier:
         col = np.concatenate([col_seen, stand_in, ray_col]).astype(np.int64)
         # the stand-ins and rays of a colour name at most its unseen markers: every seen point is named
         unseen_rows = np.arange(n_seen, len(pts))
-        pools = Pools.of((unseen_rows[col[unseen_rows] == c], int(deficit[c])) for c in np.flatnonzero(deficit > 0))
+        pools = _Pools.of((unseen_rows[col[unseen_rows] == c], int(deficit[c])) for c in np.flatnonzero(deficit > 0))
         limit = math.radians(self.rules.max_turn_deg)
         guess = float(np.clip(yaw_from_points(p_seen_m), -limit, limit))
         self._inexact = False
@@ -928,7 +928,7 @@ class Identifier:
         index = np.asarray(point_of_row, dtype=np.int64)[found.index]
         return Identification(index, float(margins.min()), margins, math.degrees(found.yaw))
 
-    def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float, pools: Pools | None = None,
+    def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float, pools: _Pools | None = None,
                 rays: _RayRows | None = None) -> _Found | None:
         """Search in the frame of ``yaw``, then in the frame of the identified left-right pairs."""
         found = self._search(pts, colour, yaw, [_SATISFIED], pools=pools, rays=rays)
@@ -1049,7 +1049,7 @@ def _seen_names(found: _Found, n_seen: int) -> np.ndarray:
 
 
 def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[list[tuple[int, int, bool]]],
-                      bar_m: float, slack_of, max_nodes: int, pools: Pools | None = None
+                      bar_m: float, slack_of, max_nodes: int, pools: _Pools | None = None
                       ) -> tuple[np.ndarray | None, int]:
     """Depth-first search for the assignment with the largest worst slack above ``bar_m``.
 
