@@ -45,6 +45,16 @@ Unseen markers
     finds the unseen marker later, by the rules' distances to its named neighbours). A wrong pose
     often hides markers too: the stand-ins let the explanation name the broken rule anyway.
 
+Markers on rays
+    A stand-in checks nothing, so with more than three unseen the names are not given (wrong
+    poses fitted). But a marker seen by one camera is not unknown: it lies on the ray through
+    its blob, at a distance its blob's size bounds (:func:`single_view_rays`). Such a ray is a
+    candidate point of the search, sampled along its range; a naming puts its markers on rays
+    at the samples that keep the rules best, so the rules check them too, and the search stays
+    as small as with points (one candidate per ray). Two rays of one colour from two cameras
+    that meet are one ball whose second view is partly hidden, or two balls: both readings are
+    searched and must agree.
+
 For the tracker: :func:`try_identify` returns None while the names are not certain (too many
 markers unseen, a stray point: wait for the next frame) and raises :class:`IdentificationError`
 when the pose breaks the rules.
@@ -56,14 +66,15 @@ import colorsys
 import logging
 import math
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
 
+from calibration.camera import Camera
 from calibration.errors import RehabError
 from tracking.errors import ContentError
 from tracking.markerset import IdentificationRules, MarkerSet, OrderRule
-from tracking.reconstruction import Points3D
+from tracking.reconstruction import CameraObservations, Points3D
 
 log = logging.getLogger(__name__)
 
@@ -75,6 +86,17 @@ _MAX_REFINE = 3
 _SATISFIED = -1e-12
 # relaxed bars for explaining a failure: the best near-assignment is looked for above each in turn
 _RELAXED_BARS_M = (-0.02, -0.05, -0.1, -0.15, -0.2, -0.3, -0.5, -math.inf)
+# a marker seen by one camera lies on the ray through its blob, between these multiples of the
+# distance that the blob's size gives: a whole (round) blob gives it within a few per cent, a
+# partly hidden ball looks smaller, so farther (measured 0.98-1.03 times it for blobs of roundness
+# 0.88 or more, 0.68-0.92 below, in the sweep's layouts)
+_RAY_NEAR_WHOLE, _RAY_FAR_WHOLE, _RAY_NEAR, _RAY_FAR = 0.92, 1.08, 0.55, 1.08
+_ROUND = 0.9
+# points along a ray are tried this far apart, within this margin around the seen points
+_RAY_STEP_M = 0.015
+_RAY_BOX_M = 0.4
+# markers on rays that share a rule are placed together up to this many sample combinations
+_MAX_JOINT = 200_000
 
 
 class IdentificationError(RehabError):
@@ -101,6 +123,75 @@ class Identification:
     margin_m: float
     rule_margins_m: np.ndarray
     yaw_deg: float
+
+
+@dataclass(frozen=True, slots=True)
+class Rays:
+    """Blobs that no 3D point uses: a marker seen by one camera only lies on the ray through its blob.
+
+    Attributes:
+        origin_m: (R, 3) float64 optical centre of the blob's camera, world metres.
+        direction: (R, 3) float64 unit direction of the ray through the blob's centroid, world.
+        colour: (R,) int64 palette index of the blob.
+        range_m: (R, 2) float64 nearest and farthest distance of the ball's centre along the ray.
+        whole: (R,) bool the blob is round (the ball not partly hidden); None: not known (taken as not).
+    """
+
+    origin_m: np.ndarray
+    direction: np.ndarray
+    colour: np.ndarray
+    range_m: np.ndarray
+    whole: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.colour.shape[0])
+
+
+def single_view_rays(cameras: Sequence[Camera], observations: Sequence[CameraObservations], points: Points3D,
+                     radius_m: float) -> Rays:
+    """The rays of the blobs that no 3D point uses (markers seen by one camera only).
+
+    A blob whose ray passes within a ball radius of a point of its colour is taken for that
+    point's view (a partly hidden view the triangulation left out) and gives no ray. The range
+    along the ray comes from the blob's size (``r_px = f R / distance``), widened towards the
+    camera for a blob that is not round (a partly hidden ball: smaller, so it looks farther).
+
+    Args:
+        cameras: the calibrated cameras, in the order of ``observations``.
+        observations: one frame's centroids of each camera.
+        points: the 3D points measured from them (``obs_index`` says which centroids they use).
+        radius_m: the marker balls' radius.
+    """
+    origin, direction, colour, rng, whole = [], [], [], [], []
+    for c, (cam, obs) in enumerate(zip(cameras, observations)):
+        free = np.ones(len(obs.colour), bool)
+        used = points.obs_index[:, c] if len(points) else np.zeros(0, np.int64)
+        free[used[used >= 0]] = False
+        free &= np.isfinite(obs.radius_px) & (obs.radius_px > 0)
+        k = np.flatnonzero(free)
+        if not len(k):
+            continue
+        centre, d = cam.back_project(obs.uv_px[k])
+        rel = points.p_world_m - centre
+        along = rel @ d.T  # (P, N)
+        off = np.linalg.norm(rel[:, None, :] - along[..., None] * d[None], axis=-1)
+        same = (points.colour[:, None] == obs.colour[k][None, :]) & (off < radius_m) & (along > 0)
+        keep = ~same.any(axis=0)
+        focal = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+        # the blob's size gives the depth along the optical axis; the ray is longer off-axis
+        dist = focal * radius_m / obs.radius_px[k] / np.maximum(d @ cam.R[2], 1e-3)
+        origin.append(np.broadcast_to(centre, (int(keep.sum()), 3)))
+        direction.append(d[keep])
+        colour.append(np.asarray(obs.colour)[k][keep])
+        round_ = obs.roundness[k] >= _ROUND if obs.roundness is not None else np.zeros(len(k), bool)
+        near = np.where(round_, _RAY_NEAR_WHOLE, _RAY_NEAR)
+        far = np.where(round_, _RAY_FAR_WHOLE, _RAY_FAR)
+        rng.append(np.stack([near[keep] * dist[keep], far[keep] * dist[keep]], axis=1))
+        whole.append(round_[keep])
+    if not colour:
+        return Rays(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros(0, bool))
+    return Rays(np.concatenate(origin).astype(np.float64), np.concatenate(direction), np.concatenate(colour).astype(np.int64),
+                np.concatenate(rng), np.concatenate(whole))
 
 
 def colour_word(rgb: Iterable[int]) -> str:
@@ -171,6 +262,72 @@ def _yaw_from_pairs(p_world_m: np.ndarray, pairs: np.ndarray, default: float = 0
 
 
 @dataclass(frozen=True, slots=True)
+class _Pools:
+    """Groups of points of which a naming may take at most so many (for :func:`_branch_and_bound`).
+
+    Attributes:
+        mask: per pool, the bitset of its points.
+        size: per pool, how many of its points may be taken.
+        of_point: point -> the pools it belongs to.
+    """
+
+    mask: tuple[int, ...]
+    size: tuple[int, ...]
+    of_point: dict[int, tuple[int, ...]]
+
+    @staticmethod
+    def of(groups: Iterable[tuple[np.ndarray, int]]) -> "_Pools":
+        """From (point indices, how many may be taken) per pool."""
+        mask, size, of_point = [], [], {}
+        for k, (rows, n) in enumerate(groups):
+            mask.append(sum(1 << int(q) for q in rows))
+            size.append(int(n))
+            for q in rows:
+                of_point[int(q)] = of_point.get(int(q), ()) + (k,)
+        return _Pools(tuple(mask), tuple(size), of_point)
+
+
+@dataclass(frozen=True, slots=True)
+class _RayRows:
+    """Rays as points of a search: the searched points from ``first`` on (NaN rows) are rays,
+    ray k sampled at ``samples[k]``; in the extended points (the rows before ``first``, then every
+    sample) ray k's samples are the rows ``starts[first + k]`` on."""
+
+    first: int
+    samples: tuple[np.ndarray, ...]
+    starts: np.ndarray
+    key: bytes
+
+    @staticmethod
+    def of(first: int, samples: Sequence[np.ndarray]) -> "_RayRows":
+        counts = [len(p) for p in samples]
+        starts = np.concatenate([np.arange(first), first + np.cumsum([0] + counts[:-1])]).astype(np.int64)
+        return _RayRows(first, tuple(samples), starts, b"".join(p.tobytes() for p in samples))
+
+    def rows(self, point: int) -> np.ndarray:
+        """Rows of the extended points of the ray that is searched point ``point``."""
+        k = point - self.first
+        return self.starts[point] + np.arange(len(self.samples[k]))
+
+
+@dataclass(frozen=True, slots=True)
+class _Blocks:
+    """Pair slacks over many points, kept only where a pair's markers' colours are.
+
+    Attributes:
+        block: per marker pair (i, j), (points of i's colour, points of j's colour) worst slack.
+        loc: (E,) position of each point among the points of its colour.
+    """
+
+    block: list[np.ndarray]
+    loc: np.ndarray
+
+    def get(self, pair: int, p, q) -> np.ndarray:
+        """Slack of ``pair`` with its first marker at point(s) ``p``, its second at ``q``."""
+        return self.block[pair][self.loc[p], self.loc[q]]
+
+
+@dataclass(frozen=True, slots=True)
 class _Found:
     index: np.ndarray
     slack_m: np.ndarray  # (K,) per constraint
@@ -231,6 +388,9 @@ class Identifier:
         self.pairs, self.c_pair = np.unique(lo_hi, axis=0, return_inverse=True)
         self.c_pair = self.c_pair.reshape(-1)
         self.c_flip = self.c_a > self.c_b  # constraint written as (j, i) of its pair (i, j)
+        self._by_pair = np.argsort(self.c_pair, kind="stable")
+        self._pair_starts = np.searchsorted(self.c_pair[self._by_pair], np.arange(len(self.pairs)))
+        self._inexact = False  # a search placed markers on rays without trying every combination
         self.lr_pairs = np.array([(idx[l], idx[r]) for l, r in rules.left_right_pairs], np.int64)
         self.neighbours: list[list[tuple[int, int, bool]]] = [[] for _ in markerset.names]
         for k, (i, j) in enumerate(self.pairs):
@@ -275,22 +435,59 @@ class Identifier:
     # ------------------------------------------------------------------------------ search
 
     def _slack(self, p_m: np.ndarray, c_pat: np.ndarray, pa: np.ndarray, pb: np.ndarray,
-               hard_distances: bool = False) -> np.ndarray:
+               hard_distances: bool = False, ks: slice | np.ndarray = slice(None)) -> np.ndarray:
         """Slack of every constraint k with marker a at point ``pa[..., k]``, b at ``pb[..., k]``.
 
         With ``hard_distances`` a distance constraint is +inf when it holds and -inf when not, so
-        that a bound on the worst slack bounds the orderings only.
+        that a bound on the worst slack bounds the orderings only. ``ks``: only these constraints
+        (the last axis of ``pa`` and ``pb``).
         """
-        ax = self.c_axis
-        order = self.c_sign * (c_pat[pb, ax] - c_pat[pa, ax]) - self.c_margin
+        ax = self.c_axis[ks]
+        order = self.c_sign[ks] * (c_pat[pb, ax] - c_pat[pa, ax]) - self.c_margin[ks]
         d = np.linalg.norm(p_m[pb] - p_m[pa], axis=-1)
-        dist = np.minimum(d - self.c_lo, self.c_hi - d)
+        dist = np.minimum(d - self.c_lo[ks], self.c_hi[ks] - d)
         # an unseen marker's stand-in point (NaN) satisfies every constraint
         order = np.where(np.isnan(order), np.inf, order)
         dist = np.where(np.isnan(dist), np.inf, dist)
         if hard_distances:
             dist = np.where(dist >= 0, np.inf, -np.inf)
-        return np.where(self.c_dist, dist, order)
+        return np.where(self.c_dist[ks], dist, order)
+
+    def _pair_blocks(self, p_m: np.ndarray, c_pat: np.ndarray, colour: np.ndarray) -> _Blocks:
+        """Worst slack of each marker pair's constraints over the points of the pair's colours only.
+
+        For many points (rays sampled finely) where :meth:`_pair_slack` would be large: pair k's
+        block holds [i at p, j at q] for p among the points of marker i's colour, q of j's. The
+        distances and coordinate differences are computed once per pair of colours.
+        """
+        members = [np.flatnonzero(colour == c) for c in range(len(self.words))]
+        loc = np.zeros(len(colour), np.int64)
+        for rows in members:
+            loc[rows] = np.arange(len(rows))
+        shared: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        blocks = []
+        for k, (i, j) in enumerate(self.pairs):
+            ci, cj = int(self.colour[i]), int(self.colour[j])
+            if (ci, cj) not in shared:
+                r, c = members[ci], members[cj]
+                diff = c_pat[c][None, :, :] - c_pat[r][:, None, :]  # (R, C, 3) j minus i
+                dist = np.linalg.norm(p_m[c][None, :, :] - p_m[r][:, None, :], axis=-1)
+                shared[ci, cj] = (diff, dist)
+            diff, dist = shared[ci, cj]
+            block = np.full(diff.shape[:2], np.inf)
+            end = self._pair_starts[k + 1] if k + 1 < len(self.pairs) else len(self._by_pair)
+            for kk in self._by_pair[self._pair_starts[k]:end]:
+                if self.c_dist[kk]:
+                    sl = np.minimum(dist - self.c_lo[kk], self.c_hi[kk] - dist)
+                else:
+                    # a constraint written (j, i) orders i after j: the difference changes sign
+                    sign = -self.c_sign[kk] if self.c_flip[kk] else self.c_sign[kk]
+                    sl = sign * diff[..., self.c_axis[kk]] - self.c_margin[kk]
+                # an unseen marker's stand-in point (NaN) satisfies every constraint (np.fmin
+                # ignores NaN)
+                np.fmin(block, sl, out=block)
+            blocks.append(block)
+        return _Blocks(blocks, loc)
 
     def _pair_slack(self, p_m: np.ndarray, c_pat: np.ndarray, hard_distances: bool) -> np.ndarray:
         """(pairs, P, P) worst slack of each marker pair's constraints, [i at p, j at q]."""
@@ -299,24 +496,40 @@ class Identifier:
         # d[k, p, q]: constraint k with its marker a at point p and b at point q
         d = self._slack(p_m, c_pat, pts[:, None, None], pts[None, :, None], hard_distances).transpose(2, 0, 1)
         d = np.where(self.c_flip[:, None, None], d.transpose(0, 2, 1), d)
-        s = np.full((len(self.pairs), n, n), np.inf)
-        np.minimum.at(s, self.c_pair, d)
-        return s
+        return np.minimum.reduceat(d[self._by_pair], self._pair_starts, axis=0)
 
     def _search(self, p_world_m: np.ndarray, colour: np.ndarray, yaw: float, bars_m: Iterable[float],
-                hard_distances: bool = False, exclude: tuple[int, int] | None = None) -> _Found | None:
+                hard_distances: bool = False, exclude: tuple[int, int] | None = None,
+                pools: _Pools | None = None, rays: _RayRows | None = None) -> _Found | None:
         """The assignment with the largest worst slack, in the frame of ``yaw``.
 
         ``bars_m`` are lower and lower bars on the worst slack: the search stops at the first
         bar above which an assignment exists, so a good bar keeps the tree small. Rows of NaN are
-        stand-ins for unseen markers (they satisfy every constraint). ``exclude`` = (marker,
-        point) forbids that one naming.
+        stand-ins for unseen markers (they satisfy every constraint), or with ``rays`` the rays
+        from ``rays.first`` on. ``exclude`` = (marker, point) forbids that one naming. ``pools``:
+        see :func:`_branch_and_bound`.
+
+        A ray is one point of the search whose pair slacks are the best over its samples (a bound);
+        a complete naming places its markers on rays at the samples that make its worst slack
+        largest (:meth:`_place_on_rays`), so the result is exact on the samples.
         """
-        c_pat = (p_world_m - np.nanmean(p_world_m, axis=0)) @ patient_axes(yaw)
-        key = (p_world_m.tobytes(), yaw, hard_distances)
+        if rays is not None and hard_distances:
+            raise ValueError("rays are searched with soft distances only")
+        centre = np.nanmean(p_world_m, axis=0)
+        axes = patient_axes(yaw)
+        c_pat = (p_world_m - centre) @ axes
+        key = (p_world_m.tobytes(), yaw, hard_distances, None if rays is None else rays.key)
         if self._last_slack[0] != key:  # the uniqueness checks search the same frame many times
-            self._last_slack = (key, self._pair_slack(p_world_m, c_pat, hard_distances))
-        slack = self._last_slack[1]
+            if rays is None:
+                self._last_slack = (key, (self._pair_slack(p_world_m, c_pat, hard_distances), None))
+            else:
+                ext_p = np.vstack([p_world_m[:rays.first], *rays.samples])
+                ext_pat = (ext_p - centre) @ axes
+                ext_col = np.concatenate([colour[:rays.first]]
+                                         + [np.full(len(p), colour[rays.first + k]) for k, p in enumerate(rays.samples)])
+                blocks = self._pair_blocks(ext_p, ext_pat, ext_col)
+                self._last_slack = (key, (self._compact(blocks, colour, ext_col, rays), (ext_p, ext_pat, blocks)))
+        slack, ext = self._last_slack[1]
         domains = [0] * len(self.colour)
         for m, c in enumerate(self.colour):
             for q in np.flatnonzero(colour == c):
@@ -325,17 +538,105 @@ class Identifier:
             domains[exclude[0]] &= ~(1 << exclude[1])
 
         def slack_of(index: np.ndarray, hard: bool = hard_distances) -> np.ndarray:
-            return self._slack(p_world_m, c_pat, index[self.c_a], index[self.c_b], hard)
+            if ext is None or not np.any(index >= rays.first):
+                return self._slack(p_world_m, c_pat, index[self.c_a], index[self.c_b], hard)
+            ext_index = self._place_on_rays(index, rays, ext[2])
+            return self._slack(ext[0], ext[1], ext_index[self.c_a], ext_index[self.c_b], hard)
 
         nodes = 0
         for bar in bars_m:
-            best, nodes_used = _branch_and_bound(slack, domains, self.neighbours, bar, slack_of, self.max_nodes)
+            best, nodes_used = _branch_and_bound(slack, domains, self.neighbours, bar, slack_of, self.max_nodes,
+                                                 pools)
             nodes += nodes_used
             if nodes_used > self.max_nodes:
                 log.warning("identification search stopped after %d nodes; the result may not be the best", nodes_used)
             if best is not None:
                 return _Found(best, slack_of(best, False), yaw, nodes)
         return None
+
+    def _compact(self, blocks: _Blocks, colour: np.ndarray, ext_col: np.ndarray, rays: _RayRows) -> np.ndarray:
+        """(pairs, P, P) pair slacks of the searched points: a ray's the best over its samples."""
+        n = len(colour)
+        out = np.full((len(self.pairs), n, n), -np.inf)
+        # the extended points of one colour are ordered by the searched point they belong to
+        owner = np.concatenate([np.arange(rays.first)]
+                               + [np.full(len(p), rays.first + k) for k, p in enumerate(rays.samples)])
+        rows, starts = [], []
+        for c in range(len(self.words)):
+            ext_rows = np.flatnonzero(ext_col == c)
+            first = np.flatnonzero(np.diff(np.concatenate([[-1], owner[ext_rows]])) != 0)
+            rows.append(owner[ext_rows][first])
+            starts.append(first)
+        for k, (i, j) in enumerate(self.pairs):
+            ci, cj = self.colour[i], self.colour[j]
+            if not len(rows[ci]) or not len(rows[cj]):
+                continue
+            b = np.maximum.reduceat(np.maximum.reduceat(blocks.block[k], starts[ci], axis=0), starts[cj], axis=1)
+            out[k][np.ix_(rows[ci], rows[cj])] = b
+        return out
+
+    def _place_on_rays(self, index: np.ndarray, rays: _RayRows, s_ext: _Blocks) -> np.ndarray:
+        """Each marker named to a ray at the sample that makes the naming's worst slack largest.
+
+        The markers on rays that share a constraint are placed together (every combination of
+        their samples: up to ``_MAX_JOINT``; beyond, each alone and the search is marked inexact).
+
+        Args:
+            index: (M,) a complete naming; rows from ``rays.first`` on are rays.
+            rays: the rays' samples (rows of the extended points after ``rays.first``).
+            s_ext: pair slacks over the extended points (seen, stand-ins, samples).
+
+        Returns:
+            (M,) the naming in rows of the extended points.
+        """
+        ext_index = index.copy()
+        on_ray = np.flatnonzero(index >= rays.first)
+        rows = {int(m): rays.rows(int(index[m])) for m in on_ray}
+        unary = {m: np.full(len(r), np.inf) for m, r in rows.items()}
+        links: list[tuple[int, int, np.ndarray]] = []
+        for m, r in rows.items():
+            for j, k, forward in self.neighbours[m]:
+                if j in rows:
+                    if m < j:
+                        mat = s_ext.get(k, r[:, None], rows[j][None, :])
+                        links.append((m, j, mat if forward else mat.T))
+                else:
+                    q = int(index[j])
+                    unary[m] = np.minimum(unary[m], s_ext.get(k, r, q) if forward else s_ext.get(k, q, r))
+        group = {m: m for m in rows}  # union-find over the links: markers placed together
+
+        def root(m: int) -> int:
+            while group[m] != m:
+                m = group[m]
+            return m
+
+        for a, b, _ in links:
+            group[root(a)] = root(b)
+        for g in {root(m) for m in rows}:
+            members = [m for m in rows if root(m) == g]
+            sizes = [len(rows[m]) for m in members]
+            if math.prod(sizes) > _MAX_JOINT:
+                self._inexact = True
+                for m in members:
+                    ext_index[m] = rows[m][int(np.argmax(unary[m]))]
+                continue
+            axis = {m: a for a, m in enumerate(members)}
+            total = np.full(sizes, np.inf)
+            for m in members:
+                shape = [1] * len(members)
+                shape[axis[m]] = sizes[axis[m]]
+                total = np.minimum(total, unary[m].reshape(shape))
+            for a, b, mat in links:
+                if a in axis:
+                    if axis[a] > axis[b]:
+                        a, b, mat = b, a, mat.T
+                    shape = [1] * len(members)
+                    shape[axis[a]], shape[axis[b]] = mat.shape
+                    total = np.minimum(total, mat.reshape(shape))
+            best = np.unravel_index(int(np.argmax(total)), total.shape)
+            for m in members:
+                ext_index[m] = rows[m][best[axis[m]]]
+        return ext_index
 
     def _rule_margins(self, slack: np.ndarray) -> np.ndarray:
         out = np.full(len(self.rules.rules), np.inf)
@@ -355,7 +656,8 @@ class Identifier:
         found = self._best(p_world_m[keep], colour[keep])
         return self._result(found, keep)
 
-    def identify_with_unseen(self, p_world_m: np.ndarray, colour: np.ndarray) -> Identification | None:
+    def identify_with_unseen(self, p_world_m: np.ndarray, colour: np.ndarray, rays: Rays | None = None
+                             ) -> Identification | None:
         """Label a frame in which some markers have no point (hidden, or seen by one camera only).
 
         Each unseen marker gets a stand-in point that satisfies every rule, so the search names
@@ -365,6 +667,15 @@ class Identifier:
         every named point no other naming comes within half a rule margin of satisfying the rules
         (a missing point can make two namings fit, e.g. an elbow marker and a wrist marker of one
         colour on one side).
+
+        When that is not possible and ``rays`` are given, the unseen markers seen by one camera
+        are placed on their rays instead (:meth:`_identify_on_rays`): the rules then check them
+        too, so more may be unseen.
+
+        Args:
+            p_world_m: (P, 3) float64 unlabelled points, world metres (rows with NaN are ignored).
+            colour: (P,) int palette index of each point.
+            rays: the blobs no point uses (:func:`single_view_rays`), or None.
 
         Returns:
             The identification, ``index`` -1 for the unseen markers; None while it is not
@@ -388,26 +699,169 @@ class Identifier:
         n_unseen = int(deficit.sum())
         if n_unseen == 0:
             return self._result(self._best(p_world_m[keep], col), keep)
+        col_seen = col
+        on_rays = (lambda: self._identify_on_rays(p_world_m[keep], col_seen, keep, deficit, rays)
+                   if rays is not None and len(rays) else None)
         if n_unseen > self.max_explained_unseen:
-            return None
+            return on_rays()
         stand_in = np.repeat(np.arange(n_col), deficit)
         pts = np.vstack([p_world_m[keep], np.full((n_unseen, 3), np.nan)])
         col = np.concatenate([col, stand_in])
         found = self._best(pts, col)  # raises when the seen points break the rules
-        if n_unseen > self.max_unseen or found.nodes > self.max_nodes:
-            return None
-        # a rule with an unseen marker checks nothing, so the others must hold clearly (a wrong
-        # pose, hands on the thighs with the inner wrist markers hidden, kept every rule within
-        # 4 mm with the elbow and wrist markers swapped)
-        if self._rule_margins(found.slack_m).min() < self.min_order_margin_m:
-            return None
-        bar = -0.5 * self.min_order_margin_m
-        n_seen = len(keep)
-        for m, q in enumerate(found.index):
-            if q < n_seen and self._search(pts, col, found.yaw, [bar], exclude=(m, int(q))) is not None:
-                log.debug("identification with %d unseen markers is ambiguous for %s", n_unseen, self.markerset.names[m])
-                return None
+        if n_unseen > self.max_unseen or found.nodes > self.max_nodes or not self._certain(pts, col, found, len(keep)):
+            return on_rays()
         return self._result(found, np.append(keep, np.full(n_unseen, -1)))
+
+    def _certain(self, pts: np.ndarray, col: np.ndarray, found: _Found, n_seen: int, pools: _Pools | None = None,
+                 rays: _RayRows | None = None) -> bool:
+        """Whether the names of the seen points (rows below ``n_seen``) of ``found`` are beyond doubt.
+
+        Every rule must hold by twice its margin: a rule with an unseen marker checks nothing, so
+        the others must hold clearly (a wrong pose, hands on the thighs with the inner wrist
+        markers hidden, kept every rule within 4 mm with the elbow and wrist markers swapped).
+        And no naming that gives a seen point another name may come within half a margin of
+        satisfying the rules (with ``rays``, within half a margin and a sampling step).
+        """
+        if self._rule_margins(found.slack_m).min() < self.min_order_margin_m:
+            return False
+        bar = -0.5 * self.min_order_margin_m
+        if rays is not None:
+            # a naming is scored at its best samples, up to half a step from the best place on
+            # each of two rays: another naming may fit better than its samples say
+            bar -= _RAY_STEP_M
+        for m, q in enumerate(found.index):
+            if q < n_seen and self._search(pts, col, found.yaw, [bar], exclude=(m, int(q)), pools=pools,
+                                           rays=rays) is not None:
+                log.debug("identification with unseen markers is ambiguous for %s", self.markerset.names[m])
+                return False
+        return True
+
+    def _identify_on_rays(self, p_seen_m: np.ndarray, col_seen: np.ndarray, keep: np.ndarray, deficit: np.ndarray,
+                          rays: Rays) -> Identification | None:
+        """Name the seen points with the unseen markers placed on the rays of single-camera blobs.
+
+        Each ray of an unseen colour is sampled every ``_RAY_STEP_M`` over its range, near the
+        seen points and not inside a seen ball; a ray is one candidate point of the search (a
+        blob is one marker), placed at its best sample (:meth:`_search`). A marker of a colour
+        with fewer rays than unseen markers may still take a stand-in point that satisfies every
+        rule, at most ``max_unseen`` of them. The names of the seen points are given under the
+        same conditions as with stand-ins only (:meth:`_certain`); the markers on rays are left
+        for the tracker's re-acquisition (``index`` -1), like the unseen ones.
+
+        Two rays that may be two views of one ball (:meth:`_merge_views`) may also be two balls
+        whose rays cross: both readings are searched, and the names are given only when one
+        reading is certain and every reading that fits the rules at all names the seen points
+        the same.
+
+        Returns:
+            The identification or None (nothing fits, or not beyond doubt: wait).
+        """
+        lo, hi = p_seen_m.min(axis=0) - _RAY_BOX_M, p_seen_m.max(axis=0) + _RAY_BOX_M
+        gap = 2.0 * self.markerset.radius_m - _RAY_STEP_M  # two balls do not overlap
+        samples, ray_col, ray_origin, ray_whole = [], [], [], []
+        for r in range(len(rays)):
+            c = int(rays.colour[r])
+            if not 0 <= c < len(deficit) or deficit[c] <= 0:
+                continue
+            near, far = rays.range_m[r]
+            t = np.arange(near, far + 0.5 * _RAY_STEP_M, _RAY_STEP_M)
+            p = rays.origin_m[r] + t[:, None] * rays.direction[r]
+            ok = ((p >= lo) & (p <= hi)).all(axis=1)
+            ok &= np.linalg.norm(p[:, None, :] - p_seen_m[None], axis=-1).min(axis=1) > gap
+            if ok.any():
+                samples.append(p[ok])
+                ray_col.append(c)
+                ray_origin.append(rays.origin_m[r])
+                ray_whole.append(bool(rays.whole[r]) if rays.whole is not None else False)
+        if not samples:
+            log.debug("no ray of an unseen colour passes near the seen points")
+            return None
+        ray_col = np.array(ray_col, np.int64)
+        readings = [(samples, ray_col)]
+        merged = self._merge_views(samples, ray_col, np.array(ray_origin), np.array(ray_whole))
+        if len(merged[0]) < len(samples):
+            readings.append(merged)
+        named: list[tuple[_Found, bool, np.ndarray]] = []
+        for candidates, colours in readings:
+            attempt = self._search_on_rays(p_seen_m, col_seen, deficit, candidates, colours)
+            if attempt is not None:
+                named.append(attempt)
+        n_seen = len(p_seen_m)
+        sure = [a for a in named if a[1]]
+        if not sure or any(not np.array_equal(_seen_names(a[0], n_seen), _seen_names(sure[0][0], n_seen))
+                           for a in named):
+            return None
+        found, _, point_of_row = sure[0]
+        return self._result(found, np.append(keep, point_of_row))
+
+    def _search_on_rays(self, p_seen_m: np.ndarray, col_seen: np.ndarray, deficit: np.ndarray,
+                        samples: list[np.ndarray], ray_col: np.ndarray) -> tuple[_Found, bool, np.ndarray] | None:
+        """One reading of the rays (:meth:`_identify_on_rays`): the best naming, whether it is
+        certain, and the rows after the seen points (-1 each); None when no naming fits."""
+        n_seen = len(p_seen_m)
+        stand_in = np.repeat(np.arange(len(deficit)),
+                             np.maximum(deficit - np.bincount(ray_col, minlength=len(deficit)), 0))
+        if len(stand_in) > self.max_unseen:
+            log.debug("%d markers are neither seen nor on a ray", len(stand_in))
+            return None
+        first = n_seen + len(stand_in)
+        on_rays = _RayRows.of(first, samples)
+        pts = np.vstack([p_seen_m, np.full((len(stand_in) + len(samples), 3), np.nan)])
+        col = np.concatenate([col_seen, stand_in, ray_col]).astype(np.int64)
+        # the stand-ins and rays of a colour name at most its unseen markers: every seen point is named
+        unseen_rows = np.arange(n_seen, len(pts))
+        pools = _Pools.of((unseen_rows[col[unseen_rows] == c], int(deficit[c])) for c in np.flatnonzero(deficit > 0))
+        limit = math.radians(self.rules.max_turn_deg)
+        guess = float(np.clip(yaw_from_points(p_seen_m), -limit, limit))
+        self._inexact = False
+        found = None
+        for yaw in dict.fromkeys((guess, 0.0)):
+            found = self._settle(pts, col, yaw, pools, on_rays)
+            if found is not None:
+                break
+        if found is None:
+            log.debug("no naming with markers on rays keeps the rules")
+            return None
+        certain = (found.nodes <= self.max_nodes
+                   and abs(_yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)) <= limit
+                   and self._certain(pts, col, found, n_seen, pools, on_rays) and not self._inexact)
+        log.debug("%s with %d markers on single-camera rays, %d unseen (worst margin %.0f mm)",
+                  "named" if certain else "not certain", int(np.sum(found.index >= first)), len(stand_in),
+                  1000 * self._rule_margins(found.slack_m).min())
+        return found, certain, np.full(len(pts) - n_seen, -1)
+
+    def _merge_views(self, samples: list[np.ndarray], ray_col: np.ndarray, origin_m: np.ndarray, whole: np.ndarray
+                     ) -> tuple[list[np.ndarray], np.ndarray]:
+        """Two rays of one colour from two cameras, one of a partly hidden ball, that pass within a
+        ball's diameter of each other become one.
+
+        Two cameras that see a ball whose second view is partly hidden give two rays (a point
+        needs two whole views): the ball is where they meet, so the pair is one candidate, its
+        samples those of either ray near the other. Pairs are taken closest first. Two whole
+        views of one ball make a point already, so two rays of whole blobs are two balls.
+
+        Returns:
+            (the candidates' samples, their colours).
+        """
+        reach = 2.0 * self.markerset.radius_m
+        near: list[tuple[float, int, int]] = []
+        for a in range(len(samples)):
+            for b in range(a + 1, len(samples)):
+                if (ray_col[a] == ray_col[b] and not (whole[a] and whole[b])
+                        and not np.allclose(origin_m[a], origin_m[b])):
+                    gap = float(np.linalg.norm(samples[a][:, None, :] - samples[b][None, :, :], axis=-1).min())
+                    if gap < reach:
+                        near.append((gap, a, b))
+        merged: dict[int, np.ndarray] = {}
+        gone: set[int] = set()
+        for _, a, b in sorted(near):
+            if a in gone or b in gone:
+                continue
+            d = np.linalg.norm(samples[a][:, None, :] - samples[b][None, :, :], axis=-1)
+            merged[a] = np.vstack([samples[a][d.min(axis=1) < reach], samples[b][d.min(axis=0) < reach]])
+            gone.update((a, b))
+        keep = [k for k in range(len(samples)) if k not in gone or k in merged]
+        return [merged.get(k, samples[k]) for k in keep], ray_col[keep]
 
     def distance_fit_m(self, marker: int, p_cand_m: np.ndarray, positions_m: np.ndarray, known: np.ndarray
                        ) -> np.ndarray:
@@ -474,16 +928,17 @@ class Identifier:
         index = np.asarray(point_of_row, dtype=np.int64)[found.index]
         return Identification(index, float(margins.min()), margins, math.degrees(found.yaw))
 
-    def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float) -> _Found | None:
+    def _settle(self, pts: np.ndarray, colour: np.ndarray, yaw: float, pools: _Pools | None = None,
+                rays: _RayRows | None = None) -> _Found | None:
         """Search in the frame of ``yaw``, then in the frame of the identified left-right pairs."""
-        found = self._search(pts, colour, yaw, [_SATISFIED])
+        found = self._search(pts, colour, yaw, [_SATISFIED], pools=pools, rays=rays)
         for _ in range(_MAX_REFINE):
             if found is None:
                 break
             new_yaw = _yaw_from_pairs(pts, found.index[self.lr_pairs], found.yaw)
             if abs(math.degrees(new_yaw - found.yaw)) < _REFINE_TOL_DEG:
                 break
-            again = self._search(pts, colour, new_yaw, [_SATISFIED])
+            again = self._search(pts, colour, new_yaw, [_SATISFIED], pools=pools, rays=rays)
             if again is None:
                 break
             found = again
@@ -550,17 +1005,18 @@ def identify(p_world_m: np.ndarray, colour: np.ndarray, markerset: MarkerSet) ->
     return Identifier(markerset).identify(p_world_m, colour)
 
 
-def try_identify(points: Points3D, identifier: Identifier) -> Identification | None:
+def try_identify(points: Points3D, identifier: Identifier, rays: Rays | None = None) -> Identification | None:
     """For the tracker, once per frame until it succeeds.
 
     With every marker seen, the names of :meth:`Identifier.identify`. With a few unseen (a marker
     seen by one camera only in the reference pose), the names of the seen ones when the rules
     still decide them beyond doubt (:meth:`Identifier.identify_with_unseen`; index -1 for the
-    unseen, which the tracker's re-acquisition finds later). Returns None while that is not
+    unseen, which the tracker's re-acquisition finds later; ``rays`` of the blobs seen by one camera
+    only, :func:`single_view_rays`, let more be unseen). Returns None while that is not
     possible (too many unseen, a stray point, an ambiguous naming: wait for the next frame);
     raises :class:`IdentificationError` when the pose breaks the rules (tell the therapist).
     """
-    return identifier.identify_with_unseen(points.p_world_m, points.colour)
+    return identifier.identify_with_unseen(points.p_world_m, points.colour, rays)
 
 
 def identify_over_frames(frames: Iterable[Points3D], markerset: MarkerSet, max_frames: int = 30
@@ -587,8 +1043,14 @@ def identify_over_frames(frames: Iterable[Points3D], markerset: MarkerSet, max_f
     raise IdentificationError(f"no frame of the first {max_frames} shows every marker: {last}")
 
 
+def _seen_names(found: _Found, n_seen: int) -> np.ndarray:
+    """(M,) the point each marker is named to, -1 where it is not one of the first ``n_seen``."""
+    return np.where(found.index < n_seen, found.index, -1)
+
+
 def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[list[tuple[int, int, bool]]],
-                      bar_m: float, slack_of, max_nodes: int) -> tuple[np.ndarray | None, int]:
+                      bar_m: float, slack_of, max_nodes: int, pools: _Pools | None = None
+                      ) -> tuple[np.ndarray | None, int]:
     """Depth-first search for the assignment with the largest worst slack above ``bar_m``.
 
     Args:
@@ -598,6 +1060,8 @@ def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[li
         bar_m: only assignments whose every pair slack exceeds this are considered.
         slack_of: (M,) assignment -> (K,) slack of every constraint.
         max_nodes: node budget; the best so far is returned when it is spent.
+        pools: groups of points of which at most so many may be taken (the points sampled along
+            one ray: one; the points that are not seen of one colour: its unseen markers).
 
     Returns:
         (the best assignment or None, nodes visited).
@@ -611,8 +1075,11 @@ def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[li
     state = {"bar": bar_m, "best": None, "nodes": 0}
     set_bar(bar_m)
 
-    def descend(dom: list[int], free: list[int]) -> bool:
-        """False stops the search (budget spent, or nothing left to improve)."""
+    pool_of = pools.of_point if pools is not None else {}
+
+    def descend(dom: list[int], free: list[int], left: tuple[int, ...]) -> bool:
+        """False stops the search (budget spent, or nothing left to improve); ``left``: what each
+        pool may still give."""
         if not free:
             index = np.array([d.bit_length() - 1 for d in dom], np.int64)
             s = slack_of(index)
@@ -635,16 +1102,25 @@ def _branch_and_bound(slack: np.ndarray, domains: list[int], neighbours: list[li
             q = low.bit_length() - 1
             new = dom.copy()
             new[v] = low
+            used, now = low, left
+            if q in pool_of:
+                now = list(left)
+                for k in pool_of[q]:
+                    now[k] -= 1
+                    if now[k] == 0:
+                        used |= pools.mask[k]
+                now = tuple(now)
+            used = ~used
             for u in rest:
-                new[u] &= ~low
+                new[u] &= used
             for u, k, forward in neighbours[v]:
                 new[u] &= masks[k][0 if forward else 1][q]
             # assigned neighbours too: after the bar rose, an earlier pair may no longer pass
             if not all(new):
                 continue
-            if not descend(new, rest):
+            if not descend(new, rest, now):
                 return False
         return True
 
-    descend(domains, list(range(len(domains))))
+    descend(domains, list(range(len(domains))), tuple(pools.size) if pools is not None else ())
     return state["best"], state["nodes"]

@@ -126,11 +126,16 @@ class FrameMeasurer:
 
     def measure(self, images: Sequence[np.ndarray]) -> Points3D:
         """(H, W, 3) uint8 BGR images, one per camera -> unlabelled 3D points (world metres)."""
+        return self.measure_views(images)[0]
+
+    def measure_views(self, images: Sequence[np.ndarray]) -> tuple[Points3D, list[CameraObservations]]:
+        """As :meth:`measure`, with each camera's centroids (``Points3D.obs_index`` indexes them)."""
         if len(images) != len(self.cameras):
             raise ValueError(f"expected {len(self.cameras)} images, got {len(images)}")
         blobs = self.blobs(images)
         t0 = time.perf_counter()
-        points = reconstruct(self.geometry, [observations_from_blobs(b) for b in blobs], self.params)
+        observations = [observations_from_blobs(b) for b in blobs]
+        points = reconstruct(self.geometry, observations, self.params)
         self.times.add("triangulation", time.perf_counter() - t0)
         self.times.frames += 1
-        return points
+        return points, observations

@@ -35,7 +35,7 @@ from tracking.blobs import find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
-from tracking.reconstruction import Points3D, RigGeometry
+from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
 from tracking.status import MarkerStatus
 from tracking.triangulation import triangulate
 
@@ -216,9 +216,9 @@ class Tracker:
         self._windows_px = self._used_uv = None
         if self.state == TrackingState.WAITING:
             t0 = time.perf_counter()
-            points = self.measurer.measure(images)
+            points, views = self.measurer.measure_views(images)
             n_points = len(points)
-            message = self._try_identify(points)
+            message = self._try_identify(points, views)
             self.times.add("full-frame re-acquisition", time.perf_counter() - t0)
         else:
             n_points = self._track(images)
@@ -240,11 +240,12 @@ class Tracker:
         )
 
     # ------------------------------------------------------------------ identification
-    def _try_identify(self, points: Points3D) -> str:
-        from tracking.identify import IdentificationError, try_identify
+    def _try_identify(self, points: Points3D, views: Sequence[CameraObservations]) -> str:
+        from tracking.identify import IdentificationError, single_view_rays, try_identify
 
         try:
-            ident = try_identify(points, self.identifier)
+            rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
+            ident = try_identify(points, self.identifier, rays)
         except IdentificationError as exc:
             return str(exc)
         if ident is None:

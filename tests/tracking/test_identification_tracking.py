@@ -32,20 +32,24 @@ RIGS = ["front4", "tri3", "front3"]
 @pytest.fixture(scope="module")
 def small_sweep():
     """The redesigned 4- and 3-camera rigs, the smallest and largest body, the reference pose and
-    two of its corners (all angles +10; a mixed one), and the three wrong poses."""
+    three of its corners (all angles +10; all -10, which only the largest body can take: four or
+    more markers seen by one camera only; a mixed one), and the three wrong poses."""
     ref = perturbed_poses(n_corners=4, n_random=0)
-    poses = [ref[0], ref[1], ref[4]] + wrong_poses()
+    # (each case's noise is seeded by its place in the list: the adducted pose goes last)
+    poses = [ref[0], ref[1], ref[4]] + wrong_poses() + [ref[2]]
     return list(sweep(RIGS, [(5, "female"), (95, "male")], poses, size_px=SIZE, frames=2))
 
 
 def test_reference_poses_are_named_right(small_sweep):
-    """Every case is named, every name is right; at most three markers are left unseen (the
-    inner elbow and wrist markers, seen by one camera only) for re-acquisition."""
+    """Every case is named, every name is right; the markers seen by one camera only (up to six
+    with the arms close to the body) are left for re-acquisition."""
     ref = [r for r in small_sweep if not r.wrong_pose and not r.clash]
-    assert len(ref) == len(RIGS) * 2 * 3
+    assert len(ref) == len(RIGS) * (2 * 4 - 1)
     assert not [r for r in ref if r.wrong], table_markdown(ref)
     assert all(r.identified for r in ref), table_markdown(ref)
-    assert all(len(r.unseen) <= 3 for r in ref), table_markdown(ref)
+    assert all(len(r.unseen) <= 6 for r in ref), table_markdown(ref)
+    adducted = [r for r in ref if r.pose.startswith("corner2")]
+    assert len(adducted) == len(RIGS) and max(len(r.unseen) for r in adducted) >= 4
 
 
 def test_wrong_poses_are_explained_never_named(small_sweep):

@@ -157,6 +157,7 @@ class CaseResult:
         rule_message: the message is one of the marker set's rule messages (a therapist message).
         clash: markers that would be inside the chair seat: the pose cannot be taken and the case
             was not run (counted apart).
+        cameras: the rig's number of cameras.
     """
 
     rig: str
@@ -171,6 +172,7 @@ class CaseResult:
     rule_message: bool
     clash: tuple[str, ...] = ()
     inaccurate: tuple[str, ...] = ()
+    cameras: int = 0
 
     @property
     def identified(self) -> bool:
@@ -194,7 +196,8 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
     ms = studio.markerset
     clash = seat_clash(studio.body, case.pose, ms)
     if clash:
-        return CaseResult(rig, body, case.name, case.wrong, -1, 0, (), (), "", False, clash=clash)
+        return CaseResult(rig, body, case.name, case.wrong, -1, 0, (), (), "", False, clash=clash,
+                          cameras=len(tracker.cameras))
     tracker.reset()
     identified_frame, message, sample, truth = -1, "", None, None
     for k in range(frames):
@@ -219,7 +222,8 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
     rules = ms.identification.rules if ms.identification is not None else ()
     rule_message = any(message.startswith(r.message) for r in rules)
     return CaseResult(rig, body, case.name, case.wrong, identified_frame, int(named_mask.sum()), wrong, unseen,
-                      message if identified_frame < 0 else "", rule_message, inaccurate=inaccurate)
+                      message if identified_frame < 0 else "", rule_message, inaccurate=inaccurate,
+                      cameras=len(tracker.cameras))
 
 
 def sweep(rigs: Sequence[str], bodies: Sequence[tuple[float, str]] = BODIES,
@@ -301,6 +305,25 @@ def _cell(cases: Sequence[CaseResult]) -> str:
     return text + (" " + "; ".join(notes) if notes else "")
 
 
+def rig_table(results: Sequence[CaseResult]) -> str:
+    """A markdown table, one row per rig: reference-pose cases identified (every marker named /
+    some left for re-acquisition), waited and misnamed; wrong poses not named (by a rule message)."""
+    lines = ["| rig | cameras | reference cases | identified (all named + partly) | waited | misnamed "
+             "| wrong poses not named (rule message) |",
+             "| --- | --- | --- | --- | --- | --- | --- |"]
+    for rig in dict.fromkeys(r.rig for r in results):
+        rr = [r for r in results if r.rig == rig and not r.clash]
+        ref = [r for r in rr if not r.wrong_pose]
+        bad = [r for r in rr if r.wrong_pose]
+        named = [r for r in ref if r.identified]
+        full = sum(not r.unseen for r in named)
+        kept = sum(not r.identified and bool(r.message) for r in bad)
+        lines.append(f"| {rig} | {rr[0].cameras if rr else ''} | {len(ref)} | {len(named)} ({full} + {len(named) - full}) "
+                     f"| {len(ref) - len(named)} | {sum(bool(r.wrong) for r in rr)} "
+                     f"| {kept}/{len(bad)} ({sum(r.passed and r.rule_message for r in bad)}) |")
+    return "\n".join(lines)
+
+
 def summary(results: Sequence[CaseResult]) -> str:
     """One line per rig: PASS (every reference pose fully named right, no wrong pose named),
     PASS-PARTLY (some reference poses named without their unseen markers, every name right) or FAIL."""
@@ -335,6 +358,8 @@ def main(argv: Iterable[str] | None = None) -> int:
     parser.add_argument("--random", type=int, default=4, help="random perturbations per body (default: %(default)s)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--quick", action="store_true", help="bodies p5 female and p95 male, 2 corners, 1 random")
+    parser.add_argument("--body", action="append", default=None, metavar="PCT:SEX",
+                        help="body as percentile:sex, e.g. 95:male (repeat; default: p5 and p50 female, p50 and p95 male)")
     args = parser.parse_args(list(argv) if argv is not None else None)
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
@@ -344,6 +369,13 @@ def main(argv: Iterable[str] | None = None) -> int:
         parser.error(f"--frames {args.frames}: give 1 or more")
     rigs = args.rig or available("rigs")
     bodies = ((5, "female"), (95, "male")) if args.quick else BODIES
+    if args.body:
+        try:
+            bodies = tuple((float(b.split(":")[0]), b.split(":")[1]) for b in args.body)
+        except (ValueError, IndexError):
+            parser.error(f"--body {args.body}: give percentile:sex, e.g. 95:male")
+        if any(sex not in ("female", "male") or not 0 < p < 100 for p, sex in bodies):
+            parser.error(f"--body {args.body}: the percentile is in 1-99 and the sex female or male")
     corners, rand = (2, 1) if args.quick else (args.corners, args.random)
     poses = perturbed_poses(corners, rand, seed=args.seed) + wrong_poses()
     results = []
@@ -353,6 +385,8 @@ def main(argv: Iterable[str] | None = None) -> int:
         print(f"\r{n}/{total} {r.rig} {r.body} {r.pose}".ljust(70), end="", file=sys.stderr, flush=True)
     print("", file=sys.stderr)
     print(table_markdown(results))
+    print()
+    print(rig_table(results))
     print()
     print(summary(results))
     return 0 if all(r.passed for r in results if not r.clash) else 1
