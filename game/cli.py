@@ -262,10 +262,42 @@ def _add_play(sub) -> None:
     p.add_argument("--seconds", type=_positive_float, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
     p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
+                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
+                            "video files, one per camera of --calibration, in its order")
+    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
+                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
     p.set_defaults(func=_cmd_play)
 
 
 _HEADLESS_MOTION = "shoulder_abduction"
+
+
+def _play_source(args) -> dict:
+    """The tracker process's source from ``--devices``/``--recording``/``--calibration``
+    (nothing: the simulated patient). Missing files are one line here, before anything starts."""
+    calibration = args.calibration
+    if calibration is not None and not calibration.is_file():
+        raise RehabError(f"calibration file {calibration} not found: give the file rehab calibrate wrote")
+    if args.devices is not None:
+        devices = tuple(d.strip() for d in args.devices.split(",") if d.strip())
+        if not devices:
+            raise RehabError("--devices: give one camera per calibrated camera, e.g. --devices 0,1,2,3")
+        if calibration is None:
+            raise RehabError("--devices needs --calibration FILE: the cameras' calibration (rehab calibrate)")
+        return {"kind": "cameras", "devices": devices, "calibration": str(calibration)}
+    if args.recording is not None:
+        if not args.recording.is_dir():
+            raise RehabError(f"recording folder {args.recording} not found: give a folder rehab record or "
+                             "rehab simulate wrote")
+        return {"kind": "recording", "path": str(args.recording),
+                "calibration": None if calibration is None else str(calibration)}
+    if calibration is not None:
+        raise RehabError("--calibration goes with --devices or --recording")
+    return {}
 
 
 def _cmd_play(args) -> int:
@@ -295,11 +327,15 @@ def _cmd_play(args) -> int:
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
                          "or give a motion YAML file")
+    if args.devices is not None or args.recording is not None:
+        if args.motion is not None:
+            raise RehabError("--motion plays on the simulated patient: leave it out with --devices or --recording")
+        motion = None  # the cameras or the recording show the patient
     if args.max_fps < 0:
         raise RehabError(f"--max-fps {args.max_fps:g}: give 0 (no cap) or a positive rate")
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
-                          adapt_colours=args.adapt_colours)
+                          adapt_colours=args.adapt_colours, **_play_source(args))
     from game.cli_calibrate import board_from_spec
 
     options = PlayOptions(

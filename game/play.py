@@ -106,7 +106,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
     def open_live():
         return LiveScene(link, motions=motions, motion=options.motion, open_monitor=open_monitor,
-                         make_avatar=make_avatar)
+                         make_avatar=make_avatar, source_kind=getattr(options.source, "kind", "sim") or "sim")
 
     from game.db import default_db_path
     from game.scenes.patients import PatientsScene

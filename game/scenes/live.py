@@ -221,8 +221,9 @@ class LiveScene(BaseScene):
 
     def __init__(self, link: LiveLink, *, motions: Sequence[str | None] = (None,), motion: str | None = None,
                  open_monitor: Callable[[], BaseScene] | None = None,
-                 make_avatar: Callable | None = None, show_markers: bool = True) -> None:
+                 make_avatar: Callable | None = None, show_markers: bool = True, source_kind: str = "sim") -> None:
         self.link = link
+        self.source_kind = source_kind
         self.motions = list(motions) if motions else [None]
         if motion not in self.motions:
             self.motions.insert(0, motion)
@@ -242,8 +243,9 @@ class LiveScene(BaseScene):
         super().enter(app)
         self.layout = live_layout(app.screen.size_px)
         self.view_m, self.proj_m = mirror_camera(self.layout.view)
-        self.link.set_motion(self.motion)
-        if self.motion is None:
+        if self.simulated:
+            self.link.set_motion(self.motion)
+        if self.interactive:
             self._send_input(force=True)
 
     def exit(self) -> None:
@@ -253,8 +255,14 @@ class LiveScene(BaseScene):
 
     # ------------------------------------------------------------------ input
     @property
+    def simulated(self) -> bool:
+        """The tracker measures the simulated patient (not a recording or cameras)."""
+        return self.source_kind == "sim"
+
+    @property
     def interactive(self) -> bool:
-        return self.motion is None
+        """The mouse and keys move the simulated patient (no scripted motion playing)."""
+        return self.simulated and self.motion is None
 
     def handle(self, event: InputEvent) -> None:
         if isinstance(event, Pointer):
@@ -268,7 +276,7 @@ class LiveScene(BaseScene):
             self.control.held.add(action)
         elif action is Action.SWITCH_ARM:
             self.control.switch_arm()
-        elif action is Action.NEXT_MOTION:
+        elif action is Action.NEXT_MOTION and self.simulated:
             k = self.motions.index(self.motion)
             self.motion = self.motions[(k + 1) % len(self.motions)]
             self.link.set_motion(self.motion)
@@ -389,10 +397,15 @@ class LiveScene(BaseScene):
         px, py, pw, ph = self.layout.panel
         x, y, right = px + 26 * s, py + 6 * s, px + pw - 10 * s
         side = self.control.side if self.interactive else None
-        title = f"{self.control.side.capitalize()} arm" if side else _humanize(self.motion)
+        if side:
+            title, mode = f"{self.control.side.capitalize()} arm", "Mouse moves the hand"
+        elif self.simulated:
+            title, mode = _humanize(self.motion), "Scripted motion, M for the next"
+        else:
+            title = "Live"
+            mode = "From the cameras" if self.source_kind == "cameras" else "From a recording"
         c.text(title, (x, y), round(theme.LARGE * s), theme.TEXT)
         y += 58 * s
-        mode = "Mouse moves the hand" if self.interactive else "Scripted motion, M for the next"
         c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
         sides = (self.control.side,) if side else ("right", "left")
@@ -489,7 +502,7 @@ class LiveScene(BaseScene):
             text = "Mouse: hand, wheel: nearer/farther   Tab: other arm   Q/E: turn forearm   Arrows: lean   "
         else:
             text = ""
-        text += "M: motions   R: find markers   C: cameras   Esc: back"
+        text += ("M: motions   " if self.simulated else "") + "R: find markers   C: cameras   Esc: back"
         size = round(theme.SMALL * 0.8 * s)
         lines = c.wrap(text, size, pw - 36 * s)
         line_h = c.measure("Ag", size)[1] + 5 * s

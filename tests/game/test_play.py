@@ -167,3 +167,42 @@ def test_a_tracker_that_cannot_start_is_one_line(headless, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown rig 'no_such_rig'" in err[0] and "ring4" in err[0]
     assert multiprocessing.active_children() == []
+
+
+@pytest.fixture(scope="module")
+def short_recording(tmp_path_factory):
+    from tracking.sim.studio import SimulationSettings, simulate_recording
+
+    folder = tmp_path_factory.mktemp("rec") / "rec"
+    simulate_recording(folder, SimulationSettings(motion="shoulder_abduction", size_px=(320, 240), fps=15.0,
+                                                  seconds=4.0))
+    return folder
+
+
+def test_play_tracks_a_recording_and_cameras_instead_of_the_simulated_patient(headless, short_recording, tmp_path, capsys):
+    out = tmp_path / "rec.png"
+    rc = main(["play", "--headless", "--seconds", "3", "--screenshot", str(out), "--recording", str(short_recording)])
+    assert rc == 0
+    rgb = cv2.imread(str(out))[:, :, ::-1].astype(int)
+    view = live_layout((1280, 720)).view
+    body = rgb[150:600, int(view.w * 0.3):int(view.w * 0.7)]
+    assert ((body[..., 2] > body[..., 0] + 50) & (body[..., 2] > 110)).sum() > 3000  # the avatar's shirt
+    # the video files as four "cameras" with the recording's calibration (the camera path of the
+    # tracker process: reader threads, frames grouped by time)
+    videos = ",".join(str(short_recording / f"cam{k}.avi") for k in range(1, 5))
+    rc = main(["play", "--headless", "--seconds", "2", "--devices", videos,
+               "--calibration", str(short_recording / "calibration.toml")])
+    assert rc == 0
+    assert multiprocessing.active_children() == []
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--devices", "0"], "--devices needs --calibration"),
+    (["--recording", "no/such/folder"], "recording folder no/such/folder not found"),
+    (["--calibration", "no/such.toml", "--devices", "0"], "calibration file no/such.toml not found"),
+    (["--recording", ".", "--motion", "reach"], "--motion plays on the simulated patient"),
+])
+def test_bad_source_options_are_one_line(args, words, capsys):
+    assert main(["play", "--headless", *args]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0]
