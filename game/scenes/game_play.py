@@ -91,7 +91,9 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
         sign = 1.0 if side == "right" else -1.0
         shift = 0.10 if kind == "rotation" else 0.0
         target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd + shift * sign * right
-        half = 0.52
+        # the key game's view is wide: framed from the head to the knees (a closer view filled it
+        # with the trunk, and llvmpipe pays per pixel: 0.52 m cost ~7 ms more CPU per frame)
+        half = 0.52 if kind == "rotation" else 0.66
     half = max(half, half * 0.9 / aspect)
     fov = 30.0
     distance = half / math.tan(math.radians(fov) / 2.0)
