@@ -110,6 +110,8 @@ class TrackerParams:
         max_reproj_px: largest RMS reprojection error of a candidate.
         max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
             show a ball of the right size in both).
+        max_loo_px: of three or more views, the worst is dropped when the point triangulated
+            from the others misses it by more than this (a wrong ball in one view).
     """
 
     base_sigma_m: float = 0.008
@@ -126,6 +128,7 @@ class TrackerParams:
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
+    max_loo_px: float = 3.0
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -424,14 +427,36 @@ class Tracker:
         with np.errstate(divide="ignore", invalid="ignore"):
             partial = seen & (rad / (ball_px / self._pred_depth) < 0.8)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
-        seen &= ~(partial & keep_full[:, None])
+        left_out = partial & keep_full[:, None]
+        seen &= ~left_out
         ext = self.geometry.extrinsics
         pts = triangulate(ext, xn, seen)
         err, depth = self._reprojection(pts, xn)
+        # a partly hidden view is shifted by less than the ball's radius: one that the point
+        # misses by more says that a full view holds another ball of the colour (two views always
+        # meet near some point): triangulate from all views and let the worst go below
+        with np.errstate(invalid="ignore"):
+            r_px = ball_px / self._pred_depth
+            recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
+        if recheck.any():
+            redo = np.flatnonzero(recheck)
+            seen[redo] |= left_out[redo]
+            pts[redo] = triangulate(ext, xn[redo], seen[redo])
+            err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         rows = np.arange(m_count)
         for _ in range(n_cams):  # drop the worst view while it misses and three or more remain
             worst = np.argmax(np.where(seen, err, -1.0), axis=1)
-            drop = (err[rows, worst] > params.max_reproj_px) & (seen.sum(axis=1) >= 3)
+            many = seen.sum(axis=1) >= 3
+            drop = (err[rows, worst] > params.max_reproj_px) & many
+            # a wrong ball in one of three views pulls the point towards itself and hides its own
+            # miss; the point from the other views shows it (leave-one-out)
+            probe = np.flatnonzero(many & ~drop)
+            if probe.size:
+                others = seen[probe].copy()
+                others[np.arange(probe.size), worst[probe]] = False
+                p_loo = triangulate(ext, xn[probe], others)
+                e_loo, _ = self._reprojection(p_loo, xn[probe])
+                drop[probe] = e_loo[np.arange(probe.size), worst[probe]] > params.max_loo_px
             if not drop.any():
                 break
             redo = np.flatnonzero(drop)
@@ -465,7 +490,9 @@ class Tracker:
             for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        measured &= self._segments_consistent(dist, new_pos, measured)
+        with np.errstate(invalid="ignore"):
+            surprise = np.sqrt((off * off) @ np.ones(3)) / sigma  # distance to the prediction in sigmas
+        measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         return new_pos, measured
@@ -478,7 +505,8 @@ class Tracker:
             d = cam[..., :2] / depth[..., None] - xn
         return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
 
-    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray,
+                             surprise: np.ndarray) -> np.ndarray:
         """False for a marker whose distance to a segment neighbour broke its learned length.
 
         Neighbours measured this frame count; so do neighbours known only from last frame's
@@ -489,6 +517,7 @@ class Tracker:
             dist: (M, M) distances between the markers' candidate positions ``pos`` (NaN where
                 either has none).
             pos: (M, 3) candidate positions; measured: (M,) bool.
+            surprise: (M,) each candidate's distance to its prediction in prediction sigmas.
         """
         tol = self.params.segment_tol_m
         with np.errstate(invalid="ignore"):
@@ -505,9 +534,15 @@ class Tracker:
                     bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
                 measured = measured & ~bad_prev
         ok = measured.copy()
-        # drop the marker involved in most broken pairs, one at a time
+        # drop the marker involved in most broken pairs, one at a time; of markers in as many, a
+        # returning one (not measured last frame) first: the one measured last frame still sits
+        # on its ball far more often than a marker found again after hiding; then the candidate
+        # farther from its prediction (a wrong ball in one view moves the point away from it)
+        returning_now = self.status != _MEASURED
         while bad_pair.any():
-            worst = int(np.argmax(bad_pair.sum(axis=1)))
+            count = bad_pair.sum(axis=1)
+            worst = max(np.flatnonzero(count == count.max()).tolist(),
+                        key=lambda i: (bool(returning_now[i]), float(surprise[i])))
             ok[worst] = False
             bad_pair[worst, :] = bad_pair[:, worst] = False
         return ok
