@@ -112,6 +112,11 @@ class TrackerParams:
             show a ball of the right size in both).
         max_loo_px: of three or more views, the worst is dropped when the point triangulated
             from the others misses it by more than this (a wrong ball in one view).
+        partial_ratio, oversize_ratio: a view whose blob radius is below / above these fractions
+            of the ball's projected radius is left out while two other views remain (a partly
+            hidden ball: centroid shifted by ~1 px at 0.8-0.9; a blob holding another ball of the
+            colour: 0.8 of those above 1.1 were > 2 px off in the simulated motions); a
+            two-view candidate needs both views at most ``oversize_ratio``.
     """
 
     base_sigma_m: float = 0.008
@@ -129,6 +134,8 @@ class TrackerParams:
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
     max_loo_px: float = 3.0
+    partial_ratio: float = 0.88
+    oversize_ratio: float = 1.1
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -423,9 +430,11 @@ class Tracker:
         seen = np.isfinite(xn[..., 0]) & known[:, None]
         ball_px = stack.focal_px * self.markerset.radius_m  # ball radius in pixels at 1 m
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
-        # shifted centroid: leave it out while two full views remain
+        # shifted centroid, and a blob larger than the ball holds more than the ball (another ball
+        # of the colour touching it): leave them out while two full views remain
         with np.errstate(divide="ignore", invalid="ignore"):
-            partial = seen & (rad / (ball_px / self._pred_depth) < 0.8)
+            ratio_pred = rad / (ball_px / self._pred_depth)
+            partial = seen & ((ratio_pred < params.partial_ratio) | (ratio_pred > params.oversize_ratio))
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         left_out = partial & keep_full[:, None]
         seen &= ~left_out
@@ -469,7 +478,7 @@ class Tracker:
         # ball of the right size in both views (as in tracking.reconstruction)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio_now = rad / (ball_px / depth)
-            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now < 1.35))).any(axis=1)
+            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
             measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
             measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
             off = pts - pred
