@@ -453,13 +453,14 @@ class Tracker:
             pts[redo] = triangulate(ext, xn[redo], seen[redo])
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         rows = np.arange(m_count)
+        changed = np.ones(m_count, dtype=bool)  # views changed since the leave-one-out check
         for _ in range(n_cams):  # drop the worst view while it misses and three or more remain
             worst = np.argmax(np.where(seen, err, -1.0), axis=1)
             many = seen.sum(axis=1) >= 3
             drop = (err[rows, worst] > params.max_reproj_px) & many
             # a wrong ball in one of three views pulls the point towards itself and hides its own
             # miss; the point from the other views shows it (leave-one-out)
-            probe = np.flatnonzero(many & ~drop)
+            probe = np.flatnonzero(many & ~drop & changed)
             if probe.size:
                 others = seen[probe].copy()
                 others[np.arange(probe.size), worst[probe]] = False
@@ -469,6 +470,7 @@ class Tracker:
             if not drop.any():
                 break
             redo = np.flatnonzero(drop)
+            changed = drop
             seen[redo, worst[drop]] = False
             pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
