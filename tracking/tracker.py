@@ -471,6 +471,8 @@ class Tracker:
                 break
             redo = np.flatnonzero(drop)
             changed = drop
+            for m in redo.tolist():
+                worst[m] = self._view_to_drop(m, seen[m], xn[m], pred[m], int(worst[m]))
             seen[redo, worst[drop]] = False
             pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
@@ -507,6 +509,28 @@ class Tracker:
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         return new_pos, measured
+
+    def _view_to_drop(self, m: int, seen: np.ndarray, xn: np.ndarray, pred: np.ndarray, worst: int) -> int:
+        """Which of marker m's (3 or more) views to drop: of those whose removal leaves a point that
+        fits the other views (RMS within ``max_reproj_px``), the one that leaves it nearest the
+        prediction; else the worst. Two partly hidden views, one of them another ball, can each
+        fit a full view within a pixel; the prediction tells them apart.
+
+        Args:
+            seen: (C,) the views used; xn: (C, 2) normalized observations; pred: (3,) prediction.
+        """
+        views = np.flatnonzero(seen)
+        keep = np.repeat(seen[None, :], views.size, axis=0)
+        keep[np.arange(views.size), views] = False
+        obs = np.repeat(xn[None], views.size, axis=0)
+        pts = triangulate(self.geometry.extrinsics, obs, keep)
+        err, _ = self._reprojection(pts, obs)
+        rms = np.sqrt((np.where(keep, err, 0.0) ** 2).sum(axis=1) / keep.sum(axis=1))
+        fits = rms <= self.params.max_reproj_px
+        if not fits.any():
+            return worst
+        near = np.where(fits, np.linalg.norm(pts - pred, axis=1), np.inf)
+        return int(views[np.argmin(near)])
 
     def _reprojection(self, pts: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
