@@ -112,6 +112,8 @@ class TrackerParams:
             show a ball of the right size in both).
         max_loo_px: of three or more views, the worst is dropped when the point triangulated
             from the others misses it by more than this (a wrong ball in one view).
+        view_choice_margin_m: of three or more views, the worst is dropped unless another view's
+            removal leaves a fitting point this much nearer the prediction (then that view goes).
         partial_ratio, oversize_ratio: a view whose blob radius is below / above these fractions
             of the ball's projected radius is left out while two other views remain (a partly
             hidden ball: centroid shifted by ~1 px at 0.8-0.9; a blob holding another ball of the
@@ -135,6 +137,7 @@ class TrackerParams:
     max_reproj_px_two_view: float = 1.2
     max_loo_px: float = 3.0
     partial_ratio: float = 0.88
+    view_choice_margin_m: float = 0.02
     oversize_ratio: float = 1.1
 
 
@@ -511,10 +514,11 @@ class Tracker:
         return new_pos, measured
 
     def _view_to_drop(self, m: int, seen: np.ndarray, xn: np.ndarray, pred: np.ndarray, worst: int) -> int:
-        """Which of marker m's (3 or more) views to drop: of those whose removal leaves a point that
-        fits the other views (RMS within ``max_reproj_px``), the one that leaves it nearest the
-        prediction; else the worst. Two partly hidden views, one of them another ball, can each
-        fit a full view within a pixel; the prediction tells them apart.
+        """Which of marker m's (3 or more) views to drop: the worst, unless another view's removal
+        leaves a point that fits the other views (RMS within ``max_reproj_px``) more than
+        ``view_choice_margin_m`` nearer the prediction: then the one that leaves it nearest. Two
+        partly hidden views, one of them another ball, can each fit a full view within a pixel;
+        the prediction tells them apart.
 
         Args:
             seen: (C,) the views used; xn: (C, 2) normalized observations; pred: (3,) prediction.
@@ -529,8 +533,13 @@ class Tracker:
         fits = rms <= self.params.max_reproj_px
         if not fits.any():
             return worst
-        near = np.where(fits, np.linalg.norm(pts - pred, axis=1), np.inf)
-        return int(views[np.argmin(near)])
+        dist = np.linalg.norm(pts - pred, axis=1)
+        near = np.where(fits, dist, np.inf)
+        i_worst = int(np.flatnonzero(views == worst)[0])
+        # the worst view goes unless that leaves the point clearly farther from the prediction
+        if not fits[i_worst] or dist[i_worst] > near.min() + self.params.view_choice_margin_m:
+            return int(views[np.argmin(near)])
+        return worst
 
     def _reprojection(self, pts: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
