@@ -110,6 +110,15 @@ class TrackerParams:
         max_reproj_px: largest RMS reprojection error of a candidate.
         max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
             show a ball of the right size in both).
+        max_loo_px: of three or more views, the worst is dropped when the point triangulated
+            from the others misses it by more than this (a wrong ball in one view).
+        view_choice_margin_m: of three or more views, the worst is dropped unless another view's
+            removal leaves a fitting point this much nearer the prediction (then that view goes).
+        partial_ratio, oversize_ratio: a view whose blob radius is below / above these fractions
+            of the ball's projected radius is left out while two other views remain (a partly
+            hidden ball: centroid shifted by ~1 px at 0.8-0.9; a blob holding another ball of the
+            colour: 0.8 of those above 1.1 were > 2 px off in the simulated motions); a
+            two-view candidate needs both views at most ``oversize_ratio``.
     """
 
     base_sigma_m: float = 0.008
@@ -126,6 +135,10 @@ class TrackerParams:
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
+    max_loo_px: float = 3.0
+    partial_ratio: float = 0.88
+    view_choice_margin_m: float = 0.02
+    oversize_ratio: float = 1.1
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -421,21 +434,49 @@ class Tracker:
         seen = np.isfinite(xn[..., 0]) & known[:, None]
         ball_px = stack.focal_px * self.markerset.radius_m  # ball radius in pixels at 1 m
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
-        # shifted centroid: leave it out while two full views remain
+        # shifted centroid, and a blob larger than the ball holds more than the ball (another ball
+        # of the colour touching it): leave them out while two full views remain
         with np.errstate(divide="ignore", invalid="ignore"):
-            partial = seen & (rad / (ball_px / self._pred_depth) < 0.8)
+            ratio_pred = rad / (ball_px / self._pred_depth)
+            partial = seen & ((ratio_pred < params.partial_ratio) | (ratio_pred > params.oversize_ratio))
         keep_full = (seen & ~partial).sum(axis=1) >= 2
-        seen &= ~(partial & keep_full[:, None])
+        left_out = partial & keep_full[:, None]
+        seen &= ~left_out
         ext = self.geometry.extrinsics
         pts = triangulate(ext, xn, seen)
         err, depth = self._reprojection(pts, xn)
+        # a partly hidden view is shifted by less than the ball's radius: one that the point
+        # misses by more says that a full view holds another ball of the colour (two views always
+        # meet near some point): triangulate from all views and let the worst go below
+        with np.errstate(invalid="ignore"):
+            r_px = ball_px / self._pred_depth
+            recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
+        if recheck.any():
+            redo = np.flatnonzero(recheck)
+            seen[redo] |= left_out[redo]
+            pts[redo] = triangulate(ext, xn[redo], seen[redo])
+            err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         rows = np.arange(m_count)
+        changed = np.ones(m_count, dtype=bool)  # views changed since the leave-one-out check
         for _ in range(n_cams):  # drop the worst view while it misses and three or more remain
             worst = np.argmax(np.where(seen, err, -1.0), axis=1)
-            drop = (err[rows, worst] > params.max_reproj_px) & (seen.sum(axis=1) >= 3)
+            many = seen.sum(axis=1) >= 3
+            drop = (err[rows, worst] > params.max_reproj_px) & many
+            # a wrong ball in one of three views pulls the point towards itself and hides its own
+            # miss; the point from the other views shows it (leave-one-out)
+            probe = np.flatnonzero(many & ~drop & changed)
+            if probe.size:
+                others = seen[probe].copy()
+                others[np.arange(probe.size), worst[probe]] = False
+                p_loo = triangulate(ext, xn[probe], others)
+                e_loo, _ = self._reprojection(p_loo, xn[probe])
+                drop[probe] = e_loo[np.arange(probe.size), worst[probe]] > params.max_loo_px
             if not drop.any():
                 break
             redo = np.flatnonzero(drop)
+            changed = drop
+            for m in redo.tolist():
+                worst[m] = self._view_to_drop(m, seen[m], xn[m], pred[m], int(worst[m]))
             seen[redo, worst[drop]] = False
             pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
@@ -445,7 +486,7 @@ class Tracker:
         # ball of the right size in both views (as in tracking.reconstruction)
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio_now = rad / (ball_px / depth)
-            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now < 1.35))).any(axis=1)
+            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
             measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
             measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
             off = pts - pred
@@ -466,10 +507,40 @@ class Tracker:
             for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        measured &= self._segments_consistent(dist, new_pos, measured)
+        with np.errstate(invalid="ignore"):
+            surprise = np.sqrt((off * off) @ np.ones(3)) / sigma  # distance to the prediction in sigmas
+        measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         return new_pos, measured
+
+    def _view_to_drop(self, m: int, seen: np.ndarray, xn: np.ndarray, pred: np.ndarray, worst: int) -> int:
+        """Which of marker m's (3 or more) views to drop: the worst, unless another view's removal
+        leaves a point that fits the other views (RMS within ``max_reproj_px``) more than
+        ``view_choice_margin_m`` nearer the prediction: then the one that leaves it nearest. Two
+        partly hidden views, one of them another ball, can each fit a full view within a pixel;
+        the prediction tells them apart.
+
+        Args:
+            seen: (C,) the views used; xn: (C, 2) normalized observations; pred: (3,) prediction.
+        """
+        views = np.flatnonzero(seen)
+        keep = np.repeat(seen[None, :], views.size, axis=0)
+        keep[np.arange(views.size), views] = False
+        obs = np.repeat(xn[None], views.size, axis=0)
+        pts = triangulate(self.geometry.extrinsics, obs, keep)
+        err, _ = self._reprojection(pts, obs)
+        rms = np.sqrt((np.where(keep, err, 0.0) ** 2).sum(axis=1) / keep.sum(axis=1))
+        fits = rms <= self.params.max_reproj_px
+        if not fits.any():
+            return worst
+        dist = np.linalg.norm(pts - pred, axis=1)
+        near = np.where(fits, dist, np.inf)
+        i_worst = int(np.flatnonzero(views == worst)[0])
+        # the worst view goes unless that leaves the point clearly farther from the prediction
+        if not fits[i_worst] or dist[i_worst] > near.min() + self.params.view_choice_margin_m:
+            return int(views[np.argmin(near)])
+        return worst
 
     def _reprojection(self, pts: np.ndarray, xn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
@@ -479,7 +550,8 @@ class Tracker:
             d = cam[..., :2] / depth[..., None] - xn
         return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
 
-    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray) -> np.ndarray:
+    def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray,
+                             surprise: np.ndarray) -> np.ndarray:
         """False for a marker whose distance to a segment neighbour broke its learned length.
 
         Neighbours measured this frame count; so do neighbours known only from last frame's
@@ -490,6 +562,7 @@ class Tracker:
             dist: (M, M) distances between the markers' candidate positions ``pos`` (NaN where
                 either has none).
             pos: (M, 3) candidate positions; measured: (M,) bool.
+            surprise: (M,) each candidate's distance to its prediction in prediction sigmas.
         """
         tol = self.params.segment_tol_m
         with np.errstate(invalid="ignore"):
@@ -506,9 +579,15 @@ class Tracker:
                     bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
                 measured = measured & ~bad_prev
         ok = measured.copy()
-        # drop the marker involved in most broken pairs, one at a time
+        # drop the marker involved in most broken pairs, one at a time; of markers in as many, a
+        # returning one (not measured last frame) first: the one measured last frame still sits
+        # on its ball far more often than a marker found again after hiding; then the candidate
+        # farther from its prediction (a wrong ball in one view moves the point away from it)
+        returning_now = self.status != _MEASURED
         while bad_pair.any():
-            worst = int(np.argmax(bad_pair.sum(axis=1)))
+            count = bad_pair.sum(axis=1)
+            worst = max(np.flatnonzero(count == count.max()).tolist(),
+                        key=lambda i: (bool(returning_now[i]), float(surprise[i])))
             ok[worst] = False
             bad_pair[worst, :] = bad_pair[:, worst] = False
         return ok
