@@ -30,6 +30,16 @@ import numpy as np
 from calibration.errors import CalibrationError
 
 
+def grid_points(rows: int, cols: int, spacing_m: float) -> np.ndarray:
+    """(rows * cols, 3) float64 points of a planar grid in its own frame (z = 0), row by row with
+    x fastest: a board's inner corners in corner-id order."""
+    j, i = np.mgrid[0:rows, 0:cols]
+    pts = np.zeros((rows * cols, 3))
+    pts[:, 0] = i.ravel() * spacing_m
+    pts[:, 1] = j.ravel() * spacing_m
+    return pts
+
+
 @dataclass(frozen=True, slots=True)
 class Checkerboard:
     """A planar checkerboard.
@@ -75,11 +85,7 @@ class Checkerboard:
 
     def object_points(self) -> np.ndarray:
         """(N, 3) float64 corner positions in the board frame, metres, row by row (x fastest)."""
-        j, i = np.mgrid[0 : self.rows, 0 : self.cols]
-        pts = np.zeros((self.n_corners, 3))
-        pts[:, 0] = i.ravel() * self.square_m
-        pts[:, 1] = j.ravel() * self.square_m
-        return pts
+        return grid_points(self.rows, self.cols, self.square_m)
 
     def is_black(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Whether board-frame points (metres) lie on a black square (False on the white margin).
@@ -133,6 +139,17 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
+def usable_gray(image: np.ndarray) -> tuple[np.ndarray | None, str]:
+    """The 8-bit grey image to look for a board in, or (None, why it cannot hold one)."""
+    gray = to_gray(np.asarray(image))
+    if gray.dtype != np.uint8 or gray.ndim != 2 or min(gray.shape) < 16:
+        return None, f"not an 8-bit image of at least 16x16 pixels (got {gray.dtype} {gray.shape})"
+    contrast = float(np.percentile(gray, 99) - np.percentile(gray, 1))
+    if contrast < 20:
+        return None, f"almost uniform image (contrast {contrast:.0f} of 255): check the exposure and the lens cap"
+    return gray, ""
+
+
 def detect_board(image: np.ndarray, board) -> tuple[Detection | None, str]:
     """Find the board's inner corners in an image, in canonical order.
 
@@ -147,12 +164,9 @@ def detect_board(image: np.ndarray, board) -> tuple[Detection | None, str]:
         from calibration.charuco import detect_charuco  # charuco imports this module
 
         return detect_charuco(image, board)
-    gray = to_gray(np.asarray(image))
-    if gray.dtype != np.uint8 or gray.ndim != 2 or min(gray.shape) < 16:
-        return None, f"not an 8-bit image of at least 16x16 pixels (got {gray.dtype} {gray.shape})"
-    contrast = float(np.percentile(gray, 99) - np.percentile(gray, 1))
-    if contrast < 20:
-        return None, f"almost uniform image (contrast {contrast:.0f} of 255): check the exposure and the lens cap"
+    gray, reason = usable_gray(image)
+    if gray is None:
+        return None, reason
     corners = _find_corners(gray, board)
     if corners is None:
         return None, f"no {board.cols}x{board.rows} board found: the whole board must be in view, sharp and not too small"

@@ -31,7 +31,7 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from calibration.board import Detection, to_gray
+from calibration.board import Detection, grid_points, usable_gray
 from calibration.errors import CalibrationError
 
 MIN_CORNERS = 6  # fewer corners in one view constrain a camera too weakly (and may be collinear)
@@ -111,11 +111,7 @@ class CharucoBoard:
 
     def object_points(self) -> np.ndarray:
         """(N, 3) float64 corner positions in the board frame, metres, in corner-id order."""
-        j, i = np.mgrid[0 : self.rows, 0 : self.cols]
-        pts = np.zeros((self.n_corners, 3))
-        pts[:, 0] = i.ravel() * self.square_m
-        pts[:, 1] = j.ravel() * self.square_m
-        return pts
+        return grid_points(self.rows, self.cols, self.square_m)
 
     def is_black(self, x_m: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Whether board-frame points (metres) lie on black print (False on the white margin).
@@ -181,12 +177,9 @@ def detect_charuco(image: np.ndarray, board: CharucoBoard) -> tuple[Detection | 
         (detection, "") with ``ids`` (M,) sorted corner ids and ``uv_px`` (M, 2) float64 their
         (distorted) pixel positions, or (None, reason) with a reason a person can act on.
     """
-    gray = to_gray(np.asarray(image))
-    if gray.dtype != np.uint8 or gray.ndim != 2 or min(gray.shape) < 16:
-        return None, f"not an 8-bit image of at least 16x16 pixels (got {gray.dtype} {gray.shape})"
-    contrast = float(np.percentile(gray, 99) - np.percentile(gray, 1))
-    if contrast < 20:
-        return None, f"almost uniform image (contrast {contrast:.0f} of 255): check the exposure and the lens cap"
+    gray, reason = usable_gray(image)
+    if gray is None:
+        return None, reason
     corners, ids, _, marker_ids = _detector(board).detectBoard(gray)
     if marker_ids is None or len(marker_ids) == 0:
         return None, f"no {board.dictionary} markers found: check the board settings (--squares, --dictionary) and focus"

@@ -163,6 +163,18 @@ vec3 shade(vec3 n, vec3 pos, vec3 srgb, vec2 look) {
 }
 """
 
+# Per-instance inputs of an ellipsoid, for both of its programs (ray-cast and meshed).
+_ELLIPSOID_INSTANCE_GLSL = """in vec3 i_centre;
+in vec3 i_ax0;
+in vec3 i_ax1;
+in vec3 i_ax2;
+in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
+in vec3 i_nrm1;
+in vec3 i_nrm2;
+in vec3 i_rgb;
+in vec2 i_style;  // estimated and lost look amounts
+"""
+
 # Ellipsoids (and spheres) are ray-cast on a screen-space quad bounding their exact outline
 # (from the dual quadric, as the simulator's cameras draw them): two triangles each instead of an
 # 80-320 triangle icosphere. llvmpipe pays per triangle (setup and binning, ~0.3 us each) more
@@ -172,16 +184,7 @@ _VERTEX_ELLIPSOID = """
 #version 330
 uniform mat4 u_clip_from_world;
 uniform vec2 u_pad_ndc;  // 1.5 pixels in NDC units
-in vec3 i_centre;
-in vec3 i_ax0;
-in vec3 i_ax1;
-in vec3 i_ax2;
-in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
-in vec3 i_nrm1;
-in vec3 i_nrm2;
-in vec3 i_rgb;
-in vec2 i_style;  // estimated and lost look amounts
-flat out vec3 v_centre;
+""" + _ELLIPSOID_INSTANCE_GLSL + """flat out vec3 v_centre;
 flat out mat3 v_nrm;
 flat out vec3 v_rgb;
 flat out vec2 v_style;
@@ -239,16 +242,7 @@ _VERTEX_ELLIPSOID_MESH = """
 #version 330
 uniform mat4 u_clip_from_world;
 in vec3 in_pos;  // unit sphere: position = normal
-in vec3 i_centre;
-in vec3 i_ax0;
-in vec3 i_ax1;
-in vec3 i_ax2;
-in vec3 i_nrm0;  // columns of the inverse transpose of (ax0, ax1, ax2): normals
-in vec3 i_nrm1;
-in vec3 i_nrm2;
-in vec3 i_rgb;
-in vec2 i_style;  // estimated and lost look amounts
-out vec3 v_pos;
+""" + _ELLIPSOID_INSTANCE_GLSL + """out vec3 v_pos;
 out vec3 v_normal;
 flat out vec3 v_rgb;
 flat out vec2 v_style;
