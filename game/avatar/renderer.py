@@ -41,7 +41,7 @@ from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
-from tracking.sim.glsl import OUTLINE_BOX_GLSL
+from tracking.sim.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
 from tracking.sim.meshes import cone_band, icosphere
 
 
@@ -269,20 +269,9 @@ out vec3 v_pos;
 out vec3 v_normal;
 flat out vec3 v_rgb;
 flat out vec2 v_style;
+""" + BAND_GLSL + """
 void main() {
-    vec3 axis = i_p1 - i_p0;
-    float d = max(length(axis), 1e-6);
-    axis /= d;
-    // The cone tangent to both end spheres: its normal tilts by asin((r0 - r1) / d) towards p1.
-    float s = clamp((i_r.x - i_r.y) / d, -1.0, 1.0);
-    float c = sqrt(max(1.0 - s * s, 0.0));
-    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
-    vec3 u = normalize(cross(helper, axis));
-    vec3 v = cross(axis, u);
-    vec3 n = s * axis + c * (in_ring.x * u + in_ring.y * v);
-    bool at_p1 = in_ring.z > 0.5;
-    v_pos = (at_p1 ? i_p1 : i_p0) + (at_p1 ? i_r.y : i_r.x) * n;
-    v_normal = n;
+    band_vertex(i_p0, i_p1, i_r, in_ring, v_pos, v_normal);
     v_rgb = i_rgb;
     v_style = i_style;
     gl_Position = u_clip_from_world * vec4(v_pos, 1.0);

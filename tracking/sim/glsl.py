@@ -1,4 +1,5 @@
-"""GLSL shared by the simulator's cameras and the game's avatar: the screen box of an ellipsoid.
+"""GLSL shared by the simulator's cameras and the game's avatar: the screen box of an ellipsoid,
+and the vertices of the band tangent to a capsule's two end spheres.
 
 Ellipsoids are ray-cast on a screen-space quad that bounds their exact outline: with M the
 clip-from-unit-sphere matrix (clip_from_world times the ellipsoid's axes and centre), the
@@ -35,5 +36,24 @@ vec2 outline_quad_corner(mat4 m, vec2 pad_ndc) {
     vec2 lo, hi;
     if (outline_box(m, lo, hi)) return clamp(mix(lo - pad_ndc, hi + pad_ndc, corner), -1.0, 1.0);
     return corner * 2.0 - 1.0;
+}
+"""
+
+# A tapered capsule's side: the cone tangent to its end spheres (p0, r.x) and (p1, r.y), as an
+# instanced band mesh whose vertices are (cos theta, sin theta, t) with t 0 at p0 and 1 at p1.
+BAND_GLSL = """
+void band_vertex(vec3 p0, vec3 p1, vec2 r, vec3 ring, out vec3 pos, out vec3 n) {
+    vec3 axis = p1 - p0;
+    float d = max(length(axis), 1e-9);
+    axis /= d;
+    // The cone tangent to both end spheres: its normal tilts by asin((r0 - r1) / d) towards p1.
+    float s = clamp((r.x - r.y) / d, -1.0, 1.0);
+    float c = sqrt(max(1.0 - s * s, 0.0));
+    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 u = normalize(cross(helper, axis));
+    vec3 v = cross(axis, u);  // (u, v, axis) right-handed: keeps the mesh's outward winding
+    n = s * axis + c * (ring.x * u + ring.y * v);
+    bool at_p1 = ring.z > 0.5;
+    pos = (at_p1 ? p1 : p0) + (at_p1 ? r.y : r.x) * n;
 }
 """

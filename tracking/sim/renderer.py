@@ -60,7 +60,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import RehabError
-from tracking.sim.glsl import OUTLINE_BOX_GLSL
+from tracking.sim.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
 from tracking.sim.meshes import cone_band
 from tracking.sim.room import build_room
 from tracking.sim.scene import SceneFrame
@@ -289,19 +289,10 @@ in vec2 i_r;
 in vec3 i_rgb;
 in float i_spec;
 out vec3 v_colour;
+""" + BAND_GLSL + """
 void main() {
-    vec3 axis = i_p1 - i_p0;
-    float d = length(axis);
-    axis /= d;
-    // The cone tangent to both end spheres: its normal tilts by asin((r0 - r1) / d) towards p1.
-    float s = clamp((i_r.x - i_r.y) / d, -1.0, 1.0);
-    float c = sqrt(max(1.0 - s * s, 0.0));
-    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
-    vec3 u = normalize(cross(helper, axis));
-    vec3 v = cross(axis, u);  // (u, v, axis) right-handed: keeps the mesh's outward winding
-    vec3 n = s * axis + c * (in_ring.x * u + in_ring.y * v);
-    bool at_p1 = in_ring.z > 0.5;
-    vec3 pos = (at_p1 ? i_p1 : i_p0) + (at_p1 ? i_r.y : i_r.x) * n;
+    vec3 pos, n;
+    band_vertex(i_p0, i_p1, i_r, in_ring, pos, n);
     v_colour = shade(n, pos, i_rgb, i_spec);
     gl_Position = u_clip_from_world * vec4(pos, 1.0);
 }
