@@ -148,20 +148,28 @@ class LiveLink:
     def latest_images(self):
         return self.tracker.latest_images() if self.ready else None
 
+    def problem(self) -> tuple[str, bool] | None:
+        """What keeps samples from flowing, in words, and whether it is a failure (not a wait);
+        None while the tracker runs."""
+        if self.state is LinkState.STARTING:
+            return "Starting the tracker...", False
+        if self.state is LinkState.FAILED:
+            return f"The tracker is not running: {self.error}", True
+        if self.state is LinkState.RESTARTING:
+            return "The tracker stopped: restarting...", False
+        if self.state is LinkState.CLOSED:
+            return "The tracker is off", True
+        return None
+
     def summary(self) -> str:
         """One line for the home screen."""
-        if self.state is LinkState.STARTING:
-            return "Starting the tracker..."
-        if self.state is LinkState.FAILED:
-            return f"The tracker is not running: {self.error}"
-        if self.state is LinkState.RESTARTING:
-            return "The tracker stopped; restarting..."
         if self.state is LinkState.RUNNING:
             kind = getattr(getattr(self.tracker, "source", None), "kind", "sim")
             what = "Simulated patient" if kind == "sim" else "Cameras"
             line = f"{what}: tracker running, {self.source_fps:.0f} frame sets/s"
             return f"{line}; {self.warning}" if self.warning else line
-        return ""
+        problem = self.problem()
+        return problem[0] if problem and self.state is not LinkState.CLOSED else ""
 
     # ------------------------------------------------------------------ commands
     def _command(self, method: str, *args) -> None:

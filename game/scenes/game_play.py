@@ -35,7 +35,6 @@ from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_f
 from game.gfx import theme
 from game.gfx.view3d import Viewport, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
-from game.live_link import LinkState
 from game.scenes.live import MIN_KNOWN_MARKERS
 from game.scenes.river_view import RiverView
 
@@ -313,15 +312,9 @@ class GameScene(BaseScene):
     # ------------------------------------------------------------------ samples -> session
     def no_reading_reason(self) -> str:
         """Why there is no usable sample now ("" when samples flow)."""
-        state = self.link.state
-        if state is LinkState.STARTING:
-            return "Starting the tracker..."
-        if state is LinkState.FAILED:
-            return f"The tracker is not running: {self.link.error}"
-        if state is LinkState.RESTARTING:
-            return "The tracker stopped: restarting..."
-        if state is LinkState.CLOSED:
-            return "The tracker is off"
+        problem = self.link.problem()
+        if problem is not None:
+            return problem[0]
         if self.link.latest is None:
             return "Waiting for the first images..."
         if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:

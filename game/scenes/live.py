@@ -452,15 +452,9 @@ class LiveScene(BaseScene):
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""
-        state = self.link.state
-        if state is LinkState.STARTING:
-            return "Starting the tracker...", theme.ATTENTION
-        if state is LinkState.FAILED:
-            return f"The tracker is not running: {self.link.error}", theme.FAILURE
-        if state is LinkState.RESTARTING:
-            return "The tracker stopped: restarting...", theme.ATTENTION
-        if state is LinkState.CLOSED:
-            return "The tracker is off", theme.FAILURE
+        problem = self.link.problem()
+        if problem is not None:
+            return problem[0], theme.FAILURE if problem[1] else theme.ATTENTION
         if sample is None:
             return "Waiting for the first images...", theme.ATTENTION
         if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:

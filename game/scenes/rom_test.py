@@ -37,7 +37,6 @@ from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.gfx.view3d import Viewport
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.live_link import LinkState
 from game.rom.session import RomProgress, RomResult, RomState, RomTestSession, round_to_5
 from game.rom.spec import RomTest, load_all_rom_tests
 from game.scenes.live import MIN_KNOWN_MARKERS
@@ -466,13 +465,9 @@ class RomTestScene(BaseScene):
 
     def status_line(self) -> tuple[str, tuple]:
         """What the scene says now, and its colour."""
-        state = self.link.state
-        if state is LinkState.STARTING:
-            return "Starting the tracker...", theme.ATTENTION
-        if state is LinkState.FAILED:
-            return f"The tracker is not running: {self.link.error}", theme.FAILURE
-        if state is LinkState.RESTARTING:
-            return "The tracker stopped: restarting...", theme.ATTENTION
+        problem = self.link.problem()
+        if problem is not None:
+            return problem[0], theme.FAILURE if problem[1] else theme.ATTENTION
         p = self.progress
         if self.notice[0]:
             return self.notice

@@ -11,7 +11,7 @@ import pytest
 from calibration.files import save_calibration_toml
 from game.app import App, BaseScene, Services, Settings
 from game.input import Action, Pointer, PointerKind, Press
-from game.live_link import LinkState
+from game.live_link import LinkState, LiveLink
 from game.scenes.monitor import MonitorScene, image_to_screen
 from tracking.colour_adapt import calibration_colours
 from tracking.live import LiveSample, SourceConfig
@@ -24,6 +24,8 @@ MAGENTA = [225, 0, 210]
 
 class ImageLink:
     """Stands in for LiveLink: one frame set of simulated images and a sample of the true markers."""
+
+    problem = LiveLink.problem  # the real words for the link's state
 
     def __init__(self, images, markerset, cameras, truth_m, source: SourceConfig) -> None:
         self.markerset, self.cameras, self._images = markerset, cameras, images

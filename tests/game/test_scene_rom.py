@@ -14,7 +14,7 @@ import pytest
 from game.app import App, BaseScene, Services, Settings
 from game.db import Database
 from game.input import Action, Pointer, PointerKind, Press
-from game.live_link import LinkState
+from game.live_link import LinkState, LiveLink
 from game.rom.session import RomState
 from game.rom.spec import load_rom_test
 from game.scenes.patients import NEW_PATIENT, PatientsScene, next_patient_id
@@ -32,6 +32,8 @@ FPS = 15.0
 class MotionLink:
     """Stands in for :class:`game.live_link.LiveLink`: a scripted motion of the simulated body,
     its exact markers as samples (``feed_until``), and a record of the motions asked for."""
+
+    problem = LiveLink.problem  # the real words for the link's state
 
     def __init__(self) -> None:
         self.markerset = load_markerset("upper_limb_seated")

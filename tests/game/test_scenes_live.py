@@ -12,7 +12,7 @@ import pytest
 from game.app import App, BaseScene, Services, Settings
 from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
-from game.live_link import LinkState
+from game.live_link import LinkState, LiveLink
 from game.avatar.live import LiveAvatar
 from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
 from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
@@ -27,6 +27,8 @@ SIZE = (640, 360)
 class BodyLink:
     """Stands in for :class:`game.live_link.LiveLink`: samples of the simulated body's exact
     markers for the poses the test sets, and a record of the commands sent."""
+
+    problem = LiveLink.problem  # the real words for the link's state
 
     def __init__(self, clock) -> None:
         self.markerset = load_markerset("upper_limb_seated")
