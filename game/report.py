@@ -26,7 +26,99 @@ from game.rom.session import round_to_5
 #: The normal band: from this fraction below the standard's normal value up to it.
 NORMAL_BAND_FRACTION = 0.10
 
-_SIDE_STYLE = {"right": ("#1f77b4", "o"), "left": ("#d62728", "s")}
+
+
+@dataclass(frozen=True, slots=True)
+class HistoryLook:
+    """How :func:`plot_rom_history` draws (the HTML report's light figure, the game's dark one).
+
+    Attributes:
+        band_rgb, band_alpha, band_line_width: the normal band and its upper line.
+        band_label: the band's legend entry, formatted with ``standard`` and ``normal_deg``.
+        side_style: per side, (colour, marker); line_width, marker_size: of the sides' lines.
+        compensation_rgb, compensation_size, compensation_width: rings round compensated maxima.
+        estimated_rgb, estimated_size: crosses on maxima that relied on estimated markers.
+        minor_grid_rgb, major_grid_rgb, minor_grid_width, major_grid_width: the y grid (5-degree
+            minor lines, the clinical recording grid).
+        coarse_above_deg: a y span over this many degrees gets 20-degree major lines, else 10.
+        date_chars: the slice of the session's UTC time stamp shown under its number.
+        line_zorder: of the sides' lines (None: matplotlib's default).
+    """
+
+    band_rgb: str
+    band_alpha: float
+    band_line_width: float
+    band_label: str
+    side_style: dict
+    line_width: float
+    marker_size: float
+    compensation_rgb: str
+    compensation_size: float
+    compensation_width: float
+    estimated_rgb: str
+    estimated_size: float
+    minor_grid_rgb: str
+    major_grid_rgb: str
+    minor_grid_width: float
+    major_grid_width: float
+    coarse_above_deg: float
+    date_chars: slice
+    line_zorder: float | None = None
+
+
+_REPORT_LOOK = HistoryLook(
+    band_rgb="#2ca02c", band_alpha=0.18, band_line_width=1.2,
+    band_label="normal ({standard} {normal:g}, band to -" + f"{100 * NORMAL_BAND_FRACTION:.0f}" + " %)",
+    side_style={"right": ("#1f77b4", "o"), "left": ("#d62728", "s")}, line_width=1.5, marker_size=7,
+    compensation_rgb="#ff7f0e", compensation_size=180, compensation_width=2,
+    estimated_rgb="black", estimated_size=60,
+    minor_grid_rgb="#dddddd", major_grid_rgb="#bbbbbb", minor_grid_width=0.6, major_grid_width=0.8,
+    coarse_above_deg=120, date_chars=slice(0, 10))
+
+
+def plot_rom_history(ax, rows: Sequence[RomRow], order: dict[str, int], normal_deg: float | None, standard: str,
+                     look: HistoryLook) -> tuple[list[int], dict[int, str]]:
+    """Draw one test's maxima over the sessions (both sides, the normal band, compensation and
+    estimated-marker flags, the 5-degree grid) on ``ax``.
+
+    Returns:
+        The session numbers shown and each one's date text, for the caller's x tick labels.
+    """
+    from matplotlib.ticker import MultipleLocator
+
+    values = [r.value_deg for r in rows]
+    if normal_deg is not None:
+        lo = normal_deg * (1.0 - NORMAL_BAND_FRACTION)
+        ax.axhspan(lo, normal_deg, color=look.band_rgb, alpha=look.band_alpha, lw=0,
+                   label=look.band_label.format(standard=standard.upper(), normal=normal_deg))
+        ax.axhline(normal_deg, color=look.band_rgb, lw=look.band_line_width)
+        values += [lo, normal_deg]
+    for side in ("right", "left"):
+        pts = sorted(((order[r.session_uid], r) for r in rows if r.side == side), key=lambda p: p[0])
+        if not pts:
+            continue
+        colour, marker = look.side_style[side]
+        extra = {} if look.line_zorder is None else {"zorder": look.line_zorder}
+        ax.plot([p[0] for p in pts], [p[1].value_deg for p in pts], color=colour, lw=look.line_width, marker=marker,
+                ms=look.marker_size, label=side, **extra)
+        flagged = [(x, r.value_deg) for x, r in pts if r.compensation]
+        if flagged:
+            ax.scatter(*zip(*flagged), s=look.compensation_size, facecolors="none", edgecolors=look.compensation_rgb,
+                       linewidths=look.compensation_width, zorder=5, label=f"{side}: compensation")
+        est = [(x, r.value_deg) for x, r in pts if r.estimated_markers]
+        if est:
+            ax.scatter(*zip(*est), s=look.estimated_size, marker="x", color=look.estimated_rgb, zorder=6,
+                       label=f"{side}: estimated markers")
+    lo_y = 5 * (int(min(values) // 5) - 2)
+    hi_y = 5 * (int(max(values) // 5) + 3)
+    ax.set_ylim(lo_y, hi_y)
+    ax.yaxis.set_minor_locator(MultipleLocator(5))   # the clinical 5-degree recording grid
+    ax.yaxis.set_major_locator(MultipleLocator(10 if hi_y - lo_y <= look.coarse_above_deg else 20))
+    ax.grid(True, which="minor", axis="y", color=look.minor_grid_rgb, lw=look.minor_grid_width)
+    ax.grid(True, which="major", axis="y", color=look.major_grid_rgb, lw=look.major_grid_width)
+    xs = sorted({order[r.session_uid] for r in rows})
+    dates = {order[r.session_uid]: r.session_started_utc[look.date_chars] for r in rows}
+    return xs, dates
 
 _CSV_COLUMNS = ("session_started_utc", "test", "side", "angle", "mode", "position", "standard", "reference_deg",
                 "value_deg", "rounded_deg", "start_deg", "range_deg", "compensation", "estimated_markers",
@@ -73,40 +165,10 @@ def rom_plot_png(title: str, rows: Sequence[RomRow], order: dict[str, int], norm
                  standard: str) -> str:
     """One test's maxima over the sessions (both sides) as a base64 PNG."""
     from matplotlib.figure import Figure
-    from matplotlib.ticker import MultipleLocator
 
     fig = Figure(figsize=(7.5, 3.4))
     ax = fig.add_subplot(1, 1, 1)
-    values = [r.value_deg for r in rows]
-    if normal_deg is not None:
-        lo = normal_deg * (1.0 - NORMAL_BAND_FRACTION)
-        ax.axhspan(lo, normal_deg, color="#2ca02c", alpha=0.18, lw=0,
-                   label=f"normal ({standard.upper()} {normal_deg:g}, band to -{100 * NORMAL_BAND_FRACTION:.0f} %)")
-        ax.axhline(normal_deg, color="#2ca02c", lw=1.2)
-        values += [lo, normal_deg]
-    for side in ("right", "left"):
-        pts = sorted(((order[r.session_uid], r) for r in rows if r.side == side), key=lambda p: p[0])
-        if not pts:
-            continue
-        colour, marker = _SIDE_STYLE[side]
-        xs, ys = [p[0] for p in pts], [p[1].value_deg for p in pts]
-        ax.plot(xs, ys, color=colour, lw=1.5, marker=marker, ms=7, label=side)
-        flagged = [(x, r.value_deg) for x, r in pts if r.compensation]
-        if flagged:
-            ax.scatter(*zip(*flagged), s=180, facecolors="none", edgecolors="#ff7f0e", linewidths=2, zorder=5,
-                       label=f"{side}: compensation")
-        est = [(x, r.value_deg) for x, r in pts if r.estimated_markers]
-        if est:
-            ax.scatter(*zip(*est), s=60, marker="x", color="black", zorder=6, label=f"{side}: estimated markers")
-    lo_y = 5 * (int(min(values) // 5) - 2)
-    hi_y = 5 * (int(max(values) // 5) + 3)
-    ax.set_ylim(lo_y, hi_y)
-    ax.yaxis.set_minor_locator(MultipleLocator(5))
-    ax.yaxis.set_major_locator(MultipleLocator(10 if hi_y - lo_y <= 120 else 20))
-    ax.grid(True, which="minor", axis="y", color="#dddddd", lw=0.6)
-    ax.grid(True, which="major", axis="y", color="#bbbbbb", lw=0.8)
-    xs = sorted({order[r.session_uid] for r in rows})
-    dates = {order[r.session_uid]: r.session_started_utc[:10] for r in rows}
+    xs, dates = plot_rom_history(ax, rows, order, normal_deg, standard, _REPORT_LOOK)
     ax.set_xticks(xs)
     ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs], fontsize=8)
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)

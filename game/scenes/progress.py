@@ -13,7 +13,6 @@ uploaded as one texture; the scene's colours match the application's theme.
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ from calibration.errors import RehabError
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.report import NORMAL_BAND_FRACTION, session_order
+from game.report import HistoryLook, plot_rom_history, session_order
 from game.rom.session import round_to_5
 
 #: Plot colours (sRGB hex) on the application's dark background.
@@ -35,6 +34,13 @@ _BG = "#%02x%02x%02x" % theme.BACKGROUND
 _TEXT = "#%02x%02x%02x" % theme.TEXT
 _DIM = "#%02x%02x%02x" % theme.TEXT_DIM
 _GRID = "#3a4556"
+_GAME_LOOK = HistoryLook(
+    band_rgb=BAND_COLOUR, band_alpha=0.30, band_line_width=1.5, band_label="normal, {standard} {normal:g}",
+    side_style=SIDE_COLOURS, line_width=2.5, marker_size=10, line_zorder=4,
+    compensation_rgb="#e87068", compensation_size=330, compensation_width=2.5,
+    estimated_rgb=_TEXT, estimated_size=90,
+    minor_grid_rgb=_GRID, major_grid_rgb="#56637a", minor_grid_width=0.7, major_grid_width=1.0,
+    coarse_above_deg=100, date_chars=slice(5, 10))
 
 
 def _figure_rgb(fig) -> np.ndarray:
@@ -65,42 +71,12 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
         normal_deg: the standard's normal value for the test's position (None: no band).
     """
     from matplotlib.figure import Figure
-    from matplotlib.ticker import MultipleLocator
 
     dpi = 100
     fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
     ax = fig.add_subplot(1, 1, 1)
     _style(ax)
-    values = [r.value_deg for r in rows]
-    if normal_deg is not None:
-        lo = normal_deg * (1.0 - NORMAL_BAND_FRACTION)
-        ax.axhspan(lo, normal_deg, color=BAND_COLOUR, alpha=0.30, lw=0,
-                   label=f"normal, {standard.upper()} {normal_deg:g}")
-        ax.axhline(normal_deg, color=BAND_COLOUR, lw=1.5)
-        values += [lo, normal_deg]
-    for side in ("right", "left"):
-        pts = sorted(((order[r.session_uid], r) for r in rows if r.side == side), key=lambda p: p[0])
-        if not pts:
-            continue
-        colour, marker = SIDE_COLOURS[side]
-        ax.plot([p[0] for p in pts], [p[1].value_deg for p in pts], color=colour, lw=2.5, marker=marker, ms=10,
-                label=side, zorder=4)
-        flagged = [(x, r.value_deg) for x, r in pts if r.compensation]
-        if flagged:
-            ax.scatter(*zip(*flagged), s=330, facecolors="none", edgecolors="#e87068", linewidths=2.5, zorder=5,
-                       label=f"{side}: compensation")
-        est = [(x, r.value_deg) for x, r in pts if r.estimated_markers]
-        if est:
-            ax.scatter(*zip(*est), s=90, marker="x", color=_TEXT, zorder=6, label=f"{side}: estimated markers")
-    lo_y = 5 * (math.floor(min(values) / 5) - 2)
-    hi_y = 5 * (math.floor(max(values) / 5) + 3)
-    ax.set_ylim(lo_y, hi_y)
-    ax.yaxis.set_minor_locator(MultipleLocator(5))   # the clinical 5-degree recording grid
-    ax.yaxis.set_major_locator(MultipleLocator(10 if hi_y - lo_y <= 100 else 20))
-    ax.grid(True, which="minor", axis="y", color=_GRID, lw=0.7)
-    ax.grid(True, which="major", axis="y", color="#56637a", lw=1.0)
-    xs = sorted({order[r.session_uid] for r in rows})
-    dates = {order[r.session_uid]: r.session_started_utc[5:10] for r in rows}
+    xs, dates = plot_rom_history(ax, rows, order, normal_deg, standard, _GAME_LOOK)
     ax.set_xticks(xs)
     ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs])
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
