@@ -321,6 +321,19 @@ class Canvas:
         return lines
 
     # ------------------------------------------------------------------ images
+    def banner(self, text: str, pos: tuple[float, float], width: float, size: int, fill: Colour, border: Colour,
+               text_colour: Colour, *, scale: float = 1.0, max_lines: int = 3) -> float:
+        """A rounded box at ``pos`` (top-left), ``width`` wide, holding ``text`` wrapped to at most
+        ``max_lines`` lines, outlined in ``border``; sizes scale with ``scale``. Returns its height."""
+        x, y = pos
+        lines = self.wrap(text, size, width - 40 * scale)[:max_lines]
+        line_h = self.measure("Ag", size)[1] + 6 * scale
+        h = len(lines) * line_h + 28 * scale
+        self.rect((x, y, width, h), fill, radius=14 * scale, border=3 * scale, border_colour=border)
+        for k, line in enumerate(lines):
+            self.text(line, (x + 20 * scale, y + 14 * scale + k * line_h), size, text_colour)
+        return h
+
     def image(self, key: str, image: np.ndarray, rect: tuple[float, float, float, float], *,
               bgr: bool = True, tint: Colour = (255, 255, 255)) -> None:
         """Draw an (H, W, 3) uint8 image (OpenCV BGR unless ``bgr`` is False) stretched to ``rect``.

@@ -529,15 +529,9 @@ class GameScene(BaseScene):
             text, colour = f"Paused: {sess.compensation}", theme.FAILURE
         else:
             return
-        size = round(theme.BODY * s)
         width = self.panel_x - v.x - 2 * theme.MARGIN * s   # over the river too: the patient looks there
-        lines = c.wrap(text, size, width - 40 * s)[:3]
-        line_h = c.measure("Ag", size)[1] + 6 * s
-        bh = len(lines) * line_h + 28 * s
-        bx, by = v.x + theme.MARGIN * s, theme.MARGIN * s
-        c.rect((bx, by, width, bh), theme.OVERLAY, radius=14 * s, border=3 * s, border_colour=colour)
-        for k, line in enumerate(lines):
-            c.text(line, (bx + 20 * s, by + 14 * s + k * line_h), size, theme.TEXT)
+        c.banner(text, (v.x + theme.MARGIN * s, theme.MARGIN * s), width, round(theme.BODY * s),
+                 theme.OVERLAY, colour, theme.TEXT, scale=s)
 
     def _draw_flash(self, c) -> None:
         if self._flash is None:

@@ -479,15 +479,8 @@ class LiveScene(BaseScene):
             c.text("The avatar appears as soon as the markers are found.", (v.x + v.w / 2, v.y + v.h / 2 + 28 * s),
                    round(theme.SMALL * s), theme.TEXT_DIM, anchor="center")
             return
-        width = v.w - 2 * theme.MARGIN * s
-        size = round(theme.BODY * s)
-        lines = c.wrap(text, size, width - 40 * s)[:3]
-        line_h = c.measure("Ag", size)[1] + 6 * s
-        h = len(lines) * line_h + 28 * s
-        x, y = v.x + theme.MARGIN * s, theme.MARGIN * s
-        c.rect((x, y, width, h), theme.OVERLAY, radius=14 * s, border=3 * s, border_colour=colour)
-        for k, line in enumerate(lines):
-            c.text(line, (x + 20 * s, y + 14 * s + k * line_h), size, theme.TEXT)
+        c.banner(text, (v.x + theme.MARGIN * s, theme.MARGIN * s), v.w - 2 * theme.MARGIN * s, round(theme.BODY * s),
+                 theme.OVERLAY, colour, theme.TEXT, scale=s)
 
     def _draw_help(self, frame: Frame) -> None:
         c, s = frame.canvas, self.layout.scale
