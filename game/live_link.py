@@ -102,11 +102,15 @@ class LiveLink:
         self.error = self.status.last_error
         if self.state is LinkState.STARTING:
             if not self.tracker.ready:
-                if self._clock() - self._started_s > self._start_timeout_s:
+                if getattr(self.tracker, "gave_up", False):  # a missing camera: no use waiting longer
+                    self.state = LinkState.FAILED
+                    log.info("the tracker cannot start: %s", self.error)
+                elif self._clock() - self._started_s > self._start_timeout_s:
                     self.state = LinkState.FAILED
                     self.error = (f"the tracker did not start within {self._start_timeout_s:g} s"
                                   + (f": {self.error}" if self.error else ""))
-                    log.error("%s", self.error)
+                    # shown by the scenes (and by the command line when headless): logged quietly
+                    log.info("%s", self.error)
                 return
             self.state = LinkState.RUNNING
             for method, args in self._pending.items():

@@ -206,3 +206,14 @@ def test_bad_source_options_are_one_line(args, words, capsys):
     assert main(["play", "--headless", *args]) == 1
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0]
+
+
+def test_a_missing_camera_is_one_line_without_waiting_for_the_start_timeout(headless, short_recording, capsys):
+    t0 = time.perf_counter()
+    rc = main(["play", "--headless", "--seconds", "1", "--devices", "97,98,99,96",
+               "--calibration", str(short_recording / "calibration.toml")])
+    assert rc == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "camera cam1 (device '97'): cannot open it" in err[0]
+    assert time.perf_counter() - t0 < 45.0  # the start retries, not the 60 s start timeout
+    assert multiprocessing.active_children() == []

@@ -421,6 +421,11 @@ class LiveTracker:
             self._child.send(self._colours)
 
     @property
+    def gave_up(self) -> bool:
+        """Every start failed (the first and its retries): the reason is ``status().last_error``."""
+        return self._child is None and self._failed_starts > MAX_START_RETRIES
+
+    @property
     def ready(self) -> bool:
         """The running process reported ready (samples flow)."""
         if self._child is not None and not self._child.ready:

@@ -388,7 +388,11 @@ def tracker_main(args: ProcessArgs, conn) -> None:
             _warm_up(source, tracker)
         except Exception as exc:
             line = " ".join(str(exc).split()) or type(exc).__name__
-            log.error("the tracker process cannot start: %s", line, exc_info=not _is_user_error(exc))
+            # A user's error (a missing camera, a bad file) reaches the game, which says it once; a
+            # bug is logged here with its traceback.
+            user_error = _is_user_error(exc)
+            log.log(logging.INFO if user_error else logging.ERROR, "the tracker process cannot start: %s", line,
+                    exc_info=not user_error)
             if not args.standby:
                 writer.set_error(f"cannot start: {line}")
                 h["state"] = ProcessState.FAILED
