@@ -754,8 +754,11 @@ class Identifier:
         the same.
 
         Returns:
-            The identification or None (nothing fits, or not beyond doubt: wait).
+            The identification or None (nothing fits, or not beyond doubt: wait; no point seen
+            by two cameras: nothing to place the rays near, as when one camera is left).
         """
+        if len(p_seen_m) == 0:
+            return None
         lo, hi = p_seen_m.min(axis=0) - _RAY_BOX_M, p_seen_m.max(axis=0) + _RAY_BOX_M
         gap = 2.0 * self.markerset.radius_m - _RAY_STEP_M  # two balls do not overlap
         samples, ray_col, ray_origin, ray_whole = [], [], [], []

@@ -224,3 +224,18 @@ def test_a_stray_ray_of_an_unseen_colour_names_nothing_wrong(seed):
     result = Identifier(MS).identify_with_unseen(pts, col, stray)
     if result is not None:
         _check_named_right(result, point_marker, ADDUCTED_UNSEEN)
+
+
+@pytest.mark.parametrize("n_seen", [0, 1])
+def test_with_one_camera_left_every_marker_on_a_ray_waits(n_seen):
+    """One camera left (the others stopped): every blob is a ray and no point, or one, is seen by
+    two cameras. The identification waits instead of failing (it once raised on no point)."""
+    body = BodyModel(BodyDimensions.from_percentile(50, "male"), MS)
+    p_m = body.markers_m(perturbed_poses(n_corners=2, n_random=0)[0].pose)
+    cam = CAMERAS[1]
+    d = p_m - cam.centre_m
+    dist = np.linalg.norm(d, axis=1)
+    rays = Rays(np.repeat(cam.centre_m[None], MS.n_markers, axis=0), d / dist[:, None], MS.colour_index.astype(np.int64),
+                dist[:, None] * np.array([0.92, 1.08]), np.ones(MS.n_markers, bool))
+    pts, col = p_m[:n_seen], MS.colour_index[:n_seen]
+    assert Identifier(MS).identify_with_unseen(pts, col, rays) is None
