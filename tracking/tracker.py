@@ -106,6 +106,10 @@ class TrackerParams:
         reacquire_every: full-frame search for lost markers every this many frames.
         reacquire_radius_m: a lost marker with no measured neighbour on its segment takes a free
             point of its colour this near to where it was last seen.
+        stale_after: an estimated marker unmeasured for this many frames is searched for in the
+            full frame too (its estimate may have drifted off its ball, e.g. after the cameras
+            were blocked while the arm moved: its windows then miss it for good), every
+            ``reacquire_stale_every`` frames.
         reidentify_after: identify again when more than half the markers are lost this many frames.
         max_reproj_px: largest RMS reprojection error of a candidate.
         max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
@@ -132,6 +136,8 @@ class TrackerParams:
     segment_tol_m: float = 0.03
     reacquire_every: int = 3
     reacquire_radius_m: float = 0.08
+    stale_after: int = 3
+    reacquire_stale_every: int = 6
     reidentify_after: int = 30
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
@@ -295,12 +301,17 @@ class Tracker:
         self.times.add("candidates + triangulation", t2 - t1)
 
         n_points = 0
-        lost_now = ~measured & (self.status == MarkerStatus.LOST)
-        if lost_now.any() and self.frame_count % self.params.reacquire_every == 0:
+        search = ~measured & (self.status == MarkerStatus.LOST)
+        if not (search.any() and self.frame_count % p.reacquire_every == 0):
+            search[:] = False
+        if self.frame_count % p.reacquire_stale_every == 0:
+            search |= ~measured & (self.status == MarkerStatus.ESTIMATED) & (self.frames_unmeasured >= p.stale_after)
+        found = np.zeros_like(measured)
+        if search.any():
             t3 = time.perf_counter()
             points = self.measurer.measure(images)
             n_points = len(points)
-            self._reacquire(points, new_pos, measured)
+            found = self._reacquire(points, new_pos, measured, search)
             self.times.add("full-frame re-acquisition", time.perf_counter() - t3)
 
         t4 = time.perf_counter()
@@ -311,7 +322,8 @@ class Tracker:
         self.positions = est_pos
         self.status = np.asarray(status, dtype=np.uint8)
         has = np.isfinite(est_pos).all(axis=1) & np.isfinite(prev).all(axis=1)
-        self.velocity = np.where(has[:, None], est_pos - prev, 0.0)
+        # a marker found again far from its estimate: the jump is the estimate's error, not motion
+        self.velocity = np.where((has & ~found)[:, None], est_pos - prev, 0.0)
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
         self._last_seen[measured] = est_pos[measured]
         self._learn_lengths(measured)
@@ -601,35 +613,52 @@ class Tracker:
         upd = pair & ~first
         self.seg_length[upd] = 0.95 * self.seg_length[upd] + 0.05 * d[upd]
 
-    def _reacquire(self, points: Points3D, new_pos: np.ndarray, measured: np.ndarray) -> None:
-        """Give lost markers the unexplained full-frame points that fit their segment lengths."""
+    def _reacquire(self, points: Points3D, new_pos: np.ndarray, measured: np.ndarray, search: np.ndarray) -> np.ndarray:
+        """Give the markers of ``search`` (lost, or estimated for long) the unexplained full-frame
+        points of their colour that fit them.
+
+        A point fits when its distances to the measured markers of the segment (and the near-rigid
+        pairs) are the learned ones; with no such neighbour, when it satisfies the marker set's
+        distance rules to the measured markers (``Identifier.distance_fit_m``) and is the only
+        free point of the colour that does; a lost marker with neither also takes the nearest
+        point within ``reacquire_radius_m`` of where it was last seen (still within the rules).
+        An estimated marker is only taken on the learned lengths or a unique rule fit (its
+        windows already searched near its estimate).
+
+        Returns:
+            (M,) bool, the markers found (``new_pos`` and ``measured`` are updated in place).
+        """
+        found = np.zeros(len(measured), dtype=bool)
         if len(points) == 0:
-            return
+            return found
+        p_m = points.p_world_m
         taken = np.zeros(len(points), dtype=bool)
         for m in np.flatnonzero(measured):
-            d = np.linalg.norm(points.p_world_m - new_pos[m], axis=1)
-            taken |= d < 0.02
+            taken |= np.linalg.norm(p_m - new_pos[m], axis=1) < 0.02
         last = self._last_seen
-        for m in np.flatnonzero(~measured & (self.status == MarkerStatus.LOST)):
+        tol = self.params.segment_tol_m
+        for m in np.flatnonzero(search & ~measured):
             cands = np.flatnonzero(~taken & (points.colour == self.colour[m]))
-            if not np.isfinite(last[m]).all():  # unseen since identification: the rules' distances decide
-                fit = self.identifier.distance_fit_m(m, points.p_world_m[cands], new_pos, measured)
-                fits = cands[np.isfinite(fit) & (fit >= 0.0)]
-                if len(fits) == 1:
-                    new_pos[m], measured[m], taken[fits[0]] = points.p_world_m[fits[0]], True, True
+            if cands.size == 0:
                 continue
+            best = -1
             nb = np.flatnonzero(self._same_segment[m] & measured & np.isfinite(self.seg_length[m]))
-            best, best_dev = -1, np.inf
-            for i in cands:
-                if nb.size:  # a measured neighbour on the segment: the learned lengths decide
-                    dev = np.abs(np.linalg.norm(new_pos[nb] - points.p_world_m[i], axis=1) - self.seg_length[m, nb]).max()
-                    if dev < self.params.segment_tol_m and dev < best_dev:
-                        best, best_dev = i, dev
-                elif np.isfinite(last[m]).all():  # otherwise: near where it was last seen
-                    dev = float(np.linalg.norm(points.p_world_m[i] - last[m]))
-                    if dev < self.params.reacquire_radius_m and dev < best_dev:
-                        best, best_dev = i, dev
+            if nb.size:  # a measured neighbour on the segment: the learned lengths decide
+                dev = np.abs(np.linalg.norm(new_pos[nb][None] - p_m[cands][:, None], axis=-1)
+                             - self.seg_length[m, nb][None]).max(axis=1)
+                if dev.min() < tol:
+                    best = int(cands[np.argmin(dev)])
+            else:
+                fit = self.identifier.distance_fit_m(m, p_m[cands], new_pos, measured)
+                ruled = np.isfinite(fit)  # a rule links the marker to a measured one
+                within = ~ruled | (fit >= 0.0)
+                if self.status[m] == MarkerStatus.LOST and np.isfinite(last[m]).all():
+                    dev = np.where(within, np.linalg.norm(p_m[cands] - last[m], axis=1), np.inf)
+                    if dev.min() < self.params.reacquire_radius_m:
+                        best = int(cands[np.argmin(dev)])
+                fits = cands[ruled & within]
+                if best < 0 and len(fits) == 1:
+                    best = int(fits[0])
             if best >= 0:
-                new_pos[m] = points.p_world_m[best]
-                measured[m] = True
-                taken[best] = True
+                new_pos[m], measured[m], taken[best], found[m] = p_m[best], True, True, True
+        return found
