@@ -554,15 +554,25 @@ class AvatarRenderer:
         self._prog_background["u_bottom"].value = style.background_bottom_rgb
 
     # ------------------------------------------------------------------ drawing
-    def render_background(self) -> None:
+    def render_background(self, *, depth: bool = True) -> None:
         """Fill the bound framebuffer's viewport with the soft background gradient and reset its
-        depth to the far plane (a clear for the avatar's scene)."""
+        depth to the far plane (a clear for the avatar's scene).
+
+        Args:
+            depth: also reset the depth; False when the caller cleared it already (then the
+                gradient is an opaque pass without a depth test: llvmpipe paints it faster and
+                drops the tiles' earlier clear).
+        """
         ctx = self._ctx
         if not self.style.background_gradient:
             rgb = 0.5 * (np.asarray(self.style.background_top_rgb) + np.asarray(self.style.background_bottom_rgb))
             ctx.clear(*(float(c) for c in rgb), 1.0, depth=1.0, viewport=ctx.viewport)
             return
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        if not depth:
+            ctx.disable(moderngl.DEPTH_TEST)
+            self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
+            return
         # Drawn at the far plane with the depth test always passing: it also resets the depth.
         # (Framebuffer.color_mask is not used anywhere here: moderngl applies it only on use().)
         ctx.enable(moderngl.DEPTH_TEST)
