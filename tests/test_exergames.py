@@ -445,6 +445,48 @@ def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_th
     assert load_limits(db_path, "P001", [spec])["rotation"] == spec.limits
 
 
+def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_stays_there(tmp_path):
+    from game.exergames.limits import LIMIT_KEYS, describe, load_limits
+    from game.exergames.spec import TherapistLimits
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+    from game.scenes.game_play import level_shown
+
+    db_path = tmp_path / "rehab.sqlite3"
+    with Database(db_path) as db:
+        db.add_patient("P001")
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
+    menu.app = FakeApp()
+    menu.handle(Press(Action.SELECT, True))                      # the first game's column
+    for _ in range(1 + LIMIT_KEYS.index("min_level")):           # down from Play to the lowest level
+        menu.handle(Press(Action.DOWN, True))
+    spec0 = menu.game
+    assert "(no limit)" in describe(spec0, menu.limits[spec0.name], "min_level")
+    for _ in range(4):
+        menu.handle(Press(Action.RIGHT, True))                   # level 1 -> level 5
+    lim = menu.limits[spec0.name]
+    assert level_shown(lim.min_level) == 5 and describe(spec0, lim, "min_level") == "level 5"
+    assert load_limits(db_path, "P001", [spec0])[spec0.name].min_level == pytest.approx(lim.min_level)  # stored
+    menu.handle(Press(Action.SELECT, True))                      # Enter plays with it
+    (spec, kw), = opened
+    assert kw["limits"].min_level == pytest.approx(4 / 9, abs=1e-3)
+    # the session starts at the lowest level at least and failing never takes it below
+    a = LevelAdapter(spec.difficulty, start=0.0, limits=kw["limits"])
+    assert a.level == pytest.approx(4 / 9, abs=1e-3)
+    for _ in range(5 * spec.difficulty.window):
+        a.record(False)
+    assert a.level == pytest.approx(4 / 9, abs=1e-3)
+    # the highest level wins when the two cross
+    b = LevelAdapter(spec.difficulty, start=0.0, limits=TherapistLimits(min_level=0.8, max_level=0.5))
+    assert b.level == pytest.approx(0.5) and b.low == pytest.approx(0.5)
+
+
 # ----------------------------------------------------------------------------- the rotation game's river
 @pytest.mark.parametrize("side", ["right", "left"])
 def test_the_river_spans_the_measured_range_and_mirrors_the_left_arm(side):

@@ -554,15 +554,25 @@ class AvatarRenderer:
         self._prog_background["u_bottom"].value = style.background_bottom_rgb
 
     # ------------------------------------------------------------------ drawing
-    def render_background(self) -> None:
+    def render_background(self, *, depth: bool = True) -> None:
         """Fill the bound framebuffer's viewport with the soft background gradient and reset its
-        depth to the far plane (a clear for the avatar's scene)."""
+        depth to the far plane (a clear for the avatar's scene).
+
+        Args:
+            depth: also reset the depth; False when the caller cleared it already (then the
+                gradient is an opaque pass without a depth test: llvmpipe paints it faster and
+                drops the tiles' earlier clear).
+        """
         ctx = self._ctx
         if not self.style.background_gradient:
             rgb = 0.5 * (np.asarray(self.style.background_top_rgb) + np.asarray(self.style.background_bottom_rgb))
             ctx.clear(*(float(c) for c in rgb), 1.0, depth=1.0, viewport=ctx.viewport)
             return
         ctx.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        if not depth:
+            ctx.disable(moderngl.DEPTH_TEST)
+            self._empty_vao_bg.render(moderngl.TRIANGLE_STRIP, vertices=4)
+            return
         # Drawn at the far plane with the depth test always passing: it also resets the depth.
         # (Framebuffer.color_mask is not used anywhere here: moderngl applies it only on use().)
         ctx.enable(moderngl.DEPTH_TEST)
@@ -702,8 +712,11 @@ class AvatarRenderer:
         return np.concatenate(rows).astype(np.float32), np.concatenate(flags)
 
     def _draw_solids(self, cast_rows: np.ndarray, fine_rows: np.ndarray, band_rows: np.ndarray) -> None:
-        self._fine.draw(fine_rows)  # the large ones first: depth-tested, they spare later pixels
+        # The limbs first: in the games' close views the arms and the legs lie in front of the trunk
+        # and the seat, and the depth test then spares the pixels they hide (measured on the river
+        # and turn the key views: ~0.4-1.4 ms CPU less per frame than the large ellipsoids first).
         self._band.draw(band_rows)
+        self._fine.draw(fine_rows)
         # The ray-cast quads face either way (a mirrored projection flips them): no culling.
         self._ctx.disable(moderngl.CULL_FACE)
         self._ellipsoids.draw(cast_rows)

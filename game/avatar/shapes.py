@@ -80,12 +80,8 @@ class _Builder:
         self.c: list[tuple] = []
 
     def ellipsoid(self, centre, axes, rgb, part: int, fine: bool = False) -> None:
-        axes = np.array(axes, float)
-        a, b, c = axes[:, 0], axes[:, 1], axes[:, 2]
-        det = (a[1] * b[2] - a[2] * b[1]) * c[0] + (a[2] * b[0] - a[0] * b[2]) * c[1] + (a[0] * b[1] - a[1] * b[0]) * c[2]
-        if det < 0:  # keep the axes right-handed: the mesh's winding depends on it
-            axes[:, 2] = -axes[:, 2]
-        self.e.append((np.asarray(centre, float), axes, rgb, part, fine))
+        """(The axes are made right-handed all at once by :func:`_pack`.)"""
+        self.e.append((centre, axes, rgb, part, fine))
 
     def sphere(self, centre, radius: float, rgb, part: int, fine: bool = False) -> None:
         self.ellipsoid(centre, np.eye(3) * radius, rgb, part, fine)
@@ -225,9 +221,12 @@ def _shadow_blobs(pose: SkeletonPose, seat_c: np.ndarray, feet: list[np.ndarray]
 
 def _pack(b: _Builder, floor_y: float, blobs: np.ndarray) -> BodyShapes:
     e, c = b.e, b.c
+    axes = np.array([x[1] for x in e], float)
+    # keep the axes right-handed: the mesh's winding depends on it
+    axes[np.linalg.det(axes) < 0, :, 2] *= -1.0
     return BodyShapes(
-        ellipsoid_centre_m=np.array([x[0] for x in e]),
-        ellipsoid_axes_m=np.array([x[1] for x in e]),
+        ellipsoid_centre_m=np.array([x[0] for x in e], float),
+        ellipsoid_axes_m=axes,
         ellipsoid_rgb=np.array([x[2] for x in e], np.float32),
         ellipsoid_part=np.array([x[3] for x in e], np.int32),
         ellipsoid_fine=np.array([x[4] for x in e], bool),

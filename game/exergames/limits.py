@@ -3,7 +3,8 @@
 A limit left unset (None) lets the game's difficulty ramp decide; each limit has a *free* value
 (what the ramp reaches at its hardest, e.g. the smallest size) and a direction that is stricter
 (a smaller range, a bigger smallest target, a shorter hold, more time per target, a lower highest
-level). Stepping a limit back past its free value unsets it. Stored per patient and game in the
+level; for the lowest level, the one the session starts at and never falls below, a higher one).
+Stepping a limit back past its free value unsets it. Stored per patient and game in the
 database (``game_limits``, JSON of :class:`game.exergames.spec.TherapistLimits`); a stored value
 that is no longer valid for the game (the content changed) is ignored with a warning.
 """
@@ -21,23 +22,25 @@ from game.exergames.spec import GameSpec, TherapistLimits, check_limits, limit_b
 log = logging.getLogger(__name__)
 
 #: The limits in the order the menu shows them.
-LIMIT_KEYS = ("max_level", "max_range", "min_size", "max_hold_s", "min_time_s")
-#: +1: a bigger value is stricter (easier for the patient); -1: a smaller one is.
-_STRICTER = {"max_level": -1, "max_range": -1, "min_size": 1, "max_hold_s": -1, "min_time_s": 1}
-LABELS = {"max_level": "Highest level", "max_range": "Farthest target", "min_size": "Smallest target",
-          "max_hold_s": "Longest hold", "min_time_s": "Time per target"}
+LIMIT_KEYS = ("min_level", "max_level", "max_range", "min_size", "max_hold_s", "min_time_s")
+#: +1: a bigger value departs from the game's own (is stricter: easier for the patient, or for the
+#: lowest level a higher floor); -1: a smaller one does.
+_STRICTER = {"min_level": 1, "max_level": -1, "max_range": -1, "min_size": 1, "max_hold_s": -1, "min_time_s": 1}
+LABELS = {"min_level": "Lowest level", "max_level": "Highest level", "max_range": "Farthest target",
+          "min_size": "Smallest target", "max_hold_s": "Longest hold", "min_time_s": "Time per target"}
 
 
 def free_value(spec: GameSpec, key: str) -> float:
-    """What the difficulty ramp reaches at its hardest for ``key`` (an unset limit)."""
+    """What the difficulty ramp reaches at its hardest for ``key`` (an unset limit; for the lowest
+    level, the game's own ``min_level``)."""
     d = spec.difficulty
-    return {"max_level": 1.0, "max_range": max(d.top_fraction.easy, d.top_fraction.hard),
+    return {"min_level": d.min_level, "max_level": 1.0, "max_range": max(d.top_fraction.easy, d.top_fraction.hard),
             "min_size": min(d.size.easy, d.size.hard), "max_hold_s": max(d.hold_s.easy, d.hold_s.hard),
             "min_time_s": min(d.time_limit_s.easy, d.time_limit_s.hard)}[key]
 
 
 def step_size(spec: GameSpec, key: str) -> float:
-    return {"max_level": 1.0 / 9.0, "max_range": 0.05, "min_size": 0.01 if spec.kind == "reach" else 1.0,
+    return {"min_level": 1.0 / 9.0, "max_level": 1.0 / 9.0, "max_range": 0.05, "min_size": 0.01 if spec.kind == "reach" else 1.0,
             "max_hold_s": 0.1, "min_time_s": 1.0}[key]
 
 
@@ -58,7 +61,7 @@ def describe(spec: GameSpec, limits: TherapistLimits, key: str) -> str:
     """The limit's value in words for the menu ("95 % of the measured range", "the game's own: 6 cm")."""
     value = getattr(limits, key)
     shown = free_value(spec, key) if value is None else value
-    if key == "max_level":
+    if key in ("min_level", "max_level"):
         text = f"level {1 + round(shown * 9)}"
     elif key == "max_range":
         text = f"{round(shown * 100)} % of the measured range"

@@ -134,7 +134,8 @@ class LevelAdapter:
     Args:
         spec: the game's ``difficulty``.
         start, low, high: override the content's start level and limits (the therapist's choice).
-        limits: the therapist's limits (None: none); its ``max_level`` caps ``high``.
+        limits: the therapist's limits (None: none); its ``max_level`` caps ``high``, its ``min_level``
+            raises ``low`` (the highest level wins when they cross).
     """
 
     def __init__(self, spec, start: float | None = None, low: float | None = None, high: float | None = None,
@@ -145,6 +146,8 @@ class LevelAdapter:
         self.high = spec.max_level if high is None else float(high)
         if self.limits.max_level is not None:
             self.high = min(self.high, self.limits.max_level)
+        if self.limits.min_level is not None:
+            self.low = max(self.low, self.limits.min_level)
         self.low = min(self.low, self.high)   # the therapist's highest level wins over the game's lowest
         self.level = min(max(spec.start if start is None else float(start), self.low), self.high)
         self.recent: list[bool] = []

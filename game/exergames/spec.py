@@ -83,6 +83,8 @@ class TherapistLimits(StrictModel):
     success rate; these bound the values it maps to, whatever the level.
     """
 
+    min_level: float | None = pydantic.Field(
+        None, ge=0, le=1, description="lowest level (0..1): the session starts there at least and never falls below")
     max_level: float | None = pydantic.Field(None, ge=0, le=1, description="highest level (0..1) the adaptation reaches")
     max_range: float | None = pydantic.Field(
         None, gt=0, le=1.3, description="targets never beyond this fraction of the measured maximum")
@@ -169,6 +171,7 @@ def limit_bounds(spec: GameSpec) -> dict[str, tuple[float, float]]:
     time_lo, time_hi = sorted((d.time_limit_s.easy, d.time_limit_s.hard))
     hold_lo, hold_hi = sorted((d.hold_s.easy, d.hold_s.hard))
     return {
+        "min_level": (0.0, 1.0),
         "max_level": (0.0, 1.0),
         "max_range": (round(spec.comfort_fraction + 0.05, 4), spec.stretch_fraction),
         "min_size": (size_lo, 2.0 * size_hi),

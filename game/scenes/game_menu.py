@@ -1,7 +1,8 @@
 """Choose an exercise game for a patient and set the therapist's limits, in large type.
 
 Left: the games of ``content/games``. Right: the therapist's limits of the chosen game for this
-patient (:mod:`game.exergames.limits`): the highest level, the farthest target (a fraction of the
+patient (:mod:`game.exergames.limits`): the lowest level (the session starts there at least and
+never falls below), the highest level, the farthest target (a fraction of the
 measured range), the smallest target, the longest hold, the time per target. The adaptation of
 the game never goes beyond them. Changes are stored for the patient at once (``game_limits``)
 when the menu has a database, else they hold for the sessions started from this menu.
@@ -109,7 +110,7 @@ class ChooseGameScene(BaseScene):
         m = theme.MARGIN * s
         games = [(m, (150 + i * 118) * s, w * GAMES_SHARE - m, 104 * s) for i in range(len(self.games))]
         x0 = w * GAMES_SHARE + 24 * s
-        limits = [(x0, (242 + i * 78) * s, w - m - x0, 70 * s) for i in range(len(LIMIT_KEYS))]
+        limits = [(x0, (242 + i * 68) * s, w - m - x0, 60 * s) for i in range(len(LIMIT_KEYS))]
         r = 24 * s
         buttons = [((x + ww - 96 * s, y + hh / 2), (x + ww - 36 * s, y + hh / 2)) for x, y, ww, hh in limits]
         play = (x0, 150 * s, w - m - x0, 60 * s)
@@ -205,8 +206,8 @@ class ChooseGameScene(BaseScene):
                 focus = self.column == j + 1
                 c.rect(rect, theme.PANEL, radius=14 * s, border=3 * s,
                        border_colour=theme.ACCENT if focus else theme.PANEL_EDGE)
-                c.text(LABELS[key], (rect[0] + 18 * s, rect[1] + 6 * s), round(theme.SMALL * s), theme.TEXT_DIM)
-                c.text(describe(g, lim, key), (rect[0] + 18 * s, rect[1] + 34 * s), round(theme.BODY * s),
+                c.text(LABELS[key], (rect[0] + 18 * s, rect[1] + 5 * s), round(theme.SMALL * s), theme.TEXT_DIM)
+                c.text(describe(g, lim, key), (rect[0] + 18 * s, rect[1] + 30 * s), round(theme.BODY * s),
                        theme.TEXT if getattr(lim, key) is not None else theme.TEXT_FAINT)
                 for centre, sign in ((minus, "-"), (plus, "+")):
                     c.circle(centre, r, (*theme.ACCENT_DARK, 255), border=2 * s, border_colour=theme.ACCENT)

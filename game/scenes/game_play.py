@@ -391,7 +391,8 @@ class GameScene(BaseScene):
         ctx = frame.screen.ctx
         ctx.viewport = self.view.gl(frame.size_px[1])
         try:
-            self.avatar.renderer.render_background()
+            # the frame's depth was cleared whole (App.render): the gradient needs not write it again
+            self.avatar.renderer.render_background(depth=False)
             if self._prepared is not None:
                 self.avatar.renderer.draw(self._prepared)
         finally:

@@ -3,17 +3,19 @@ gates (two buoys) drifting down to it.
 
 Seen from above, the river runs from the top of its rectangle down past the boat near the bottom;
 its banks are the ends of the patient's measured rotation range (:mod:`game.exergames.river`).
-Everything that does not change is drawn once with pygame into textures when the scene opens (a
-tile of water and banks that scrolls by moving its texture coordinates, the boat turned to a few
-headings), so a frame costs two textured quads and a few dozen shapes of the canvas batch.
+The water and the banks are bands of flat colour (opaque fills: llvmpipe, the CPU rasterizer, paints
+a third of the window cheapest that way; a textured tile cost ~1.5 ms more CPU per frame) with ripples
+and bushes carried down by the flow; the ripples and the boat (turned to a few headings) are drawn
+once with pygame when the scene opens. A frame costs seven fills, a textured quad and a few dozen
+shapes of the canvas batch.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import dataclass
 
-import moderngl
 import numpy as np
 import pygame
 
@@ -26,6 +28,7 @@ WATER_DEEP = (34, 104, 156)
 BANK = (86, 150, 84)
 BANK_DARK = (62, 118, 64)
 SAND = (214, 196, 140)
+RIPPLE = (150, 200, 230)
 #: Headings the boat is drawn at (degrees, + turns the bow to the right).
 HEADINGS_DEG = tuple(range(-24, 25, 6))
 #: Share of the river's width that is bank on each side.
@@ -65,33 +68,47 @@ def _boat_surface(length_px: int, colour) -> pygame.Surface:
     return surf
 
 
-def _river_tile(w: int, h: int, seed: int = 5) -> pygame.Surface:
-    """Banks and water of the river's rectangle; tiles vertically (features wrap top to bottom)."""
+@dataclass(frozen=True)
+class _RiverLook:
+    """The river's rectangle as bands across it and features on it, in pixels of the rectangle.
+
+    Attributes:
+        bands: (x0, x1, colour) from left to right: bank, sand, shallow water, deep water and back.
+        ripples: (x, y, mask) white arcs on the water (masks made once, drawn tinted).
+        bushes: (x, y, radius) dark green discs on the banks.
+        height: the rectangle's height: the features repeat every ``height`` pixels down the river.
+    """
+
+    bands: tuple
+    ripples: tuple
+    bushes: tuple
+    height: float
+
+
+def _river_look(w: int, h: int, seed: int = 5) -> _RiverLook:
+    """Banks and water of the river's rectangle; its features repeat vertically (they wrap top to bottom)."""
     rng = np.random.default_rng(seed)
-    surf = pygame.Surface((w, h), pygame.SRCALPHA)   # (a plain surface's RGBA bytes have no real alpha)
-    surf.fill((*BANK, 255))
     bank = round(w * BANK_SHARE)
-    pygame.draw.rect(surf, SAND, (bank - 5, 0, w - 2 * bank + 10, h))
-    pygame.draw.rect(surf, WATER, (bank, 0, w - 2 * bank, h))
     shallow = round(w * 0.06)     # deeper water away from the banks
-    pygame.draw.rect(surf, WATER_DEEP, (bank + shallow, 0, w - 2 * (bank + shallow), h))
-
-    def wrapped(draw, y):
-        for dy in (-h, 0, h):
-            draw(y + dy)
-
-    for _ in range(max(8, h // 40)):   # ripples
+    bands = ((0, bank - 5, BANK), (bank - 5, bank, SAND), (bank, bank + shallow, WATER),
+             (bank + shallow, w - bank - shallow, WATER_DEEP), (w - bank - shallow, w - bank, WATER),
+             (w - bank, w - bank + 5, SAND), (w - bank + 5, w, BANK))
+    ripples = []
+    for _ in range(max(8, h // 40)):
         x = rng.uniform(bank + 14, w - bank - 40)
         y = rng.uniform(0, h)
         length = rng.uniform(16, 34)
-        wrapped(lambda yy: pygame.draw.arc(surf, (150, 200, 230), (x, yy, length, 10), 0.3, math.pi - 0.3, 2), y)
-    for side in (0, 1):                 # bushes on the banks
+        mask = pygame.Surface((math.ceil(length) + 1, 11), pygame.SRCALPHA)
+        pygame.draw.arc(mask, (255, 255, 255), (x % 1.0, 0, length, 10), 0.3, math.pi - 0.3, 2)
+        ripples.append((math.floor(x), y, mask))
+    bushes = []
+    for side in (0, 1):
         for _ in range(max(4, h // 90)):
             x = rng.uniform(4, bank - 6) if side == 0 else rng.uniform(w - bank + 6, w - 4)
             y = rng.uniform(0, h)
             r = rng.uniform(5, min(11, bank * 0.35))
-            wrapped(lambda yy: pygame.draw.circle(surf, BANK_DARK, (round(x), round(yy)), round(r)), y)
-    return surf
+            bushes.append((float(round(x)), y, float(round(r))))
+    return _RiverLook(bands, tuple(ripples), tuple(bushes), float(h))
 
 
 class RiverView:
@@ -112,10 +129,7 @@ class RiverView:
         self.colour = tuple(colour)
         x, y, w, h = self.rect
         self.ctx = ctx
-        self.water = surface_to_texture(ctx, _river_tile(round(w), round(h)))
-        self.water.repeat_y = True
-        # drawn one texel per pixel: nearest sampling looks the same and costs less on a CPU rasteriser
-        self.water.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.look = _river_look(round(w), round(h))
         self.boat_len = 80.0 * scale
         boat = _boat_surface(round(self.boat_len), self.colour)
         self.boat_half_w = boat.get_width() / 2.0
@@ -202,11 +216,7 @@ class RiverView:
         """The river, the gates, the boat and its labels."""
         x, y, w, h = self.rect
         s = self.scale
-        v0 = -self.scroll_px / h
-        c.flush()
-        self.ctx.disable(moderngl.BLEND)    # the tile is opaque: no blending over a third of the window
-        c.texture(self.water, self.rect, uv=(0.0, v0, 1.0, v0 + 1.0))
-        self.ctx.enable(moderngl.BLEND)
+        self._draw_water(c)
         # where the arm points now along the river's width, from its ends: "in" and "out" banks
         size = round(theme.SMALL * 0.85 * s)
         out_left = river.side == "left"
@@ -249,6 +259,27 @@ class RiverView:
                 c.rect((gx - half, gy - 40 * s, 2 * half * left, 7 * s), (*self.colour, 230), radius=3 * s)
         self._draw_boat(c, boat_inside)
 
+    def _draw_water(self, c) -> None:
+        """The banks and the water, the ripples and the bushes moved down by the flow (wrapping)."""
+        x, y, w, h = self.rect
+        look = self.look
+        x0, y0 = round(x), round(y)
+        for a, b, colour in look.bands:
+            c.fill((x0 + a, y0, b - a, look.height), colour)
+        c.clip((x0, y0, round(w), look.height))
+        shift = self.scroll_px % look.height
+        for rx, ry, mask in look.ripples:
+            yy = (ry + shift) % look.height
+            for wrap in (0.0, -look.height):     # the part still above the top edge
+                if -12.0 < yy + wrap < look.height:
+                    c.sprite(("river-ripple", id(mask)), mask, (x0 + rx, y0 + yy + wrap), RIPPLE)
+        for bx, by, r in look.bushes:
+            yy = (by + shift) % look.height
+            for wrap in (0.0, -look.height, look.height):
+                if -r < yy + wrap < look.height + r:
+                    c.circle((x0 + bx, y0 + yy + wrap), r, BANK_DARK)
+        c.clip(None)
+
     def _draw_gate(self, c, river: River, value_deg: float, size_deg: float, gy: float, colour, *,
                    alpha: int = 255, shrink: float = 1.0, paused: bool = False) -> None:
         s = self.scale
@@ -281,7 +312,6 @@ class RiverView:
         self.boat_px = (self.boat_x, cy)
 
     def release(self) -> None:
-        self.water.release()
         for tex, _ in self.boats.values():
             tex.release()
         self.boats.clear()

@@ -213,3 +213,51 @@ def test_text_atlas_starts_afresh_when_full_without_losing_queued_text(screen):
     canvas.end()
     assert canvas.atlas.resets == resets
     canvas.release()
+
+
+def test_canvas_fill_sprite_and_clip_draw_in_call_order(screen):
+    import pygame
+
+    from game.gfx.canvas import Canvas
+
+    canvas = Canvas(screen.ctx, screen.size_px)
+    mask = pygame.Surface((20, 10), pygame.SRCALPHA)
+    mask.fill((255, 255, 255, 255))
+    screen.begin((0.0, 0.0, 0.0))
+    canvas.begin()
+    canvas.rect((0, 0, 100, 100), (255, 0, 0))               # under the fill: covered by it
+    canvas.fill((10, 10, 80, 60), (0, 0, 200, 90))            # opaque whatever the alpha
+    canvas.sprite("block", mask, (20, 20), (0, 255, 0))       # the mask tinted, over the fill
+    canvas.clip((150, 0, 40, 40))
+    canvas.circle((150, 20), 30, (255, 255, 0))               # only its part inside the clip
+    canvas.clip(None)
+    canvas.end()
+    rgb = screen.read_rgb().astype(int)
+    assert (rgb[50, 60] == (0, 0, 200)).all()                 # the fill, opaque
+    assert (rgb[5, 5] == (255, 0, 0)).all()                   # the rect outside the fill
+    assert (rgb[25, 30] == (0, 255, 0)).all()                 # the sprite
+    assert (rgb[20, 160] == (255, 255, 0)).all()              # the circle inside the clip
+    assert (rgb[20, 135] == (0, 0, 0)).all()                  # ... and not left of it
+    canvas.release()
+
+
+def test_canvas_writes_new_strings_into_the_atlas_before_any_draw_of_the_frame(screen, monkeypatch):
+    """llvmpipe rasterizes later: a texture written after a draw that samples it was issued makes
+    the driver finish that draw first (a stall), so the frame's new strings go in before its draws."""
+    from game.gfx.canvas import Canvas
+
+    canvas = Canvas(screen.ctx, screen.size_px)
+    events = []
+    write, draw = canvas.atlas.texture.write, canvas._draw_batch
+    monkeypatch.setattr(canvas.atlas.texture, "write", lambda *a, **k: (events.append("write"), write(*a, **k)))
+    monkeypatch.setattr(canvas, "_draw_batch", lambda rows: (events.append("draw"), draw(rows)))
+    screen.begin((0.0, 0.0, 0.0))
+    canvas.begin()
+    canvas.text("first", (10, 10), 24, (255, 255, 255))
+    canvas.fill((0, 60, 50, 50), (0, 0, 255))                 # ends a batch
+    canvas.text("second", (10, 120), 24, (255, 255, 255))    # a new string after it
+    canvas.end()
+    assert events == ["write", "write", "draw", "draw"]
+    rgb = screen.read_rgb()
+    assert (rgb[10:40, 10:60].max(axis=2) > 128).sum() > 20 and (rgb[120:150, 10:70].max(axis=2) > 128).sum() > 20
+    canvas.release()
