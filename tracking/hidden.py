@@ -641,9 +641,13 @@ class Estimator:
             extrapolated, and dropped past this uncertainty.
         max_forearm_stale_s: a LOST styloid marker is estimated again from the other, measured,
             while its forearm's angles are at most this old.
-        view_gate_m: a single camera view of a hidden styloid marker (:meth:`observe_views`)
-            counts in the forearm fit when its ray passes this near the predicted marker (farther:
-            another ball of the colour).
+        view_gate_m: a single camera view of a hidden marker (:meth:`observe_views`) counts
+            (in the forearm fit, or moving an elbow hinge's estimate across the ray) when its ray
+            passes this near the predicted marker (farther: another ball of the colour).
+        drop_unpinned: a styloid marker whose partner, measured, has not pinned both forearm
+            angles for longer than the extrapolation allows (``max_forearm_sigma_deg``) is LOST.
+        view_estimate_sigma_m: uncertainty of an elbow hinge's estimate across a view's ray
+            (the estimate moves towards the ray by the views' relative weight).
     """
 
     def __init__(
@@ -680,6 +684,7 @@ class Estimator:
         max_forearm_stale_s: float = 0.5,
         view_gate_m: float = 0.025,
         drop_unpinned: bool = True,
+        view_estimate_sigma_m: float = 0.01,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -743,6 +748,7 @@ class Estimator:
         self.max_forearm_stale_frames = max_forearm_stale_s * float(fps)
         self.view_gate_m = float(view_gate_m)
         self.drop_unpinned = bool(drop_unpinned)
+        self.view_estimate_sigma_m = float(view_estimate_sigma_m)
         self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
         self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
         self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
@@ -1093,6 +1099,23 @@ class Estimator:
                     out.append((slot, o, d, sigma_rad))
         return out
 
+    def _refine_with_views(self, k: int, est: np.ndarray) -> np.ndarray:
+        """An estimate of marker k moved across its single camera views (rays passing within
+        ``view_gate_m``): per ray, the estimate's offset across the ray is shrunk by the weight of
+        the view (``sigma_rad`` times the distance) against the estimate's (``view_estimate_sigma_m``);
+        the depth along the ray stays the estimate's."""
+        q = est.tolist()
+        for o, d, sigma_rad in self._views[k]:
+            v = [q[i] - o[i] for i in range(3)]
+            s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
+            off = [v[i] - s * d[i] for i in range(3)]
+            if s <= 0 or sum(x * x for x in off) > self.view_gate_m ** 2:
+                continue
+            sr2 = (sigma_rad * s) ** 2
+            gain = self.view_estimate_sigma_m ** 2 / (self.view_estimate_sigma_m ** 2 + sr2)
+            q = [q[i] - gain * off[i] for i in range(3)]
+        return np.array(q)
+
     def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
         """Carry the arms' flexion and supination to the next frame."""
         for r, (wa, wb, ea, eb, _) in enumerate(self._arms):
@@ -1289,6 +1312,8 @@ class Estimator:
                 if not np.all(np.isfinite(est)):
                     hidden[k] = False
                     continue
+                if how == Method.HINGE and k in self._views:
+                    est = self._refine_with_views(k, est)
                 used[k] = how
                 p[k] = est
                 weight[k] = self.estimate_weight
