@@ -736,3 +736,30 @@ def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
         assert s[2] == ESTIMATED
         errors.append(np.linalg.norm(p[2] - truth[20, 2]))
     assert errors[0] < 0.003 and errors[1] > 0.05, errors
+
+
+def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
+    truth = []
+    for i in range(21):
+        e1, e2, w1, w2 = forearm_pose(0.8 + 0.3 * i / 30, 0.3)
+        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+    truth = np.array(truth)
+    measured = np.ones((21, 5), dtype=bool)
+    measured[20, 2] = False
+    camera = truth[20, 2] + np.array([0.0, 0.3, -2.0])  # looks across the elbow's axis
+    errors = []
+    for view in (False, True):
+        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+        for t in range(20):
+            est.update(truth[t], measured[t])
+        est.hinge_length[:] *= 1.1  # a hinge 1 cm off along the axis (a wrong learned width)
+        if view:
+            d = (truth[20, 2] - camera) / np.linalg.norm(truth[20, 2] - camera)
+            est.observe_views([2], camera[None], d[None], [0.001])
+        p, s = est.update(np.where(measured[20][:, None], truth[20], np.nan), measured[20])
+        assert s[2] == ESTIMATED
+        errors.append(np.linalg.norm(p[2] - truth[20, 2]))
+    assert errors[0] > 0.008 and errors[1] < 0.003, errors
