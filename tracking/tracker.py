@@ -530,10 +530,9 @@ class Tracker:
         Args:
             xn: (M, C, 2) normalized observations; views: (M, C) bool, the views to pass.
         """
-        m_idx, c_idx = np.nonzero(views)
-        if not m_idx.size:
-            self.estimator.observe_views(m_idx, np.empty((0, 3)), np.empty((0, 3)), np.empty(0))
+        if not views.any():  # the estimator forgets the views of the last frame by itself
             return
+        m_idx, c_idx = np.nonzero(views)
         rot = self.geometry.extrinsics[c_idx, :, :3]  # world -> camera
         ray = np.concatenate([xn[m_idx, c_idx], np.ones((m_idx.size, 1))], axis=1)
         d = np.einsum("kji,kj->ki", rot, ray)  # R^T [x, y, 1]
