@@ -39,7 +39,12 @@ measured comparison and the recommended configuration):
   when the forearm has turned (pronation-supination breaks the rigid shape), it is the mirror of
   the measured styloid through the wrist centre, which lies on a learned circle about the flexion
   axis with the measured styloid in its plane perpendicular to the forearm. (The circle alone is
-  exact but amplifies noise: the styloids are only 5 cm off a 24 cm axis.)
+  exact but amplifies noise: the styloids are only 5 cm off a 24 cm axis.) Where the arm's
+  flexion and supination are tracked (:func:`fit_forearm`), a hidden styloid comes from their fit
+  to the measured styloid; a styloid whose partner has not pinned both angles for longer than the
+  extrapolation allows is LOST.
+- **Single views** (:meth:`Estimator.observe_views`): a camera that alone sees a hidden marker
+  gives a ray; it enters the forearm fit, and moves an elbow hinge's estimate across the ray.
 Each estimator falls back to the next simpler one when ill-posed (hinge/forearm -> rigid ->
 equation 6 -> the marker's own decaying velocity). The estimate is fed back as the base of the
 next frame, as in the paper. An estimate is dropped to LOST when it leaves what the body allows:
