@@ -39,7 +39,12 @@ measured comparison and the recommended configuration):
   when the forearm has turned (pronation-supination breaks the rigid shape), it is the mirror of
   the measured styloid through the wrist centre, which lies on a learned circle about the flexion
   axis with the measured styloid in its plane perpendicular to the forearm. (The circle alone is
-  exact but amplifies noise: the styloids are only 5 cm off a 24 cm axis.)
+  exact but amplifies noise: the styloids are only 5 cm off a 24 cm axis.) Where the arm's
+  flexion and supination are tracked (:func:`fit_forearm`), a hidden styloid comes from their fit
+  to the measured styloid; a styloid whose partner has not pinned both angles for longer than the
+  extrapolation allows is LOST.
+- **Single views** (:meth:`Estimator.observe_views`): a camera that alone sees a hidden marker
+  gives a ray; it enters the forearm fit, and moves an elbow hinge's estimate across the ray.
 Each estimator falls back to the next simpler one when ill-posed (hinge/forearm -> rigid ->
 equation 6 -> the marker's own decaying velocity). The estimate is fed back as the base of the
 next frame, as in the paper. An estimate is dropped to LOST when it leaves what the body allows:
@@ -507,14 +512,19 @@ def _forearm_points_f(c0, n, r1, r2, along, radius, half, tilt, theta, psi):
 
 def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple[int, np.ndarray]],
                 theta_pred: float, psi_pred: float, sigma_theta: float, sigma_psi: float,
-                sigma_m: float = 0.002, iterations: int = 4, pinned: list[bool] | None = None) -> tuple[float, float]:
+                sigma_m: float = 0.002, iterations: int = 4, pinned: list[bool] | None = None,
+                rays: Sequence[tuple[int, Sequence[float], Sequence[float], float]] = (),
+                info: list[float] | None = None, pin_sigma: float | None = None) -> tuple[float, float]:
     """Flexion and supination (radians) that best place the measured styloid markers, near the
     prediction: Gauss-Newton on ``sum |marker - model|^2 / sigma_m^2 + (theta - theta_pred)^2 /
-    sigma_theta^2 + (psi - psi_pred)^2 / sigma_psi^2``.
+    sigma_theta^2 + (psi - psi_pred)^2 / sigma_psi^2``, plus for each single camera view of a
+    hidden styloid marker (a ray) the model marker's distance from the ray over that view's
+    uncertainty there (``sigma_rad`` times the distance along the ray).
 
     One styloid marker leaves flexion and supination confounded where its line is near the flexion
     axis (palm up or down: the marker's motion along the forearm's front is R dtheta + half dpsi);
-    the prediction settles what the marker cannot.
+    a view of the hidden one separates them unless it looks along that direction; the prediction
+    settles what the markers cannot.
 
     Args:
         measured: (slot, position) pairs, slot 0 for the first styloid marker, 1 for the second.
@@ -522,15 +532,31 @@ def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple
         pinned: a one-element list that receives whether the markers alone pin both angles more
             firmly than the prediction (the data's information in its weakest direction exceeds
             the prior's), i.e. whether the answer is evidence rather than the prediction echoed.
+        pin_sigma: judge ``pinned`` against this uncertainty (rad) instead of the prior's (a prior
+            loosened by a long extrapolation would make weak data look pinning).
+        rays: (slot, camera centre, unit direction, sigma_rad) of single views of hidden styloid
+            markers (world metres).
+        info: a three-element list that receives the normal matrix (aa, ab, bb) of the last
+            iteration, prior included (its inverse is the fit's covariance, rad^2).
     """
     geo = (frame.centre.tolist(), frame.n.tolist(), frame.r1.tolist(), frame.r2.tolist(),
            shape.along, shape.radius, shape.half, shape.tilt)
     obs = [(slot, pos.tolist()) for slot, pos in measured]
     wm, wt, wp = 1.0 / sigma_m, 1.0 / sigma_theta, 1.0 / sigma_psi
+    # each ray's weight at the prediction's distance along it (it barely changes within the fit)
+    pts0 = _forearm_points_f(*geo, theta_pred, psi_pred)
+    lines = []
+    for slot, o, d, sigma_rad in rays:
+        along = sum((pts0[slot][i] - o[i]) * d[i] for i in range(3))
+        lines.append((slot, o, d, 1.0 / (sigma_rad * max(along, 0.1))))
 
     def residual(th: float, ps: float) -> list[float]:
         pts = _forearm_points_f(*geo, th, ps)
         res = [(pts[slot][i] - pos[i]) * wm for slot, pos in obs for i in range(3)]
+        for slot, o, d, w in lines:  # the part of (model - camera centre) across the ray
+            q = [pts[slot][i] - o[i] for i in range(3)]
+            s = q[0] * d[0] + q[1] * d[1] + q[2] * d[2]
+            res += [(q[i] - s * d[i]) * w for i in range(3)]
         res += [(th - theta_pred) * wt, (ps - psi_pred) * wp]
         return res
 
@@ -545,7 +571,9 @@ def fit_forearm(frame: ElbowFrame, shape: ForearmShape, measured: Sequence[tuple
         if pinned is not None:  # the data's part of the normal matrix (without the two prior rows)
             da, db = aa - wt * wt, bb - wp * wp
             smallest = 0.5 * (da + db) - math.sqrt(max(0.25 * (da - db) ** 2 + ab * ab, 0.0))
-            pinned[0] = smallest > max(wt, wp) ** 2
+            pinned[0] = smallest > (max(wt, wp) if pin_sigma is None else 1.0 / pin_sigma) ** 2
+        if info is not None:
+            info[:] = [aa, ab, bb]
         ga = sum(x * y for x, y in zip(ja, r0))
         gb = sum(x * y for x, y in zip(jb, r0))
         det = aa * bb - ab * ab
@@ -618,6 +646,13 @@ class Estimator:
             extrapolated, and dropped past this uncertainty.
         max_forearm_stale_s: a LOST styloid marker is estimated again from the other, measured,
             while its forearm's angles are at most this old.
+        view_gate_m: a single camera view of a hidden marker (:meth:`observe_views`) counts
+            (in the forearm fit, or moving an elbow hinge's estimate across the ray) when its ray
+            passes this near the predicted marker (farther: another ball of the colour).
+        drop_unpinned: a styloid marker whose partner, measured, has not pinned both forearm
+            angles for longer than the extrapolation allows (``max_forearm_sigma_deg``) is LOST.
+        view_estimate_sigma_m: uncertainty of an elbow hinge's estimate across a view's ray
+            (the estimate moves towards the ray by the views' relative weight).
     """
 
     def __init__(
@@ -652,6 +687,9 @@ class Estimator:
         max_forearm_sigma_deg: float = 3.0,
         max_hinge_sigma_deg: float = 10.0,
         max_forearm_stale_s: float = 0.5,
+        view_gate_m: float = 0.025,
+        drop_unpinned: bool = True,
+        view_estimate_sigma_m: float = 0.01,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -713,6 +751,9 @@ class Estimator:
         self.max_forearm_sigma_rad = math.radians(max_forearm_sigma_deg)
         self.max_hinge_sigma_rad = math.radians(max_hinge_sigma_deg)
         self.max_forearm_stale_frames = max_forearm_stale_s * float(fps)
+        self.view_gate_m = float(view_gate_m)
+        self.drop_unpinned = bool(drop_unpinned)
+        self.view_estimate_sigma_m = float(view_estimate_sigma_m)
         self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
         self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
         self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
@@ -773,6 +814,7 @@ class Estimator:
         self.hinge_length = np.full(len(self._h_idx), np.nan)
         self.hinge_fore = np.full(len(self._h_idx), np.nan)
         self.hinge_free = np.zeros(len(self._h_idx), dtype=np.int64)  # frames in a row with the axis extrapolated
+        self.hinge_sense = np.zeros(len(self._h_idx))  # sign of n . (humerus x forearm), learned (0: unknown)
         self._hinge_free_now: set[int] = set()
         # per forearm: wrist centre along the flexion axis and distance from it
         self.fore_along = np.full(len(self._f_idx), np.nan)
@@ -783,9 +825,11 @@ class Estimator:
         self.arm_velocity = np.full((len(self._arms), 2), np.nan)
         self.arm_age = np.zeros(len(self._arms), dtype=np.int64)         # frames since the angles were known
         self.arm_unmeasured = np.zeros(len(self._arms), dtype=np.int64)  # frames with neither styloid measured
+        self.arm_unpinned = np.zeros(len(self._arms), dtype=np.int64)  # frames since the data last pinned both angles
         self._arm_seen: dict[int, tuple[float, float, bool]] = {}  # this frame: arm -> (theta, psi, measured)
         self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._arm_pinned: set[int] = set()
+        self._views: dict[int, list[tuple[list[float], list[float], float]]] = {}
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
@@ -864,6 +908,14 @@ class Estimator:
             first = not math.isfinite(old_l)
             self.hinge_length[r] = length if first else old_l + rate * (length - old_l)
             self.hinge_fore[r] = fore if first else old_f + rate * (fore - old_f)
+            # which way the axis runs relative to humerus x forearm (the elbow bends one way only):
+            # learned where the elbow is clearly flexed (sine of the angle > 0.3)
+            hum = [0.5 * (pl[mk][i] + pl[pa][i]) - pl[sh][i] for i in range(3)]
+            fa = [0.5 * (pl[wa][i] + pl[wb][i] - pl[mk][i] - pl[pa][i]) for i in range(3)]
+            hx = [hum[1] * fa[2] - hum[2] * fa[1], hum[2] * fa[0] - hum[0] * fa[2], hum[0] * fa[1] - hum[1] * fa[0]]
+            sense = n[0] * hx[0] + n[1] * hx[1] + n[2] * hx[2]
+            if abs(sense) > 0.3 * math.sqrt(sum(x * x for x in hum) * sum(x * x for x in fa)):
+                self.hinge_sense[r] += rate * (math.copysign(1.0, sense) - self.hinge_sense[r])
             # shoulder pivot G = S + R g: the axis is perpendicular to the humerus,
             # n . (centre - G) = 0, i.e. (R^T n) . g = n . (centre - S): one equation per frame,
             # accumulated with forgetting (normal equations per shoulder, solved when needed)
@@ -946,9 +998,14 @@ class Estimator:
         if ok[wa] and ok[wb]:
             rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
             values.append(self.hinge_fore[r])
+        side = prev_axis
+        if len(rows) == 2 and abs(self.hinge_sense[r]) > 0.5:
+            # of the two mirror images the one on the side the elbow bends (anatomy), rather than
+            # the previous axis' (which may itself be an extrapolation, or unknown after LOST)
+            side = math.copysign(1.0, self.hinge_sense[r]) * _unit(_cross(rows[0], rows[1]))
         fixed = [0]
         n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
-                       axis_prev=prev_axis, fixed=fixed)
+                       axis_prev=side, fixed=fixed)
         if fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
             free = self.hinge_free[r] + 1
             arm = self._arm_of_elbow.get(k)
@@ -993,24 +1050,76 @@ class Estimator:
             return None
         measured = [(s, p[w]) for s, w in ((0, wa), (1, wb)) if ok[w]]
         age = int(self.arm_age[r]) + 1  # frames since the angles were last known
-        if measured:
-            pred = angles + np.nan_to_num(vel) * min(age, 2)
+        pred = angles + np.nan_to_num(vel) * min(age, 2)
+        rays = self._styloid_rays(r, frame, shape, pred, ok)
+        evidence = bool(measured)
+        theta = psi = math.nan
+        if measured or rays:
             sigma = self.forearm_sigma_rad + self._arm_sigma(r, age - 1)
             pinned = [False]
             theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
-                                     float(sigma[0]), float(sigma[1]), pinned=pinned)
+                                     float(sigma[0]), float(sigma[1]), pinned=pinned, rays=rays,
+                                     pin_sigma=self.forearm_sigma_rad)
             if pinned[0]:
                 self._arm_pinned.add(r)
-        else:
+                evidence = True
+            elif measured and self.drop_unpinned and np.any(
+                    self._arm_sigma(r, int(self.arm_unpinned[r]) + 1) > self.max_forearm_sigma_rad):
+                # one styloid measured, but for a while it has not pinned both angles (palm up or
+                # down: flexion and supination confounded): the hidden one is a guess, dropped;
+                # the fit stays the arm's state, so the marker returns once the data pin it again
+                self._arm_seen[r] = (theta, psi, False)
+                self._arm_points[r] = (_DROP, _DROP)
+                return _DROP
+        if not evidence:  # neither styloid measured, and no view that pins the angles
             unmeasured = int(self.arm_unmeasured[r]) + 1
             if np.any(self._arm_sigma(r, unmeasured) > self.max_forearm_sigma_rad):
                 self._arm_points[r] = (_DROP, _DROP)
                 return _DROP
             theta, psi = (float(x) for x in angles + np.nan_to_num(vel) * self._arm_decay)
-        self._arm_seen[r] = (theta, psi, bool(measured))
+        self._arm_seen[r] = (theta, psi, evidence)
         pts = forearm_markers(frame, shape, theta, psi)
         self._arm_points[r] = pts
         return pts[slot]
+
+    def _styloid_rays(self, r: int, frame: ElbowFrame, shape: ForearmShape, pred: np.ndarray,
+                      ok: np.ndarray) -> list[tuple[int, list[float], list[float], float]]:
+        """Single camera views (:meth:`observe_views`) of arm r's hidden styloid markers that pass
+        within ``view_gate_m`` of the predicted marker, as :func:`fit_forearm`'s rays."""
+        if not self._views:
+            return []
+        wa, wb = self._arms[r][:2]
+        out = []
+        pts = None
+        for slot, w in ((0, wa), (1, wb)):
+            if ok[w] or w not in self._views:
+                continue
+            if pts is None:
+                pts = forearm_markers(frame, shape, float(pred[0]), float(pred[1]))
+            q = pts[slot].tolist()
+            for o, d, sigma_rad in self._views[w]:
+                v = [q[i] - o[i] for i in range(3)]
+                s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
+                if sum((v[i] - s * d[i]) ** 2 for i in range(3)) <= self.view_gate_m ** 2:
+                    out.append((slot, o, d, sigma_rad))
+        return out
+
+    def _refine_with_views(self, k: int, est: np.ndarray) -> np.ndarray:
+        """An estimate of marker k moved across its single camera views (rays passing within
+        ``view_gate_m``): per ray, the estimate's offset across the ray is shrunk by the weight of
+        the view (``sigma_rad`` times the distance) against the estimate's (``view_estimate_sigma_m``);
+        the depth along the ray stays the estimate's."""
+        q = est.tolist()
+        for o, d, sigma_rad in self._views[k]:
+            v = [q[i] - o[i] for i in range(3)]
+            s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
+            off = [v[i] - s * d[i] for i in range(3)]
+            if s <= 0 or sum(x * x for x in off) > self.view_gate_m ** 2:
+                continue
+            sr2 = (sigma_rad * s) ** 2
+            gain = self.view_estimate_sigma_m ** 2 / (self.view_estimate_sigma_m ** 2 + sr2)
+            q = [q[i] - gain * off[i] for i in range(3)]
+        return np.array(q)
 
     def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
         """Carry the arms' flexion and supination to the next frame."""
@@ -1022,8 +1131,10 @@ class Estimator:
                 angles = None if frame is None else forearm_angles(frame, p[wa], p[wb])
                 if angles is not None:
                     seen = (angles[0], angles[1], True)
-            measured_now = bool(ok[wa] or ok[wb])
+            measured_now = bool(ok[wa] or ok[wb]) or (seen is not None and seen[2])
             self.arm_unmeasured[r] = 0 if measured_now else self.arm_unmeasured[r] + 1
+            pinned_now = bool(ok[wa] and ok[wb]) or r in self._arm_pinned
+            self.arm_unpinned[r] = 0 if pinned_now else self.arm_unpinned[r] + 1
             if seen is None:  # the last angles stay, older by a frame
                 self.arm_age[r] += 1
                 continue
@@ -1121,6 +1232,27 @@ class Estimator:
                 return est
         return None
 
+    def observe_views(self, markers: np.ndarray, origins_m: np.ndarray, directions: np.ndarray,
+                      sigma_rad: np.ndarray) -> None:
+        """Single camera views of markers that the next :meth:`update` will not have measured
+        (seen by one camera, or by views that do not agree), used by that update only.
+
+        A view is a ray: the marker lies on ``origin + s direction`` (s > 0) up to the view's
+        angular uncertainty. Where the one-styloid forearm fit cannot tell flexion from
+        supination (palm up or down), a view of the hidden styloid marker can.
+
+        Args:
+            markers: (K,) marker index of each view (a marker may have several).
+            origins_m: (K, 3) camera centres, world metres.
+            directions: (K, 3) unit ray directions, world frame.
+            sigma_rad: (K,) angular uncertainty of each view (centroid error over focal length).
+        """
+        views: dict[int, list[tuple[list[float], list[float], float]]] = {}
+        for k, o, d, sr in zip(np.asarray(markers).tolist(), np.asarray(origins_m).tolist(),
+                               np.asarray(directions).tolist(), np.asarray(sigma_rad).tolist()):
+            views.setdefault(int(k), []).append((o, d, float(sr)))
+        self._views = views
+
     def update(self, positions_m: np.ndarray, measured: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One frame: pass measured markers through, estimate the hidden ones.
 
@@ -1185,6 +1317,8 @@ class Estimator:
                 if not np.all(np.isfinite(est)):
                     hidden[k] = False
                     continue
+                if how == Method.HINGE and k in self._views:
+                    est = self._refine_with_views(k, est)
                 used[k] = how
                 p[k] = est
                 weight[k] = self.estimate_weight
@@ -1221,6 +1355,7 @@ class Estimator:
         self.used = used
         self.status = np.where(ok, MarkerStatus.MEASURED,
                                np.where(hidden, MarkerStatus.ESTIMATED, MarkerStatus.LOST)).astype(np.uint8)
+        self._views = {}
         return p.copy(), self.status.copy()
 
 

@@ -123,6 +123,9 @@ class TrackerParams:
             hidden ball: centroid shifted by ~1 px at 0.8-0.9; a blob holding another ball of the
             colour: 0.8 of those above 1.1 were > 2 px off in the simulated motions); a
             two-view candidate needs both views at most ``oversize_ratio``.
+        view_sigma_px: centroid uncertainty of a single full view of a marker that is not
+            measured; such views go to the hidden-marker estimator as rays
+            (:meth:`~tracking.hidden.Estimator.observe_views`).
     """
 
     base_sigma_m: float = 0.008
@@ -145,6 +148,7 @@ class TrackerParams:
     partial_ratio: float = 0.88
     view_choice_margin_m: float = 0.02
     oversize_ratio: float = 1.1
+    view_sigma_px: float = 0.5
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -182,6 +186,8 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
+        ext = self.geometry.extrinsics
+        self._cam_centres = -np.einsum("cji,cj->ci", ext[:, :, :3], ext[:, :, 3])  # -R^T t
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
@@ -524,7 +530,27 @@ class Tracker:
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
+        with np.errstate(invalid="ignore"):
+            full = seen & ~measured[:, None] & (ratio_pred >= params.partial_ratio) & (ratio_pred <= params.oversize_ratio)
+        self._offer_views(xn, full)
         return new_pos, measured
+
+    def _offer_views(self, xn: np.ndarray, views: np.ndarray) -> None:
+        """Pass the full-sized views of unmeasured markers to the hidden-marker estimator as rays
+        (camera centre, unit direction, angular uncertainty), for this frame's update.
+
+        Args:
+            xn: (M, C, 2) normalized observations; views: (M, C) bool, the views to pass.
+        """
+        if not views.any():  # the estimator forgets the views of the last frame by itself
+            return
+        m_idx, c_idx = np.nonzero(views)
+        rot = self.geometry.extrinsics[c_idx, :, :3]  # world -> camera
+        ray = np.concatenate([xn[m_idx, c_idx], np.ones((m_idx.size, 1))], axis=1)
+        d = np.einsum("kji,kj->ki", rot, ray)  # R^T [x, y, 1]
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        self.estimator.observe_views(m_idx, self._cam_centres[c_idx], d,
+                                     self.params.view_sigma_px / self._stack.focal_px[c_idx])
 
     def _view_to_drop(self, m: int, seen: np.ndarray, xn: np.ndarray, pred: np.ndarray, worst: int) -> int:
         """Which of marker m's (3 or more) views to drop: the worst, unless another view's removal

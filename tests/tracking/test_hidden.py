@@ -214,9 +214,11 @@ def test_fit_forearm_finds_both_angles_from_one_styloid_and_keeps_the_prediction
     assert abs(th - 1.2) < 0.03 and abs(ps) < 0.1
 
 
-def forearm_run(measured_rows, n=60, fps=30.0, **kw):
+def forearm_run(measured_rows, n=60, fps=30.0, camera=None, miss=(0.0, 0.0, 0.0), **kw):
     """Shoulder, elbows and styloids (markers 0-4) of an arm flexing and supinating; returns
-    (truth, positions, status) with the rows of ``measured_rows`` hidden as given."""
+    (truth, positions, status) with the rows of ``measured_rows`` hidden as given. With a
+    ``camera`` position, each hidden marker is also seen by that one camera (a ray to its true
+    centre plus ``miss``, 1 mrad off, through :meth:`Estimator.observe_views`)."""
     truth = []
     for i in range(n):
         t = i / fps
@@ -228,19 +230,96 @@ def forearm_run(measured_rows, n=60, fps=30.0, **kw):
                hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
                forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=fps, scapular_rhythm=0.0)
     cfg.update(kw)
-    p, s = run(Estimator(**cfg), truth, measured_rows, noise_m=0.0005)
-    return truth, p, s
+    est = Estimator(**cfg)
+    if camera is None:
+        p, s = run(est, truth, measured_rows, noise_m=0.0005)
+        return truth, p, s
+    rng = np.random.default_rng(1)
+    out_p, out_s = [], []
+    for t in range(n):
+        hidden = np.flatnonzero(~measured_rows[t])
+        d = truth[t][hidden] + np.asarray(miss) - camera
+        d = d / np.linalg.norm(d, axis=1, keepdims=True) + rng.normal(0.0, 0.001, d.shape)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        est.observe_views(hidden, np.repeat(camera[None], len(hidden), axis=0), d, np.full(len(hidden), 0.001))
+        x = truth[t] + rng.normal(0.0, 0.0005, truth[t].shape)
+        p, s = est.update(np.where(measured_rows[t][:, None], x, np.nan), measured_rows[t])
+        out_p.append(p)
+        out_s.append(s)
+    return truth, np.array(out_p), np.array(out_s)
 
 
-def test_forearm_estimator_follows_flexion_and_supination_with_one_styloid_hidden():
+def test_forearm_fit_follows_flexion_and_supination_with_one_styloid_hidden():
     measured = np.ones((60, 5), dtype=bool)
     measured[15:, 4] = False
-    truth, p, s = forearm_run(measured)
+    truth, p, s = forearm_run(measured, drop_unpinned=False)  # the fit alone, never dropped
     assert (s[15:, 4] == ESTIMATED).all()
     err = np.linalg.norm(p[15:, 4] - truth[15:, 4], axis=1)
     # supination up to 110 deg/s, through palm up and down (where one styloid cannot tell
     # supination from flexion): no runaway, a few millimetres
     assert err.mean() < 0.005 and err.max() < 0.02, (err.mean(), err.max())
+
+
+def test_a_styloid_that_cannot_pin_the_supination_leaves_the_other_lost_until_it_can():
+    # supination from thumb up (0) towards palm up (74 deg) and back: near palm up one styloid
+    # leaves flexion and supination confounded; once that has lasted longer than the
+    # extrapolation allows (3 degrees), the hidden styloid is LOST, not a guess, and it is
+    # estimated again when the measured one pins both angles
+    measured = np.ones((60, 5), dtype=bool)
+    measured[15:, 4] = False
+    truth, p, s = forearm_run(measured)
+    assert (s[15:18, 4] == ESTIMATED).all()
+    assert (s[25:45, 4] == LOST).all()
+    assert (s[52:, 4] == ESTIMATED).all()
+    est = s[15:, 4] == ESTIMATED
+    err = np.linalg.norm(p[15:, 4][est] - truth[15:, 4][est], axis=1)
+    assert err.mean() < 0.005 and err.max() < 0.01, (err.mean(), err.max())
+
+
+def test_a_view_of_the_hidden_styloid_pins_the_supination():
+    # the same motion, the hidden styloid seen by one camera 2 m away along the flexion axis:
+    # its ray fixes the direction that one styloid leaves free, so it stays estimated, closely
+    measured = np.ones((60, 5), dtype=bool)
+    measured[15:, 4] = False
+    truth, p, s = forearm_run(measured, camera=np.array([2.0, -0.1, -0.2]))
+    assert (s[15:, 4] == ESTIMATED).all()
+    err = np.linalg.norm(p[15:, 4] - truth[15:, 4], axis=1)
+    assert err.mean() < 0.003 and err.max() < 0.008, (err.mean(), err.max())
+
+
+def test_fit_forearm_with_a_ray_separates_flexion_from_supination():
+    frame = elbow_frame(np.array([0.055, 0.0, 0.0]), np.array([-0.055, 0.0, 0.0]), np.array([0.0, 0.3, 0.0]))
+    shape = ForearmShape(0.0, 0.24, 0.05, 0.0)
+    wa, wb = forearm_markers(frame, shape, 1.2, 0.15)  # near palm up: confounded for one styloid
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.2, 0.0, 0.06, 0.06)
+    assert abs(ps - 0.15) > 0.1  # the styloid alone: mostly read as flexion
+    camera = wb + np.array([1.5, 0.5, 0.3])  # a camera that sees the hidden styloid
+    d = (wb - camera) / np.linalg.norm(wb - camera)
+    pinned = [False]
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.2, 0.0, 0.06, 0.06, pinned=pinned,
+                         rays=[(1, camera.tolist(), d.tolist(), 0.0002)])
+    # the measured styloid's 2 mm over the styloids' 10 cm: supination to ~0.02 rad, against the
+    # prior's 0.06: mostly the data
+    assert pinned[0] and th == pytest.approx(1.2, abs=0.005) and ps == pytest.approx(0.15, abs=0.02)
+    th, ps = fit_forearm(frame, shape, [(0, wa)], 1.2, 0.0, 1.0, 1.0, rays=[(1, camera.tolist(), d.tolist(), 0.0002)])
+    assert th == pytest.approx(1.2, abs=0.001) and ps == pytest.approx(0.15, abs=0.002)
+    # a ray alone (both styloids hidden) pins both angles too
+    da = (wa - camera) / np.linalg.norm(wa - camera)
+    th, ps = fit_forearm(frame, shape, [], 1.15, 0.05, 0.06, 0.06, pinned=pinned,
+                         rays=[(1, camera.tolist(), d.tolist(), 0.0002), (0, camera.tolist(), da.tolist(), 0.0002)])
+    assert pinned[0] and th == pytest.approx(1.2, abs=0.005) and ps == pytest.approx(0.15, abs=0.01)
+
+
+def test_a_view_far_from_the_prediction_is_another_ball_and_ignored():
+    measured = np.ones((60, 5), dtype=bool)
+    measured[15:, 4] = False
+    camera = np.array([2.0, -0.1, -0.2])
+    truth, p_ref, s_ref = forearm_run(measured, camera=camera, miss=(0.0, 5.0, 0.0))  # no view near
+    # the one camera's ray misses the hidden styloid by 5 cm: left out, as if there were no view
+    truth, p, s = forearm_run(measured, camera=camera, miss=(0.0, 0.05, 0.0))
+    np.testing.assert_array_equal(s, s_ref)
+    np.testing.assert_array_equal(p, p_ref)
+    assert (s[25:45, 4] == LOST).all()
 
 
 def test_forearm_with_both_styloids_hidden_is_dropped_when_its_turn_is_guesswork():
@@ -256,10 +335,14 @@ def test_a_lost_styloid_comes_back_from_the_other():
     measured = np.ones((60, 5), dtype=bool)
     measured[20:32, 3:] = False  # both hidden: lost
     measured[32:, 4] = False     # one styloid back: the other is estimated again
-    truth, p, s = forearm_run(measured)
+    truth, p, s = forearm_run(measured, drop_unpinned=False)
     assert (s[30:32, 4] == LOST).all()
     assert (s[33:, 4] == ESTIMATED).all()
     assert np.linalg.norm(p[40:, 4] - truth[40:, 4], axis=1).max() < 0.015
+    # with the drop rule it is estimated where the measured styloid pins the angles (thumb up)
+    truth, p, s = forearm_run(measured)
+    assert (s[52:, 4] == ESTIMATED).all()
+    assert np.linalg.norm(p[52:, 4] - truth[52:, 4], axis=1).max() < 0.01
 
 
 def test_the_shoulder_pivot_turns_with_the_scapula_when_the_arm_rises():
@@ -625,3 +708,58 @@ def test_any_input_gives_consistent_statuses(seed, p_hidden):
         assert np.array_equal(s == MEASURED, measured)
         assert np.array_equal(np.isnan(p).any(axis=1), s == LOST)
         np.testing.assert_array_equal(p[measured], x[measured])
+
+
+def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
+    # elbow flexed, the inner epicondyle marker hidden; its last position (the previous axis) on
+    # the wrong side, as after a bad estimate or a re-entry from LOST: the elbow bends one way
+    # only, so the learned sense picks the right one of the two solutions
+    truth = []
+    for i in range(21):
+        e1, e2, w1, w2 = forearm_pose(0.4 + 0.8 * i / 30, 0.3)
+        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+    truth = np.array(truth)
+    measured = np.ones((21, 5), dtype=bool)
+    measured[20, 2] = False
+    errors = []
+    for learned in (True, False):
+        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+        for t in range(20):
+            est.update(truth[t], measured[t])
+        if not learned:
+            est.hinge_sense[:] = 0.0  # as before the sense was learned: the previous axis decides
+        est.positions[2] = 2 * truth[19, 1] - truth[19, 2]  # the mirror image through the partner
+        p, s = est.update(np.where(measured[20][:, None], truth[20], np.nan), measured[20])
+        assert s[2] == ESTIMATED
+        errors.append(np.linalg.norm(p[2] - truth[20, 2]))
+    assert errors[0] < 0.003 and errors[1] > 0.05, errors
+
+
+def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
+    truth = []
+    for i in range(21):
+        e1, e2, w1, w2 = forearm_pose(0.8 + 0.3 * i / 30, 0.3)
+        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+    truth = np.array(truth)
+    measured = np.ones((21, 5), dtype=bool)
+    measured[20, 2] = False
+    camera = truth[20, 2] + np.array([0.0, 0.3, -2.0])  # looks across the elbow's axis
+    errors = []
+    for view in (False, True):
+        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+        for t in range(20):
+            est.update(truth[t], measured[t])
+        est.hinge_length[:] *= 1.1  # a hinge 1 cm off along the axis (a wrong learned width)
+        if view:
+            d = (truth[20, 2] - camera) / np.linalg.norm(truth[20, 2] - camera)
+            est.observe_views([2], camera[None], d[None], [0.001])
+        p, s = est.update(np.where(measured[20][:, None], truth[20], np.nan), measured[20])
+        assert s[2] == ESTIMATED
+        errors.append(np.linalg.norm(p[2] - truth[20, 2]))
+    assert errors[0] > 0.008 and errors[1] < 0.003, errors

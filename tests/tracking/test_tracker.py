@@ -152,3 +152,36 @@ def test_cameras_going_dark_in_any_combination_never_break_the_tracker():
     measured = sample.status == MarkerStatus.MEASURED
     assert measured.sum() >= (reference.status == MarkerStatus.MEASURED).sum() - 1
     assert np.linalg.norm(sample.positions_m[measured] - reference.positions_m[measured], axis=1).max() < 0.01
+
+def test_single_views_of_unmeasured_markers_go_to_the_estimator_as_rays(monkeypatch):
+    """A marker that is not measured but shows a full ball in a view is passed on as a ray from
+    that camera (the forearm fit uses them): the rays point at the true ball."""
+    from tracking.hidden import Estimator
+
+    offered = []
+    original = Estimator.observe_views
+
+    def record(self, markers, origins_m, directions, sigma_rad):
+        offered.append((np.array(markers), np.array(origins_m), np.array(directions), np.array(sigma_rad)))
+        original(self, markers, origins_m, directions, sigma_rad)
+
+    monkeypatch.setattr(Estimator, "observe_views", record)
+    studio, motion = studio_from_settings(
+        SimulationSettings(motion="right_external_rotation", size_px=(320, 240), fps=15.0)
+    )
+    with studio:
+        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0)
+        truths = []
+        for sf in studio.play(motion, 15.0, seconds=4.0, noise_sigma=1.5):
+            n = len(offered)
+            tracker.step(sf.frames.images, sf.frames.time_s)
+            truths += [sf.markers_m] * (len(offered) - n)
+    misses = []
+    for (markers, origins, dirs, sigma), truth in zip(offered, truths):
+        assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0) and (sigma > 0).all()
+        v = truth[markers] - origins
+        along = (v * dirs).sum(axis=1)
+        assert (along > 0).all()  # in front of the camera
+        misses += list(np.linalg.norm(v - along[:, None] * dirs, axis=1))
+    assert len(misses) >= 5, "the first 4 s of the seed experiment hide markers from all but one view"
+    assert np.median(misses) < 0.005, np.median(misses)
