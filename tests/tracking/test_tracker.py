@@ -153,6 +153,7 @@ def test_cameras_going_dark_in_any_combination_never_break_the_tracker():
     assert measured.sum() >= (reference.status == MarkerStatus.MEASURED).sum() - 1
     assert np.linalg.norm(sample.positions_m[measured] - reference.positions_m[measured], axis=1).max() < 0.01
 
+
 def test_single_views_of_unmeasured_markers_go_to_the_estimator_as_rays(monkeypatch):
     """A marker that is not measured but shows a full ball in a view is passed on as a ray from
     that camera (the forearm fit uses them): the rays point at the true ball."""
