@@ -405,6 +405,21 @@ def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
     assert lim.max_range == pytest.approx(1.0) and describe(reach, lim, "max_range") == "100 % of the measured range"
 
 
+def _menu_for(db_path):
+    """The game menu of patient P001 whose Play records (spec, keywords) in the returned list."""
+    from game.scenes.game_menu import ChooseGameScene
+
+    opened = []
+
+    class FakeApp:
+        def push(self, scene):
+            opened.append(scene)
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
+    menu.app = FakeApp()
+    return menu, opened
+
+
 def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_them(tmp_path):
     from game.exergames.limits import LIMIT_KEYS, load_limits
     from game.input import Action, Press
@@ -414,14 +429,7 @@ def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_th
     with Database(db_path) as db:
         db.add_patient("P001")
         db.add_patient("P002")
-    opened = []
-
-    class FakeApp:
-        def push(self, scene):
-            opened.append(scene)
-
-    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
-    menu.app = FakeApp()
+    menu, opened = _menu_for(db_path)
     rot = [g.name for g in menu.games].index("rotation")
     for _ in range(rot):
         menu.handle(Press(Action.DOWN, True))
@@ -449,20 +457,12 @@ def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_s
     from game.exergames.limits import LIMIT_KEYS, describe, load_limits
     from game.exergames.spec import TherapistLimits
     from game.input import Action, Press
-    from game.scenes.game_menu import ChooseGameScene
     from game.scenes.game_play import level_shown
 
     db_path = tmp_path / "rehab.sqlite3"
     with Database(db_path) as db:
         db.add_patient("P001")
-    opened = []
-
-    class FakeApp:
-        def push(self, scene):
-            opened.append(scene)
-
-    menu = ChooseGameScene("P001", lambda spec, pid, **kw: (spec, kw), db_path=db_path)
-    menu.app = FakeApp()
+    menu, opened = _menu_for(db_path)
     menu.handle(Press(Action.SELECT, True))                      # the first game's column
     for _ in range(1 + LIMIT_KEYS.index("min_level")):           # down from Play to the lowest level
         menu.handle(Press(Action.DOWN, True))

@@ -710,23 +710,34 @@ def test_any_input_gives_consistent_statuses(seed, p_hidden):
         np.testing.assert_array_equal(p[measured], x[measured])
 
 
+def _arm_estimator() -> Estimator:
+    """A shoulder, two elbow markers on a hinge and two styloids on a forearm, at 30 frames/s."""
+    return Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                     np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                     hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                     forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+
+
+def _flexing_arm(flexion_at):
+    """21 frames of (shoulder, elbow markers, styloids) flexing by ``flexion_at(i)`` radians, the
+    inner elbow marker hidden in the last frame: (truth (21, 5, 3), measured (21, 5))."""
+    truth = []
+    for i in range(21):
+        e1, e2, w1, w2 = forearm_pose(flexion_at(i), 0.3)
+        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+    measured = np.ones((21, 5), dtype=bool)
+    measured[20, 2] = False
+    return np.array(truth), measured
+
+
 def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
     # elbow flexed, the inner epicondyle marker hidden; its last position (the previous axis) on
     # the wrong side, as after a bad estimate or a re-entry from LOST: the elbow bends one way
     # only, so the learned sense picks the right one of the two solutions
-    truth = []
-    for i in range(21):
-        e1, e2, w1, w2 = forearm_pose(0.4 + 0.8 * i / 30, 0.3)
-        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
-    truth = np.array(truth)
-    measured = np.ones((21, 5), dtype=bool)
-    measured[20, 2] = False
+    truth, measured = _flexing_arm(lambda i: 0.4 + 0.8 * i / 30)
     errors = []
     for learned in (True, False):
-        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
-                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
-                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
-                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+        est = _arm_estimator()
         for t in range(20):
             est.update(truth[t], measured[t])
         if not learned:
@@ -739,20 +750,11 @@ def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
 
 
 def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
-    truth = []
-    for i in range(21):
-        e1, e2, w1, w2 = forearm_pose(0.8 + 0.3 * i / 30, 0.3)
-        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
-    truth = np.array(truth)
-    measured = np.ones((21, 5), dtype=bool)
-    measured[20, 2] = False
+    truth, measured = _flexing_arm(lambda i: 0.8 + 0.3 * i / 30)
     camera = truth[20, 2] + np.array([0.0, 0.3, -2.0])  # looks across the elbow's axis
     errors = []
     for view in (False, True):
-        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
-                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
-                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
-                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+        est = _arm_estimator()
         for t in range(20):
             est.update(truth[t], measured[t])
         est.hinge_length[:] *= 1.1  # a hinge 1 cm off along the axis (a wrong learned width)
