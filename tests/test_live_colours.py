@@ -1,6 +1,7 @@
 """The live tracker's colour table: learnt colours from the calibration file, and the online adapter
 (SourceConfig.adapt_colours) following a lighting drift, driven through TrackerLoop.step (no process)."""
 
+from contextlib import contextmanager
 from multiprocessing import shared_memory
 
 import numpy as np
@@ -24,20 +25,19 @@ def drifting(tmp_path_factory):
     return rec
 
 
-def run_loop(config: SourceConfig):
-    """Every frame set of the source through a TrackerLoop; returns (status (T, M) per published sample, adapter)."""
+@contextmanager
+def tracker_loop(config: SourceConfig, slots: int):
+    """A TrackerLoop over the source of ``config`` writing into a ring of ``slots`` samples:
+    yields (source, loop, reader, adapter); everything is closed after."""
     source = open_source(config)
     try:
         tracker, adapter = make_tracker(config, source)
-        ring = RingLayout(source.markerset.n_markers, len(source.cameras), len(angle_names_for(source.markerset)), 128)
+        ring = RingLayout(source.markerset.n_markers, len(source.cameras), len(angle_names_for(source.markerset)), slots)
         shm = shared_memory.SharedMemory(create=True, size=ring.nbytes)
         try:
             writer = RingWriter(shm.buf, ring, initialize=True)
             reader = RingReader(shm.buf, ring)
-            loop = TrackerLoop(source, writer, None, fps=config.fps, tracker=tracker, adapter=adapter)
-            while loop.step():
-                pass
-            status = np.array([r["status"] for r in reader.read_new()])
+            yield source, TrackerLoop(source, writer, None, fps=config.fps, tracker=tracker, adapter=adapter), reader, adapter
             writer.release()
             reader.release()
         finally:
@@ -45,6 +45,14 @@ def run_loop(config: SourceConfig):
             shm.unlink()
     finally:
         source.close()
+
+
+def run_loop(config: SourceConfig):
+    """Every frame set of the source through a TrackerLoop; returns (status (T, M) per published sample, adapter)."""
+    with tracker_loop(config, 128) as (_, loop, reader, adapter):
+        while loop.step():
+            pass
+        status = np.array([r["status"] for r in reader.read_new()])
     return status, adapter
 
 
@@ -89,26 +97,12 @@ def test_taught_colours_sent_to_the_loop_replace_its_table(drifting):
     from tracking.live.protocol import SetColours
 
     config = SourceConfig(kind="recording", path=str(drifting), fps=15.0, adapt_colours=True)
-    source = open_source(config)
-    try:
-        tracker, adapter = make_tracker(config, source)
-        ring = RingLayout(source.markerset.n_markers, len(source.cameras), len(angle_names_for(source.markerset)), 8)
-        shm = shared_memory.SharedMemory(create=True, size=ring.nbytes)
-        try:
-            writer = RingWriter(shm.buf, ring, initialize=True)
-            reader = RingReader(shm.buf, ring)
-            loop = TrackerLoop(source, writer, None, fps=15.0, tracker=tracker, adapter=adapter)
-            models = nominal_models(source.markerset.palette)
-            labels = np.zeros((256, 256), np.uint8)
-            assert loop.handle(SetColours(tuple(models), labels))
-            assert loop.adapter is not adapter and tracker.table is loop.adapter.table
-            assert not tracker.table.lut.any()  # the table of the (empty) labels sent
-            assert loop.handle(SetColours(tuple(models[:2]), labels))  # wrong count: reported, table kept
-            assert tracker.table is loop.adapter.table and "colours error" in reader.error_line()
-            writer.release()
-            reader.release()
-        finally:
-            shm.close()
-            shm.unlink()
-    finally:
-        source.close()
+    with tracker_loop(config, 8) as (source, loop, reader, adapter):
+        tracker = loop.tracker
+        models = nominal_models(source.markerset.palette)
+        labels = np.zeros((256, 256), np.uint8)
+        assert loop.handle(SetColours(tuple(models), labels))
+        assert loop.adapter is not adapter and tracker.table is loop.adapter.table
+        assert not tracker.table.lut.any()  # the table of the (empty) labels sent
+        assert loop.handle(SetColours(tuple(models[:2]), labels))  # wrong count: reported, table kept
+        assert tracker.table is loop.adapter.table and "colours error" in reader.error_line()
