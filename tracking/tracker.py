@@ -186,8 +186,7 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
-        ext = self.geometry.extrinsics
-        self._cam_centres = -np.einsum("cji,cj->ci", ext[:, :, :3], ext[:, :, 3])  # -R^T t
+        self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
@@ -307,9 +306,7 @@ class Tracker:
         self.times.add("candidates + triangulation", t2 - t1)
 
         n_points = 0
-        search = ~measured & (self.status == MarkerStatus.LOST)
-        if not (search.any() and self.frame_count % p.reacquire_every == 0):
-            search[:] = False
+        search = ~measured & (self.status == MarkerStatus.LOST) & (self.frame_count % p.reacquire_every == 0)
         if self.frame_count % p.reacquire_stale_every == 0:
             search |= ~measured & (self.status == MarkerStatus.ESTIMATED) & (self.frames_unmeasured >= p.stale_after)
         found = np.zeros_like(measured)
