@@ -287,6 +287,18 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
+def _carry(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """v turned by the shortest rotation that takes direction a to direction b (Rodrigues)."""
+    a, b = _unit(a), _unit(b)
+    axis = _cross(a, b)
+    s = math.sqrt(float(axis @ axis))
+    c = float(a @ b)
+    if s < 1e-12:
+        return v
+    axis = axis / s
+    return v * c + _cross(axis, v) * s + axis * float(axis @ v) * (1.0 - c)
+
+
 def _ema(old: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
     """Exponential moving average; NaN (nothing learned yet) takes the new value."""
     return np.where(np.isfinite(old), old + rate * (new - old), new)
@@ -830,9 +842,12 @@ class Estimator:
         self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._arm_pinned: set[int] = set()
         self._views: dict[int, list[tuple[list[float], list[float], float]]] = {}
+        # per hinge marker: the positions of the last frame with its hinge's markers known
+        self._hinge_prev: dict[int, np.ndarray] = {}
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
+        self._rest_cache: dict[int, np.ndarray] = {}  # shoulder slot -> solved offset, until _piv_* change
         self._shoulder_side = np.ones(len(self._shoulder_slot))  # +1 right, -1 left (trunk x)
         self._trunk_rot: np.ndarray | None = None
 
@@ -859,13 +874,13 @@ class Estimator:
         self._arm_seen = {}
         self._arm_points = {}
         self._arm_pinned: set[int] = set()
+        pl = okl = None
         for r, (wa, wb, ea, eb, sh) in enumerate(self._arms):
             if not (ok[wa] and ok[wb] and ok[ea] and ok[eb]):
                 continue
-            frame = self._elbow_frame(r, p, ok)
-            if frame is None:
-                continue
-            angles = forearm_angles(frame, p[wa], p[wb])
+            if pl is None:
+                pl, okl = p.tolist(), ok.tolist()
+            angles = self._forearm_angles_f(r, pl, okl)
             if angles is None:
                 continue
             theta, psi, shape = angles
@@ -879,7 +894,8 @@ class Estimator:
         if not (len(self._f_idx) or len(self._h_idx)):
             return
         # a few 3-vectors per arm: plain floats are several times faster than numpy here
-        pl, okl = p.tolist(), ok.tolist()
+        if pl is None:
+            pl, okl = p.tolist(), ok.tolist()
         rate = self._ema
         for r, (w, wp, ea, eb) in enumerate(self._f_idx.tolist()):
             if not (okl[w] and okl[wp] and okl[ea] and okl[eb]):
@@ -934,6 +950,7 @@ class Estimator:
                 a_t = (turn.T @ np.array(a_t)).tolist()
             self._piv_a[k] = self._forget * self._piv_a[k] + np.array([[a_t[i] * a_t[j] for j in range(3)] for i in range(3)])
             self._piv_b[k] = self._forget * self._piv_b[k] + np.array([rhs * a_t[i] for i in range(3)])
+            self._rest_cache.pop(k, None)
 
     @property
     def trunk_rot(self) -> np.ndarray:
@@ -941,7 +958,13 @@ class Estimator:
         return np.eye(3) if self._trunk_rot is None else self._trunk_rot
 
     def _rest_offset(self, k: int) -> np.ndarray:
-        return np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
+        # solved once per change of the normal equations (several callers per frame, ~20 us each)
+        g = self._rest_cache.get(k)
+        if g is None:
+            g = np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
+            g.flags.writeable = False
+            self._rest_cache[k] = g
+        return g
 
     def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
         """(3, 3) trunk-frame rotation of the pivot offset by the scapula's upward rotation for the
@@ -978,20 +1001,31 @@ class Estimator:
         length = self.hinge_length[r]
         if not (ok[h.partner] and ok[h.shoulder]) or not np.isfinite(length):
             return None
-        # prediction: the rigid forearm-elbow fit (exact while the forearm does not turn), else
-        # the axis of the previous frame
+        # prediction (it fills the directions the constraints below leave free: the axis' turn
+        # about the arm while the elbow is nearly straight): the axis of the last frame with the
+        # hinge's markers known (the previous one, or the last before LOST) carried along by the
+        # humerus' swing since, the shortest rotation of the shoulder marker -> partner direction
+        # from then to now: the humerus does not turn about its own axis, which a straight arm's
+        # markers cannot show. Else the rigid forearm-elbow fit, which assumes instead that the
+        # forearm does not pronate; in right_shoulder_extension (elbow straight, the forearm
+        # pronating 25 degrees while the inner elbow marker hides behind the body) that fit took
+        # the hidden marker 28 mm off on average (41 at most), the carried axis 6 (9).
         prev_axis = base[k] - base[h.partner]
         prev_axis = _unit(prev_axis) if np.all(np.isfinite(prev_axis)) else None
-        rigid = self._rigid(k, p, weight, prior)
-        if rigid is not None:
-            axis_pred = _unit(rigid - p[h.partner])
-        elif prev_axis is not None:
-            axis_pred = prev_axis
+        if k in self._hinge_prev:
+            q = self._hinge_prev[k]
+            axis_pred = _carry(q[h.partner] - q[h.shoulder], p[h.partner] - p[h.shoulder], _unit(q[k] - q[h.partner]))
         else:
-            return None
+            rigid = self._rigid(k, p, weight, prior)
+            if rigid is not None:
+                axis_pred = _unit(rigid - p[h.partner])
+            elif prev_axis is not None:
+                axis_pred = prev_axis
+            else:
+                return None
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
-        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
         rows = [p[h.partner] - pivot]
         values = [-0.5 * length]
         wa, wb = h.wrists
@@ -1015,6 +1049,67 @@ class Estimator:
                 return _DROP
             self._hinge_free_now.add(r)
         return p[h.partner] + length * n
+
+    def _forearm_angles_f(self, r: int, pl: list, okl: list) -> tuple[float, float, ForearmShape] | None:
+        """``forearm_angles(self._elbow_frame(r, p, ok), p[wa], p[wb])`` in plain floats (``pl``,
+        ``okl``: p and ok as lists): run for every arm in every frame while its markers are measured."""
+        wa, wb, ea, eb, sh = self._arms[r]
+        shoulder = pl[sh] if okl[sh] else self.positions[sh].tolist()
+        if not all(math.isfinite(x) for x in shoulder):
+            return None
+        a, b = pl[ea], pl[eb]
+        centre = [0.5 * (a[i] + b[i]) for i in range(3)]
+        # the shoulder pivot (as pivot_offset and _scapula_turn, in floats)
+        rt = self.trunk_rot.tolist()
+        k = self._shoulder_slot[sh]
+        g = self._rest_offset(k).tolist()
+        if self.scapular_rhythm > 0:
+            d = [centre[i] - shoulder[i] for i in range(3)]
+            u = [rt[0][j] * d[0] + rt[1][j] * d[1] + rt[2][j] * d[2] - g[j] for j in range(3)]
+            lu = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+            if lu > 1e-9:
+                elevation = math.degrees(math.acos(max(-1.0, min(1.0, -u[1] / lu))))
+                lo, hi = self.rhythm_deg
+                phi = math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * self._shoulder_side[k]
+                c, s = math.cos(phi), math.sin(phi)
+                g = [c * g[0] - s * g[1], s * g[0] + c * g[1], g[2]]
+        pivot = [shoulder[i] + rt[i][0] * g[0] + rt[i][1] * g[1] + rt[i][2] * g[2] for i in range(3)]
+        # the elbow frame (elbow_frame)
+        e = [b[i] - a[i] for i in range(3)]
+        le = math.sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+        if not le > 1e-6:
+            return None
+        n = [x / le for x in e]
+        h = [centre[i] - pivot[i] for i in range(3)]
+        hn = h[0] * n[0] + h[1] * n[1] + h[2] * n[2]
+        h = [h[i] - hn * n[i] for i in range(3)]
+        lh = math.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
+        if not lh > 1e-6:
+            return None
+        r1 = [x / lh for x in h]
+        r2 = [n[1] * r1[2] - n[2] * r1[1], n[2] * r1[0] - n[0] * r1[2], n[0] * r1[1] - n[1] * r1[0]]
+        # the forearm angles (forearm_angles)
+        pa, pb = pl[wa], pl[wb]
+        v = [0.5 * (pa[i] + pb[i]) - centre[i] for i in range(3)]
+        w = [pb[i] - pa[i] for i in range(3)]
+        half = 0.5 * math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
+        lv = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+        if not (half > 1e-6 and lv > 1e-6):
+            return None
+        along = v[0] * n[0] + v[1] * n[1] + v[2] * n[2]
+        radial = [v[i] - along * n[i] for i in range(3)]
+        theta = math.atan2(radial[0] * r2[0] + radial[1] * r2[1] + radial[2] * r2[2],
+                           radial[0] * r1[0] + radial[1] * r1[1] + radial[2] * r1[2])
+        av = [x / lv for x in v]
+        uw = [x / (2.0 * half) for x in w]
+        na = n[0] * av[0] + n[1] * av[1] + n[2] * av[2]
+        p1 = [n[i] - na * av[i] for i in range(3)]
+        lp = math.sqrt(p1[0] * p1[0] + p1[1] * p1[1] + p1[2] * p1[2])
+        p1 = [x / lp for x in p1]
+        p2 = [av[1] * p1[2] - av[2] * p1[1], av[2] * p1[0] - av[0] * p1[2], av[0] * p1[1] - av[1] * p1[0]]
+        psi = math.atan2(uw[0] * p2[0] + uw[1] * p2[1] + uw[2] * p2[2], uw[0] * p1[0] + uw[1] * p1[1] + uw[2] * p1[2])
+        radius = math.sqrt(radial[0] * radial[0] + radial[1] * radial[1] + radial[2] * radial[2])
+        return theta, psi, ForearmShape(along, radius, half, uw[0] * av[0] + uw[1] * av[1] + uw[2] * av[2])
 
     def _elbow_frame(self, r: int, p: np.ndarray, ok: np.ndarray) -> ElbowFrame | None:
         """Arm r's elbow frame now (the shoulder marker measured, else its last output)."""
@@ -1345,6 +1440,9 @@ class Estimator:
         if self._arms:
             self._arm_update(p, ok)
         known = ok | hidden
+        for k, h in self.hinges.items():  # the last frame with the hinge's markers known
+            if known[k] and known[h.partner] and known[h.shoulder]:
+                self._hinge_prev[k] = p
         # a reappearing marker keeps the velocity of its estimate (its measured jump is estimate error)
         keep_v = ok & ~self.measured & has_base
         self.velocity = np.where(keep_v[:, None], self.velocity, np.where(known[:, None], p - prev, np.nan))

@@ -86,6 +86,11 @@ class AngleAccuracy:
         rmse_estimated_deg: RMSE over the frames with an estimated marker (NaN: none).
         rmse_measured_deg: RMSE over the frames with all its markers measured (the floor that
             measurement noise sets; NaN: none).
+        ill_conditioned: frames left out of the RMSEs above because the angle is ill-conditioned
+            in the true pose there: 1 mm of error in one of its markers can move it by more than
+            :data:`ILL_CONDITIONED_DEG_PER_MM` (a planar angle of a segment nearly along the
+            plane's normal: shoulder flexion with the arm straight out to the side).
+        rmse_all_deg: RMSE over all the frames of ``rmse_deg`` and the ill-conditioned ones.
     """
 
     rmse_deg: float
@@ -94,6 +99,8 @@ class AngleAccuracy:
     lost: float
     rmse_estimated_deg: float
     rmse_measured_deg: float = float("nan")
+    ill_conditioned: int = 0
+    rmse_all_deg: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True)
@@ -137,7 +144,39 @@ class TrackingAccuracy:
             a = self.angles[worst[0]]
             text += (f", its frames estimated {100 * a.estimated:.1f} % / lost {100 * a.lost:.1f} %, "
                      f"RMSE {a.rmse_measured_deg:.2f} deg where all its markers are measured")
+        ill = {name: a for name, a in self.angles.items() if a.ill_conditioned}
+        if ill:
+            text += "; left out as ill-conditioned (> {:g} deg per mm): ".format(ILL_CONDITIONED_DEG_PER_MM) + ", ".join(
+                f"{name} {a.ill_conditioned} frame{'s' if a.ill_conditioned > 1 else ''} (RMSE with them {a.rmse_all_deg:.2f})"
+                for name, a in ill.items())
         return text
+
+
+ILL_CONDITIONED_DEG_PER_MM = 5.0
+"""An angle that 1 mm of error in one marker (along any axis) can move by more than this is
+ill-conditioned in that frame. Well-conditioned angles move 0.1-0.3 degrees per mm (shoulder and
+elbow, 250-350 mm segments) to ~1.5 (forearm supination, markers 50-60 mm apart); shoulder flexion
+passes 5 degrees per mm where the upper arm is within ~2 degrees of the trunk's left-right axis."""
+
+
+def angle_sensitivity(truth_m: np.ndarray, names: Sequence[str], uses: dict[str, np.ndarray],
+                      step_m: float = 0.001) -> dict[str, np.ndarray]:
+    """Per angle, (T,) the largest change (degrees) of its true value when one of its markers
+    moves by ``step_m`` along one world axis: how much marker error the angle amplifies in each
+    frame (NaN where the angle is undefined)."""
+    from tracking.angles import joint_angles
+
+    base = joint_angles(truth_m, names)
+    sens = {name: np.where(np.isfinite(v), 0.0, np.nan) for name, v in base.items()}
+    for m in np.flatnonzero(np.any(list(uses.values()), axis=0)):
+        for axis in range(3):
+            moved = truth_m.copy()
+            moved[:, m, axis] += step_m
+            for name, values in joint_angles(moved, names).items():
+                if uses[name][m]:
+                    d = np.abs((values - base[name] + 180.0) % 360.0 - 180.0)
+                    sens[name] = np.fmax(sens[name], np.where(np.isfinite(base[name]), np.nan_to_num(d, nan=np.inf), np.nan))
+    return sens
 
 
 def angle_markers(truth_m: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
@@ -177,10 +216,13 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
     meas, est = status == MarkerStatus.MEASURED, status == MarkerStatus.ESTIMATED
     tracked_angles, true_angles = joint_angles(pos, names), joint_angles(truth_m, names)
     uses = angle_markers(truth_m, names)
+    sensitivity = angle_sensitivity(truth_m, names, uses)
     rmse, angles = {}, {}
     for name, values in tracked_angles.items():
         defined = np.isfinite(true_angles[name])
-        ok = np.isfinite(values) & defined
+        reported = np.isfinite(values) & defined
+        ill = reported & ~(sensitivity[name] <= ILL_CONDITIONED_DEG_PER_MM)
+        ok = reported & ~ill
         with_est = ok & est[:, uses[name]].any(axis=1)
         all_meas = ok & meas[:, uses[name]].all(axis=1)
         diff = (values - true_angles[name] + 180.0) % 360.0 - 180.0
@@ -195,6 +237,8 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
             lost=float((defined & ~np.isfinite(values)).sum() / n) if n else 0.0,
             rmse_estimated_deg=float(np.sqrt(np.mean(diff[with_est] ** 2))) if with_est.any() else float("nan"),
             rmse_measured_deg=float(np.sqrt(np.mean(diff[all_meas] ** 2))) if all_meas.any() else float("nan"),
+            ill_conditioned=int(ill.sum()),
+            rmse_all_deg=float(np.sqrt(np.mean(diff[reported] ** 2))) if reported.any() else float("nan"),
         )
     return TrackingAccuracy(
         frames=frames,
