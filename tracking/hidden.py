@@ -299,6 +299,21 @@ def _carry(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
     return v * c + _cross(axis, v) * s + axis * float(axis @ v) * (1.0 - c)
 
 
+def _solve3(a: np.ndarray, b: np.ndarray) -> list[float]:
+    """x with a x = b for a (3, 3) matrix well away from singular (Cramer's rule in plain floats:
+    ~10x faster than numpy's solve on one 3x3 system)."""
+    (a00, a01, a02), (a10, a11, a12), (a20, a21, a22) = a.tolist()
+    b0, b1, b2 = b.tolist()
+    c00, c01, c02 = a11 * a22 - a12 * a21, a12 * a20 - a10 * a22, a10 * a21 - a11 * a20
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if det == 0.0:
+        raise np.linalg.LinAlgError("singular 3x3 system")
+    x0 = (b0 * c00 + a01 * (a12 * b2 - b1 * a22) + a02 * (b1 * a21 - a11 * b2)) / det
+    x1 = (a00 * (b1 * a22 - a12 * b2) + b0 * c01 + a02 * (a10 * b2 - b1 * a20)) / det
+    x2 = (a00 * (a11 * b2 - b1 * a21) + a01 * (b1 * a20 - a10 * b2) + b0 * c02) / det
+    return [x0, x1, x2]
+
+
 def _ema(old: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
     """Exponential moving average; NaN (nothing learned yet) takes the new value."""
     return np.where(np.isfinite(old), old + rate * (new - old), new)
@@ -961,7 +976,7 @@ class Estimator:
         # solved once per change of the normal equations (several callers per frame, ~20 us each)
         g = self._rest_cache.get(k)
         if g is None:
-            g = np.linalg.solve(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m)
+            g = np.array(_solve3(self._piv_a[k] + np.eye(3), self._piv_b[k] + self.pivot_prior_m))
             g.flags.writeable = False
             self._rest_cache[k] = g
         return g
