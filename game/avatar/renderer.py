@@ -14,7 +14,8 @@ before shading; tapered capsules are an instanced band tangent to the two end sp
 simulator's band, ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are
 not drawn. About 4.2k triangles in all.
 
-Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
+Lighting, in linear RGB then encoded to sRGB (per pixel on the ray-cast ellipsoids, per vertex on
+the meshes, whose colours are interpolated): a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
 body against the background, and a little Blinn-Phong sheen. The lights are fixed relative to
 the camera, so every view is lit from the front. The floor disc carries soft contact shadows
@@ -242,17 +243,15 @@ _VERTEX_ELLIPSOID_MESH = """
 #version 330
 uniform mat4 u_clip_from_world;
 in vec3 in_pos;  // unit sphere: position = normal
-""" + _ELLIPSOID_INSTANCE_GLSL + """out vec3 v_pos;
-out vec3 v_normal;
-flat out vec3 v_rgb;
-flat out vec2 v_style;
+""" + _ELLIPSOID_INSTANCE_GLSL + """out vec3 v_colour;
+flat out float v_alpha;
+""" + _LIGHTING + """
 void main() {
-    mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
-    v_pos = i_centre + axes * in_pos;
-    v_normal = mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos;
-    v_rgb = i_rgb;
-    v_style = i_style;
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    vec3 pos = i_centre + mat3(i_ax0, i_ax1, i_ax2) * in_pos;
+    vec3 n = normalize(mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos);
+    v_colour = shade(n, pos, i_rgb, i_style);
+    v_alpha = mix(1.0, u_lost_alpha, i_style.y);
+    gl_Position = u_clip_from_world * vec4(pos, 1.0);
 }
 """
 
@@ -265,30 +264,29 @@ in vec3 i_p1;
 in vec2 i_r;
 in vec3 i_rgb;
 in vec2 i_style;
-out vec3 v_pos;
-out vec3 v_normal;
-flat out vec3 v_rgb;
-flat out vec2 v_style;
-""" + BAND_GLSL + """
+out vec3 v_colour;
+flat out float v_alpha;
+""" + BAND_GLSL + _LIGHTING + """
 void main() {
-    band_vertex(i_p0, i_p1, i_r, in_ring, v_pos, v_normal);
-    v_rgb = i_rgb;
-    v_style = i_style;
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    vec3 pos, n;
+    band_vertex(i_p0, i_p1, i_r, in_ring, pos, n);
+    v_colour = shade(n, pos, i_rgb, i_style);
+    v_alpha = mix(1.0, u_lost_alpha, i_style.y);
+    gl_Position = u_clip_from_world * vec4(pos, 1.0);
 }
 """
 
+# The meshes (large ellipsoids, capsule bands) are lit per vertex and their colours interpolated:
+# per-pixel lighting of them cost ~3-5 ms CPU per frame in the games' close views on llvmpipe, and
+# at the meshes' resolution (320-triangle icospheres, 16-sided bands) the two look alike (mean
+# difference under one level of 255; the highlights and the rim a little softer).
 _FRAGMENT_BODY = """
 #version 330
-in vec3 v_pos;
-in vec3 v_normal;
-flat in vec3 v_rgb;
-flat in vec2 v_style;
+in vec3 v_colour;
+flat in float v_alpha;
 out vec4 f_colour;
-""" + _LIGHTING + """
 void main() {
-    vec3 n = normalize(v_normal);
-    f_colour = vec4(shade(n, v_pos, v_rgb, v_style), mix(1.0, u_lost_alpha, v_style.y));
+    f_colour = vec4(v_colour, v_alpha);
 }
 """
 
