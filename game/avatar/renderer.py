@@ -12,7 +12,7 @@ cameras draw them (two triangles each instead of 80 for an icosphere: llvmpipe p
 triangle); the large ones (trunk, head, chair) are instanced 320-triangle icospheres, depth-tested
 before shading; tapered capsules are an instanced band tangent to the two end spheres (the
 simulator's band, ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are
-not drawn. About 4.2k triangles in all.
+not drawn. About 4.8k triangles in all (the floor's 544 among them).
 
 Lighting, in linear RGB then encoded to sRGB (per pixel on the ray-cast ellipsoids, per vertex on
 the meshes, whose colours are interpolated): a sky/ground hemisphere ambient, a warm
@@ -421,8 +421,8 @@ class _Floor:
 
     A polar mesh of rings x ``segments``: rings every ~12 cm where the shadow blobs are (out to
     0.55 of the radius), fewer in the outer fade, which needs no detail. llvmpipe pays per triangle
-    and per tile it touches: the floor's 1104 triangles (12 even rings of 48) cost ~1-2 ms CPU per
-    frame in the games' views, its 544 here about half that, and they look alike.
+    and per tile it touches: 1104 triangles (12 even rings of 48) cost 1.3-1.8 ms CPU per frame in
+    the rotation and turn the key views, these 544 0.8-1.4 ms, and they look alike.
     """
 
     #: Ring radii, in units of the disc's radius.
