@@ -12,9 +12,10 @@ cameras draw them (two triangles each instead of 80 for an icosphere: llvmpipe p
 triangle); the large ones (trunk, head, chair) are instanced 320-triangle icospheres, depth-tested
 before shading; tapered capsules are an instanced band tangent to the two end spheres (the
 simulator's band, ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are
-not drawn. About 4.2k triangles in all.
+not drawn. About 4.8k triangles in all (the floor's 544 among them).
 
-Lighting, per pixel in linear RGB then encoded to sRGB: a sky/ground hemisphere ambient, a warm
+Lighting, in linear RGB then encoded to sRGB (per pixel on the ray-cast ellipsoids, per vertex on
+the meshes, whose colours are interpolated): a sky/ground hemisphere ambient, a warm
 key light from above the viewer's left shoulder, a cool rim light from behind that outlines the
 body against the background, and a little Blinn-Phong sheen. The lights are fixed relative to
 the camera, so every view is lit from the front. The floor disc carries soft contact shadows
@@ -242,17 +243,15 @@ _VERTEX_ELLIPSOID_MESH = """
 #version 330
 uniform mat4 u_clip_from_world;
 in vec3 in_pos;  // unit sphere: position = normal
-""" + _ELLIPSOID_INSTANCE_GLSL + """out vec3 v_pos;
-out vec3 v_normal;
-flat out vec3 v_rgb;
-flat out vec2 v_style;
+""" + _ELLIPSOID_INSTANCE_GLSL + """out vec3 v_colour;
+flat out float v_alpha;
+""" + _LIGHTING + """
 void main() {
-    mat3 axes = mat3(i_ax0, i_ax1, i_ax2);
-    v_pos = i_centre + axes * in_pos;
-    v_normal = mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos;
-    v_rgb = i_rgb;
-    v_style = i_style;
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    vec3 pos = i_centre + mat3(i_ax0, i_ax1, i_ax2) * in_pos;
+    vec3 n = normalize(mat3(i_nrm0, i_nrm1, i_nrm2) * in_pos);
+    v_colour = shade(n, pos, i_rgb, i_style);
+    v_alpha = mix(1.0, u_lost_alpha, i_style.y);
+    gl_Position = u_clip_from_world * vec4(pos, 1.0);
 }
 """
 
@@ -265,30 +264,29 @@ in vec3 i_p1;
 in vec2 i_r;
 in vec3 i_rgb;
 in vec2 i_style;
-out vec3 v_pos;
-out vec3 v_normal;
-flat out vec3 v_rgb;
-flat out vec2 v_style;
-""" + BAND_GLSL + """
+out vec3 v_colour;
+flat out float v_alpha;
+""" + BAND_GLSL + _LIGHTING + """
 void main() {
-    band_vertex(i_p0, i_p1, i_r, in_ring, v_pos, v_normal);
-    v_rgb = i_rgb;
-    v_style = i_style;
-    gl_Position = u_clip_from_world * vec4(v_pos, 1.0);
+    vec3 pos, n;
+    band_vertex(i_p0, i_p1, i_r, in_ring, pos, n);
+    v_colour = shade(n, pos, i_rgb, i_style);
+    v_alpha = mix(1.0, u_lost_alpha, i_style.y);
+    gl_Position = u_clip_from_world * vec4(pos, 1.0);
 }
 """
 
+# The meshes (large ellipsoids, capsule bands) are lit per vertex and their colours interpolated:
+# per-pixel lighting of them cost ~3-5 ms CPU per frame in the games' close views on llvmpipe, and
+# at the meshes' resolution (320-triangle icospheres, 16-sided bands) the two look alike (mean
+# difference under one level of 255; the highlights and the rim a little softer).
 _FRAGMENT_BODY = """
 #version 330
-in vec3 v_pos;
-in vec3 v_normal;
-flat in vec3 v_rgb;
-flat in vec2 v_style;
+in vec3 v_colour;
+flat in float v_alpha;
 out vec4 f_colour;
-""" + _LIGHTING + """
 void main() {
-    vec3 n = normalize(v_normal);
-    f_colour = vec4(shade(n, v_pos, v_rgb, v_style), mix(1.0, u_lost_alpha, v_style.y));
+    f_colour = vec4(v_colour, v_alpha);
 }
 """
 
@@ -421,16 +419,21 @@ class _Instanced:
 class _Floor:
     """The floor disc, vertex-coloured per frame (radial fade, contact shadows).
 
-    A polar mesh of ``rings`` x ``segments``: vertices dense enough (~10 cm) for the shadow blobs
-    to look smooth, few enough triangles (llvmpipe pays per triangle and per tile it touches).
+    A polar mesh of rings x ``segments``: rings every ~12 cm where the shadow blobs are (out to
+    0.55 of the radius), fewer in the outer fade, which needs no detail. llvmpipe pays per triangle
+    and per tile it touches: 1104 triangles (12 even rings of 48) cost 1.3-1.8 ms CPU per frame in
+    the rotation and turn the key views, these 544 0.8-1.4 ms, and they look alike.
     """
 
+    #: Ring radii, in units of the disc's radius.
+    RINGS = (0.09, 0.18, 0.27, 0.36, 0.45, 0.55, 0.70, 0.85, 1.0)
+
     def __init__(self, ctx: moderngl.Context, program: moderngl.Program, radius_m: float, rgb: tuple[float, float, float],
-                 rings: int = 12, segments: int = 48) -> None:
+                 segments: int = 32) -> None:
         self._radius, self._rgb = radius_m, np.asarray(rgb, np.float64)
-        # Centre vertex, then ring k (1..rings) of `segments` vertices.
+        # Centre vertex, then each ring of `segments` vertices.
         theta = 2.0 * np.pi * np.arange(segments) / segments
-        radii = np.arange(1, rings + 1) / rings
+        radii = np.asarray(self.RINGS)
         ring_xz = np.stack([np.outer(radii, np.cos(theta)), np.outer(radii, np.sin(theta))], axis=-1).reshape(-1, 2)
         self._unit = np.vstack([[0.0, 0.0], ring_xz])  # (V, 2) in units of the radius
         r = np.linalg.norm(self._unit, axis=1)
@@ -440,7 +443,7 @@ class _Floor:
         j = np.arange(segments)
         jn = (j + 1) % segments
         tris = [np.stack([np.zeros(segments, int), 1 + j, 1 + jn], axis=1)]
-        for k in range(rings - 1):
+        for k in range(len(radii) - 1):
             a, b = 1 + k * segments, 1 + (k + 1) * segments
             tris += [np.stack([a + j, b + j, b + jn], axis=1), np.stack([a + j, b + jn, a + jn], axis=1)]
         tris = np.concatenate(tris)
