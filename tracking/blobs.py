@@ -296,3 +296,120 @@ def _coverage(patch_bgr: np.ndarray, patch_labels: np.ndarray, filled: np.ndarra
     alpha = np.minimum(alpha, np.where(ref < _FAR, _MARKER_SHADING_RATIO * marker_part / np.maximum(ref, 1.0), 1.0))
     weights[unknown] = np.where(solvable, np.clip(alpha, 0.0, 1.0), weights[unknown])
     return weights
+
+
+ARC_INSIDE_TOL_PX = (1.0, 1.0, 0.7, 0.7, 0.5, 0.5)
+"""Per Gauss-Newton iteration: an edge point this far inside the circle fitted so far is taken for
+the occluder's outline, not the ball's (loose while the start, the centroid, is still far off)."""
+ARC_EDGE_SHRINK_PX = 0.2
+"""How much smaller the binary region of a full ball is than its projected radius (mean over the
+simulated studio's balls of 2.5-8 px: 0.14-0.27 px; the colour test drops the dark limb)."""
+
+ARC_ENCLOSING_BELOW = 0.85
+"""A region with less than this fraction of the whole ball's area starts from its enclosing circle."""
+ARC_ENCLOSING_MIN_PX = 4.0
+"""... only on balls of at least this radius."""
+
+
+def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
+                box_lo: np.ndarray, box_hi: np.ndarray, *,
+                inside_tol_px: Sequence[float] = ARC_INSIDE_TOL_PX) -> np.ndarray:
+    """Centres of partly hidden balls, each from the visible arc of its region's outline.
+
+    A ball partly hidden by something in front of it (an arm) or behind whose outline it sits
+    leaves a region cut by a chord-like edge; the region's centroid lies towards its visible part
+    (by 0.17 radii when a fifth of the disc is hidden). The outline of the region is the ball's
+    circle where the ball shows and the occluder's edge elsewhere, and the occluder's edge lies
+    inside the circle. So each centre is fitted by Gauss-Newton to the region's edge points with
+    the radius known, starting from the centroid, and at every iteration only the edge points
+    farther from the centre than ``radius - inside_tol_px[i]`` are kept (the occluder's edge
+    drops out as the centre moves). Edge points are the midpoints between a region pixel and each of
+    its 4-neighbours outside the region (a binary disc's region has the area of the circle
+    through them); neighbours outside the searched box are not edges (a ball cut by the window
+    or the image border).
+
+    All regions are fitted at once (vectorized over regions); pixel coordinates are integers
+    relative to any origin of the caller's choice per region, e.g. a window's centre pixel.
+
+    Args:
+        win: (P,) int64 region index 0..K-1 of each pixel.
+        x, y: (P,) float64 integer pixel coordinates (column, row) of the region pixels; no pixel
+            twice.
+        start_px: (K, 2) float64 starting centres (the regions' centroids), same coordinates.
+        radius_px: (K,) float64 radius of each ball's binary region when whole (the projected
+            radius less ``ARC_EDGE_SHRINK_PX``).
+        box_lo, box_hi: (K, 2) float64 first and last (inclusive) pixel x, y searched for each
+            region.
+        inside_tol_px: one tolerance per iteration: edge points nearer the centre than the
+            radius less it are left out.
+
+    Returns:
+        (K, 2) float64 fitted centres; the start where fewer than three edge points remain or the
+        points do not pin the centre.
+    """
+    k_count = start_px.shape[0]
+    centre = np.array(start_px, dtype=np.float64)
+    if k_count == 0 or win.size == 0:
+        return centre
+    # pixel keys on a grid wide enough for every region: (region, row, column) -> one integer
+    x0, y0 = float(x.min()) - 1.0, float(y.min()) - 1.0
+    span = float(max(x.max() - x0, y.max() - y0)) + 2.0
+    key = (win * span + (y - y0)) * span + (x - x0)
+    order = np.sort(key)
+    pts_x, pts_y, pts_w = [], [], []
+    for ex, ey in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+        nx, ny = x + ex, y + ey
+        probe = key + ey * span + ex
+        at = np.minimum(np.searchsorted(order, probe), order.size - 1)
+        outside = order[at] != probe
+        lo, hi = box_lo[win], box_hi[win]
+        inside_box = (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
+        edge = outside & inside_box
+        pts_x.append(x[edge] + 0.5 * ex)
+        pts_y.append(y[edge] + 0.5 * ey)
+        pts_w.append(win[edge])
+    px, py, pw = np.concatenate(pts_x), np.concatenate(pts_y), np.concatenate(pts_w)
+    by_region = np.argsort(pw, kind="stable")
+    px, py, pw = px[by_region], py[by_region], pw[by_region]
+    r = radius_px[pw]
+    # a ball hidden by much is a poor start: its centroid lies so far towards the visible part that
+    # the arc opposite the cut looks inside the circle; the smallest circle enclosing the edge
+    # points is the ball's while more than half of it shows (too noisy on balls of a few pixels)
+    area = np.bincount(win, minlength=k_count)
+    far_off = np.flatnonzero((area < ARC_ENCLOSING_BELOW * np.pi * radius_px**2) & (radius_px >= ARC_ENCLOSING_MIN_PX))
+    if far_off.size:
+        bounds = np.searchsorted(pw, np.arange(k_count + 1))
+        for k in far_off.tolist():
+            edge_pts = np.stack([px[bounds[k]:bounds[k + 1]], py[bounds[k]:bounds[k + 1]]], axis=1)
+            if len(edge_pts) >= 3:
+                (cx, cy), enclosing_r = cv2.minEnclosingCircle(edge_pts.astype(np.float32))
+                if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
+                    centre[k] = cx, cy
+    for tol in inside_tol_px:
+        dx, dy = px - centre[pw, 0], py - centre[pw, 1]
+        dist = np.sqrt(dx * dx + dy * dy)
+        keep = dist > np.maximum(r - tol, 1e-9)
+        w = keep.astype(np.float64)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ux, uy = np.where(keep, dx / dist, 0.0), np.where(keep, dy / dist, 0.0)
+        res = dist - r
+        # normal equations of min sum (|q - c| - r)^2 over the kept points, one 2x2 per region
+        a = np.bincount(pw, ux * ux, k_count)
+        b = np.bincount(pw, ux * uy, k_count)
+        d = np.bincount(pw, uy * uy, k_count)
+        gx = np.bincount(pw, ux * res, k_count)
+        gy = np.bincount(pw, uy * res, k_count)
+        n = np.bincount(pw, w, k_count)
+        det = a * d - b * b
+        # fewer than three points, or points on one side only (det near 0): keep the centre
+        solvable = (n >= 3) & (det > 1e-3 * np.maximum(n, 1.0) ** 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            step_x = np.where(solvable, (d * gx - b * gy) / det, 0.0)
+            step_y = np.where(solvable, (a * gy - b * gx) / det, 0.0)
+        centre[:, 0] += step_x
+        centre[:, 1] += step_y
+    # a fit that wandered off (too few edge points for the radius) is not a better centre
+    moved = np.hypot(*(centre - start_px).T)
+    bad = ~np.isfinite(moved) | (moved > radius_px)
+    centre[bad] = start_px[bad]
+    return centre

@@ -26,12 +26,13 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
 from tracking.angles import joint_angles
-from tracking.blobs import find_blobs
+from tracking.blobs import ARC_EDGE_SHRINK_PX, arc_centres, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
@@ -126,6 +127,10 @@ class TrackerParams:
         view_sigma_px: centroid uncertainty of a single full view of a marker that is not
             measured; such views go to the hidden-marker estimator as rays
             (:meth:`~tracking.hidden.Estimator.observe_views`).
+        arc_fit_ratio: a window region whose equivalent radius is below this fraction of the
+            ball's (projected radius less ``ARC_EDGE_SHRINK_PX``) is taken for a partly hidden
+            ball: its centre is fitted to the visible arc of its outline
+            (:func:`~tracking.blobs.arc_centres`) instead of its centroid; 0 turns that off.
     """
 
     base_sigma_m: float = 0.008
@@ -149,6 +154,7 @@ class TrackerParams:
     view_choice_margin_m: float = 0.02
     oversize_ratio: float = 1.1
     view_sigma_px: float = 0.5
+    arc_fit_ratio: float = 1.05
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -159,6 +165,27 @@ STEP_STAGES = (
     "full-frame re-acquisition",
     "joint angles",
 )
+
+
+def _region_arc_centre(mask: np.ndarray, centroid_px: np.ndarray, radius_px: float) -> np.ndarray:
+    """The ball centre from the visible arc of the 8-connected region of ``mask`` at ``centroid_px``.
+
+    Args:
+        mask: (h, w) bool pixels of the marker's colour in a window (the whole window was searched).
+        centroid_px: (2,) float64 the region's centroid (x, y) in window pixels.
+        radius_px: the whole ball's region radius (:func:`~tracking.blobs.arc_centres`).
+
+    Returns:
+        (2,) float64 centre in window pixels; the centroid when the region is not found.
+    """
+    _, regions = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+    ys, xs = np.nonzero(mask)
+    nearest = np.argmin((xs - centroid_px[0]) ** 2 + (ys - centroid_px[1]) ** 2)
+    ys, xs = np.nonzero(regions == regions[ys[nearest], xs[nearest]])
+    h, w = mask.shape
+    return arc_centres(np.zeros(xs.size, dtype=np.int64), xs.astype(np.float64), ys.astype(np.float64),
+                       centroid_px[None, :], np.array([radius_px]), np.zeros((1, 2)),
+                       np.array([[w - 1.0, h - 1.0]]))[0]
 
 
 class Tracker:
@@ -415,7 +442,20 @@ class Tracker:
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
         ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
         simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
-        uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
+        local_uv = np.stack([mx, my], axis=1)
+        # a partly hidden ball: its region's centroid lies towards the visible part; the centre
+        # comes from the visible arc instead (only these few windows pay for it)
+        edge_r = r_px[mi, ci] - ARC_EDGE_SHRINK_PX
+        partial = np.flatnonzero(simple & (m00 < np.pi * (self.params.arc_fit_ratio * edge_r) ** 2))
+        if partial.size:
+            part = np.zeros(k_count, dtype=bool)
+            part[partial] = True
+            sel = part[win]
+            slot = np.cumsum(part) - 1  # window -> row among the partial ones
+            last = (hi - 1 - centre).astype(np.float64)
+            local_uv[partial] = arc_centres(slot[win[sel]], dx[sel], dy[sel], local_uv[partial], edge_r[partial],
+                                            first[partial], last[partial])
+        uv_out[mi[simple], ci[simple]] = centre[simple] + local_uv[simple]
         rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
         crowded = np.flatnonzero(ok & ~simple)
         if crowded.size == 0:
@@ -438,6 +478,11 @@ class Tracker:
                 j = np.argmin(np.linalg.norm(blobs.uv_px - uv[m, c], axis=1))
                 uv_out[m, c] = blobs.uv_px[j]
                 rad_out[m, c] = blobs.radius_px[j]
+                if blobs.radius_px[j] < self.params.arc_fit_ratio * edge_r[k]:
+                    # e.g. half a ball (roundness ~0.5): the region's centre from its arc as above
+                    offset = np.array([x0k, y0k], dtype=np.float64)
+                    uv_out[m, c] = offset + _region_arc_centre(win_labels == self._label[m],
+                                                               blobs.uv_px[j] - offset, edge_r[k])
 
     def _choose(self, obs, pred, sigma, known):
         """Triangulate every marker from its window centroids; keep geometrically consistent ones."""
