@@ -298,7 +298,7 @@ def _coverage(patch_bgr: np.ndarray, patch_labels: np.ndarray, filled: np.ndarra
     return weights
 
 
-ARC_INSIDE_TOL_PX = (1.0, 1.0, 0.7, 0.7, 0.5, 0.5)
+ARC_INSIDE_TOL_PX = (1.0, 1.0, 0.7, 0.5)
 """Per Gauss-Newton iteration: an edge point this far inside the circle fitted so far is taken for
 the occluder's outline, not the ball's (loose while the start, the centroid, is still far off)."""
 ARC_EDGE_SHRINK_PX = 0.2
@@ -351,63 +351,57 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     centre = np.array(start_px, dtype=np.float64)
     if k_count == 0 or win.size == 0:
         return centre
-    # pixel keys on a grid wide enough for every region: (region, row, column) -> one integer
+    # pixel keys on a grid wide enough for every region: (region, row, column) -> one number
     x0, y0 = float(x.min()) - 1.0, float(y.min()) - 1.0
     span = float(max(x.max() - x0, y.max() - y0)) + 2.0
     key = (win * span + (y - y0)) * span + (x - x0)
     order = np.sort(key)
-    pts_x, pts_y, pts_w = [], [], []
-    for ex, ey in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
-        nx, ny = x + ex, y + ey
-        probe = key + ey * span + ex
-        at = np.minimum(np.searchsorted(order, probe), order.size - 1)
-        outside = order[at] != probe
-        lo, hi = box_lo[win], box_hi[win]
-        inside_box = (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
-        edge = outside & inside_box
-        pts_x.append(x[edge] + 0.5 * ex)
-        pts_y.append(y[edge] + 0.5 * ey)
-        pts_w.append(win[edge])
-    px, py, pw = np.concatenate(pts_x), np.concatenate(pts_y), np.concatenate(pts_w)
+    lo, hi = box_lo[win], box_hi[win]
+    # the 4 neighbours of every pixel at once: (4, P) coordinates, keys, and "outside the region"
+    ex = np.array([[1.0], [-1.0], [0.0], [0.0]])
+    ey = np.array([[0.0], [0.0], [1.0], [-1.0]])
+    nx, ny = x + ex, y + ey
+    probe = key + ey * span + ex
+    outside = order[np.minimum(np.searchsorted(order, probe), order.size - 1)] != probe
+    edge = outside & (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
+    # the edge points of each region in one row of a (K, L) table, padded (``valid``)
+    pw = np.broadcast_to(win, edge.shape)[edge]
     by_region = np.argsort(pw, kind="stable")
-    px, py, pw = px[by_region], py[by_region], pw[by_region]
-    r = radius_px[pw]
+    pw = pw[by_region]
+    px = (x + 0.5 * ex)[edge][by_region]
+    py = (y + 0.5 * ey)[edge][by_region]
+    counts = np.bincount(pw, minlength=k_count)
+    slot = np.arange(pw.size) - (np.cumsum(counts) - counts)[pw]
+    valid = np.zeros((k_count, max(int(counts.max()), 1)), dtype=bool)
+    valid[pw, slot] = True
+    pts = np.zeros((2,) + valid.shape)
+    pts[0][valid], pts[1][valid] = px, py
     # a ball hidden by much is a poor start: its centroid lies so far towards the visible part that
     # the arc opposite the cut looks inside the circle; the smallest circle enclosing the edge
     # points is the ball's while more than half of it shows (too noisy on balls of a few pixels)
     area = np.bincount(win, minlength=k_count)
-    far_off = np.flatnonzero((area < ARC_ENCLOSING_BELOW * np.pi * radius_px**2) & (radius_px >= ARC_ENCLOSING_MIN_PX))
-    if far_off.size:
-        bounds = np.searchsorted(pw, np.arange(k_count + 1))
-        for k in far_off.tolist():
-            edge_pts = np.stack([px[bounds[k]:bounds[k + 1]], py[bounds[k]:bounds[k + 1]]], axis=1)
-            if len(edge_pts) >= 3:
-                (cx, cy), enclosing_r = cv2.minEnclosingCircle(edge_pts.astype(np.float32))
-                if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
-                    centre[k] = cx, cy
+    far_off = np.flatnonzero((area < ARC_ENCLOSING_BELOW * np.pi * radius_px**2) & (radius_px >= ARC_ENCLOSING_MIN_PX)
+                             & (counts >= 3))
+    for k in far_off.tolist():
+        (cx, cy), enclosing_r = cv2.minEnclosingCircle(pts[:, k, :counts[k]].T.astype(np.float32))
+        if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
+            centre[k] = cx, cy
+    r = radius_px[:, None]
     for tol in inside_tol_px:
-        dx, dy = px - centre[pw, 0], py - centre[pw, 1]
-        dist = np.sqrt(dx * dx + dy * dy)
-        keep = dist > np.maximum(r - tol, 1e-9)
-        w = keep.astype(np.float64)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ux, uy = np.where(keep, dx / dist, 0.0), np.where(keep, dy / dist, 0.0)
-        res = dist - r
+        d = pts - centre.T[:, :, None]  # (2, K, L) from the centre to each edge point
+        dist = np.sqrt(d[0] * d[0] + d[1] * d[1])
+        keep = valid & (dist > r - tol)
+        u = d * np.where(keep, 1.0 / np.maximum(dist, 1e-9), 0.0)  # unit directions of the kept points
         # normal equations of min sum (|q - c| - r)^2 over the kept points, one 2x2 per region
-        a = np.bincount(pw, ux * ux, k_count)
-        b = np.bincount(pw, ux * uy, k_count)
-        d = np.bincount(pw, uy * uy, k_count)
-        gx = np.bincount(pw, ux * res, k_count)
-        gy = np.bincount(pw, uy * res, k_count)
-        n = np.bincount(pw, w, k_count)
-        det = a * d - b * b
+        m = np.einsum("ikl,jkl->kij", u, u)  # (K, 2, 2)
+        g = np.einsum("ikl,kl->ki", u, dist - r)  # (K, 2)
+        det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] ** 2
+        n = keep.sum(axis=1)
         # fewer than three points, or points on one side only (det near 0): keep the centre
-        solvable = (n >= 3) & (det > 1e-3 * np.maximum(n, 1.0) ** 2)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            step_x = np.where(solvable, (d * gx - b * gy) / det, 0.0)
-            step_y = np.where(solvable, (a * gy - b * gx) / det, 0.0)
-        centre[:, 0] += step_x
-        centre[:, 1] += step_y
+        solvable = (n >= 3) & (det > 1e-3 * np.maximum(n, 1) ** 2)
+        det = np.where(solvable, det, np.inf)
+        centre[:, 0] += (m[:, 1, 1] * g[:, 0] - m[:, 0, 1] * g[:, 1]) / det
+        centre[:, 1] += (m[:, 0, 0] * g[:, 1] - m[:, 0, 1] * g[:, 0]) / det
     # a fit that wandered off (too few edge points for the radius) is not a better centre
     moved = np.hypot(*(centre - start_px).T)
     bad = ~np.isfinite(moved) | (moved > radius_px)
