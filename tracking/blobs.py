@@ -387,21 +387,19 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
         if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
             centre[k] = cx, cy
     r = radius_px[:, None]
+    # (few numpy calls per iteration: on small arrays their count, not their size, is the cost)
+    c = centre.T[:, :, None].copy()  # (2, K, 1)
+    ridge = 1e-6 * np.eye(2)  # a region with no kept point gets no step (its sums are 0)
     for tol in inside_tol_px:
-        d = pts - centre.T[:, :, None]  # (2, K, L) from the centre to each edge point
-        dist = np.sqrt(d[0] * d[0] + d[1] * d[1])
+        d = pts - c  # (2, K, L) from the centre to each edge point
+        dist = np.sqrt(np.einsum("ikl,ikl->kl", d, d))
         keep = valid & (dist > r - tol)
-        u = d * np.where(keep, 1.0 / np.maximum(dist, 1e-9), 0.0)  # unit directions of the kept points
+        u = d * (keep / np.where(keep, dist, 1.0))  # unit directions of the kept points, 0 elsewhere
         # normal equations of min sum (|q - c| - r)^2 over the kept points, one 2x2 per region
-        m = np.einsum("ikl,jkl->kij", u, u)  # (K, 2, 2)
-        g = np.einsum("ikl,kl->ki", u, dist - r)  # (K, 2)
-        det = m[:, 0, 0] * m[:, 1, 1] - m[:, 0, 1] ** 2
-        n = keep.sum(axis=1)
-        # fewer than three points, or points on one side only (det near 0): keep the centre
-        solvable = (n >= 3) & (det > 1e-3 * np.maximum(n, 1) ** 2)
-        det = np.where(solvable, det, np.inf)
-        centre[:, 0] += (m[:, 1, 1] * g[:, 0] - m[:, 0, 1] * g[:, 1]) / det
-        centre[:, 1] += (m[:, 0, 0] * g[:, 1] - m[:, 0, 1] * g[:, 0]) / det
+        normal = np.einsum("ikl,jkl->kij", u, u) + ridge
+        step = np.linalg.solve(normal, np.einsum("ikl,kl->ki", u, dist - r)[..., None])
+        c += step.transpose(1, 0, 2) * (keep.sum(axis=1) >= 3)[:, None]  # three points pin a circle
+    centre = c[:, :, 0].T.copy()
     # a fit that wandered off (too few edge points for the radius) is not a better centre
     moved = np.hypot(*(centre - start_px).T)
     bad = ~np.isfinite(moved) | (moved > radius_px)

@@ -478,6 +478,10 @@ class Tracker:
             # roundness as in tracking.blobs (a pixel's own second moment, 1/12, on each axis)
             round_px = np.sqrt(np.clip(mean_var + 1.0 / 12.0 - spread, 0, None) / (mean_var + 1.0 / 12.0 + spread))
         part = simple & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2) | (round_px < params.arc_fit_roundness))
+        # a view well below the ball's size is left out anyway while two full views remain (_choose)
+        ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
+        full = simple & (ratio >= params.partial_ratio) & (ratio <= params.oversize_ratio)
+        part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
         arcs = _ArcRegions()
         if part.any():
             sel = part[win]
