@@ -134,8 +134,8 @@ class TrackerParams:
             instead of its centroid. In the simulated motions at 640x480 this takes 99.8 % of the
             views of balls 10-50 % hidden and 0.2 % of the whole ones (at 320x240 a third of the
             whole ones too: balls of 2.5-3.5 px are seldom round); all 0 turn it off.
-        arc_fit_all_below_px: every region of a ball whose radius (less ``ARC_EDGE_SHRINK_PX``)
-            is below this is fitted: on balls of a few pixels neither size nor roundness tells a
+        arc_fit_all_below_px: every region (not larger than the whole ball) of a ball whose
+            radius (less ``ARC_EDGE_SHRINK_PX``) is below this is fitted: on balls of a few pixels neither size nor roundness tells a
             partly hidden ball, and the fit leaves a whole ball's centre where its centroid is
             (0.168 px RMS either way on the 5661 whole views of trunk_lean_compensation at 320x240).
     """
@@ -482,8 +482,11 @@ class Tracker:
         with np.errstate(invalid="ignore"):
             # roundness as in tracking.blobs (a pixel's own second moment, 1/12, on each axis)
             round_px = np.sqrt(np.clip(mean_var + 1.0 / 12.0 - spread, 0, None) / (mean_var + 1.0 / 12.0 + spread))
-        part = simple & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2) | (round_px < params.arc_fit_roundness)
-                         | (edge_r < params.arc_fit_all_below_px))
+        # (a region larger than the whole ball is no partly hidden ball: two balls of the colour
+        # touching, whose outline fits neither)
+        part = simple & (m00 <= np.pi * edge_r**2) & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2)
+                                                     | (round_px < params.arc_fit_roundness)
+                                                     | (edge_r < params.arc_fit_all_below_px))
         # a view well below the ball's size is left out anyway while two full views remain (_choose)
         ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
         full = simple & (ratio >= params.partial_ratio) & (ratio <= params.oversize_ratio)
@@ -512,7 +515,8 @@ class Tracker:
                 j = np.argmin(np.linalg.norm(blobs.uv_px - uv[m, c], axis=1))
                 uv_out[m, c] = blobs.uv_px[j]
                 rad_out[m, c] = blobs.radius_px[j]
-                if blobs.radius_px[j] < params.arc_fit_ratio * edge_r[k] or blobs.roundness[j] < params.arc_fit_roundness:
+                if blobs.radius_px[j] <= edge_r[k] and (blobs.radius_px[j] < params.arc_fit_ratio * edge_r[k]
+                                                        or blobs.roundness[j] < params.arc_fit_roundness):
                     # e.g. half a ball (roundness ~0.5), or a ball beside another of its colour
                     arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], (x0k, y0k), edge_r[k], m, c)
         if arcs.count:
