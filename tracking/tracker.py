@@ -135,9 +135,10 @@ class TrackerParams:
             views of balls 10-50 % hidden and 0.2 % of the whole ones (at 320x240 a third of the
             whole ones too: balls of 2.5-3.5 px are seldom round); all 0 turn it off.
         arc_fit_all_below_px: every region (not larger than the whole ball) of a ball whose
-            radius (less ``ARC_EDGE_SHRINK_PX``) is below this is fitted: on balls of a few pixels neither size nor roundness tells a
-            partly hidden ball, and the fit leaves a whole ball's centre where its centroid is
-            (0.168 px RMS either way on the 5661 whole views of trunk_lean_compensation at 320x240).
+            radius (less ``ARC_EDGE_SHRINK_PX``) is below this is fitted: on balls of a few pixels
+            neither size nor roundness tells a partly hidden ball, and the fit leaves a whole
+            ball's centre where its centroid is (0.168 px RMS either way on the 5661 whole views
+            of trunk_lean_compensation at 320x240).
     """
 
     base_sigma_m: float = 0.008

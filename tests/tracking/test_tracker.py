@@ -129,8 +129,9 @@ def test_partly_hidden_balls_are_measured_from_their_visible_arcs():
     )
     with studio:
         cams = studio.cameras
+        no_arcs = TrackerParams(arc_fit_ratio=0.0, arc_fit_roundness=0.0, arc_fit_all_below_px=0.0)
         trackers = {"arc": Tracker(cams, studio.markerset, fps=15.0),
-                    "centroid": Tracker(cams, studio.markerset, fps=15.0, params=TrackerParams(arc_fit_ratio=0.0, arc_fit_roundness=0.0, arc_fit_all_below_px=0.0))}
+                    "centroid": Tracker(cams, studio.markerset, fps=15.0, params=no_arcs)}
         errors = {name: [] for name in trackers}
         for sf in studio.play(motion, 15.0, seconds=1.5, noise_sigma=1.5):
             for name, tracker in trackers.items():
