@@ -26,12 +26,13 @@ import time
 from dataclasses import dataclass
 from typing import Sequence
 
+import cv2
 import numpy as np
 
 from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
 from tracking.angles import joint_angles
-from tracking.blobs import find_blobs
+from tracking.blobs import ARC_EDGE_SHRINK_PX, arc_centres, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
@@ -126,6 +127,18 @@ class TrackerParams:
         view_sigma_px: centroid uncertainty of a single full view of a marker that is not
             measured; such views go to the hidden-marker estimator as rays
             (:meth:`~tracking.hidden.Estimator.observe_views`).
+        arc_fit_ratio, arc_fit_roundness: a window region whose equivalent radius is below
+            ``arc_fit_ratio`` times the ball's (projected radius less ``ARC_EDGE_SHRINK_PX``), or
+            whose roundness is below ``arc_fit_roundness``, is taken for a partly hidden ball: its
+            centre is fitted to the visible arc of its outline (:func:`~tracking.blobs.arc_centres`)
+            instead of its centroid. In the simulated motions at 640x480 this takes 99.8 % of the
+            views of balls 10-50 % hidden and 0.2 % of the whole ones (at 320x240 a third of the
+            whole ones too: balls of 2.5-3.5 px are seldom round); all 0 turn it off.
+        arc_fit_all_below_px: every region (not larger than the whole ball) of a ball whose
+            radius (less ``ARC_EDGE_SHRINK_PX``) is below this is fitted: on balls of a few pixels
+            neither size nor roundness tells a partly hidden ball, and the fit leaves a whole
+            ball's centre where its centroid is (0.168 px RMS either way on the 5661 whole views
+            of trunk_lean_compensation at 320x240).
     """
 
     base_sigma_m: float = 0.008
@@ -149,6 +162,9 @@ class TrackerParams:
     view_choice_margin_m: float = 0.02
     oversize_ratio: float = 1.1
     view_sigma_px: float = 0.5
+    arc_fit_ratio: float = 0.95
+    arc_fit_roundness: float = 0.9
+    arc_fit_all_below_px: float = 4.0
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -159,6 +175,48 @@ STEP_STAGES = (
     "full-frame re-acquisition",
     "joint angles",
 )
+
+
+class _ArcRegions:
+    """Window regions of partly hidden balls gathered for one :func:`~tracking.blobs.arc_centres`
+    call (one vectorized fit for all of a frame's), each with its own pixel origin."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self._parts: list[tuple[np.ndarray, ...]] = []
+
+    def add_many(self, region: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
+                 box_lo: np.ndarray, box_hi: np.ndarray, origin_px: np.ndarray, marker: np.ndarray,
+                 camera: np.ndarray) -> None:
+        """K regions: (P,) region index 0..K-1, pixel x, y relative to each region's (K, 2) origin
+        (full-image pixels); (K, 2) centroids, (K,) radii, (K, 2) searched boxes (inclusive), all
+        relative to the origin; (K,) marker and camera of each."""
+        self._parts.append((region + self.count, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
+                            start_px, radius_px, np.asarray(box_lo, dtype=np.float64),
+                            np.asarray(box_hi, dtype=np.float64), np.asarray(origin_px, dtype=np.float64),
+                            marker, camera))
+        self.count += len(radius_px)
+
+    def add_region(self, mask: np.ndarray, centroid_px: np.ndarray, origin_px: tuple[int, int], radius_px: float,
+                   marker: int, camera: int) -> None:
+        """The 8-connected region of ``mask`` (a whole searched window at ``origin_px``) nearest
+        the (full-image) ``centroid_px``."""
+        origin = np.array(origin_px, dtype=np.float64)
+        local = centroid_px - origin
+        _, regions = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+        ys, xs = np.nonzero(mask)
+        nearest = np.argmin((xs - local[0]) ** 2 + (ys - local[1]) ** 2)
+        ys, xs = np.nonzero(regions == regions[ys[nearest], xs[nearest]])
+        h, w = mask.shape
+        self.add_many(np.zeros(xs.size, dtype=np.int64), xs, ys, local[None, :], np.array([radius_px]),
+                      np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
+                      np.array([camera]))
+
+    def fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels."""
+        cols = [np.concatenate(parts) for parts in zip(*self._parts)]
+        region, x, y, start, radius, lo, hi, origin, marker, camera = cols
+        return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi)
 
 
 class Tracker:
@@ -417,13 +475,33 @@ class Tracker:
         simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
         uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
         rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
+        # a partly hidden ball: its region's centroid lies towards the visible part; its centre
+        # comes from the visible arc instead (only these few windows pay for it), all in one call
+        # with those of the crowded windows below
+        edge_r = r_px[mi, ci] - ARC_EDGE_SHRINK_PX
+        params = self.params
+        with np.errstate(invalid="ignore"):
+            # roundness as in tracking.blobs (a pixel's own second moment, 1/12, on each axis)
+            round_px = np.sqrt(np.clip(mean_var + 1.0 / 12.0 - spread, 0, None) / (mean_var + 1.0 / 12.0 + spread))
+        # (a region larger than the whole ball is no partly hidden ball: two balls of the colour
+        # touching, whose outline fits neither)
+        part = simple & (m00 <= np.pi * edge_r**2) & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2)
+                                                     | (round_px < params.arc_fit_roundness)
+                                                     | (edge_r < params.arc_fit_all_below_px))
+        # a view well below the ball's size is left out anyway while two full views remain (_choose)
+        ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
+        full = simple & (ratio >= params.partial_ratio) & (ratio <= params.oversize_ratio)
+        part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
+        arcs = _ArcRegions()
+        if part.any():
+            sel = part[win]
+            arcs.add_many((np.cumsum(part) - 1)[win[sel]], dx[sel], dy[sel], np.stack([mx, my], axis=1)[part],
+                          edge_r[part], first[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
         crowded = np.flatnonzero(ok & ~simple)
-        if crowded.size == 0:
-            return
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
         recent = known & (self.frames_unmeasured == 0)
-        for k in crowded:
+        for k in crowded.tolist():
             m, c = int(mi[k]), int(ci[k])
             hw = int(np.ceil(half[recent & valid[:, c], c].max() if recent[m] else half[m, c]))
             img, gate = images[c], self.gates[c]
@@ -438,6 +516,13 @@ class Tracker:
                 j = np.argmin(np.linalg.norm(blobs.uv_px - uv[m, c], axis=1))
                 uv_out[m, c] = blobs.uv_px[j]
                 rad_out[m, c] = blobs.radius_px[j]
+                if blobs.radius_px[j] <= edge_r[k] and (blobs.radius_px[j] < params.arc_fit_ratio * edge_r[k]
+                                                        or blobs.roundness[j] < params.arc_fit_roundness):
+                    # e.g. half a ball (roundness ~0.5), or a ball beside another of its colour
+                    arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], (x0k, y0k), edge_r[k], m, c)
+        if arcs.count:
+            m_idx, c_idx, uv_fit = arcs.fit()
+            uv_out[m_idx, c_idx] = uv_fit
 
     def _choose(self, obs, pred, sigma, known):
         """Triangulate every marker from its window centroids; keep geometrically consistent ones."""

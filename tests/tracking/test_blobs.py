@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tracking.blobs import DEFAULT_MIN_ROUNDNESS, Blobs, find_blobs
+from tracking.blobs import ARC_EDGE_SHRINK_PX, DEFAULT_MIN_ROUNDNESS, Blobs, arc_centres, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import load_markerset
 
@@ -227,6 +227,71 @@ def test_order_is_by_colour_then_raster(table, palette):
     assert blobs.colour.tolist() == [0, 0, 1, 2]
     np.testing.assert_allclose(blobs.uv_px, [(60, 15), (20, 45), (100, 15), (20, 15)], atol=0.1)
     assert blobs.of_colour(0).uv_px.shape == (2, 2)
+
+
+def hide_behind_edge(image_rgb: np.ndarray, centre_px, normal_deg: float, distance_px: float, rgb) -> None:
+    """Cover the half-plane beyond the line ``distance_px`` from ``centre_px`` along the direction
+    ``normal_deg`` with an occluder of colour ``rgb`` (an arm in front of a ball), anti-aliased."""
+    h, w = image_rgb.shape[:2]
+    offsets = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+    xs = (np.arange(w)[:, None] + offsets).reshape(-1)
+    ys = (np.arange(h)[:, None] + offsets).reshape(-1)
+    a = np.deg2rad(normal_deg)
+    beyond = (xs[None, :] - centre_px[0]) * np.cos(a) + (ys[:, None] - centre_px[1]) * np.sin(a) > distance_px
+    cover = beyond.reshape(h, SUPERSAMPLE, w, SUPERSAMPLE).mean(axis=(1, 3))[..., None]
+    image_rgb[:] = image_rgb * (1.0 - cover) + cover * np.asarray(rgb, dtype=np.float64)
+
+
+def region_arc_centre(mask: np.ndarray, radius_px: float, box_hi=None) -> tuple[np.ndarray, np.ndarray]:
+    """(centroid, arc centre) of the pixels of ``mask`` taken as one region searched in the whole image."""
+    ys, xs = np.nonzero(mask)
+    start = np.array([[xs.mean(), ys.mean()]])
+    hi = np.array([box_hi if box_hi is not None else (mask.shape[1] - 1.0, mask.shape[0] - 1.0)], dtype=np.float64)
+    fitted = arc_centres(np.zeros(xs.size, dtype=np.int64), xs.astype(np.float64), ys.astype(np.float64), start,
+                         np.array([radius_px - ARC_EDGE_SHRINK_PX]), np.zeros((1, 2)), hi)
+    return start[0], fitted[0]
+
+
+def test_partly_hidden_ball_centre_from_its_visible_arc(table, palette):
+    """A ball 10-35 % hidden behind a straight edge (skin or a dark sleeve, any direction, radius
+    3.5-8 px): the binary region's centroid lies 0.46-2.0 px towards the visible part (1.25 px
+    RMS); the circle of the ball's radius fitted to the visible arc is 0.22 px RMS, 0.40 max."""
+    rng = np.random.default_rng(3)
+    errors = {"centroid": [], "arc": []}
+    angle = np.linspace(0.0, np.pi, 2001)
+    cut_area = (angle - np.sin(angle)) / (2.0 * np.pi)  # area fraction cut off by a chord
+    for trial in range(30):
+        radius, colour = rng.uniform(3.5, 8.0), trial % len(palette)
+        centre = (30.0 + rng.uniform(), 27.0 + rng.uniform())
+        image = canvas(64, 56, BACKGROUNDS_RGB[trial % len(BACKGROUNDS_RGB)])
+        draw_ball(image, centre, radius, palette[colour], LIGHTS[trial % len(LIGHTS)])
+        hidden = rng.uniform(0.1, 0.35)
+        chord_distance = radius * np.cos(np.interp(hidden, cut_area, angle) / 2.0)
+        hide_behind_edge(image, centre, rng.uniform(0.0, 360.0), chord_distance,
+                         (224, 172, 140) if trial % 2 else (60, 60, 70))
+        mask = table.classify(to_bgr(image, 1.0, trial)) == colour + 1
+        centroid, fitted = region_arc_centre(mask, radius)
+        errors["centroid"].append(np.hypot(*(centroid - centre)))
+        errors["arc"].append(np.hypot(*(fitted - centre)))
+    rms = {name: float(np.sqrt(np.mean(np.square(e)))) for name, e in errors.items()}
+    assert min(errors["centroid"]) > 0.4 and rms["centroid"] > 1.0
+    assert rms["arc"] < 0.3 and max(errors["arc"]) < 0.5
+
+
+def test_arc_centre_of_a_whole_ball_is_its_centroid_and_a_cut_window_is_no_edge(table, palette):
+    """A whole ball: the arc fit stays within 0.1 px of the (binary) centroid. The same
+    ball cut by the border of the searched window (the box): the cut is not the ball's outline,
+    so the fit uses the rest of the circle, while the centroid lies inside the window."""
+    centre, radius = (30.4, 27.7), 6.0
+    mask = table.classify(one_ball(centre, radius, palette[2], seed=5)) == 3
+    centroid, fitted = region_arc_centre(mask, radius)
+    assert np.hypot(*(fitted - centroid)) < 0.1 and np.hypot(*(fitted - centre)) < 0.25
+    last_col = 32  # the window ends 1.6 px right of the centre: a quarter of the ball is outside
+    cut = mask.copy()
+    cut[:, last_col + 1:] = False
+    centroid, fitted = region_arc_centre(cut, radius, box_hi=(last_col, mask.shape[0] - 1.0))
+    assert np.hypot(*(centroid - centre)) > 0.8
+    assert np.hypot(*(fitted - centre)) < 0.25
 
 
 def test_empty_inputs_give_empty_blobs(table):

@@ -6,7 +6,7 @@ import pytest
 from tracking.angles import joint_angles
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.status import MarkerStatus
-from tracking.tracker import Tracker, TrackingState
+from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +118,34 @@ def test_windows_and_centroids_for_the_camera_monitor():
     errors = np.array(errors)
     assert errors.size > 0.9 * len(runs[1:]) * m_count * 2
     assert errors.max() < 1.5 and np.sqrt(np.mean(errors**2)) < 0.35  # binary centroids of ~3 px balls: 0.27 px RMS
+
+
+def test_partly_hidden_balls_are_measured_from_their_visible_arcs():
+    """Views of balls 10-40 % hidden (trunk_lean_compensation at 640x480: styloids behind the
+    other wrist, elbow markers at the arm's outline): the centres the tracker takes from the visible
+    arcs are within 0.3 px RMS of the true ball centres; the same windows' centroids are ~1 px off."""
+    studio, motion = studio_from_settings(
+        SimulationSettings(motion="trunk_lean_compensation", size_px=(640, 480), fps=15.0)
+    )
+    with studio:
+        cams = studio.cameras
+        no_arcs = TrackerParams(arc_fit_ratio=0.0, arc_fit_roundness=0.0, arc_fit_all_below_px=0.0)
+        trackers = {"arc": Tracker(cams, studio.markerset, fps=15.0),
+                    "centroid": Tracker(cams, studio.markerset, fps=15.0, params=no_arcs)}
+        errors = {name: [] for name in trackers}
+        for sf in studio.play(motion, 15.0, seconds=1.5, noise_sigma=1.5):
+            for name, tracker in trackers.items():
+                sample = tracker.step(sf.frames.images, sf.frames.time_s)
+                if sample.uv_px is None:
+                    continue
+                for c, cam in enumerate(cams):
+                    vis = sf.visible_fraction[c]
+                    part = (vis > 0.6) & (vis < 0.9) & np.isfinite(sample.uv_px[:, c, 0])
+                    errors[name].extend(np.linalg.norm(sample.uv_px[part, c] - cam.project(sf.markers_m[part]), axis=1))
+    rms = {name: float(np.sqrt(np.mean(np.square(e)))) for name, e in errors.items()}
+    assert len(errors["arc"]) >= 50
+    assert rms["centroid"] > 0.8
+    assert rms["arc"] < 0.35 and max(errors["arc"]) < 0.7
 
 
 def test_cameras_going_dark_in_any_combination_never_break_the_tracker():
