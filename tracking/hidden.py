@@ -287,18 +287,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
                      a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
 
 
-def _carry(a: np.ndarray, b: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """v turned by the shortest rotation that takes direction a to direction b (Rodrigues)."""
-    a, b = _unit(a), _unit(b)
-    axis = _cross(a, b)
-    s = math.sqrt(float(axis @ axis))
-    c = float(a @ b)
-    if s < 1e-12:
-        return v
-    axis = axis / s
-    return v * c + _cross(axis, v) * s + axis * float(axis @ v) * (1.0 - c)
-
-
 def _solve3(a: np.ndarray, b: np.ndarray) -> list[float]:
     """x with a x = b for a (3, 3) matrix well away from singular (Cramer's rule in plain floats:
     ~10x faster than numpy's solve on one 3x3 system)."""
@@ -857,8 +845,6 @@ class Estimator:
         self._arm_points: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._arm_pinned: set[int] = set()
         self._views: dict[int, list[tuple[list[float], list[float], float]]] = {}
-        # per hinge marker: the positions of the last frame with its hinge's markers known
-        self._hinge_prev: dict[int, np.ndarray] = {}
         # per shoulder: normal equations of the pivot offset (trunk frame)
         self._piv_a = np.zeros((len(self._shoulder_slot), 3, 3))
         self._piv_b = np.zeros((len(self._shoulder_slot), 3))
@@ -1016,31 +1002,20 @@ class Estimator:
         length = self.hinge_length[r]
         if not (ok[h.partner] and ok[h.shoulder]) or not np.isfinite(length):
             return None
-        # prediction (it fills the directions the constraints below leave free: the axis' turn
-        # about the arm while the elbow is nearly straight): the axis of the last frame with the
-        # hinge's markers known (the previous one, or the last before LOST) carried along by the
-        # humerus' swing since, the shortest rotation of the shoulder marker -> partner direction
-        # from then to now: the humerus does not turn about its own axis, which a straight arm's
-        # markers cannot show. Else the rigid forearm-elbow fit, which assumes instead that the
-        # forearm does not pronate; in right_shoulder_extension (elbow straight, the forearm
-        # pronating 25 degrees while the inner elbow marker hides behind the body) that fit took
-        # the hidden marker 28 mm off on average (41 at most), the carried axis 6 (9).
+        # prediction: the rigid forearm-elbow fit (exact while the forearm does not turn), else
+        # the axis of the previous frame
         prev_axis = base[k] - base[h.partner]
         prev_axis = _unit(prev_axis) if np.all(np.isfinite(prev_axis)) else None
-        if k in self._hinge_prev:
-            q = self._hinge_prev[k]
-            axis_pred = _carry(q[h.partner] - q[h.shoulder], p[h.partner] - p[h.shoulder], _unit(q[k] - q[h.partner]))
+        rigid = self._rigid(k, p, weight, prior)
+        if rigid is not None:
+            axis_pred = _unit(rigid - p[h.partner])
+        elif prev_axis is not None:
+            axis_pred = prev_axis
         else:
-            rigid = self._rigid(k, p, weight, prior)
-            if rigid is not None:
-                axis_pred = _unit(rigid - p[h.partner])
-            elif prev_axis is not None:
-                axis_pred = prev_axis
-            else:
-                return None
-        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
+            return None
         # the axis is perpendicular to the humerus (pivot -> elbow centre) and to the forearm
         # (elbow centre -> wrist centre); with the centre = partner + length/2 n both are linear in n
+        pivot = p[h.shoulder] + self.trunk_rot @ self.pivot_offset(h.shoulder, p[h.partner], p[h.shoulder])
         rows = [p[h.partner] - pivot]
         values = [-0.5 * length]
         wa, wb = h.wrists
@@ -1455,9 +1430,6 @@ class Estimator:
         if self._arms:
             self._arm_update(p, ok)
         known = ok | hidden
-        for k, h in self.hinges.items():  # the last frame with the hinge's markers known
-            if known[k] and known[h.partner] and known[h.shoulder]:
-                self._hinge_prev[k] = p
         # a reappearing marker keeps the velocity of its estimate (its measured jump is estimate error)
         keep_v = ok & ~self.measured & has_base
         self.velocity = np.where(keep_v[:, None], self.velocity, np.where(known[:, None], p - prev, np.nan))
