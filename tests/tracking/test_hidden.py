@@ -765,3 +765,27 @@ def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
         assert s[2] == ESTIMATED
         errors.append(np.linalg.norm(p[2] - truth[20, 2]))
     assert errors[0] > 0.008 and errors[1] < 0.003, errors
+
+
+@pytest.mark.parametrize("rhythm", [0.0, 0.5])
+def test_the_per_frame_forearm_angles_in_floats_match_the_elbow_frame_and_forearm_angles(rhythm):
+    # _learn computes the arm's angles every frame in plain floats (speed); they must stay the
+    # numpy definitions' (elbow_frame with the learned, scapula-turned pivot; forearm_angles)
+    est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                    np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                    hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                    forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=rhythm)
+    truth, _ = _flexing_arm(lambda i: 0.3 + 0.06 * i)
+    # the shoulder up and to the side (humerus elevation ~45 degrees: the scapula turns), moving
+    truth[:, 0] = np.array([-0.2, 0.2, 0.0]) + np.linspace(0.0, 0.05, len(truth))[:, None]
+    measured = np.ones(5, dtype=bool)
+    turned = []
+    for p in truth:
+        est.update(p, measured)
+        turned.append(not np.allclose(est.pivot_offset(0, 0.5 * (p[1] + p[2]), p[0]), est.pivot_offset(0)))
+        fast = est._forearm_angles_f(0, p.tolist(), measured.tolist())
+        theta, psi, shape = forearm_angles(est._elbow_frame(0, p, measured), p[3], p[4])
+        assert fast[0] == pytest.approx(theta, abs=1e-12) and fast[1] == pytest.approx(psi, abs=1e-12)
+        assert np.allclose([fast[2].along, fast[2].radius, fast[2].half, fast[2].tilt],
+                           [shape.along, shape.radius, shape.half, shape.tilt], atol=1e-12)
+    assert any(turned) == (rhythm > 0)
