@@ -237,14 +237,20 @@ def _measure(
     total = mom["m00"]
     if total <= 0.0:
         return None
-    # a pixel is a unit square, not a point: its own second moment is 1/12 on each axis
-    cxx = mom["mu20"] / total + 1.0 / 12.0
-    cyy = mom["mu02"] / total + 1.0 / 12.0
-    cxy = mom["mu11"] / total
-    half_trace = 0.5 * (cxx + cyy)
-    root = float(np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy))
-    roundness = float(np.sqrt(max(half_trace - root, 0.0) / (half_trace + root)))
+    roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
     return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
+
+
+PIXEL_MOMENT = 1.0 / 12.0
+"""A pixel is a unit square, not a point: its own second moment on each axis."""
+
+
+def axis_ratio(mu20, mu02, mu11, own: float = 0.0):
+    """Minor/major axis ratio (0..1) of regions with central second moments ``mu20``, ``mu02``,
+    ``mu11`` (per unit area; arrays or floats), each point's ``own`` moment added on both axes."""
+    mean_var = 0.5 * (mu20 + mu02) + own
+    spread = np.sqrt(0.25 * (mu20 - mu02) ** 2 + mu11 * mu11)
+    return np.sqrt(np.clip(mean_var - spread, 0.0, None) / (mean_var + spread))
 
 
 def _coverage(patch_bgr: np.ndarray, patch_labels: np.ndarray, filled: np.ndarray, colour: int) -> np.ndarray:

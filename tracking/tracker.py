@@ -32,7 +32,7 @@ import numpy as np
 from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
 from tracking.angles import joint_angles
-from tracking.blobs import ARC_EDGE_SHRINK_PX, arc_centres, find_blobs
+from tracking.blobs import ARC_EDGE_SHRINK_PX, PIXEL_MOMENT, arc_centres, axis_ratio, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
@@ -165,6 +165,11 @@ class TrackerParams:
     arc_fit_ratio: float = 0.95
     arc_fit_roundness: float = 0.9
     arc_fit_all_below_px: float = 4.0
+
+    def full_view(self, ratio: np.ndarray) -> np.ndarray:
+        """Views whose blob radius over the ball's projected radius (``ratio``) shows the whole
+        ball: neither partly hidden nor holding more than the ball (False for NaN)."""
+        return (ratio >= self.partial_ratio) & (ratio <= self.oversize_ratio)
 
 
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
@@ -466,9 +471,7 @@ class Tracker:
             mu20 = np.bincount(win, dx * dx, k_count) / m00 - mx**2
             mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
             mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
-            spread = np.sqrt(((mu20 - mu02) / 2.0) ** 2 + mu11**2)
-            mean_var = (mu20 + mu02) / 2.0
-            roundness = np.sqrt(np.clip(mean_var - spread, 0, None) / (mean_var + spread))
+            roundness = axis_ratio(mu20, mu02, mu11)
         ball_area = np.pi * r_px[mi, ci] ** 2
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
         ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
@@ -481,8 +484,7 @@ class Tracker:
         edge_r = r_px[mi, ci] - ARC_EDGE_SHRINK_PX
         params = self.params
         with np.errstate(invalid="ignore"):
-            # roundness as in tracking.blobs (a pixel's own second moment, 1/12, on each axis)
-            round_px = np.sqrt(np.clip(mean_var + 1.0 / 12.0 - spread, 0, None) / (mean_var + 1.0 / 12.0 + spread))
+            round_px = axis_ratio(mu20, mu02, mu11, PIXEL_MOMENT)  # roundness as tracking.blobs measures it
         # (a region larger than the whole ball is no partly hidden ball: two balls of the colour
         # touching, whose outline fits neither)
         part = simple & (m00 <= np.pi * edge_r**2) & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2)
@@ -490,7 +492,7 @@ class Tracker:
                                                      | (edge_r < params.arc_fit_all_below_px))
         # a view well below the ball's size is left out anyway while two full views remain (_choose)
         ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
-        full = simple & (ratio >= params.partial_ratio) & (ratio <= params.oversize_ratio)
+        full = simple & params.full_view(ratio)
         part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
         arcs = _ArcRegions()
         if part.any():
@@ -538,7 +540,7 @@ class Tracker:
         # of the colour touching it): leave them out while two full views remain
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio_pred = rad / (ball_px / self._pred_depth)
-            partial = seen & ((ratio_pred < params.partial_ratio) | (ratio_pred > params.oversize_ratio))
+            partial = seen & ~params.full_view(ratio_pred) & ~np.isnan(ratio_pred)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         left_out = partial & keep_full[:, None]
         seen &= ~left_out
@@ -613,7 +615,7 @@ class Tracker:
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         with np.errstate(invalid="ignore"):
-            full = seen & ~measured[:, None] & (ratio_pred >= params.partial_ratio) & (ratio_pred <= params.oversize_ratio)
+            full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)
         return new_pos, measured
 
