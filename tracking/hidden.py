@@ -967,20 +967,26 @@ class Estimator:
             self._rest_cache[k] = g
         return g
 
-    def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
-        """(3, 3) trunk-frame rotation of the pivot offset by the scapula's upward rotation for the
-        humerus elevation (shoulder slot k, the shoulder marker and the elbow centre now): the
-        scapulohumeral rhythm, ``scapular_rhythm`` degrees per degree of elevation between
-        ``rhythm_deg`` (the acromion marker turns medially over the humeral head as the arm rises)."""
-        rt = self.trunk_rot
-        g = self._rest_offset(k)
-        u = rt.T @ (elbow_m - shoulder_m) - g
-        lu = math.sqrt(float(u @ u))
+    def _scapula_angle(self, k: int, shoulder: Sequence[float], elbow: Sequence[float]) -> float:
+        """Angle (rad, about the trunk's z) of the scapula's upward rotation for the humerus
+        elevation (shoulder slot k, the shoulder marker and the elbow centre now, world
+        3-sequences): the scapulohumeral rhythm, ``scapular_rhythm`` degrees per degree of
+        elevation between ``rhythm_deg`` (the acromion marker turns medially over the humeral head
+        as the arm rises). In plain floats: it runs for every arm in every frame."""
+        rt = self.trunk_rot.tolist()
+        g = self._rest_offset(k).tolist()
+        d = [elbow[i] - shoulder[i] for i in range(3)]
+        u = [rt[0][j] * d[0] + rt[1][j] * d[1] + rt[2][j] * d[2] - g[j] for j in range(3)]
+        lu = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
         if not lu > 1e-9:
-            return np.eye(3)
-        elevation = math.degrees(math.acos(max(-1.0, min(1.0, -float(u[1]) / lu))))
+            return 0.0
+        elevation = math.degrees(math.acos(max(-1.0, min(1.0, -u[1] / lu))))
         lo, hi = self.rhythm_deg
-        phi = math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * self._shoulder_side[k]
+        return math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * float(self._shoulder_side[k])
+
+    def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
+        """(3, 3) trunk-frame rotation of the pivot offset by :meth:`_scapula_angle`."""
+        phi = self._scapula_angle(k, shoulder_m.tolist(), elbow_m.tolist())
         c, s = math.cos(phi), math.sin(phi)
         return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
@@ -1054,15 +1060,9 @@ class Estimator:
         k = self._shoulder_slot[sh]
         g = self._rest_offset(k).tolist()
         if self.scapular_rhythm > 0:
-            d = [centre[i] - shoulder[i] for i in range(3)]
-            u = [rt[0][j] * d[0] + rt[1][j] * d[1] + rt[2][j] * d[2] - g[j] for j in range(3)]
-            lu = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-            if lu > 1e-9:
-                elevation = math.degrees(math.acos(max(-1.0, min(1.0, -u[1] / lu))))
-                lo, hi = self.rhythm_deg
-                phi = math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * self._shoulder_side[k]
-                c, s = math.cos(phi), math.sin(phi)
-                g = [c * g[0] - s * g[1], s * g[0] + c * g[1], g[2]]
+            phi = self._scapula_angle(k, shoulder, centre)
+            c, s = math.cos(phi), math.sin(phi)
+            g = [c * g[0] - s * g[1], s * g[0] + c * g[1], g[2]]
         pivot = [shoulder[i] + rt[i][0] * g[0] + rt[i][1] * g[1] + rt[i][2] * g[2] for i in range(3)]
         # the elbow frame (elbow_frame)
         e = [b[i] - a[i] for i in range(3)]
