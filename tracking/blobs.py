@@ -366,55 +366,62 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     centre = np.array(start_px, dtype=np.float64)
     if k_count == 0 or win.size == 0:
         return centre
-    # pixel keys on a grid wide enough for every region: (region, row, column) -> one number
+    # every region's pixels in one occupancy grid (K regions x rows x columns, a border of one
+    # empty pixel all round); the 4 neighbours of every pixel at once, by flat offsets in it
     x0, y0 = float(x.min()) - 1.0, float(y.min()) - 1.0
-    span = float(max(x.max() - x0, y.max() - y0)) + 2.0
-    key = (win * span + (y - y0)) * span + (x - x0)
-    order = np.sort(key)
-    lo, hi = box_lo[win], box_hi[win]
-    # the 4 neighbours of every pixel at once: (4, P) coordinates, keys, and "outside the region"
+    ix, iy = (x - x0).astype(np.intp), (y - y0).astype(np.intp)
+    w_grid, h_grid = int(ix.max()) + 2, int(iy.max()) + 2
+    flat = (win * h_grid + iy) * w_grid + ix
+    grid = np.zeros(k_count * h_grid * w_grid, dtype=bool)
+    grid[flat] = True
     ex = np.array([[1.0], [-1.0], [0.0], [0.0]])
     ey = np.array([[0.0], [0.0], [1.0], [-1.0]])
+    offset = np.array([[1], [-1], [w_grid], [-w_grid]], dtype=np.intp)
     nx, ny = x + ex, y + ey
-    probe = key + ey * span + ex
-    outside = order[np.minimum(np.searchsorted(order, probe), order.size - 1)] != probe
-    edge = outside & (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
-    # the edge points of each region in one row of a (K, L) table, padded (``valid``)
+    lo, hi = box_lo[win], box_hi[win]
+    edge = ~grid[flat + offset] & (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
+    # edge points (midpoints to the outside neighbours), grouped by region
     pw = np.broadcast_to(win, edge.shape)[edge]
     by_region = np.argsort(pw, kind="stable")
     pw = pw[by_region]
     px = (x + 0.5 * ex)[edge][by_region]
     py = (y + 0.5 * ey)[edge][by_region]
     counts = np.bincount(pw, minlength=k_count)
-    slot = np.arange(pw.size) - (np.cumsum(counts) - counts)[pw]
-    valid = np.zeros((k_count, max(int(counts.max()), 1)), dtype=bool)
-    valid[pw, slot] = True
-    pts = np.zeros((2,) + valid.shape)
-    pts[0][valid], pts[1][valid] = px, py
+    first = np.cumsum(counts) - counts
     # a ball hidden by much is a poor start: its centroid lies so far towards the visible part that
     # the arc opposite the cut looks inside the circle; the smallest circle enclosing the edge
     # points is the ball's while more than half of it shows (too noisy on balls of a few pixels)
     area = np.bincount(win, minlength=k_count)
     far_off = np.flatnonzero((area < ARC_ENCLOSING_BELOW * np.pi * radius_px**2) & (radius_px >= ARC_ENCLOSING_MIN_PX)
                              & (counts >= 3))
+    q = np.stack([px, py])  # (2, E) edge points
+    if far_off.size:
+        q32 = np.ascontiguousarray(q.T, dtype=np.float32)
     for k in far_off.tolist():
-        (cx, cy), enclosing_r = cv2.minEnclosingCircle(pts[:, k, :counts[k]].T.astype(np.float32))
+        (cx, cy), enclosing_r = cv2.minEnclosingCircle(q32[first[k]:first[k] + counts[k]])
         if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
             centre[k] = cx, cy
-    r = radius_px[:, None]
-    # (few numpy calls per iteration: on small arrays their count, not their size, is the cost)
-    c = centre.T[:, :, None].copy()  # (2, K, 1)
-    ridge = 1e-6 * np.eye(2)  # a region with no kept point gets no step (its sums are 0)
+    # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region: the
+    # per-region sums of one iteration are one product with the (K, E) region indicator
+    # (few numpy calls per iteration: on these small arrays their count, not their size, is the cost)
+    member = (pw == np.arange(k_count)[:, None]).astype(np.float64)
+    r = radius_px[pw]
+    c = centre.T.copy()  # (2, K)
+    terms = np.empty((6, pw.size))  # per edge point: uxx, uxy, uyy, ux res, uy res, kept
     for tol in inside_tol_px:
-        d = pts - c  # (2, K, L) from the centre to each edge point
-        dist = np.sqrt(np.einsum("ikl,ikl->kl", d, d))
-        keep = valid & (dist > r - tol)
+        d = q - c.take(pw, axis=1)  # (2, E) from the centre to each edge point
+        dist = np.sqrt(d[0] * d[0] + d[1] * d[1])
+        keep = np.greater(dist, r - tol, out=terms[5])
         u = d * (keep / np.where(keep, dist, 1.0))  # unit directions of the kept points, 0 elsewhere
-        # normal equations of min sum (|q - c| - r)^2 over the kept points, one 2x2 per region
-        normal = np.einsum("ikl,jkl->kij", u, u) + ridge
-        step = np.linalg.solve(normal, np.einsum("ikl,kl->ki", u, dist - r)[..., None])
-        c += step.transpose(1, 0, 2) * (keep.sum(axis=1) >= 3)[:, None]  # three points pin a circle
-    centre = c[:, :, 0].T.copy()
+        np.multiply(u, u[0], out=terms[0:2])
+        np.multiply(u[1], u[1], out=terms[2])
+        np.multiply(u, dist - r, out=terms[3:5])
+        s = member @ terms.T
+        sxx, sxy, syy = s[:, 0] + 1e-6, s[:, 1], s[:, 2] + 1e-6  # a region with no kept point gets no step
+        pinned = (s[:, 5] >= 3) / (sxx * syy - sxy * sxy)  # three points pin a circle
+        c[0] += (syy * s[:, 3] - sxy * s[:, 4]) * pinned
+        c[1] += (sxx * s[:, 4] - sxy * s[:, 3]) * pinned
+    centre = c.T.copy()
     # a fit that wandered off (too few edge points for the radius) is not a better centre
     moved = np.hypot(*(centre - start_px).T)
     bad = ~np.isfinite(moved) | (moved > radius_px)
