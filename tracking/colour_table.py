@@ -350,7 +350,7 @@ class ColourTable:
         if self.bits < 8:
             index = _quantize_index(index, self.bits)
         labels = np.empty(index.shape, dtype=np.uint8)
-        np.take(self.lut, index, out=labels, mode="clip")
+        np.take(self.lut, index, out=labels, mode="wrap")  # (in range: wrap is numpy's cheapest check)
         return labels
 
     def classify_windows(self, images: Sequence[np.ndarray], image_index: np.ndarray, boxes: np.ndarray
@@ -401,7 +401,7 @@ class ColourTable:
         if self.bits < 8:
             words = _quantize_index(words, self.bits)
         labels = np.empty(words.shape, dtype=np.uint8)
-        np.take(self.lut, words, out=labels, mode="clip")
+        np.take(self.lut, words, out=labels, mode="wrap")  # (in range: wrap is numpy's cheapest check)
         return labels, starts
 
 
