@@ -263,6 +263,8 @@ class Tracker:
         self._same_segment = (seg[:, None] == seg[None, :]) & ~np.eye(m, dtype=bool)
         for i, j in estimator_config(markerset)["length_pairs"]:
             self._same_segment[i, j] = self._same_segment[j, i] = True
+        # pairs of markers of one colour: their windows can hold the same ball
+        self._colour_pairs = np.argwhere(np.triu(self.colour[:, None] == self.colour[None, :], 1))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -434,7 +436,26 @@ class Tracker:
         self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
         if valid.any():
             self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
+            self._one_ball_one_marker(uv, r_px, uv_out, rad_out)
         return uv_out, rad_out
+
+    def _one_ball_one_marker(self, uv, r_px, uv_out, rad_out) -> None:
+        """A ball that the windows of two markers of its colour both found (the same blob in one
+        camera, e.g. a hidden wrist marker behind the elbow marker of its colour on one line of
+        sight) is a view of the marker predicted nearer to it only; the other loses that view."""
+        i, j = self._colour_pairs.T
+        with np.errstate(invalid="ignore"):
+            d = np.sqrt(((uv_out[i] - uv_out[j]) ** 2).sum(axis=2))  # (P, C), NaN where either has none
+            shared = d < 0.5 * np.minimum(r_px[i], r_px[j])
+        if not shared.any():
+            return
+        pair, cam = np.nonzero(shared)
+        a, b = i[pair], j[pair]
+        da = np.sqrt(((uv_out[a, cam] - uv[a, cam]) ** 2).sum(axis=1))
+        db = np.sqrt(((uv_out[b, cam] - uv[b, cam]) ** 2).sum(axis=1))
+        loser = np.where(da <= db, b, a)
+        uv_out[loser, cam] = np.nan
+        rad_out[loser, cam] = np.nan
 
     def _windows(self, images, valid, uv, half, r_px, known, size, uv_out, rad_out) -> None:
         """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
