@@ -32,9 +32,7 @@ measured comparison and the recommended configuration):
   direction. The shoulder pivot is the acromion marker plus an offset in the trunk frame learned
   online from exactly this perpendicularity (the acromion is on the scapula, ~6 cm above the
   humeral head). Where the two conditions do not fix the axis (elbow nearly straight, wrists
-  hidden) the rigid forearm-elbow fit (or the previous axis) fills in, for as long as that
-  extrapolation allows (``max_hinge_sigma_deg``), then the marker is LOST; a LOST epicondyle comes
-  back as an estimate only where the two conditions pin the axis. Where two mirror-image
+  hidden) the rigid forearm-elbow fit (or the previous axis) fills in; where two mirror-image
   solutions remain, the one on the previous axis' side is kept.
 - **Forearm** (:func:`wrist_centre`, :class:`Forearm`): a hidden styloid marker comes from the
   rigid forearm-elbow fit while that fits (RMS misfit of its supports <= ``max_rigid_residual_m``);
@@ -1039,8 +1037,6 @@ class Estimator:
         n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
                        axis_prev=side, fixed=fixed)
         if fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
-            if not np.all(np.isfinite(base[k])):  # a lost marker comes back only where the hinge pins it
-                return _DROP
             free = self.hinge_free[r] + 1
             arm = self._arm_of_elbow.get(k)
             speed = abs(float(self.arm_velocity[arm][1])) * self.fps if arm is not None and np.isfinite(self.arm_velocity[arm][1]) else 0.0

@@ -749,37 +749,6 @@ def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
     assert errors[0] < 0.003 and errors[1] > 0.05, errors
 
 
-def test_a_lost_elbow_marker_stays_lost_while_the_straight_elbow_leaves_its_axis_free():
-    # the inner elbow marker hidden while the elbow straightens and stays straight as the forearm
-    # pronates (right_shoulder_extension): the axis' turn about the arm is guesswork, so after
-    # the extrapolation's allowance the marker is LOST, and it stays LOST (it came back as an
-    # estimate every frame before, from the same guess) until the bent elbow pins the axis again
-    def flexion(i):
-        return float(np.interp(i, [0, 20, 30, 90, 100, 130], [1.0, 1.0, 0.05, 0.05, 1.0, 1.0]))
-
-    def supination(i):
-        return float(np.interp(i, [0, 30, 90, 130], [0.3, 0.3, -0.4, -0.4]))
-
-    truth = []
-    for i in range(130):
-        e1, e2, w1, w2 = forearm_pose(flexion(i), supination(i))
-        truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
-    truth = np.array(truth)
-    measured = np.ones((130, 5), dtype=bool)
-    measured[20:, 2] = False
-    est = _arm_estimator()
-    est.min_singular = 0.45  # this arm's straight elbow (sv 0.30) counts as free, as the studio's (0.28)
-    p, s = run(est, truth, measured)
-    assert (s[20:25, 2] == ESTIMATED).all()  # still pinned while the elbow is bent
-    lost = np.flatnonzero(s[20:, 2] == LOST) + 20
-    assert lost.size and lost[0] < 60, lost
-    assert (s[lost[0]:95, 2] == LOST).all(), s[lost[0]:95, 2]
-    assert (s[105:, 2] == ESTIMATED).all()  # bent again: the hinge pins it
-    est = s[20:, 2] == ESTIMATED
-    err = np.linalg.norm(p[20:, 2][est] - truth[20:, 2][est], axis=1)
-    assert err.max() < 0.02, err.max()
-
-
 def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
     truth, measured = _flexing_arm(lambda i: 0.8 + 0.3 * i / 30)
     camera = truth[20, 2] + np.array([0.0, 0.3, -2.0])  # looks across the elbow's axis
