@@ -162,6 +162,9 @@ class BaseScene:
     app: "App"
     #: Clear colour of the frame, 0..1 linear-ish RGB.
     background = theme.BACKGROUND_GL
+    #: The frame's depth is cleared with its colour; False: the scene resets the depth itself
+    #: where it draws in 3D (e.g. with a background at the far plane), and the clear spares it.
+    clear_depth = True
 
     def enter(self, app: "App") -> None:
         self.app = app
@@ -355,7 +358,7 @@ class App:
             scene.prepare(frame)
         # A whole-target clear is a fast tile clear on llvmpipe: cheaper than painting the part a
         # 3D pass leaves as a large 2D shape (tried: ~1.5-3 ms more per 1280x720 frame).
-        self.screen.begin(scene.background)
+        self.screen.begin(scene.background, depth=scene.clear_depth)
         scene.render_3d(frame)
         self.canvas.begin()
         scene.render_2d(frame)

@@ -176,6 +176,9 @@ class GameScene(BaseScene):
         source: stored with the session (e.g. ``sim``).
     """
 
+    #: The depth is reset by the 3D view's background (:meth:`render_3d`), not by the frame's clear.
+    clear_depth = False
+
     def __init__(self, link, spec: GameSpec, side: str, db_path: Path, patient_id: str, *,
                  make_avatar: Callable | None = None, auto: bool = False, mute: bool = False, seed: int = 0,
                  level: float | None = None, level_low: float | None = None, level_high: float | None = None,
@@ -391,8 +394,9 @@ class GameScene(BaseScene):
         ctx = frame.screen.ctx
         ctx.viewport = self.view.gl(frame.size_px[1])
         try:
-            # the frame's depth was cleared whole (App.render): the gradient needs not write it again
-            self.avatar.renderer.render_background(depth=False)
+            # the gradient at the far plane resets the view's depth (the frame's clear spares it:
+            # nothing else of the frame is depth-tested)
+            self.avatar.renderer.render_background(depth=not self.clear_depth)
             if self._prepared is not None:
                 self.avatar.renderer.draw(self._prepared)
         finally:
