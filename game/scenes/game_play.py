@@ -205,6 +205,7 @@ class GameScene(BaseScene):
         self._sent = None
         self._flash: tuple[str, tuple, float] | None = None
         self._frame_consumed = -1
+        self._read = (None, (None, ""))   # (the sample read last, its (reading, reason))
         self._forearm_deg = 0.0
         self._turn = 0
         self._hand_target = None
@@ -342,7 +343,9 @@ class GameScene(BaseScene):
                 if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
                     self.avatar.push_sample(sample)
             latest = samples[-1] if samples else self.link.latest
-            reading, reason = read_sample(latest, markerset.names, self.link.angle_names, self.side)
+            if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
+                self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))
+            reading, reason = self._read[1]
         self.session.update(now, reading, reason)
         for cue in self.session.take_cues():
             self._cue(cue, now)
