@@ -3,6 +3,8 @@ stack, and headless frames with pixels checked. SDL dummy driver, EGL (llvmpipe)
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pygame
 import pytest
@@ -102,6 +104,29 @@ def test_run_paces_frames_to_max_fps_and_stops_after_seconds(screen):
     summary = app.run(seconds=1.0)
     assert summary.frames == pytest.approx(30, abs=1)
     assert summary.updates == pytest.approx(120, abs=4)
+
+
+def test_run_holds_max_fps_on_average_when_sleeps_wake_late_and_some_frames_are_slow(screen):
+    """Frames are paced to deadlines: a late wake-up or a frame longer than the period is made up by
+    the next wait (paced from each frame's start, the rate fell to ~53 of 60 here)."""
+    clock = FakeClock()
+    late = itertools.cycle((0.004, 0.0, 0.002))
+
+    def sleep(dt_s: float) -> None:
+        clock.now_s += dt_s + next(late)
+
+    class Working(Recorder):
+        drawn = 0
+
+        def render_2d(self, frame: Frame):
+            super().render_2d(frame)
+            Working.drawn += 1
+            clock.now_s += 0.020 if Working.drawn % 7 == 0 else 0.008   # now and then slower than 1/60 s
+
+    app = App(screen, Settings(max_fps=60, show_fps=False), clock=clock, sleep=sleep, events=lambda: [])
+    app.push(Working())
+    summary = app.run(seconds=2.0)
+    assert summary.frames == pytest.approx(120, abs=2)
 
 
 def test_scene_stack_push_pop_replace_and_quit(screen):
