@@ -141,6 +141,7 @@ def test_auto_play_collects_targets_inside_the_stored_rom_and_logs_the_session(r
     body = rgb[:, :view_w]
     shirt = (body[..., 2] > body[..., 0] + 50) & (body[..., 2] > 110) & (body[..., 1] < 170)
     assert shirt.sum() > 800
+    assert (np.abs(rgb[4, 4] - (204, 222, 240)) <= 3).all()   # the view's gradient (its light top) around it
     x, y = (round(v) for v in target_px)
     if scene.river is None:
         patch = rgb[max(0, y - 45):y + 45, max(0, x - 45):min(view_w, x + 45)]

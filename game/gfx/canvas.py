@@ -117,24 +117,28 @@ void main() {
 _FILL_VS = """
 #version 330
 uniform vec2 u_screen;
-uniform vec4 u_rect;            // x, y, w, h in pixels
 in vec2 in_corner;
+in vec4 in_rect;                // x, y, w, h in pixels
+in vec4 in_colour;
+flat out vec4 v_colour;
 void main() {
-    vec2 px = u_rect.xy + in_corner * u_rect.zw;
+    vec2 px = in_rect.xy + in_corner * in_rect.zw;
+    v_colour = in_colour;
     gl_Position = vec4(px.x / u_screen.x * 2.0 - 1.0, 1.0 - px.y / u_screen.y * 2.0, 0.0, 1.0);
 }
 """
 
 _FILL_FS = """
 #version 330
-uniform vec4 u_colour;
+flat in vec4 v_colour;
 out vec4 f_colour;
 void main() {
-    f_colour = u_colour;
+    f_colour = v_colour;
 }
 """
 
 _FLOATS = 18                     # per instance: rect 4, fill 4, edge 4, shape 2, uv 4
+_FILL_FLOATS = 8                 # per fill: rect 4, colour 4
 _NO_UV = (0.0, 0.0, 0.0, 0.0)
 _NO_EDGE = (0.0, 0.0, 0.0, 0.0)
 _ANCHORS = ("topleft", "midtop", "topright", "midleft", "center", "midright", "bottomleft", "midbottom",
@@ -278,10 +282,12 @@ class Canvas:
         self._batch_vao = self._make_batch_vao()
         self._quad_vao = ctx.vertex_array(self._quad_prog, [(self._corners, "2f", "in_corner")])
         self._fill_prog = ctx.program(vertex_shader=_FILL_VS, fragment_shader=_FILL_FS)
-        self._fill_vao = ctx.vertex_array(self._fill_prog, [(self._corners, "2f", "in_corner")])
+        self._fill_capacity = 16
+        self._fill_instances = ctx.buffer(reserve=self._fill_capacity * _FILL_FLOATS * 4, dynamic=True)
+        self._fill_vao = self._make_fill_vao()
         self._pending: list[float] = []
         # the frame's draws, issued by end(): ("batch", float32 rows) | ("quad", texture, rect, uv, tint)
-        # | ("fill", rect, colour) | ("clip", GL scissor box or None)
+        # | ("fills", [rect and colour floats of consecutive fills]) | ("clip", GL scissor box or None)
         self._ops: list[tuple] = []
         self._clip = None
         self._images: dict[str, moderngl.Texture] = {}
@@ -290,6 +296,12 @@ class Canvas:
         return self.ctx.vertex_array(self._batch_prog, [
             (self._corners, "2f", "in_corner"),
             (self._instances, "4f 4f 4f 2f 4f/i", "in_rect", "in_fill", "in_edge", "in_shape", "in_uv"),
+        ])
+
+    def _make_fill_vao(self) -> moderngl.VertexArray:
+        return self.ctx.vertex_array(self._fill_prog, [
+            (self._corners, "2f", "in_corner"),
+            (self._fill_instances, "4f 4f/i", "in_rect", "in_colour"),
         ])
 
     # ------------------------------------------------------------------ frame
@@ -326,13 +338,8 @@ class Canvas:
                 prog["u_tint"].write(struct.pack("4f", *_rgba(tint)))
                 texture.use(0)
                 self._quad_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
-            elif kind == "fill":
-                _, rect, colour = op
-                self._fill_prog["u_rect"].write(struct.pack("4f", *rect))
-                self._fill_prog["u_colour"].write(struct.pack("4f", *_rgba(colour)))
-                ctx.disable(moderngl.BLEND)    # opaque: blending would read every pixel back
-                self._fill_vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
-                ctx.enable(moderngl.BLEND)
+            elif kind == "fills":
+                self._draw_fills(op[1])
             else:  # clip
                 ctx.scissor = op[1]
         self._ops.clear()
@@ -349,6 +356,19 @@ class Canvas:
         self._instances.write(rows.tobytes())
         self.atlas.texture.use(0)
         self._batch_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+
+    def _draw_fills(self, values: list[float]) -> None:
+        n = len(values) // _FILL_FLOATS
+        if n > self._fill_capacity:
+            while self._fill_capacity < n:
+                self._fill_capacity *= 2
+            self._fill_instances.orphan(self._fill_capacity * _FILL_FLOATS * 4)
+            self._fill_vao.release()
+            self._fill_vao = self._make_fill_vao()
+        self._fill_instances.write(np.asarray(values, dtype="f4").tobytes())
+        self.ctx.disable(moderngl.BLEND)    # opaque: blending would read every pixel back
+        self._fill_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+        self.ctx.enable(moderngl.BLEND)
 
     def end(self) -> None:
         """Draw what is queued and leave blending off (and no clip) for the next 3D pass."""
@@ -382,9 +402,12 @@ class Canvas:
                   border_colour=border_colour)
 
     def fill(self, rect: tuple[float, float, float, float], colour: Colour) -> None:
-        """An opaque rectangle of one colour (alpha ignored): for large areas, the cheapest to paint."""
+        """An opaque rectangle of one colour (alpha ignored): for large areas, the cheapest to paint.
+        Consecutive fills are one draw."""
         self.flush()
-        self._ops.append(("fill", tuple(float(v) for v in rect), (*colour[:3], 255)))
+        if not self._ops or self._ops[-1][0] != "fills":
+            self._ops.append(("fills", []))
+        self._ops[-1][1].extend((*(float(v) for v in rect), *_rgba((*colour[:3], 255))))
 
     def sprite(self, key, surface: pygame.Surface, pos: tuple[float, float], colour: Colour) -> None:
         """The alpha of ``surface`` (a white mask made once by the caller, kept in the text atlas under
@@ -476,7 +499,7 @@ class Canvas:
         for tex in self._images.values():
             tex.release()
         self._images.clear()
-        for obj in (self._batch_vao, self._quad_vao, self._fill_vao, self._instances, self._corners,
+        for obj in (self._batch_vao, self._quad_vao, self._fill_vao, self._instances, self._fill_instances, self._corners,
                     self._batch_prog, self._quad_prog, self._fill_prog):
             obj.release()
 

@@ -110,11 +110,14 @@ class Screen:
     def aspect(self) -> float:
         return self.size_px[0] / self.size_px[1]
 
-    def begin(self, clear_rgb: tuple[float, float, float] | None) -> None:
+    def begin(self, clear_rgb: tuple[float, float, float] | None, *, depth: bool = True) -> None:
         """Bind the frame's target and clear it (colour and depth).
 
         Args:
             clear_rgb: the clear colour, 0..1; None: bind only (the frame repaints every pixel).
+            depth: clear the depth too; False when the frame resets the depth where it needs it
+                (a 3D view's background drawn at the far plane): the depth clear of the whole
+                1280x720 target is about half the clear's cost on llvmpipe (~0.7 ms CPU).
 
         The clear is of the whole target: llvmpipe clears a whole surface cheaply, tile by tile,
         whereas a scissored clear is drawn like a quad and makes the next texture upload of the
@@ -123,7 +126,12 @@ class Screen:
         self.target.use()
         self.ctx.viewport = (0, 0, *self.size_px)
         if clear_rgb is not None:
-            self.target.clear(*clear_rgb, 1.0, depth=1.0)
+            if depth:
+                self.target.clear(*clear_rgb, 1.0, depth=1.0)
+            else:   # glClear honours the depth mask: the colour alone
+                self.target.depth_mask = False
+                self.target.clear(*clear_rgb, 1.0)
+                self.target.depth_mask = True
 
     def flush(self) -> None:
         """Hand the commands issued so far to the rasterizer without waiting for them (glFlush):

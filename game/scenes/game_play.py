@@ -176,6 +176,9 @@ class GameScene(BaseScene):
         source: stored with the session (e.g. ``sim``).
     """
 
+    #: The depth is reset by the 3D view's background (:meth:`render_3d`), not by the frame's clear.
+    clear_depth = False
+
     def __init__(self, link, spec: GameSpec, side: str, db_path: Path, patient_id: str, *,
                  make_avatar: Callable | None = None, auto: bool = False, mute: bool = False, seed: int = 0,
                  level: float | None = None, level_low: float | None = None, level_high: float | None = None,
@@ -202,6 +205,7 @@ class GameScene(BaseScene):
         self._sent = None
         self._flash: tuple[str, tuple, float] | None = None
         self._frame_consumed = -1
+        self._read = (None, (None, ""))   # (the sample read last, its (reading, reason))
         self._forearm_deg = 0.0
         self._turn = 0
         self._hand_target = None
@@ -339,7 +343,9 @@ class GameScene(BaseScene):
                 if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
                     self.avatar.push_sample(sample)
             latest = samples[-1] if samples else self.link.latest
-            reading, reason = read_sample(latest, markerset.names, self.link.angle_names, self.side)
+            if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
+                self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))
+            reading, reason = self._read[1]
         self.session.update(now, reading, reason)
         for cue in self.session.take_cues():
             self._cue(cue, now)
@@ -391,8 +397,9 @@ class GameScene(BaseScene):
         ctx = frame.screen.ctx
         ctx.viewport = self.view.gl(frame.size_px[1])
         try:
-            # the frame's depth was cleared whole (App.render): the gradient needs not write it again
-            self.avatar.renderer.render_background(depth=False)
+            # the gradient at the far plane resets the view's depth (the frame's clear spares it:
+            # nothing else of the frame is depth-tested)
+            self.avatar.renderer.render_background(depth=not self.clear_depth)
             if self._prepared is not None:
                 self.avatar.renderer.draw(self._prepared)
         finally:

@@ -219,6 +219,10 @@ class LiveScene(BaseScene):
         show_markers: draw the measured markers over the avatar.
     """
 
+    #: The avatar's gradient resets the view's depth (:meth:`game.avatar.live.LiveAvatar.render`):
+    #: the frame's clear spares it.
+    clear_depth = False
+
     def __init__(self, link: LiveLink, *, motions: Sequence[str | None] = (None,), motion: str | None = None,
                  open_monitor: Callable[[], BaseScene] | None = None,
                  make_avatar: Callable | None = None, show_markers: bool = True, source_kind: str = "sim") -> None:

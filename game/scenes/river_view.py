@@ -6,8 +6,8 @@ its banks are the ends of the patient's measured rotation range (:mod:`game.exer
 The water and the banks are bands of flat colour (opaque fills: llvmpipe, the CPU rasterizer, paints
 a third of the window cheapest that way; a textured tile cost ~1.5 ms more CPU per frame) with ripples
 and bushes carried down by the flow; the ripples and the boat (turned to a few headings) are drawn
-once with pygame when the scene opens. A frame costs seven fills, a textured quad and a few dozen
-shapes of the canvas batch.
+once with pygame when the scene opens. A frame costs seven fills (one draw), a textured quad and a
+few dozen shapes of the canvas batch.
 """
 
 from __future__ import annotations

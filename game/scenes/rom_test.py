@@ -285,6 +285,10 @@ class RomTestScene(BaseScene):
         demo: play the test's scripted motion on the simulated patient from the start.
     """
 
+    #: The avatar's gradient resets the view's depth (:meth:`game.avatar.live.LiveAvatar.render`):
+    #: the frame's clear spares it.
+    clear_depth = False
+
     def __init__(self, link, visit: RomVisit, test: RomTest, side: str, *, make_avatar: Callable | None = None,
                  demo: bool = False) -> None:
         self.link = link

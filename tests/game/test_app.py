@@ -3,6 +3,8 @@ stack, and headless frames with pixels checked. SDL dummy driver, EGL (llvmpipe)
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pygame
 import pytest
@@ -102,6 +104,29 @@ def test_run_paces_frames_to_max_fps_and_stops_after_seconds(screen):
     summary = app.run(seconds=1.0)
     assert summary.frames == pytest.approx(30, abs=1)
     assert summary.updates == pytest.approx(120, abs=4)
+
+
+def test_run_holds_max_fps_on_average_when_sleeps_wake_late_and_some_frames_are_slow(screen):
+    """Frames are paced to deadlines: a late wake-up or a frame longer than the period is made up by
+    the next wait (paced from each frame's start, the rate fell to ~53 of 60 here)."""
+    clock = FakeClock()
+    late = itertools.cycle((0.004, 0.0, 0.002))
+
+    def sleep(dt_s: float) -> None:
+        clock.now_s += dt_s + next(late)
+
+    class Working(Recorder):
+        drawn = 0
+
+        def render_2d(self, frame: Frame):
+            super().render_2d(frame)
+            Working.drawn += 1
+            clock.now_s += 0.020 if Working.drawn % 7 == 0 else 0.008   # now and then slower than 1/60 s
+
+    app = App(screen, Settings(max_fps=60, show_fps=False), clock=clock, sleep=sleep, events=lambda: [])
+    app.push(Working())
+    summary = app.run(seconds=2.0)
+    assert summary.frames == pytest.approx(120, abs=2)
 
 
 def test_scene_stack_push_pop_replace_and_quit(screen):
@@ -261,3 +286,60 @@ def test_canvas_writes_new_strings_into_the_atlas_before_any_draw_of_the_frame(s
     rgb = screen.read_rgb()
     assert (rgb[10:40, 10:60].max(axis=2) > 128).sum() > 20 and (rgb[120:150, 10:70].max(axis=2) > 128).sum() > 20
     canvas.release()
+
+
+def test_consecutive_fills_are_one_draw_and_keep_the_call_order(screen, monkeypatch):
+    """The river's bands: consecutive fills go out as one instanced draw; a shape between two
+    runs of fills stays between them."""
+    from game.gfx.canvas import Canvas
+
+    canvas = Canvas(screen.ctx, screen.size_px)
+    draws = []
+    render = canvas._fill_vao.render
+    monkeypatch.setattr(canvas._fill_vao, "render", lambda *a, **k: (draws.append(k.get("instances")), render(*a, **k)))
+    screen.begin((0.0, 0.0, 0.0))
+    canvas.begin()
+    for k, colour in enumerate(((200, 0, 0), (0, 200, 0), (0, 0, 200))):
+        canvas.fill((20 * k, 0, 20, 100), colour)            # three bands side by side
+    canvas.circle((30, 50), 10, (255, 255, 255))              # over the first two bands
+    canvas.fill((25, 45, 10, 10), (90, 90, 90, 20))            # over the circle, opaque
+    canvas.end()
+    assert draws == [3, 1]
+    rgb = screen.read_rgb().astype(int)
+    assert (rgb[80, 10] == (200, 0, 0)).all() and (rgb[80, 30] == (0, 200, 0)).all()
+    assert (rgb[80, 50] == (0, 0, 200)).all()
+    assert (rgb[50, 24] == (255, 255, 255)).all()             # the circle over the bands
+    assert (rgb[50, 30] == (90, 90, 90)).all()                # the last fill over the circle
+    canvas.release()
+
+
+def test_a_frame_clear_without_depth_keeps_the_depth(screen):
+    """``begin(depth=False)`` clears the colour only (a scene that resets the depth itself, e.g.
+    the games' gradient at the far plane, spares the clear the depth)."""
+    import moderngl
+
+    ctx = screen.ctx
+    prog = ctx.program(
+        vertex_shader="#version 330\nuniform float z;\nvoid main() {\n"
+                      "  vec2 p = vec2(float(gl_VertexID & 1), float((gl_VertexID >> 1) & 1));\n"
+                      "  gl_Position = vec4(p * 2.0 - 1.0, z, 1.0);\n}\n",
+        fragment_shader="#version 330\nout vec4 f;\nvoid main() { f = vec4(1.0, 1.0, 1.0, 1.0); }\n")
+    quad = ctx.vertex_array(prog, [])
+
+    def draw_at(z: float) -> None:
+        prog["z"].value = z
+        quad.render(moderngl.TRIANGLE_STRIP, vertices=4)
+
+    ctx.enable(moderngl.DEPTH_TEST)
+    screen.begin((0.0, 0.0, 0.0))
+    draw_at(-0.5)                                             # the near depth written
+    screen.begin((0.2, 0.0, 0.0), depth=False)
+    assert tuple(screen.read_rgb()[90, 160]) == (51, 0, 0)    # the colour cleared
+    draw_at(0.5)                                              # behind the kept depth: hidden
+    assert tuple(screen.read_rgb()[90, 160]) == (51, 0, 0)
+    screen.begin((0.2, 0.0, 0.0))                             # the whole clear
+    draw_at(0.5)
+    assert tuple(screen.read_rgb()[90, 160]) == (255, 255, 255)
+    ctx.disable(moderngl.DEPTH_TEST)
+    quad.release()
+    prog.release()
