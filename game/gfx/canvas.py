@@ -277,32 +277,18 @@ class Canvas:
         self._corners = ctx.buffer(corners.tobytes())
         self._batch_prog = ctx.program(vertex_shader=_BATCH_VS, fragment_shader=_BATCH_FS)
         self._quad_prog = ctx.program(vertex_shader=_QUAD_VS, fragment_shader=_QUAD_FS)
-        self._capacity = 512
-        self._instances = ctx.buffer(reserve=self._capacity * _FLOATS * 4, dynamic=True)
-        self._batch_vao = self._make_batch_vao()
+        self._batch = _InstanceStream(ctx, self._batch_prog, self._corners, _FLOATS, 512, "4f 4f 4f 2f 4f/i",
+                                      ("in_rect", "in_fill", "in_edge", "in_shape", "in_uv"))
         self._quad_vao = ctx.vertex_array(self._quad_prog, [(self._corners, "2f", "in_corner")])
         self._fill_prog = ctx.program(vertex_shader=_FILL_VS, fragment_shader=_FILL_FS)
-        self._fill_capacity = 16
-        self._fill_instances = ctx.buffer(reserve=self._fill_capacity * _FILL_FLOATS * 4, dynamic=True)
-        self._fill_vao = self._make_fill_vao()
+        self._fills = _InstanceStream(ctx, self._fill_prog, self._corners, _FILL_FLOATS, 16, "4f 4f/i",
+                                      ("in_rect", "in_colour"))
         self._pending: list[float] = []
         # the frame's draws, issued by end(): ("batch", float32 rows) | ("quad", texture, rect, uv, tint)
         # | ("fills", [rect and colour floats of consecutive fills]) | ("clip", GL scissor box or None)
         self._ops: list[tuple] = []
         self._clip = None
         self._images: dict[str, moderngl.Texture] = {}
-
-    def _make_batch_vao(self) -> moderngl.VertexArray:
-        return self.ctx.vertex_array(self._batch_prog, [
-            (self._corners, "2f", "in_corner"),
-            (self._instances, "4f 4f 4f 2f 4f/i", "in_rect", "in_fill", "in_edge", "in_shape", "in_uv"),
-        ])
-
-    def _make_fill_vao(self) -> moderngl.VertexArray:
-        return self.ctx.vertex_array(self._fill_prog, [
-            (self._corners, "2f", "in_corner"),
-            (self._fill_instances, "4f 4f/i", "in_rect", "in_colour"),
-        ])
 
     # ------------------------------------------------------------------ frame
     def begin(self) -> None:
@@ -345,29 +331,12 @@ class Canvas:
         self._ops.clear()
 
     def _draw_batch(self, rows: np.ndarray) -> None:
-        n = len(rows) // _FLOATS
-        if n > self._capacity:
-            while self._capacity < n:
-                self._capacity *= 2
-            self._instances.orphan(self._capacity * _FLOATS * 4)
-            self._batch_vao.release()
-            self._batch_vao = self._make_batch_vao()
-        # (a vertex buffer is read when the draw is issued: rewriting it for the next batch costs no wait)
-        self._instances.write(rows.tobytes())
         self.atlas.texture.use(0)
-        self._batch_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+        self._batch.draw(rows)
 
     def _draw_fills(self, values: list[float]) -> None:
-        n = len(values) // _FILL_FLOATS
-        if n > self._fill_capacity:
-            while self._fill_capacity < n:
-                self._fill_capacity *= 2
-            self._fill_instances.orphan(self._fill_capacity * _FILL_FLOATS * 4)
-            self._fill_vao.release()
-            self._fill_vao = self._make_fill_vao()
-        self._fill_instances.write(np.asarray(values, dtype="f4").tobytes())
         self.ctx.disable(moderngl.BLEND)    # opaque: blending would read every pixel back
-        self._fill_vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+        self._fills.draw(np.asarray(values, dtype="f4"))
         self.ctx.enable(moderngl.BLEND)
 
     def end(self) -> None:
@@ -499,9 +468,43 @@ class Canvas:
         for tex in self._images.values():
             tex.release()
         self._images.clear()
-        for obj in (self._batch_vao, self._quad_vao, self._fill_vao, self._instances, self._fill_instances, self._corners,
-                    self._batch_prog, self._quad_prog, self._fill_prog):
+        for obj in (self._batch, self._quad_vao, self._fills, self._corners, self._batch_prog, self._quad_prog,
+                    self._fill_prog):
             obj.release()
+
+
+class _InstanceStream:
+    """Per-instance rows of one instanced quad program: a dynamic buffer (doubled when a draw needs
+    more rows) and its vertex array over the shared unit-square corners."""
+
+    def __init__(self, ctx: moderngl.Context, prog: moderngl.Program, corners: moderngl.Buffer, floats: int,
+                 capacity: int, layout: str, names: tuple[str, ...]) -> None:
+        self.ctx, self._prog, self._corners = ctx, prog, corners
+        self._floats, self._layout, self._names = floats, layout, names
+        self.capacity = capacity
+        self.buffer = ctx.buffer(reserve=capacity * floats * 4, dynamic=True)
+        self.vao = self._make_vao()
+
+    def _make_vao(self) -> moderngl.VertexArray:
+        return self.ctx.vertex_array(self._prog, [(self._corners, "2f", "in_corner"),
+                                                  (self.buffer, self._layout, *self._names)])
+
+    def draw(self, rows: np.ndarray) -> None:
+        """Draw one quad per row of ``rows`` (float32, ``floats`` values per row, flat)."""
+        n = len(rows) // self._floats
+        if n > self.capacity:
+            while self.capacity < n:
+                self.capacity *= 2
+            self.buffer.orphan(self.capacity * self._floats * 4)
+            self.vao.release()
+            self.vao = self._make_vao()
+        # (a vertex buffer is read when the draw is issued: rewriting it for the next draw costs no wait)
+        self.buffer.write(rows.tobytes())
+        self.vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+
+    def release(self) -> None:
+        self.vao.release()
+        self.buffer.release()
 
 
 def _anchored(pos: tuple[float, float], size: tuple[float, float], anchor: str) -> tuple[float, float]:

@@ -295,8 +295,8 @@ def test_consecutive_fills_are_one_draw_and_keep_the_call_order(screen, monkeypa
 
     canvas = Canvas(screen.ctx, screen.size_px)
     draws = []
-    render = canvas._fill_vao.render
-    monkeypatch.setattr(canvas._fill_vao, "render", lambda *a, **k: (draws.append(k.get("instances")), render(*a, **k)))
+    render = canvas._fills.vao.render
+    monkeypatch.setattr(canvas._fills.vao, "render", lambda *a, **k: (draws.append(k.get("instances")), render(*a, **k)))
     screen.begin((0.0, 0.0, 0.0))
     canvas.begin()
     for k, colour in enumerate(((200, 0, 0), (0, 200, 0), (0, 0, 200))):
