@@ -376,7 +376,7 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     grid[flat] = True
     ex = np.array([[1.0], [-1.0], [0.0], [0.0]])
     ey = np.array([[0.0], [0.0], [1.0], [-1.0]])
-    offset = np.array([[1], [-1], [w_grid], [-w_grid]], dtype=np.intp)
+    offset = (ey * w_grid + ex).astype(np.intp)  # the same neighbours in the flat grid
     nx, ny = x + ex, y + ey
     lo, hi = box_lo[win], box_hi[win]
     edge = ~grid[flat + offset] & (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])

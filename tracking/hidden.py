@@ -302,6 +302,12 @@ def _solve3(a: np.ndarray, b: np.ndarray) -> list[float]:
     return [x0, x1, x2]
 
 
+def _turn_z(v: Sequence[float], phi: float) -> list[float]:
+    """The 3-vector v turned by phi (rad) about z, in plain floats."""
+    c, s = math.cos(phi), math.sin(phi)
+    return [c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]
+
+
 def _ema(old: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
     """Exponential moving average; NaN (nothing learned yet) takes the new value."""
     return np.where(np.isfinite(old), old + rate * (new - old), new)
@@ -947,8 +953,7 @@ class Estimator:
                 if self.trunk is not None and okl[self.trunk[0]]:
                     lateral = sum((pl[sh][i] - pl[self.trunk[0]][i]) * rt[i][0] for i in range(3))
                     self._shoulder_side[k] = 1.0 if lateral >= 0 else -1.0
-                turn = self._scapula_turn(k, p[sh], np.array(centre))
-                a_t = (turn.T @ np.array(a_t)).tolist()
+                a_t = _turn_z(a_t, -self._scapula_angle(k, pl[sh], centre))
             self._piv_a[k] = self._forget * self._piv_a[k] + np.array([[a_t[i] * a_t[j] for j in range(3)] for i in range(3)])
             self._piv_b[k] = self._forget * self._piv_b[k] + np.array([rhs * a_t[i] for i in range(3)])
             self._rest_cache.pop(k, None)
@@ -984,21 +989,22 @@ class Estimator:
         lo, hi = self.rhythm_deg
         return math.radians(self.scapular_rhythm * (min(max(elevation, lo), hi) - lo)) * float(self._shoulder_side[k])
 
-    def _scapula_turn(self, k: int, shoulder_m: np.ndarray, elbow_m: np.ndarray) -> np.ndarray:
-        """(3, 3) trunk-frame rotation of the pivot offset by :meth:`_scapula_angle`."""
-        phi = self._scapula_angle(k, shoulder_m.tolist(), elbow_m.tolist())
-        c, s = math.cos(phi), math.sin(phi)
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    def _offset_f(self, k: int, shoulder: Sequence[float], elbow: Sequence[float]) -> list[float]:
+        """The pivot offset of shoulder slot k (trunk frame) turned with the scapula for the
+        humerus elevation (:meth:`_scapula_angle`), in plain floats."""
+        g = self._rest_offset(k).tolist()
+        if self.scapular_rhythm <= 0:
+            return g
+        return _turn_z(g, self._scapula_angle(k, shoulder, elbow))
 
     def pivot_offset(self, shoulder: int, elbow_m: np.ndarray | None = None, shoulder_m: np.ndarray | None = None) -> np.ndarray:
         """(3,) learned shoulder pivot (glenohumeral centre) minus the shoulder marker, trunk frame;
         turned with the scapula for the humerus elevation when the elbow centre and the shoulder
         marker are given."""
         k = self._shoulder_slot[shoulder]
-        g = self._rest_offset(k)
         if elbow_m is None or shoulder_m is None or self.scapular_rhythm <= 0:
-            return g
-        return self._scapula_turn(k, shoulder_m, elbow_m) @ g
+            return self._rest_offset(k)
+        return np.array(self._offset_f(k, shoulder_m.tolist(), elbow_m.tolist()))
 
     # ------------------------------------------------------------------ estimation
     def _hinge(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray, prior: np.ndarray,
@@ -1055,14 +1061,9 @@ class Estimator:
             return None
         a, b = pl[ea], pl[eb]
         centre = [0.5 * (a[i] + b[i]) for i in range(3)]
-        # the shoulder pivot (as pivot_offset and _scapula_turn, in floats)
+        # the shoulder pivot (as _elbow_frame's, in floats)
         rt = self.trunk_rot.tolist()
-        k = self._shoulder_slot[sh]
-        g = self._rest_offset(k).tolist()
-        if self.scapular_rhythm > 0:
-            phi = self._scapula_angle(k, shoulder, centre)
-            c, s = math.cos(phi), math.sin(phi)
-            g = [c * g[0] - s * g[1], s * g[0] + c * g[1], g[2]]
+        g = self._offset_f(self._shoulder_slot[sh], shoulder, centre)
         pivot = [shoulder[i] + rt[i][0] * g[0] + rt[i][1] * g[1] + rt[i][2] * g[2] for i in range(3)]
         # the elbow frame (elbow_frame)
         e = [b[i] - a[i] for i in range(3)]
