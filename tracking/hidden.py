@@ -674,6 +674,13 @@ class Estimator:
             angles for longer than the extrapolation allows (``max_forearm_sigma_deg``) is LOST.
         view_estimate_sigma_m: uncertainty of an elbow hinge's estimate across a view's ray
             (the estimate moves towards the ray by the views' relative weight).
+
+    After each :meth:`update`, ``axis_guessed`` (M,) bool marks the elbow (HINGE) markers estimated
+    with the elbow axis' turn about the arm pinned neither by the hinge nor by a view of the
+    marker: the axis was carried from earlier frames or taken from a rigid fit. Their positions
+    serve the elbow centre (1-2 cm off at most), but the axis' direction, which forearm supination
+    reads, is a guess: with the elbow straight the forearm may turn without any measured marker
+    showing it.
     """
 
     def __init__(
@@ -823,6 +830,8 @@ class Estimator:
         self.hidden_frames = np.zeros(m, dtype=np.int64)
         self.unsupported_frames = np.zeros(m, dtype=np.int64)  # hidden with the whole segment
         self.used = np.full(m, -1, dtype=np.int8)    # Method used for each estimate (-1: none)
+        # epicondyle estimates whose turn about the arm no measurement pins (see axis_guessed)
+        self.axis_guessed = np.zeros(m, dtype=bool)
         self.dist_lo = np.full(len(self._pairs), np.inf)
         self.dist_hi = np.full(len(self._pairs), -np.inf)
         # recent frames (a ring): rigid fits take their reference configuration from them
@@ -1190,12 +1199,14 @@ class Estimator:
                     out.append((slot, o, d, sigma_rad))
         return out
 
-    def _refine_with_views(self, k: int, est: np.ndarray) -> np.ndarray:
+    def _refine_with_views(self, k: int, est: np.ndarray) -> tuple[np.ndarray, bool]:
         """An estimate of marker k moved across its single camera views (rays passing within
         ``view_gate_m``): per ray, the estimate's offset across the ray is shrunk by the weight of
         the view (``sigma_rad`` times the distance) against the estimate's (``view_estimate_sigma_m``);
-        the depth along the ray stays the estimate's."""
+        the depth along the ray stays the estimate's. Returns the estimate and whether a view was
+        used."""
         q = est.tolist()
+        used = False
         for o, d, sigma_rad in self._views[k]:
             v = [q[i] - o[i] for i in range(3)]
             s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
@@ -1205,7 +1216,8 @@ class Estimator:
             sr2 = (sigma_rad * s) ** 2
             gain = self.view_estimate_sigma_m ** 2 / (self.view_estimate_sigma_m ** 2 + sr2)
             q = [q[i] - gain * off[i] for i in range(3)]
-        return np.array(q)
+            used = True
+        return np.array(q), used
 
     def _arm_update(self, p: np.ndarray, ok: np.ndarray) -> None:
         """Carry the arms' flexion and supination to the next frame."""
@@ -1370,6 +1382,7 @@ class Estimator:
         hidden = (~ok & has_base & (hidden_frames <= self.max_hidden_frames)
                   & (unsupported_frames <= self.max_unsupported_frames))
         used = np.full(self.n_markers, -1, dtype=np.int8)
+        guessed = np.zeros(self.n_markers, dtype=bool)
 
         if hidden.any():
             d_ok = ok & self.measured
@@ -1403,8 +1416,14 @@ class Estimator:
                 if not np.all(np.isfinite(est)):
                     hidden[k] = False
                     continue
+                viewed = False
                 if how == Method.HINGE and k in self._views:
-                    est = self._refine_with_views(k, est)
+                    est, viewed = self._refine_with_views(k, est)
+                if self.methods[k] == Method.HINGE:
+                    # the elbow axis' turn about the arm: pinned by the hinge (elbow bent, or the
+                    # wrists measured) or by a view of the marker; else extrapolated or a rigid
+                    # fit's guess (a straight elbow while the forearm turns: supination unknown)
+                    guessed[k] = not (viewed or (how == Method.HINGE and self._h_row[k] not in self._hinge_free_now))
                 used[k] = how
                 p[k] = est
                 weight[k] = self.estimate_weight
@@ -1439,6 +1458,7 @@ class Estimator:
         self.hidden_frames = hidden_frames
         self.unsupported_frames = unsupported_frames
         self.used = used
+        self.axis_guessed = guessed & hidden & ~ok
         self.status = np.where(ok, MarkerStatus.MEASURED,
                                np.where(hidden, MarkerStatus.ESTIMATED, MarkerStatus.LOST)).astype(np.uint8)
         self._views = {}

@@ -112,7 +112,7 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
 
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
                     c3d, colours=None, adapt_colours=False, progress=False) -> str:
-    from tracking.angles import joint_angles
+    from tracking.angles import ANGLE_COLUMNS
     from tracking.c3d_io import write_c3d
     from tracking.status import MarkerStatus
     from tracking.tables import write_angles_csv, write_status_csv
@@ -130,7 +130,7 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
         else:
             tracker = Tracker(rec.cameras, ms, table=_colour_table(ms, learnt), fps=rec.fps)
-        positions, status, frames, times = [], [], [], []
+        positions, status, frames, times, angles = [], [], [], [], []
         waiting_message = ""
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
         for fs in frame_iter:
@@ -141,6 +141,7 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
                 adapter.observe(fs.images, sample.positions_m, sample.status)
             positions.append(np.where(sample.status[:, None] == MarkerStatus.LOST, np.nan, sample.positions_m))
             status.append(sample.status)
+            angles.append(sample.angles_deg)
             frames.append(fs.index)
             times.append(fs.time_s)
     if not frames:
@@ -161,7 +162,10 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
     if status_csv:
         write_status_csv(status_csv, frames_a, times_a, ms.names, pos_mm, st)
     if angles_csv:
-        write_angles_csv(angles_csv, frames_a, times_a, joint_angles(pos_mm, ms.names))
+        # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
+        # without a supination whose elbow axis is a guess
+        write_angles_csv(angles_csv, frames_a, times_a,
+                         {c: np.array([a.get(c, np.nan) for a in angles]) for c in ANGLE_COLUMNS})
     if c3d:
         write_c3d(c3d, ms.names, pos_mm, rec.fps)
     share = {s.name.lower(): float(np.mean(st == s)) for s in MarkerStatus}

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -31,7 +32,7 @@ import numpy as np
 
 from calibration.camera import Camera, CameraStack
 from calibration.errors import RehabError
-from tracking.angles import joint_angles
+from tracking.angles import AXIS_ANGLES, joint_angles
 from tracking.blobs import ARC_EDGE_SHRINK_PX, PIXEL_MOMENT, arc_centres, axis_ratio, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
@@ -63,7 +64,9 @@ class TrackerSample:
         state: WAITING (no names yet) or TRACKING.
         positions_m: (M, 3) float64 marker positions, world metres; NaN where lost.
         status: (M,) uint8 :class:`MarkerStatus` per marker.
-        angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined.
+        angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined, and forearm
+            supination NaN while an estimated elbow marker's axis is a guess
+            (:attr:`tracking.hidden.Estimator.axis_guessed`).
         message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
         windows_px: (M, C, 3) float64 search window of each marker in each camera this frame:
@@ -312,7 +315,14 @@ class Tracker:
         else:
             n_points = self._track(images)
         t0 = time.perf_counter()
-        angles = joint_angles(self.positions, self.markerset.names) if self.state == TrackingState.TRACKING else {}
+        angles = {}
+        if self.state == TrackingState.TRACKING:
+            angles = joint_angles(self.positions, self.markerset.names)
+            for k in np.flatnonzero(self.estimator.axis_guessed).tolist():
+                # an elbow axis that no measurement pins: no supination rather than a guessed one
+                name = AXIS_ANGLES.get(self.markerset.names[k])
+                if name in angles:
+                    angles[name] = math.nan
         self.times.add("joint angles", time.perf_counter() - t0)
         self.times.frames += 1
         return TrackerSample(

@@ -301,6 +301,11 @@ class RomTestSession:
         for k in held:
             q[self._hip_idx[k]] = self._hips_seen[k]
         angles = joint_angles(q, self._names)
+        # an angle the tracker withheld from these positions (a supination whose elbow axis is a
+        # guess) stays withheld
+        for name, value in joint_angles(p, self._names).items():
+            if np.isfinite(value) and not np.isfinite(_angle(sample, name)):
+                angles[name] = math.nan
         return (lambda name: float(angles[name]) if name in angles else math.nan), \
             tuple(self._names[self._hip_idx[k]] for k in held)
 

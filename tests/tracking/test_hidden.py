@@ -767,6 +767,28 @@ def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
     assert errors[0] > 0.008 and errors[1] < 0.003, errors
 
 
+def test_an_elbow_marker_estimated_on_a_straight_arm_has_its_axis_guessed():
+    """Inner elbow marker hidden while the forearm pronates: with the elbow bent the hinge pins the
+    axis from the measured wrists; with the arm straight nothing measured shows the axis' turn
+    about the arm (its estimate still serves the elbow centre), unless a view of the marker does."""
+    shoulder = np.array([0.0, 0.32, 0.0])
+    for flexion, view, guessed in ((0.9, False, False), (0.02, False, True), (0.02, True, False)):
+        est = _arm_estimator()
+        flags = []
+        for i in range(45):
+            x = np.stack([shoulder, *forearm_pose(flexion, 0.4 - 0.02 * i)])
+            measured = np.ones(5, dtype=bool)
+            measured[2] = i < 20
+            if view and i >= 20:
+                camera = x[2] + np.array([0.0, 0.3, -2.0])
+                est.observe_views([2], camera[None], ((x[2] - camera) / np.linalg.norm(x[2] - camera))[None], [0.001])
+            p, s = est.update(np.where(measured[:, None], x, np.nan), measured)
+            assert not est.axis_guessed[s != ESTIMATED].any()
+            if i >= 20 and s[2] == ESTIMATED:
+                flags.append(bool(est.axis_guessed[2]))
+        assert len(flags) >= 10 and set(flags) == {guessed}, (flexion, view, flags)
+
+
 @pytest.mark.parametrize("rhythm", [0.0, 0.5])
 def test_the_per_frame_forearm_angles_in_floats_match_the_elbow_frame_and_forearm_angles(rhythm):
     # _learn computes the arm's angles every frame in plain floats (speed); they must stay the

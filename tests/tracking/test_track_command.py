@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from game.cli import main
+from tracking.angles import joint_angles
 from tracking.recording import RecordingWriter
 from tracking.sim.body import ArmPose, reference_pose
 from tracking.sim.studio import SimulationSettings, studio_from_settings
@@ -32,6 +33,10 @@ def test_labelled_outputs(tmp_path):
     assert (status.status == 1).all()  # every marker measured in the still reference pose
     angles = read_angles_csv(out / "a.csv")
     assert np.isfinite(angles.angles["right_elbow_flexion"]).all()
+    # the tracker's angles: those of its positions (no axis guessed here)
+    from_trc = joint_angles(trc.positions_mm, trc.names)
+    for name, values in angles.angles.items():
+        np.testing.assert_allclose(values, from_trc[name], atol=0.01)
     assert (out / "m.c3d").stat().st_size > 0
 
 

@@ -198,7 +198,8 @@ def angle_markers(truth_m: np.ndarray, names: Sequence[str]) -> dict[str, np.nda
 
 
 def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndarray, names: Sequence[str], *,
-                   frames: int, identified_at: int, swaps: int) -> TrackingAccuracy:
+                   frames: int, identified_at: int, swaps: int,
+                   angles_deg: dict[str, np.ndarray] | None = None) -> TrackingAccuracy:
     """Compare a tracked motion with the truth.
 
     Args:
@@ -207,6 +208,8 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
         truth_m: (T, M, 3) true marker centres.
         names: the M marker names.
         frames, identified_at, swaps: passed through to the result.
+        angles_deg: the tracker's reported angles, name -> (T,) (NaN where it reported none, e.g.
+            a withheld supination); None: computed from the positions.
     """
     from tracking.angles import joint_angles
     from tracking.status import MarkerStatus
@@ -214,7 +217,8 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
     pos = np.where((status != MarkerStatus.LOST)[..., None], positions_m, np.nan)
     err = np.linalg.norm(pos - truth_m, axis=-1) * 1000.0
     meas, est = status == MarkerStatus.MEASURED, status == MarkerStatus.ESTIMATED
-    tracked_angles, true_angles = joint_angles(pos, names), joint_angles(truth_m, names)
+    true_angles = joint_angles(truth_m, names)
+    tracked_angles = joint_angles(pos, names) if angles_deg is None else angles_deg
     uses = angle_markers(truth_m, names)
     sensitivity = angle_sensitivity(truth_m, names, uses)
     rmse, angles = {}, {}
@@ -266,6 +270,8 @@ class TrackedRun:
         frames: all frame sets processed (identification included).
         identified_at: first frame with names (-1: never).
         swaps: (frame, marker) cases where a marker was measured on another marker's ball.
+        angles_deg: the tracker's reported angles of the same frames, name -> (T,); None: computed
+            from the positions when scored.
     """
 
     names: tuple[str, ...]
@@ -275,12 +281,13 @@ class TrackedRun:
     frames: int
     identified_at: int
     swaps: int
+    angles_deg: dict[str, np.ndarray] | None = None
 
     def score(self) -> TrackingAccuracy:
         if not len(self.positions_m):
             return TrackingAccuracy(self.frames, -1, 0, 0.0, 0.0, 1.0, float("nan"), float("nan"), {})
         return score_tracking(self.positions_m, self.status, self.truth_m, self.names, frames=self.frames,
-                              identified_at=self.identified_at, swaps=self.swaps)
+                              identified_at=self.identified_at, swaps=self.swaps, angles_deg=self.angles_deg)
 
 
 def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np.ndarray]]) -> TrackedRun:
@@ -288,7 +295,7 @@ def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np
     from tracking.status import MarkerStatus
     from tracking.tracker import TrackingState
 
-    positions, status, truth = [], [], []
+    positions, status, truth, angles = [], [], [], []
     identified_at, swaps, total = -1, 0, 0
     for images, time_s, truth_m in frames:
         total += 1
@@ -306,10 +313,12 @@ def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np
         positions.append(np.where((s.status != MarkerStatus.LOST)[:, None], s.positions_m, np.nan))
         status.append(s.status)
         truth.append(truth_m)
+        angles.append(s.angles_deg)
     m = len(tracker.markerset.names)
     stack = (lambda rows, shape: np.stack(rows) if rows else np.zeros(shape))
+    reported = {name: np.array([a.get(name, np.nan) for a in angles]) for name in (angles[0] if angles else ())}
     return TrackedRun(tuple(tracker.markerset.names), stack(positions, (0, m, 3)), stack(status, (0, m)).astype(np.uint8),
-                      stack(truth, (0, m, 3)), total, identified_at, swaps)
+                      stack(truth, (0, m, 3)), total, identified_at, swaps, reported if angles else None)
 
 
 def validate_tracking(settings: SimulationSettings, *, progress: bool = False) -> TrackingAccuracy:

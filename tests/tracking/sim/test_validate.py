@@ -92,3 +92,25 @@ def test_frames_where_an_angle_is_ill_conditioned_are_reported_apart(motion_trut
     assert a.rmse_all_deg == pytest.approx(np.sqrt(np.mean(diff**2)))
     assert acc.angles["right_elbow_flexion"].ill_conditioned == 0
     assert "right_shoulder_flexion 5 frames" in acc.summary()
+
+
+def test_angles_the_tracker_withheld_count_as_lost_not_in_the_rmse(motion_truth):
+    """The tracker reports no supination while an elbow marker's axis is a guess: given its
+    reported angles, those frames are lost for that angle only, and out of its RMSE."""
+    ms, truth = motion_truth
+    t = len(truth)
+    status = np.full(truth.shape[:2], MarkerStatus.MEASURED, dtype=np.uint8)
+    pos = truth.copy()
+    e2 = ms.index("MRE2")
+    guessed = slice(20, 50)
+    status[guessed, e2] = MarkerStatus.ESTIMATED
+    pos[guessed, e2] += np.array([0.0, 0.0, 0.03])  # the axis turned by a guess
+    reported = joint_angles(pos, ms.names)
+    reported["right_forearm_supination"][guessed] = np.nan
+    plain = score_tracking(pos, status, truth, ms.names, frames=t, identified_at=0, swaps=0)
+    told = score_tracking(pos, status, truth, ms.names, frames=t, identified_at=0, swaps=0, angles_deg=reported)
+
+    sup, sup_told = plain.angles["right_forearm_supination"], told.angles["right_forearm_supination"]
+    assert sup.rmse_deg > 1.0 and sup.lost == 0.0
+    assert sup_told.rmse_deg == pytest.approx(0.0, abs=1e-9) and sup_told.lost == pytest.approx(30 / t)
+    assert told.angles["right_elbow_flexion"].rmse_deg == plain.angles["right_elbow_flexion"].rmse_deg > 0.1
