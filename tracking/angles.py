@@ -67,11 +67,12 @@ ANGLE_COLUMNS: tuple[str, ...] = tuple(f"{side}_{angle}" for side in SIDES for a
     "trunk_lateral_lean",
 )
 
-#: Epicondyle marker -> the angle that reads its direction to the other epicondyle (the elbow's
-#: flexion axis ``E2 - E1``): forearm supination. The tracker withholds that angle (NaN) while the
-#: direction is a guess (:attr:`tracking.hidden.Estimator.axis_guessed`).
+#: Epicondyle or styloid marker -> the angle that reads its direction to its pair (the elbow's
+#: flexion axis ``E2 - E1``, the wrist's ``W2 - W1``): forearm supination. The tracker withholds
+#: that angle (NaN) while the direction is a guess (:attr:`tracking.hidden.Estimator.axis_guessed`).
 AXIS_ANGLES: dict[str, str] = {
-    f"M{side[0].upper()}E{i}": f"{side}_forearm_supination" for side in SIDES for i in (1, 2)
+    f"M{side[0].upper()}{joint}{i}": f"{side}_forearm_supination"
+    for side in SIDES for joint in ("E", "W") for i in (1, 2)
 }
 
 #: Horizontal flexion is undefined (NaN) below this shoulder elevation (degrees).

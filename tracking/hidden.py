@@ -675,12 +675,17 @@ class Estimator:
         view_estimate_sigma_m: uncertainty of an elbow hinge's estimate across a view's ray
             (the estimate moves towards the ray by the views' relative weight).
 
-    After each :meth:`update`, ``axis_guessed`` (M,) bool marks the elbow (HINGE) markers estimated
-    with the elbow axis' turn about the arm pinned neither by the hinge nor by a view of the
-    marker: the axis was carried from earlier frames or taken from a rigid fit. Their positions
-    serve the elbow centre (1-2 cm off at most), but the axis' direction, which forearm supination
-    reads, is a guess: with the elbow straight the forearm may turn without any measured marker
-    showing it.
+    After each :meth:`update`, ``axis_guessed`` (M,) bool marks the estimates whose direction to
+    their pair (the elbow axis ``E2 - E1``, the wrist axis ``W2 - W1``), which forearm supination
+    reads, no measurement of this frame pins:
+
+    - elbow (HINGE) markers whose axis' turn about the arm neither the hinge nor a view of the
+      marker pins: the axis was carried from earlier frames or taken from a rigid fit (with the
+      elbow straight the forearm may turn without any measured marker showing it);
+    - styloid markers of an arm with neither styloid measured and no views that pin the forearm's
+      angles: the angles are extrapolated.
+
+    Their positions still serve the elbow and wrist centres (the angles that read those).
     """
 
     def __init__(
@@ -830,7 +835,7 @@ class Estimator:
         self.hidden_frames = np.zeros(m, dtype=np.int64)
         self.unsupported_frames = np.zeros(m, dtype=np.int64)  # hidden with the whole segment
         self.used = np.full(m, -1, dtype=np.int8)    # Method used for each estimate (-1: none)
-        # epicondyle estimates whose turn about the arm no measurement pins (see axis_guessed)
+        # estimates whose direction to their pair no measurement pins (see axis_guessed)
         self.axis_guessed = np.zeros(m, dtype=bool)
         self.dist_lo = np.full(len(self._pairs), np.inf)
         self.dist_hi = np.full(len(self._pairs), -np.inf)
@@ -1424,6 +1429,12 @@ class Estimator:
                     # wrists measured) or by a view of the marker; else extrapolated or a rigid
                     # fit's guess (a straight elbow while the forearm turns: supination unknown)
                     guessed[k] = not (viewed or (how == Method.HINGE and self._h_row[k] not in self._hinge_free_now))
+                elif k in self._arm_of:
+                    # the wrist's turn: a styloid marker of the arm measured, or views that pin
+                    # the forearm's angles; else the angles extrapolated from earlier frames
+                    r = self._arm_of[k][0]
+                    wa, wb = self._arms[r][:2]
+                    guessed[k] = not (ok[wa] or ok[wb] or r in self._arm_pinned)
                 used[k] = how
                 p[k] = est
                 weight[k] = self.estimate_weight

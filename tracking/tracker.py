@@ -65,7 +65,7 @@ class TrackerSample:
         positions_m: (M, 3) float64 marker positions, world metres; NaN where lost.
         status: (M,) uint8 :class:`MarkerStatus` per marker.
         angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined, and forearm
-            supination NaN while an estimated elbow marker's axis is a guess
+            supination NaN while an estimated elbow or wrist marker's axis is a guess
             (:attr:`tracking.hidden.Estimator.axis_guessed`).
         message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
@@ -319,7 +319,7 @@ class Tracker:
         if self.state == TrackingState.TRACKING:
             angles = joint_angles(self.positions, self.markerset.names)
             for k in np.flatnonzero(self.estimator.axis_guessed).tolist():
-                # an elbow axis that no measurement pins: no supination rather than a guessed one
+                # an elbow or wrist axis that no measurement pins: no supination rather than a guess
                 name = AXIS_ANGLES.get(self.markerset.names[k])
                 if name in angles:
                     angles[name] = math.nan

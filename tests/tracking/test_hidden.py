@@ -789,6 +789,25 @@ def test_an_elbow_marker_estimated_on_a_straight_arm_has_its_axis_guessed():
         assert len(flags) >= 10 and set(flags) == {guessed}, (flexion, view, flags)
 
 
+def test_styloid_markers_estimated_with_neither_measured_have_their_axis_guessed():
+    """Both styloid markers hidden: the forearm's angles are extrapolated, so the wrist axis'
+    direction is a guess; with one measured it is fitted, not guessed."""
+    shoulder = np.array([0.0, 0.32, 0.0])
+    for hidden, guessed in (((3,), False), ((3, 4), True)):
+        est = _arm_estimator()
+        flags = []
+        for i in range(30):
+            x = np.stack([shoulder, *forearm_pose(0.9 + 0.005 * i, 0.3 - 0.005 * i)])
+            measured = np.ones(5, dtype=bool)
+            if i >= 20:
+                measured[list(hidden)] = False
+            p, s = est.update(np.where(measured[:, None], x, np.nan), measured)
+            for k in hidden:
+                if i >= 20 and s[k] == ESTIMATED:
+                    flags.append(bool(est.axis_guessed[k]))
+        assert len(flags) >= 3 and set(flags) == {guessed}, (hidden, flags)
+
+
 @pytest.mark.parametrize("rhythm", [0.0, 0.5])
 def test_the_per_frame_forearm_angles_in_floats_match_the_elbow_frame_and_forearm_angles(rhythm):
     # _learn computes the arm's angles every frame in plain floats (speed); they must stay the
