@@ -470,28 +470,46 @@ class Tracker:
         lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
         hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
         labels, starts = self.table.classify_windows(images, ci, np.concatenate([lo, hi], axis=1))
-        # the marker's own colour among the (few) marker-coloured pixels of each window
-        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
-        win = np.searchsorted(starts, hit, side="right") - 1
-        own = labels[hit] == self._label[mi][win]
-        hit, win = hit[own], win[own]
-        # pixel -> column and row in its window -> offsets from the window's centre pixel, in
-        # float64 (exact for these small integers; a float division is cheaper than an integer one)
-        local = (hit - starts[win]).astype(np.float64)
-        width = (hi[:, 0] - lo[:, 0]).astype(np.float64)[win]
-        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
-        row = np.floor(local / width)
-        dx = local - row * width + first[:, 0][win]  # (1-D gathers: numpy's fast path)
-        dy = row + first[:, 1][win]
+        # the marker's own colour among the (few) marker-coloured pixels of each window; the
+        # pixels come window after window, so each window's share is one run of them, found by
+        # K binary searches (runs and repeats: no per-pixel window look-up)
         k_count = mi.size
-        # sums of integers: exact in float64 whatever the order
-        m00 = np.bincount(win, minlength=k_count).astype(np.float64)
+        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
+        bounds = np.searchsorted(hit, starts)
+        own = labels[hit] == np.repeat(self._label[mi], np.diff(bounds))
+        hit = hit[own]
+        n = hit.size
+        run = np.concatenate(([0], np.cumsum(own)))[bounds]  # each window's first own pixel, and n
+        count = np.diff(run)
+        run = run[:-1]
+        # pixel -> column and row in its window, in float64 (exact for these small integers; a
+        # float division is cheaper than an integer one)
+        local = (hit - np.repeat(starts[:-1], count)).astype(np.float64)
+        width = np.repeat((hi[:, 0] - lo[:, 0]).astype(np.float64), count)
+        cr = np.empty((5, n + 1))  # per pixel: column, row, their squares and product; one 0 column
+        cr[:, n] = 0.0
+        col, row = cr[0, :n], cr[1, :n]
+        np.floor(local / width, out=row)
+        np.subtract(local, row * width, out=col)
+        np.multiply(cr[:2, :n], cr[:2, :n], out=cr[2:4, :n])
+        np.multiply(col, row, out=cr[4, :n])
+        # the five sums of every window as one reduction over the runs (the zero column ends the
+        # last; an empty run gives the next run's first element: set to 0), then taken about the
+        # window's centre pixel (offset ``first`` from the window's first pixel): sums of
+        # integers, exact in float64 whatever the order
+        sums = np.add.reduceat(cr, run, axis=1)
+        sums[:, count == 0] = 0.0
+        sc, sr, scc, srr, scr = sums
+        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
+        fx, fy = first[:, 0], first[:, 1]
+        m00 = count.astype(np.float64)
+        sx, sy = sc + m00 * fx, sr + m00 * fy
         with np.errstate(divide="ignore", invalid="ignore"):
-            mx = np.bincount(win, dx, k_count) / m00
-            my = np.bincount(win, dy, k_count) / m00
-            mu20 = np.bincount(win, dx * dx, k_count) / m00 - mx**2
-            mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
-            mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
+            mx = sx / m00
+            my = sy / m00
+            mu20 = (scc + fx * (sc + sx)) / m00 - mx**2
+            mu02 = (srr + fy * (sr + sy)) / m00 - my**2
+            mu11 = (scr + fy * sc + fx * sy) / m00 - mx * my
             roundness = axis_ratio(mu20, mu02, mu11)
         ball_area = np.pi * r_px[mi, ci] ** 2
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
@@ -517,8 +535,10 @@ class Tracker:
         part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
         arcs = _ArcRegions()
         if part.any():
+            win = np.repeat(np.arange(k_count), count)
             sel = part[win]
-            arcs.add_many((np.cumsum(part) - 1)[win[sel]], dx[sel], dy[sel], np.stack([mx, my], axis=1)[part],
+            ws = win[sel]
+            arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], np.stack([mx, my], axis=1)[part],
                           edge_r[part], first[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
         crowded = np.flatnonzero(ok & ~simple)
         # several regions in the window: separate them, in a window of the size that the markers
