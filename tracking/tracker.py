@@ -265,6 +265,9 @@ class Tracker:
             self._same_segment[i, j] = self._same_segment[j, i] = True
         # pairs of markers of one colour: their windows can hold the same ball
         self._colour_pairs = np.argwhere(np.triu(self.colour[:, None] == self.colour[None, :], 1))
+        self._colour_pairs_ij = tuple(np.ascontiguousarray(self._colour_pairs.T))
+        self._image_shapes: list[tuple[int, ...]] = []
+        self._image_size = np.zeros((0, 2), dtype=np.int64)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -421,19 +424,29 @@ class Tracker:
         p = self.params
         m_count = self.markerset.n_markers
         n_cams = len(self.cameras)
-        uv_out = np.full((m_count, n_cams, 2), np.nan)
-        rad_out = np.full((m_count, n_cams), np.nan)
+        uv_out = np.empty((m_count, n_cams, 2))
+        uv_out.fill(np.nan)
+        rad_out = np.empty((m_count, n_cams))
+        rad_out.fill(np.nan)
         uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
         self._pred_uv, self._pred_depth = uv, depth
         focal = self._stack.focal_px
         safe_depth = np.maximum(depth, 1e-3)
         r_px = focal * self.markerset.radius_m / safe_depth
         half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
-        size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)  # (C, 2) width, height
+        shapes = [img.shape for img in images]
+        if shapes != self._image_shapes:
+            self._image_shapes = shapes
+            self._image_size = np.array([s[1::-1] for s in shapes], dtype=np.int64)  # (C, 2) width, height
+        size = self._image_size
         # in front of the camera (project() gives NaN behind it) and the window overlaps the image
-        with np.errstate(invalid="ignore"):
-            valid = known[:, None] & (uv > -half[..., None]).all(axis=2) & (uv < size + half[..., None]).all(axis=2)
-        self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
+        # (comparisons with NaN are False, without a warning)
+        windows = np.empty((m_count, n_cams, 3))
+        windows[..., :2] = uv
+        windows[..., 2] = half
+        valid = ((uv > -windows[..., 2:]) & (uv < size + windows[..., 2:])).all(axis=2) & known[:, None]
+        windows[~valid] = np.nan
+        self._windows_px = windows
         if valid.any():
             self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
             self._one_ball_one_marker(uv, r_px, uv_out, rad_out)
@@ -443,10 +456,9 @@ class Tracker:
         """A ball that the windows of two markers of its colour both found (the same blob in one
         camera, e.g. a hidden wrist marker behind the elbow marker of its colour on one line of
         sight) is a view of the marker predicted nearer to it only; the other loses that view."""
-        i, j = self._colour_pairs.T
-        with np.errstate(invalid="ignore"):
-            d = np.sqrt(((uv_out[i] - uv_out[j]) ** 2).sum(axis=2))  # (P, C), NaN where either has none
-            shared = d < 0.5 * np.minimum(r_px[i], r_px[j])
+        i, j = self._colour_pairs_ij
+        d = uv_out[i] - uv_out[j]  # (P, C, 2), NaN where either has none (no warning: no inf)
+        shared = (d * d).sum(axis=2) < 0.25 * np.minimum(r_px[i], r_px[j]) ** 2
         if not shared.any():
             return
         pair, cam = np.nonzero(shared)
@@ -463,9 +475,10 @@ class Tracker:
         A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
         the image border; the moments are taken about that pixel centre.
         """
-        mi, ci = np.nonzero(valid)
-        centre = np.round(uv[mi, ci]).astype(np.int64)  # (K, 2) window centre pixel x, y
-        ext = half[mi, ci].astype(np.int64)[:, None]  # half size rounded down (it is positive)
+        at = np.flatnonzero(valid)  # (K,) flat (marker, camera) index of each window
+        mi, ci = np.divmod(at, valid.shape[1])
+        centre = np.round(uv.reshape(-1, 2)[at]).astype(np.int64)  # (K, 2) window centre pixel x, y
+        ext = half.reshape(-1)[at].astype(np.int64)[:, None]  # half size rounded down (it is positive)
         size_k = size[ci]
         lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
         hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
@@ -500,37 +513,41 @@ class Tracker:
         sums = np.add.reduceat(cr, run, axis=1)
         sums[:, count == 0] = 0.0
         sc, sr, scc, srr, scr = sums
-        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
-        fx, fy = first[:, 0], first[:, 1]
+        first = (lo - centre).astype(np.float64).T  # (2, K) offsets of each window's first pixel
+        fx, fy = first
         m00 = count.astype(np.float64)
-        sx, sy = sc + m00 * fx, sr + m00 * fy
+        sxy = sums[:2] + m00 * first
+        sx, sy = sxy
         with np.errstate(divide="ignore", invalid="ignore"):
-            mx = sx / m00
-            my = sy / m00
+            mxy = sxy / m00  # (2, K) centroid about the centre pixel
+            mx, my = mxy
             mu20 = (scc + fx * (sc + sx)) / m00 - mx**2
             mu02 = (srr + fy * (sr + sy)) / m00 - my**2
             mu11 = (scr + fy * sc + fx * sy) / m00 - mx * my
             roundness = axis_ratio(mu20, mu02, mu11)
-        ball_area = np.pi * r_px[mi, ci] ** 2
+            round_px = axis_ratio(mu20, mu02, mu11, PIXEL_MOMENT)  # roundness as tracking.blobs measures it
+        mxy = mxy.T
+        r_k = r_px.reshape(-1)[at]
+        ball_area = np.pi * r_k**2
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
         ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
         simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
-        uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
-        rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
+        radius = np.sqrt(m00 / np.pi)
+        at_simple = at[simple]
+        uv_out.reshape(-1, 2)[at_simple] = centre[simple] + mxy[simple]
+        rad_out.reshape(-1)[at_simple] = radius[simple]
         # a partly hidden ball: its region's centroid lies towards the visible part; its centre
         # comes from the visible arc instead (only these few windows pay for it), all in one call
         # with those of the crowded windows below
-        edge_r = r_px[mi, ci] - ARC_EDGE_SHRINK_PX
+        edge_r = r_k - ARC_EDGE_SHRINK_PX
         params = self.params
-        with np.errstate(invalid="ignore"):
-            round_px = axis_ratio(mu20, mu02, mu11, PIXEL_MOMENT)  # roundness as tracking.blobs measures it
         # (a region larger than the whole ball is no partly hidden ball: two balls of the colour
         # touching, whose outline fits neither)
         part = simple & (m00 <= np.pi * edge_r**2) & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2)
                                                      | (round_px < params.arc_fit_roundness)
                                                      | (edge_r < params.arc_fit_all_below_px))
         # a view well below the ball's size is left out anyway while two full views remain (_choose)
-        ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
+        ratio = radius / r_k
         full = simple & params.full_view(ratio)
         part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
         arcs = _ArcRegions()
@@ -538,8 +555,8 @@ class Tracker:
             win = np.repeat(np.arange(k_count), count)
             sel = part[win]
             ws = win[sel]
-            arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], np.stack([mx, my], axis=1)[part],
-                          edge_r[part], first[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
+            arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], mxy[part],
+                          edge_r[part], first.T[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
         crowded = np.flatnonzero(ok & ~simple)
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
