@@ -38,7 +38,7 @@ from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
 from tracking.status import MarkerStatus
-from tracking.triangulation import triangulate
+from tracking.triangulation import Triangulator
 
 log = logging.getLogger(__name__)
 
@@ -249,6 +249,7 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
+        self._triangulate = Triangulator(self.geometry.extrinsics)
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
@@ -602,8 +603,8 @@ class Tracker:
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         left_out = partial & keep_full[:, None]
         seen &= ~left_out
-        ext = self.geometry.extrinsics
-        pts = triangulate(ext, xn, seen)
+        triangulate = self._triangulate
+        pts = triangulate(xn, seen)
         err, depth = self._reprojection(pts, xn)
         # a partly hidden view is shifted by less than the ball's radius: one that the point
         # misses by more says that a full view holds another ball of the colour (two views always
@@ -614,7 +615,7 @@ class Tracker:
         if recheck.any():
             redo = np.flatnonzero(recheck)
             seen[redo] |= left_out[redo]
-            pts[redo] = triangulate(ext, xn[redo], seen[redo])
+            pts[redo] = triangulate(xn[redo], seen[redo])
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         rows = np.arange(m_count)
         changed = np.ones(m_count, dtype=bool)  # views changed since the leave-one-out check
@@ -628,7 +629,7 @@ class Tracker:
             if probe.size:
                 others = seen[probe].copy()
                 others[np.arange(probe.size), worst[probe]] = False
-                p_loo = triangulate(ext, xn[probe], others)
+                p_loo = triangulate(xn[probe], others)
                 e_loo, _ = self._reprojection(p_loo, xn[probe])
                 drop[probe] = e_loo[np.arange(probe.size), worst[probe]] > params.max_loo_px
             if not drop.any():
@@ -638,7 +639,7 @@ class Tracker:
             for m in redo.tolist():
                 worst[m] = self._view_to_drop(m, seen[m], xn[m], pred[m], int(worst[m]))
             seen[redo, worst[drop]] = False
-            pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
+            pts[redo] = triangulate(xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         n_seen = seen.sum(axis=1)
         rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ np.ones(n_cams) / np.maximum(n_seen, 1))
@@ -708,7 +709,7 @@ class Tracker:
         keep = np.repeat(seen[None, :], views.size, axis=0)
         keep[np.arange(views.size), views] = False
         obs = np.repeat(xn[None], views.size, axis=0)
-        pts = triangulate(self.geometry.extrinsics, obs, keep)
+        pts = self._triangulate(obs, keep)
         err, _ = self._reprojection(pts, obs)
         rms = np.sqrt((np.where(keep, err, 0.0) ** 2).sum(axis=1) / keep.sum(axis=1))
         fits = rms <= self.params.max_reproj_px
