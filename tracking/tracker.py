@@ -172,6 +172,9 @@ class TrackerParams:
         return (ratio >= self.partial_ratio) & (ratio <= self.oversize_ratio)
 
 
+_ONES2 = np.ones(2)  # row sums of (N, 2) and (N, 3) arrays as matrix products
+_ONES3 = np.ones(3)
+
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
 STEP_STAGES = (
     "windows (colour table + centroids)",
@@ -250,6 +253,7 @@ class Tracker:
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
         self._triangulate = Triangulator(self.geometry.extrinsics)
+        self._ones_cams = np.ones(len(self.cameras))
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
@@ -597,9 +601,10 @@ class Tracker:
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
         # shifted centroid, and a blob larger than the ball holds more than the ball (another ball
         # of the colour touching it): leave them out while two full views remain
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_pred = rad / (ball_px / self._pred_depth)
-            partial = seen & ~params.full_view(ratio_pred) & ~np.isnan(ratio_pred)
+        # (no errstate in this method: NaN where a marker or view is missing compares False
+        # without a warning, and a depth of exactly 0 does not occur)
+        ratio_pred = rad / (ball_px / self._pred_depth)
+        partial = seen & ~params.full_view(ratio_pred) & ~np.isnan(ratio_pred)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         left_out = partial & keep_full[:, None]
         seen &= ~left_out
@@ -609,9 +614,8 @@ class Tracker:
         # a partly hidden view is shifted by less than the ball's radius: one that the point
         # misses by more says that a full view holds another ball of the colour (two views always
         # meet near some point): triangulate from all views and let the worst go below
-        with np.errstate(invalid="ignore"):
-            r_px = ball_px / self._pred_depth
-            recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
+        r_px = ball_px / self._pred_depth
+        recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
         if recheck.any():
             redo = np.flatnonzero(recheck)
             seen[redo] |= left_out[redo]
@@ -642,39 +646,36 @@ class Tracker:
             pts[redo] = triangulate(xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         n_seen = seen.sum(axis=1)
-        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ np.ones(n_cams) / np.maximum(n_seen, 1))
+        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ self._ones_cams / np.maximum(n_seen, 1))
         # two views always meet in some point: a two-camera candidate must fit tightly and show a
         # ball of the right size in both views (as in tracking.reconstruction)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_now = rad / (ball_px / depth)
-            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
-            measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
-            measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
-            off = pts - pred
-            measured &= np.sqrt((off * off) @ np.ones(3)) <= params.gate_sigmas * sigma + 0.01
+        ratio_now = rad / (ball_px / depth)
+        size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
+        measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
+        measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
+        off = pts - pred
+        off_m = np.sqrt((off * off) @ _ONES3)  # distance to the prediction
+        measured &= off_m <= params.gate_sigmas * sigma + 0.01
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
         diff = new_pos[:, None, :] - new_pos[None, :, :]
-        dist = np.sqrt((diff * diff) @ np.ones(3))  # (M, M), NaN unless both measured
-        with np.errstate(invalid="ignore"):
-            clash = dist < params.same_ball_m
+        dist = np.sqrt((diff * diff) @ _ONES3)  # (M, M), NaN unless both measured
+        clash = dist < params.same_ball_m
         np.fill_diagonal(clash, False)
         if clash.any():
             # Q (equation 4) of the chosen candidate
             duv = uv - self._pred_uv
-            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ np.ones(2)))
+            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ _ONES2))
             q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
             was_measured = self.status == _MEASURED
             for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        with np.errstate(invalid="ignore"):
-            surprise = np.sqrt((off * off) @ np.ones(3)) / sigma  # distance to the prediction in sigmas
+        surprise = off_m / sigma  # distance to the prediction in sigmas
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
-        with np.errstate(invalid="ignore"):
-            full = seen & ~measured[:, None] & params.full_view(ratio_pred)
+        full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)
         return new_pos, measured
 
@@ -727,9 +728,8 @@ class Tracker:
         """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
         cam = self._stack.world_to_cameras(pts)
         depth = cam[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = cam[..., :2] / depth[..., None] - xn
-        return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
+        d = cam[..., :2] / depth[..., None] - xn  # (NaN for NaN points; no depth is exactly 0)
+        return np.sqrt((d * d).sum(axis=2)) * self._stack.focal_px, depth
 
     def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray,
                              surprise: np.ndarray) -> np.ndarray:
@@ -746,18 +746,16 @@ class Tracker:
             surprise: (M,) each candidate's distance to its prediction in prediction sigmas.
         """
         tol = self.params.segment_tol_m
-        with np.errstate(invalid="ignore"):
-            broken = np.abs(dist - self.seg_length) > tol
+        broken = np.abs(dist - self.seg_length) > tol  # (False for NaN, without a warning)
         bad_pair = self._same_segment & measured[:, None] & measured[None, :] & broken
         returning = measured & (self.status != _MEASURED)
         if returning.any():
             known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
             if known_prev.any():
                 diff = pos[:, None, :] - self.positions[None, :, :]
-                d_prev = np.sqrt((diff * diff) @ np.ones(3))
+                d_prev = np.sqrt((diff * diff) @ _ONES3)
                 chk = self._same_segment & returning[:, None] & known_prev[None, :]
-                with np.errstate(invalid="ignore"):
-                    bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
+                bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
                 measured = measured & ~bad_prev
         ok = measured.copy()
         # drop the marker involved in most broken pairs, one at a time; of markers in as many, a
