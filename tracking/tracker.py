@@ -222,7 +222,10 @@ class _ArcRegions:
 
     def fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels."""
-        cols = [np.concatenate(parts) for parts in zip(*self._parts)]
+        if len(self._parts) == 1:
+            cols = self._parts[0]
+        else:
+            cols = [np.concatenate(parts) for parts in zip(*self._parts)]
         region, x, y, start, radius, lo, hi, origin, marker, camera = cols
         return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi)
 
@@ -773,12 +776,11 @@ class Tracker:
 
     def _learn_lengths(self, measured: np.ndarray) -> None:
         pos = self.positions
-        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+        diff = pos[:, None, :] - pos[None, :, :]
+        d = np.sqrt((diff * diff) @ _ONES3)
         pair = self._same_segment & measured[:, None] & measured[None, :]
-        first = pair & ~np.isfinite(self.seg_length)
-        self.seg_length[first] = d[first]
-        upd = pair & ~first
-        self.seg_length[upd] = 0.95 * self.seg_length[upd] + 0.05 * d[upd]
+        old = self.seg_length  # NaN until first learned
+        self.seg_length = np.where(pair, np.where(np.isnan(old), d, 0.95 * old + 0.05 * d), old)
 
     def _reacquire(self, points: Points3D, new_pos: np.ndarray, measured: np.ndarray, search: np.ndarray) -> np.ndarray:
         """Give the markers of ``search`` (lost, or estimated for long) the unexplained full-frame
