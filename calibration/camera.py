@@ -320,6 +320,10 @@ class CameraStack:
     distorted: np.ndarray = field(init=False, repr=False)
     focal_px: np.ndarray = field(init=False, repr=False)
     _rotation_t: np.ndarray = field(init=False, repr=False)
+    _k_col: tuple[np.ndarray, ...] = field(init=False, repr=False)
+    _k_row: tuple[np.ndarray, ...] = field(init=False, repr=False)
+    _t_col: np.ndarray = field(init=False, repr=False)
+    _distorted_list: tuple[int, ...] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         cams = tuple(self.cameras)
@@ -336,8 +340,15 @@ class CameraStack:
             "dist": dist,
             "distorted": np.array([c.has_distortion for c in cams]),
             "focal_px": np.array([(c.K[0, 0] + c.K[1, 1]) / 2.0 for c in cams]),
+            "_distorted_list": tuple(c for c, cam in enumerate(cams) if cam.has_distortion),
         }
         values["_rotation_t"] = np.ascontiguousarray(values["rotation"].transpose(0, 2, 1))
+        K = values["K"]
+        # the intrinsics as (C, 1) columns (project) and (C,) rows (undistort_points), so that a
+        # call pays for no indexing; the distorted cameras as a plain list
+        values["_k_col"] = tuple(np.ascontiguousarray(K[:, i, j, None]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
+        values["_k_row"] = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
+        values["_t_col"] = np.ascontiguousarray(values["t_m"][:, None, :])
         for name, value in values.items():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
@@ -349,7 +360,7 @@ class CameraStack:
     def world_to_cameras(self, p_world_m: np.ndarray) -> np.ndarray:
         """(N, 3) world metres -> (N, C, 3) camera-frame metres of each point in each camera."""
         p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
-        return (np.matmul(p, self._rotation_t) + self.t_m[:, None, :]).transpose(1, 0, 2)
+        return (np.matmul(p, self._rotation_t) + self._t_col).transpose(1, 0, 2)
 
     def project(self, p_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project points into every camera.
@@ -362,17 +373,18 @@ class CameraStack:
             depth_m: (N, C) float64 camera-frame z of each point in each camera.
         """
         # (C, N, 3): the same products as Camera.world_to_camera, camera by camera
-        p_cam = self.world_to_cameras(p_world_m).transpose(1, 0, 2)
+        p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
+        p_cam = np.matmul(p, self._rotation_t) + self._t_col
         z = p_cam[..., 2]
-        K = self.K
+        fx, skew, cx, fy, cy = self._k_col
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             x = p_cam[..., 0] / z
             y = p_cam[..., 1] / z
-            if self.distorted.any():
+            if self._distorted_list:
                 x, y = self._distort(x, y)
-            u = K[:, 0, 0, None] * x + K[:, 0, 1, None] * y + K[:, 0, 2, None]
-            v = K[:, 1, 1, None] * y + K[:, 1, 2, None]
-        uv = np.stack([u.T, v.T], axis=-1)
+            uv = np.empty((p.shape[0], len(self.cameras), 2))
+            uv[..., 0] = (fx * x + skew * y + cx).T
+            uv[..., 1] = (fy * y + cy).T
         depth = z.T
         uv[depth <= 1e-9] = np.nan
         return uv, depth
@@ -395,11 +407,11 @@ class CameraStack:
         all points at once; the others go through :meth:`Camera.undistort_points` (OpenCV).
         """
         uv = np.asarray(uv_px, dtype=np.float64)
-        K = self.K
-        y = (uv[..., 1] - K[None, :, 1, 2]) / K[None, :, 1, 1]
-        x = (uv[..., 0] - K[None, :, 0, 2] - K[None, :, 0, 1] * y) / K[None, :, 0, 0]
-        xn = np.stack([x, y], axis=-1)
-        for c in np.flatnonzero(self.distorted):
+        fx, skew, cx, fy, cy = self._k_row
+        xn = np.empty(uv.shape)
+        y = np.divide(uv[..., 1] - cy, fy, out=xn[..., 1])
+        np.divide(uv[..., 0] - cx - skew * y, fx, out=xn[..., 0])
+        for c in self._distorted_list:
             ok = np.isfinite(uv[:, c]).all(axis=1)
             if ok.any():
                 xn[ok, c] = self.cameras[c].undistort_points(uv[ok, c])

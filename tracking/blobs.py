@@ -65,6 +65,7 @@ centroid's 1.25 (docs/TRACKING.md, "Partly hidden balls").
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -323,6 +324,13 @@ ARC_ENCLOSING_BELOW = 0.85
 """A region with less than this fraction of the whole ball's area starts from its enclosing circle."""
 ARC_ENCLOSING_MIN_PX = 4.0
 """The enclosing-circle start is for balls of at least this radius (on smaller ones it is noise)."""
+# the 4 neighbours of a pixel (+x, -x, +y, -y): steps, the edge point halfway, which coordinate
+# and side of the searched box each tests (columns of [box_hi, -box_lo])
+_ARC_STEP = np.array([[[1], [-1], [0], [0]], [[0], [0], [1], [-1]]], dtype=np.intp)
+_ARC_HALF_STEP = 0.5 * _ARC_STEP
+_ARC_AXIS = np.array([0, 0, 1, 1])
+_ARC_SIGN = np.array([[1.0], [-1.0], [1.0], [-1.0]])
+_ARC_BOUND_ROWS = np.array([0, 2, 1, 3])
 
 
 def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
@@ -363,9 +371,8 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
         points do not pin the centre.
     """
     k_count = start_px.shape[0]
-    centre = np.array(start_px, dtype=np.float64)
     if k_count == 0 or win.size == 0:
-        return centre
+        return np.array(start_px, dtype=np.float64)
     # every region's pixels in one occupancy grid (K regions x rows x columns, a border of one
     # empty pixel all round); the 4 neighbours of every pixel at once, by flat offsets in it
     x0, y0 = float(x.min()) - 1.0, float(y.min()) - 1.0
@@ -374,56 +381,63 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     flat = (win * h_grid + iy) * w_grid + ix
     grid = np.zeros(k_count * h_grid * w_grid, dtype=bool)
     grid[flat] = True
-    ex = np.array([[1.0], [-1.0], [0.0], [0.0]])
-    ey = np.array([[0.0], [0.0], [1.0], [-1.0]])
-    offset = (ey * w_grid + ex).astype(np.intp)  # the same neighbours in the flat grid
-    nx, ny = x + ex, y + ey
-    lo, hi = box_lo[win], box_hi[win]
-    edge = ~grid[flat + offset] & (nx >= lo[:, 0]) & (nx <= hi[:, 0]) & (ny >= lo[:, 1]) & (ny <= hi[:, 1])
+    # a neighbour is an edge unless it is in the region or outside the searched box; the box test
+    # of all 4 at once: s * coordinate < the box's bound on that side (integers), s = +1 for the
+    # neighbour after the pixel (bound: the last pixel), -1 before it (bound: minus the first)
+    n_px = x.size
+    xy = np.concatenate((x, y)).reshape(2, n_px)
+    bound = np.concatenate((box_hi, -box_lo), axis=1).T[_ARC_BOUND_ROWS].take(win, axis=1)  # (4, P)
+    edge = ~grid[flat + (_ARC_STEP[1] * w_grid + _ARC_STEP[0])] & (xy[_ARC_AXIS] * _ARC_SIGN < bound)
     # edge points (midpoints to the outside neighbours), grouped by region
-    pw = np.broadcast_to(win, edge.shape)[edge]
+    at = np.flatnonzero(edge)  # neighbour d of pixel i at d * P + i
+    pw = win.take(at % n_px)
     by_region = np.argsort(pw, kind="stable")
-    pw = pw[by_region]
-    px = (x + 0.5 * ex)[edge][by_region]
-    py = (y + 0.5 * ey)[edge][by_region]
-    counts = np.bincount(pw, minlength=k_count)
-    first = np.cumsum(counts) - counts
+    at = at.take(by_region)
+    pw = pw.take(by_region)
+    q = (xy[:, None, :] + _ARC_HALF_STEP).reshape(2, 4 * n_px).take(at, axis=1)  # (2, E) edge points
+    counts = np.bincount(pw, minlength=k_count).tolist()
     # a ball hidden by much is a poor start: its centroid lies so far towards the visible part that
     # the arc opposite the cut looks inside the circle; the smallest circle enclosing the edge
     # points is the ball's while more than half of it shows (too noisy on balls of a few pixels)
-    area = np.bincount(win, minlength=k_count)
-    far_off = np.flatnonzero((area < ARC_ENCLOSING_BELOW * np.pi * radius_px**2) & (radius_px >= ARC_ENCLOSING_MIN_PX)
-                             & (counts >= 3))
-    q = np.stack([px, py])  # (2, E) edge points
-    if far_off.size:
-        q32 = np.ascontiguousarray(q.T, dtype=np.float32)
-    for k in far_off.tolist():
-        (cx, cy), enclosing_r = cv2.minEnclosingCircle(q32[first[k]:first[k] + counts[k]])
-        if abs(enclosing_r - radius_px[k]) < 1.0:  # else the region is not a cut disc
-            centre[k] = cx, cy
+    # (the few per-region numbers in plain floats: numpy's per-call cost exceeds their work)
+    area = np.bincount(win, minlength=k_count).tolist()
+    radius = radius_px.tolist()
+    start = start_px.tolist()
+    cx, cy = [p[0] for p in start], [p[1] for p in start]
+    q32 = None
+    first = 0
+    for k in range(k_count):
+        r_k, n_k = radius[k], counts[k]
+        if area[k] < ARC_ENCLOSING_BELOW * np.pi * (r_k * r_k) and r_k >= ARC_ENCLOSING_MIN_PX and n_k >= 3:
+            if q32 is None:
+                q32 = np.ascontiguousarray(q.T, dtype=np.float32)
+            (ex, ey), enclosing_r = cv2.minEnclosingCircle(q32[first:first + n_k])
+            if abs(enclosing_r - r_k) < 1.0:  # else the region is not a cut disc
+                cx[k], cy[k] = ex, ey
+        first += n_k
     # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region: the
     # per-region sums of one iteration are one product with the (K, E) region indicator
     # (few numpy calls per iteration: on these small arrays their count, not their size, is the cost)
     member = (pw == np.arange(k_count)[:, None]).astype(np.float64)
     r = radius_px[pw]
-    c = centre.T.copy()  # (2, K)
     terms = np.empty((6, pw.size))  # per edge point: uxx, uxy, uyy, ux res, uy res, kept
     for tol in inside_tol_px:
-        d = q - c.take(pw, axis=1)  # (2, E) from the centre to each edge point
-        dist = np.sqrt(d[0] * d[0] + d[1] * d[1])
+        d = q - np.array([cx, cy]).take(pw, axis=1)  # (2, E) from the centre to each edge point
+        dist = np.sqrt((d * d).sum(axis=0))
         keep = np.greater(dist, r - tol, out=terms[5])
         u = d * (keep / np.where(keep, dist, 1.0))  # unit directions of the kept points, 0 elsewhere
         np.multiply(u, u[0], out=terms[0:2])
         np.multiply(u[1], u[1], out=terms[2])
         np.multiply(u, dist - r, out=terms[3:5])
-        s = member @ terms.T
-        sxx, sxy, syy = s[:, 0] + 1e-6, s[:, 1], s[:, 2] + 1e-6  # a region with no kept point gets no step
-        pinned = (s[:, 5] >= 3) / (sxx * syy - sxy * sxy)  # three points pin a circle
-        c[0] += (syy * s[:, 3] - sxy * s[:, 4]) * pinned
-        c[1] += (sxx * s[:, 4] - sxy * s[:, 3]) * pinned
-    centre = c.T.copy()
+        for k, (sxx, sxy, syy, sx, sy, kept) in enumerate((member @ terms.T).tolist()):
+            sxx += 1e-6  # a region with no kept point gets no step
+            syy += 1e-6
+            det = sxx * syy - sxy * sxy
+            pinned = (kept >= 3) / det if det else math.nan  # three points pin a circle
+            cx[k] += (syy * sx - sxy * sy) * pinned
+            cy[k] += (sxx * sy - sxy * sx) * pinned
     # a fit that wandered off (too few edge points for the radius) is not a better centre
-    moved = np.hypot(*(centre - start_px).T)
-    bad = ~np.isfinite(moved) | (moved > radius_px)
-    centre[bad] = start_px[bad]
-    return centre
+    for k in range(k_count):
+        if not math.hypot(cx[k] - start[k][0], cy[k] - start[k][1]) <= radius[k]:  # (NaN too)
+            cx[k], cy[k] = start[k]
+    return np.array([cx, cy]).T

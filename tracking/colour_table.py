@@ -375,15 +375,15 @@ class ColourTable:
         for img in images:
             _check_image(img)
         boxes = np.asarray(boxes, dtype=np.int64).reshape(-1, 4)
-        widths = boxes[:, 2] - boxes[:, 0]
-        heights = boxes[:, 3] - boxes[:, 1]
         image_index = np.asarray(image_index, dtype=np.int64).reshape(-1)
-        sizes = np.array([img.shape[1::-1] for img in images], dtype=np.int64).reshape(-1, 2)  # (w, h)
-        size = sizes[image_index]
-        if (widths < 0).any() or (heights < 0).any() or (boxes[:, :2] < 0).any() or (boxes[:, 2:] > size).any():
+        # (w, h) of each window's image, then 0 <= x0 <= x1 <= w and 0 <= y0 <= y1 <= h as one test
+        size = np.array([img.shape[1::-1] for img in images], dtype=np.int64).reshape(-1, 2)[image_index]
+        corners = np.concatenate((np.zeros_like(size), boxes, size), axis=1)  # 0, 0, x0, y0, x1, y1, w, h
+        if (corners[:, 2:] < corners[:, :-2]).any():
             raise ValueError("window boxes must satisfy 0 <= x0 <= x1 <= W and 0 <= y0 <= y1 <= H")
+        extent = boxes[:, 2:] - boxes[:, :2]
         starts = np.zeros(len(boxes) + 1, dtype=np.int64)
-        np.cumsum(widths * heights, out=starts[1:])
+        np.cumsum(extent[:, 0] * extent[:, 1], out=starts[1:])
         words = np.empty(int(starts[-1]), dtype=np.uint32)
         # images whose pixels OpenCV can read in place (any row stride); others go through numpy
         plain = [img.strides[1:] == (3, 1) for img in images]
@@ -394,7 +394,7 @@ class ColourTable:
             if b == a:
                 continue
             if plain[img_k]:  # the loop body of _pixel_words, without its checks
-                cv2.cvtColor(images[img_k][y0:y1, x0:x1], bgra, dst=as_bytes[4 * a:4 * b].reshape(y1 - y0, x1 - x0, 4))
+                cv2.cvtColor(images[img_k][y0:y1, x0:x1], bgra, as_bytes[4 * a:4 * b].reshape(y1 - y0, x1 - x0, 4))
             else:
                 _pixel_words(images[img_k], x0, y0, x1, y1, out=words[a:b].reshape(y1 - y0, x1 - x0))
         np.bitwise_and(words, 0xFFFFFF, out=words)

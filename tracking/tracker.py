@@ -39,7 +39,7 @@ from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
 from tracking.status import MarkerStatus
-from tracking.triangulation import triangulate
+from tracking.triangulation import Triangulator
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +175,9 @@ class TrackerParams:
         return (ratio >= self.partial_ratio) & (ratio <= self.oversize_ratio)
 
 
+_ONES2 = np.ones(2)  # row sums of (N, 2) and (N, 3) arrays as matrix products
+_ONES3 = np.ones(3)
+
 #: Stages of :meth:`Tracker.step` reported by ``rehab bench``.
 STEP_STAGES = (
     "windows (colour table + centroids)",
@@ -222,7 +225,10 @@ class _ArcRegions:
 
     def fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels."""
-        cols = [np.concatenate(parts) for parts in zip(*self._parts)]
+        if len(self._parts) == 1:
+            cols = self._parts[0]
+        else:
+            cols = [np.concatenate(parts) for parts in zip(*self._parts)]
         region, x, y, start, radius, lo, hi, origin, marker, camera = cols
         return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi)
 
@@ -252,6 +258,8 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
+        self._triangulate = Triangulator(self.geometry.extrinsics)
+        self._ones_cams = np.ones(len(self.cameras))
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
@@ -268,6 +276,9 @@ class Tracker:
             self._same_segment[i, j] = self._same_segment[j, i] = True
         # pairs of markers of one colour: their windows can hold the same ball
         self._colour_pairs = np.argwhere(np.triu(self.colour[:, None] == self.colour[None, :], 1))
+        self._colour_pairs_ij = tuple(np.ascontiguousarray(self._colour_pairs.T))
+        self._image_shapes: list[tuple[int, ...]] = []
+        self._image_size = np.zeros((0, 2), dtype=np.int64)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -431,19 +442,29 @@ class Tracker:
         p = self.params
         m_count = self.markerset.n_markers
         n_cams = len(self.cameras)
-        uv_out = np.full((m_count, n_cams, 2), np.nan)
-        rad_out = np.full((m_count, n_cams), np.nan)
+        uv_out = np.empty((m_count, n_cams, 2))
+        uv_out.fill(np.nan)
+        rad_out = np.empty((m_count, n_cams))
+        rad_out.fill(np.nan)
         uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
         self._pred_uv, self._pred_depth = uv, depth
         focal = self._stack.focal_px
         safe_depth = np.maximum(depth, 1e-3)
         r_px = focal * self.markerset.radius_m / safe_depth
         half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
-        size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)  # (C, 2) width, height
+        shapes = [img.shape for img in images]
+        if shapes != self._image_shapes:
+            self._image_shapes = shapes
+            self._image_size = np.array([s[1::-1] for s in shapes], dtype=np.int64)  # (C, 2) width, height
+        size = self._image_size
         # in front of the camera (project() gives NaN behind it) and the window overlaps the image
-        with np.errstate(invalid="ignore"):
-            valid = known[:, None] & (uv > -half[..., None]).all(axis=2) & (uv < size + half[..., None]).all(axis=2)
-        self._windows_px = np.where(valid[..., None], np.concatenate([uv, half[..., None]], axis=2), np.nan)
+        # (comparisons with NaN are False, without a warning)
+        windows = np.empty((m_count, n_cams, 3))
+        windows[..., :2] = uv
+        windows[..., 2] = half
+        valid = ((uv > -windows[..., 2:]) & (uv < size + windows[..., 2:])).all(axis=2) & known[:, None]
+        windows[~valid] = np.nan
+        self._windows_px = windows
         if valid.any():
             self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
             self._one_ball_one_marker(uv, r_px, uv_out, rad_out)
@@ -453,10 +474,9 @@ class Tracker:
         """A ball that the windows of two markers of its colour both found (the same blob in one
         camera, e.g. a hidden wrist marker behind the elbow marker of its colour on one line of
         sight) is a view of the marker predicted nearer to it only; the other loses that view."""
-        i, j = self._colour_pairs.T
-        with np.errstate(invalid="ignore"):
-            d = np.sqrt(((uv_out[i] - uv_out[j]) ** 2).sum(axis=2))  # (P, C), NaN where either has none
-            shared = d < 0.5 * np.minimum(r_px[i], r_px[j])
+        i, j = self._colour_pairs_ij
+        d = uv_out[i] - uv_out[j]  # (P, C, 2), NaN where either has none (no warning: no inf)
+        shared = (d * d).sum(axis=2) < 0.25 * np.minimum(r_px[i], r_px[j]) ** 2
         if not shared.any():
             return
         pair, cam = np.nonzero(shared)
@@ -473,63 +493,88 @@ class Tracker:
         A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
         the image border; the moments are taken about that pixel centre.
         """
-        mi, ci = np.nonzero(valid)
-        centre = np.round(uv[mi, ci]).astype(np.int64)  # (K, 2) window centre pixel x, y
-        ext = half[mi, ci].astype(np.int64)[:, None]  # half size rounded down (it is positive)
+        at = np.flatnonzero(valid)  # (K,) flat (marker, camera) index of each window
+        mi, ci = np.divmod(at, valid.shape[1])
+        centre = np.round(uv.reshape(-1, 2)[at]).astype(np.int64)  # (K, 2) window centre pixel x, y
+        ext = half.reshape(-1)[at].astype(np.int64)[:, None]  # half size rounded down (it is positive)
         size_k = size[ci]
         lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
         hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
         labels, starts = self.table.classify_windows(images, ci, np.concatenate([lo, hi], axis=1))
-        # the marker's own colour among the (few) marker-coloured pixels of each window
-        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
-        win = np.searchsorted(starts, hit, side="right") - 1
-        own = labels[hit] == self._label[mi][win]
-        hit, win = hit[own], win[own]
-        # pixel -> column and row in its window -> offsets from the window's centre pixel, in
-        # float64 (exact for these small integers; a float division is cheaper than an integer one)
-        local = (hit - starts[win]).astype(np.float64)
-        width = (hi[:, 0] - lo[:, 0]).astype(np.float64)[win]
-        first = (lo - centre).astype(np.float64)  # (K, 2) offsets of each window's first pixel
-        row = np.floor(local / width)
-        dx = local - row * width + first[:, 0][win]  # (1-D gathers: numpy's fast path)
-        dy = row + first[:, 1][win]
+        # the marker's own colour among the (few) marker-coloured pixels of each window; the
+        # pixels come window after window, so each window's share is one run of them, found by
+        # K binary searches (runs and repeats: no per-pixel window look-up)
         k_count = mi.size
-        # sums of integers: exact in float64 whatever the order
-        m00 = np.bincount(win, minlength=k_count).astype(np.float64)
+        hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
+        bounds = np.searchsorted(hit, starts)
+        own = labels[hit] == np.repeat(self._label[mi], np.diff(bounds))
+        hit = hit[own]
+        n = hit.size
+        run = np.concatenate(([0], np.cumsum(own)))[bounds]  # each window's first own pixel, and n
+        count = np.diff(run)
+        run = run[:-1]
+        # pixel -> column and row in its window, in float64 (exact for these small integers; a
+        # float division is cheaper than an integer one)
+        local = (hit - np.repeat(starts[:-1], count)).astype(np.float64)
+        width = np.repeat((hi[:, 0] - lo[:, 0]).astype(np.float64), count)
+        cr = np.empty((5, n + 1))  # per pixel: column, row, their squares and product; one 0 column
+        cr[:, n] = 0.0
+        col, row = cr[0, :n], cr[1, :n]
+        np.floor(local / width, out=row)
+        np.subtract(local, row * width, out=col)
+        np.multiply(cr[:2, :n], cr[:2, :n], out=cr[2:4, :n])
+        np.multiply(col, row, out=cr[4, :n])
+        # the five sums of every window as one reduction over the runs (the zero column ends the
+        # last; an empty run gives the next run's first element: set to 0), then taken about the
+        # window's centre pixel (offset ``first`` from the window's first pixel): sums of
+        # integers, exact in float64 whatever the order
+        sums = np.add.reduceat(cr, run, axis=1)
+        sums[:, count == 0] = 0.0
+        sc, sr, scc, srr, scr = sums
+        first = (lo - centre).astype(np.float64).T  # (2, K) offsets of each window's first pixel
+        fx, fy = first
+        m00 = count.astype(np.float64)
+        sxy = sums[:2] + m00 * first
+        sx, sy = sxy
         with np.errstate(divide="ignore", invalid="ignore"):
-            mx = np.bincount(win, dx, k_count) / m00
-            my = np.bincount(win, dy, k_count) / m00
-            mu20 = np.bincount(win, dx * dx, k_count) / m00 - mx**2
-            mu02 = np.bincount(win, dy * dy, k_count) / m00 - my**2
-            mu11 = np.bincount(win, dx * dy, k_count) / m00 - mx * my
+            mxy = sxy / m00  # (2, K) centroid about the centre pixel
+            mx, my = mxy
+            mu20 = (scc + fx * (sc + sx)) / m00 - mx**2
+            mu02 = (srr + fy * (sr + sy)) / m00 - my**2
+            mu11 = (scr + fy * sc + fx * sy) / m00 - mx * my
             roundness = axis_ratio(mu20, mu02, mu11)
-        ball_area = np.pi * r_px[mi, ci] ** 2
+            round_px = axis_ratio(mu20, mu02, mu11, PIXEL_MOMENT)  # roundness as tracking.blobs measures it
+        mxy = mxy.T
+        r_k = r_px.reshape(-1)[at]
+        ball_area = np.pi * r_k**2
         # a sliver (under 40 % of the ball's area) is a ball mostly hidden in this camera: no view
         ok = (m00 >= self._min_area_px[ci]) & (m00 >= 0.4 * ball_area)
         simple = ok & (m00 <= 1.6 * ball_area) & (roundness >= 0.6)
-        uv_out[mi[simple], ci[simple]] = centre[simple] + np.stack([mx, my], axis=1)[simple]
-        rad_out[mi[simple], ci[simple]] = np.sqrt(m00[simple] / np.pi)
+        radius = np.sqrt(m00 / np.pi)
+        at_simple = at[simple]
+        uv_out.reshape(-1, 2)[at_simple] = centre[simple] + mxy[simple]
+        rad_out.reshape(-1)[at_simple] = radius[simple]
         # a partly hidden ball: its region's centroid lies towards the visible part; its centre
         # comes from the visible arc instead (only these few windows pay for it), all in one call
         # with those of the crowded windows below
-        edge_r = r_px[mi, ci] - ARC_EDGE_SHRINK_PX
+        edge_r = r_k - ARC_EDGE_SHRINK_PX
         params = self.params
-        with np.errstate(invalid="ignore"):
-            round_px = axis_ratio(mu20, mu02, mu11, PIXEL_MOMENT)  # roundness as tracking.blobs measures it
         # (a region larger than the whole ball is no partly hidden ball: two balls of the colour
         # touching, whose outline fits neither)
         part = simple & (m00 <= np.pi * edge_r**2) & ((m00 < np.pi * (params.arc_fit_ratio * edge_r) ** 2)
                                                      | (round_px < params.arc_fit_roundness)
                                                      | (edge_r < params.arc_fit_all_below_px))
         # a view well below the ball's size is left out anyway while two full views remain (_choose)
-        ratio = np.sqrt(m00 / np.pi) / r_px[mi, ci]
+        ratio = radius / r_k
         full = simple & params.full_view(ratio)
         part &= ~((ratio < params.partial_ratio) & (np.bincount(mi[full], minlength=valid.shape[0])[mi] >= 2))
         arcs = _ArcRegions()
         if part.any():
+            win = np.repeat(np.arange(k_count), count)
             sel = part[win]
-            arcs.add_many((np.cumsum(part) - 1)[win[sel]], dx[sel], dy[sel], np.stack([mx, my], axis=1)[part],
-                          edge_r[part], first[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
+            ws = win[sel]
+            arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], mxy[part],
+                          edge_r[part], first.T[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
         crowded = np.flatnonzero(ok & ~simple)
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
@@ -569,25 +614,25 @@ class Tracker:
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
         # shifted centroid, and a blob larger than the ball holds more than the ball (another ball
         # of the colour touching it): leave them out while two full views remain
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_pred = rad / (ball_px / self._pred_depth)
-            partial = seen & ~params.full_view(ratio_pred) & ~np.isnan(ratio_pred)
+        # (no errstate in this method: NaN where a marker or view is missing compares False
+        # without a warning, and a depth of exactly 0 does not occur)
+        ratio_pred = rad / (ball_px / self._pred_depth)
+        partial = seen & ~params.full_view(ratio_pred) & ~np.isnan(ratio_pred)
         keep_full = (seen & ~partial).sum(axis=1) >= 2
         left_out = partial & keep_full[:, None]
         seen &= ~left_out
-        ext = self.geometry.extrinsics
-        pts = triangulate(ext, xn, seen)
+        triangulate = self._triangulate
+        pts = triangulate(xn, seen)
         err, depth = self._reprojection(pts, xn)
         # a partly hidden view is shifted by less than the ball's radius: one that the point
         # misses by more says that a full view holds another ball of the colour (two views always
         # meet near some point): triangulate from all views and let the worst go below
-        with np.errstate(invalid="ignore"):
-            r_px = ball_px / self._pred_depth
-            recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
+        r_px = ball_px / self._pred_depth
+        recheck = (left_out & (err > np.maximum(r_px, params.max_reproj_px))).any(axis=1)
         if recheck.any():
             redo = np.flatnonzero(recheck)
             seen[redo] |= left_out[redo]
-            pts[redo] = triangulate(ext, xn[redo], seen[redo])
+            pts[redo] = triangulate(xn[redo], seen[redo])
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         rows = np.arange(m_count)
         changed = np.ones(m_count, dtype=bool)  # views changed since the leave-one-out check
@@ -601,7 +646,7 @@ class Tracker:
             if probe.size:
                 others = seen[probe].copy()
                 others[np.arange(probe.size), worst[probe]] = False
-                p_loo = triangulate(ext, xn[probe], others)
+                p_loo = triangulate(xn[probe], others)
                 e_loo, _ = self._reprojection(p_loo, xn[probe])
                 drop[probe] = e_loo[np.arange(probe.size), worst[probe]] > params.max_loo_px
             if not drop.any():
@@ -611,42 +656,39 @@ class Tracker:
             for m in redo.tolist():
                 worst[m] = self._view_to_drop(m, seen[m], xn[m], pred[m], int(worst[m]))
             seen[redo, worst[drop]] = False
-            pts[redo] = triangulate(ext, xn[redo], seen[redo])  # the other points do not change
+            pts[redo] = triangulate(xn[redo], seen[redo])  # the other points do not change
             err[redo], depth[redo] = self._reprojection(pts[redo], xn[redo])
         n_seen = seen.sum(axis=1)
-        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ np.ones(n_cams) / np.maximum(n_seen, 1))
+        rms = np.sqrt(np.where(seen, err, 0.0) ** 2 @ self._ones_cams / np.maximum(n_seen, 1))
         # two views always meet in some point: a two-camera candidate must fit tightly and show a
         # ball of the right size in both views (as in tracking.reconstruction)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio_now = rad / (ball_px / depth)
-            size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
-            measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
-            measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
-            off = pts - pred
-            measured &= np.sqrt((off * off) @ np.ones(3)) <= params.gate_sigmas * sigma + 0.01
+        ratio_now = rad / (ball_px / depth)
+        size_fit = ~(seen & ~((ratio_now > 0.65) & (ratio_now <= params.oversize_ratio))).any(axis=1)
+        measured = (n_seen >= 2) & (rms <= params.max_reproj_px)
+        measured &= (n_seen >= 3) | ((rms <= params.max_reproj_px_two_view) & size_fit)
+        off = pts - pred
+        off_m = np.sqrt((off * off) @ _ONES3)  # distance to the prediction
+        measured &= off_m <= params.gate_sigmas * sigma + 0.01
         new_pos = np.where(measured[:, None], pts, np.nan)
         # one ball, one marker: a marker measured last frame keeps its ball, then the larger Q
         diff = new_pos[:, None, :] - new_pos[None, :, :]
-        dist = np.sqrt((diff * diff) @ np.ones(3))  # (M, M), NaN unless both measured
-        with np.errstate(invalid="ignore"):
-            clash = dist < params.same_ball_m
+        dist = np.sqrt((diff * diff) @ _ONES3)  # (M, M), NaN unless both measured
+        clash = dist < params.same_ball_m
         np.fill_diagonal(clash, False)
         if clash.any():
             # Q (equation 4) of the chosen candidate
             duv = uv - self._pred_uv
-            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ np.ones(2)))
+            q_cam = 1.0 / (1.0 + np.sqrt((duv * duv) @ _ONES2))
             q_best = np.where(measured, np.prod(np.where(seen, q_cam, 1.0), axis=1), 0.0)
             was_measured = self.status == _MEASURED
             for a in np.lexsort((-q_best, ~was_measured)):
                 if measured[a]:
                     measured &= ~clash[a]
-        with np.errstate(invalid="ignore"):
-            surprise = np.sqrt((off * off) @ np.ones(3)) / sigma  # distance to the prediction in sigmas
+        surprise = off_m / sigma  # distance to the prediction in sigmas
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
-        with np.errstate(invalid="ignore"):
-            full = seen & ~measured[:, None] & params.full_view(ratio_pred)
+        full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)
         return new_pos, measured
 
@@ -681,7 +723,7 @@ class Tracker:
         keep = np.repeat(seen[None, :], views.size, axis=0)
         keep[np.arange(views.size), views] = False
         obs = np.repeat(xn[None], views.size, axis=0)
-        pts = triangulate(self.geometry.extrinsics, obs, keep)
+        pts = self._triangulate(obs, keep)
         err, _ = self._reprojection(pts, obs)
         rms = np.sqrt((np.where(keep, err, 0.0) ** 2).sum(axis=1) / keep.sum(axis=1))
         fits = rms <= self.params.max_reproj_px
@@ -699,9 +741,8 @@ class Tracker:
         """(N, 3) points, (N, C, 2) normalized observations -> (N, C) errors in pixels, (N, C) depths."""
         cam = self._stack.world_to_cameras(pts)
         depth = cam[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            d = cam[..., :2] / depth[..., None] - xn
-        return np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2) * self._stack.focal_px, depth
+        d = cam[..., :2] / depth[..., None] - xn  # (NaN for NaN points; no depth is exactly 0)
+        return np.sqrt((d * d).sum(axis=2)) * self._stack.focal_px, depth
 
     def _segments_consistent(self, dist: np.ndarray, pos: np.ndarray, measured: np.ndarray,
                              surprise: np.ndarray) -> np.ndarray:
@@ -718,18 +759,16 @@ class Tracker:
             surprise: (M,) each candidate's distance to its prediction in prediction sigmas.
         """
         tol = self.params.segment_tol_m
-        with np.errstate(invalid="ignore"):
-            broken = np.abs(dist - self.seg_length) > tol
+        broken = np.abs(dist - self.seg_length) > tol  # (False for NaN, without a warning)
         bad_pair = self._same_segment & measured[:, None] & measured[None, :] & broken
         returning = measured & (self.status != _MEASURED)
         if returning.any():
             known_prev = np.isfinite(self.positions).all(axis=1) & ~measured
             if known_prev.any():
                 diff = pos[:, None, :] - self.positions[None, :, :]
-                d_prev = np.sqrt((diff * diff) @ np.ones(3))
+                d_prev = np.sqrt((diff * diff) @ _ONES3)
                 chk = self._same_segment & returning[:, None] & known_prev[None, :]
-                with np.errstate(invalid="ignore"):
-                    bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
+                bad_prev = (chk & (np.abs(d_prev - self.seg_length) > 2 * tol)).any(axis=1)
                 measured = measured & ~bad_prev
         ok = measured.copy()
         # drop the marker involved in most broken pairs, one at a time; of markers in as many, a
@@ -747,12 +786,11 @@ class Tracker:
 
     def _learn_lengths(self, measured: np.ndarray) -> None:
         pos = self.positions
-        d = np.linalg.norm(pos[:, None, :] - pos[None, :, :], axis=-1)
+        diff = pos[:, None, :] - pos[None, :, :]
+        d = np.sqrt((diff * diff) @ _ONES3)
         pair = self._same_segment & measured[:, None] & measured[None, :]
-        first = pair & ~np.isfinite(self.seg_length)
-        self.seg_length[first] = d[first]
-        upd = pair & ~first
-        self.seg_length[upd] = 0.95 * self.seg_length[upd] + 0.05 * d[upd]
+        old = self.seg_length  # NaN until first learned
+        self.seg_length = np.where(pair, np.where(np.isnan(old), d, 0.95 * old + 0.05 * d), old)
 
     def _reacquire(self, points: Points3D, new_pos: np.ndarray, measured: np.ndarray, search: np.ndarray) -> np.ndarray:
         """Give the markers of ``search`` (lost, or estimated for long) the unexplained full-frame

@@ -27,38 +27,85 @@ def triangulate(extrinsics: np.ndarray, xn: np.ndarray, seen: np.ndarray | None 
     Returns:
         (N, 3) float64 points in world metres; NaN where fewer than 2 cameras see the point.
     """
-    extrinsics = np.asarray(extrinsics, dtype=np.float64)
-    xn = np.asarray(xn, dtype=np.float64)
-    if xn.ndim == 2:
-        xn = xn[None]
-    n_pts, n_cams, _ = xn.shape
-    if seen is None:
-        seen = np.isfinite(xn).all(axis=-1)
-    seen = np.asarray(seen, dtype=bool).reshape(n_pts, n_cams)
-    out = np.full((n_pts, 3), np.nan)
-    ok = seen.sum(axis=1) >= 2
-    if not ok.any():
+    return Triangulator(extrinsics)(xn, seen)
+
+
+class Triangulator:
+    """:func:`triangulate` for one rig, with the per-camera constants prepared once (the
+    per-frame tracker calls it a few times per frame set on ~14 points, where the count of numpy
+    calls, not the work, is the cost).
+
+    Method: linear least squares (DLT) over the cameras that see a point, solved through the
+    normal equations of its inhomogeneous form, then once more with each camera's rows weighted
+    by 1 / projective depth (so that its residual approximates the image-plane error). Camera c
+    adds the rows ``x P3 - P1`` and ``y P3 - P2`` (``P = [R | t]``, weight w), i.e. to the 4x4
+    Gram matrix ``A^T A``: ``w^2 ((x^2 + y^2) P3 P3^T - x (P3 P1^T + P1 P3^T) - y (P3 P2^T + P2 P3^T)
+    + P1 P1^T + P2 P2^T)``: a fixed (4C, 16) basis times 4 numbers per point and camera, one
+    matrix product for all points.
+    """
+
+    def __init__(self, extrinsics: np.ndarray):
+        ext = np.asarray(extrinsics, dtype=np.float64)
+        if ext.ndim != 3 or ext.shape[1:] != (3, 4):
+            raise ValueError(f"extrinsics must be (C, 3, 4), got {ext.shape}")
+        self.n_cams = ext.shape[0]
+        p1, p2, p3 = ext[:, 0, :, None], ext[:, 1, :, None], ext[:, 2, :, None]  # (C, 4, 1)
+
+        def outer(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return a @ b.transpose(0, 2, 1)
+
+        def sym(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return outer(a, b) + outer(b, a)
+
+        basis = np.stack([outer(p3, p3), -sym(p3, p1), -sym(p3, p2), outer(p1, p1) + outer(p2, p2)], axis=1)
+        self._basis = np.ascontiguousarray(basis.reshape(4 * self.n_cams, 16))
+        self._depth_rot = np.ascontiguousarray(ext[:, 2, :3].T)  # (3, C)
+        self._depth_t = np.ascontiguousarray(ext[:, 2, 3])
+
+    def __call__(self, xn: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
+        """(N, C, 2) normalized observations, (N, C) bool seen -> (N, 3) points (as :func:`triangulate`)."""
+        xn = np.asarray(xn, dtype=np.float64)
+        if xn.ndim == 2:
+            xn = xn[None]
+        n_pts, n_cams, _ = xn.shape
+        if n_cams != self.n_cams:
+            raise ValueError(f"{n_cams} cameras' observations for a rig of {self.n_cams}")
+        if seen is None:
+            seen = np.isfinite(xn).all(axis=-1)
+        seen = np.asarray(seen, dtype=bool).reshape(n_pts, n_cams)
+        ok = np.count_nonzero(seen, axis=1) >= 2
+        all_ok = bool(ok.all())
+        if not all_ok:
+            out = np.empty((n_pts, 3))
+            out.fill(np.nan)
+            if not ok.any():
+                return out
+            xn, seen = xn[ok], seen[ok]
+        n = xn.shape[0]
+        # per point and camera: x^2 + y^2, x, y, 1 (all 0 where unseen), the basis' coefficients
+        feat = np.empty((n, n_cams, 4))
+        x = np.where(seen[..., None], xn, 0.0)
+        feat[..., 1:3] = x
+        feat[..., 0] = (x * x).sum(axis=2)
+        feat[..., 3] = seen
+        gram = feat.reshape(n, 4 * n_cams) @ self._basis  # (n, 16) A^T A, unweighted
+        X = _solve_normal(gram)
+        # reweight by 1 / depth so each row measures an image-plane (normalized) error
+        depth = X @ self._depth_rot + self._depth_t
+        w = np.where(seen, 1.0 / np.maximum(np.abs(depth), 1e-6), 0.0)
+        w /= w.max(axis=1, keepdims=True)
+        feat *= (w * w)[..., None]
+        X = _solve_normal(feat.reshape(n, 4 * n_cams) @ self._basis)
+        if all_ok:
+            return X
+        out[ok] = X
         return out
-    if not ok.all():
-        xn, seen = xn[ok], seen[ok]
-    x = np.where(seen[..., None], xn, 0.0)  # (n, C, 2)
-    w = seen.astype(np.float64)  # (n, C)
-    # rows x * P3 - P1 and y * P3 - P2 of every camera: (n, C, 2, 4)
-    rows = x[..., None] * extrinsics[None, :, 2:3, :] - extrinsics[None, :, 0:2, :]
-    n = x.shape[0]
-    for first in (True, False):
-        A = (rows * w[..., None, None]).reshape(n, 2 * n_cams, 4)
-        # normal equations of A[:, :, :3] X = -A[:, :, 3] (inhomogeneous form: the same minimiser
-        # as the SVD for points not at infinity), all from one Gram matrix A^T A
-        G = np.matmul(A.transpose(0, 2, 1), A)
-        X = np.linalg.solve(G[:, :3, :3], -G[:, :3, 3:])[..., 0]
-        if first:
-            # reweight by 1 / depth so each row measures an image-plane (normalized) error
-            depth = X @ extrinsics[:, 2, :3].T + extrinsics[:, 2, 3]
-            w = np.where(seen, 1.0 / np.maximum(np.abs(depth), 1e-6), 0.0)
-            w /= w.max(axis=1, keepdims=True)
-    out[ok] = X
-    return out
+
+
+def _solve_normal(gram: np.ndarray) -> np.ndarray:
+    """(n, 16) flattened 4x4 Gram matrices -> (n, 3) solutions of G[:3, :3] X = -G[:3, 3]."""
+    g = gram.reshape(-1, 4, 4)
+    return np.linalg.solve(g[:, :3, :3], -g[:, :3, 3:])[..., 0]
 
 
 def triangulate_one(extrinsics: np.ndarray, xn: np.ndarray) -> np.ndarray:
