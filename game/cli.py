@@ -371,7 +371,9 @@ def _cmd_play(args) -> int:
 def _add_bench(sub) -> None:
     p = sub.add_parser("bench", help="measure speed: colour table, centroids, triangulation, simulator")
     p.add_argument("--frames", type=int, default=60, help="frame sets per measurement (default: %(default)s)")
-    p.add_argument("--quick", action="store_true", help="fewer frames, for a smoke run")
+    p.add_argument("--quick", action="store_true", help="fewer frames and one pass, for a smoke run")
+    p.add_argument("--passes", type=int, default=5,
+                   help="alternating passes of full-frame measurement and tracking (default: %(default)s)")
     p.add_argument("--seconds", type=float, default=10.0,
                    help="measuring time of the live-process and application figures (default: %(default)s)")
     p.add_argument("--skip-live", action="store_true",
@@ -383,7 +385,7 @@ def _cmd_bench(args) -> int:
     from tracking.bench import run_benchmarks
 
     n = 10 if args.quick else args.frames
-    for line in run_benchmarks(n_frames=n):
+    for line in run_benchmarks(n_frames=n, passes=1 if args.quick else max(1, args.passes)):
         print(line, flush=True)
     if args.skip_live:
         return 0

@@ -2,9 +2,10 @@
 
 All timings are medians over frame sets of the simulated patient (4 cameras, a real motion).
 The per-frame pipeline (full-frame measurement, steady-state tracking) is measured pinned to one
-CPU core with OpenCV on one thread, as one tracker process would run beside the game; the
-simulator (GPU rendering) is not pinned. Machines are noisy: quote the ratios, and the CPU time
-per frame set next to the wall-clock time (other processes on the core inflate the latter).
+CPU core with OpenCV on one thread, as one tracker process would run beside the game, in
+alternating passes; the simulator (GPU rendering) is not pinned. Machines are noisy: quote the
+ratios, and the CPU time per frame set next to the wall-clock time (other processes on the core
+inflate the latter).
 """
 
 from __future__ import annotations
@@ -76,8 +77,15 @@ def simulate_frames(settings: SimulationSettings, n_frames: int, start_s: float 
         return frames, rate, studio.cameras
 
 
-def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> Iterator[str]:
-    """Yield report lines as each measurement finishes."""
+def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passes: int = 5) -> Iterator[str]:
+    """Yield report lines as each measurement finishes.
+
+    Full-frame measurement and steady-state tracking are timed in ``passes`` alternating passes
+    over the same frame sets (each tracking pass with a new tracker): on a machine whose speed
+    drifts (a shared virtual machine: 1.5x within minutes), each tracking pass is compared with
+    the full-frame pass just before it, and the best pass shows the code's speed where the machine
+    interfered least (as ``timeit`` takes the minimum).
+    """
     base = SimulationSettings(motion=motion, rig="ring4", fps=15.0, noise_sigma=1.5)
     yield f"rehab bench: 4 cameras, motion {motion}, {n_frames} frame sets per figure (medians)"
 
@@ -95,39 +103,56 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction") -> It
     ms = load_markerset(base.markerset)
     table = ColourTable.build(ms.palette)
     with one_core() as where:
-        yield (f"per-frame pipeline below: {where}; wall-clock medians (CPU time of the thread in brackets: "
-               "on a busy machine the wall clock also counts other processes)")
-        # full-frame measurement
+        yield (f"per-frame pipeline below: {where}; wall-clock medians over the frame sets of a pass, "
+               f"{passes} alternating passes (CPU time of the thread in brackets: on a busy machine the "
+               "wall clock also counts other processes)")
         measurer = FrameMeasurer(cameras, table, ms.radius_m)
         measurer.measure(frames[0])  # warm-up (page in the table)
         measurer.times.reset()
-        wall, cpu = np.median([_timed(lambda f=f: measurer.measure(f)) for f in frames], axis=0)
-        measure_s = float(wall)
+        warm = min(10, len(frames) // 3)
+        measure, track = [], []  # per pass: (wall s, CPU s) medians over its frame sets
+        stage_times = None
+        for _ in range(max(1, passes)):
+            measure.append(np.median([_timed(lambda f=f: measurer.measure(f)) for f in frames], axis=0))
+            tracker = Tracker(cameras, ms, table=table, fps=base.fps)
+            for f in frames[:warm]:
+                tracker.step(f)
+            if tracker.state != TrackingState.TRACKING:
+                break
+            tracker.times.reset()
+            track.append(np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0))
+            stage_times = tracker.times
+        measure_a = np.array(measure)
+        measure_s, cpu = (float(x) for x in np.median(measure_a, axis=0))
         yield (
             f"full-frame measurement, 4x640x480:        {1000 * measure_s:7.2f} ms per frame set "
-            f"({1 / measure_s:6.1f} frame sets/s; CPU {1000 * cpu:.2f} ms)"
+            f"({1 / measure_s:6.1f} frame sets/s; CPU {1000 * cpu:.2f} ms; passes "
+            + " ".join(f"{1000 * w:.1f}" for w, _ in measure_a) + " ms)"
         )
         yield "    stages (mean ms): " + ", ".join(f"{k} {v:.2f}" for k, v in measurer.times.per_frame_ms().items())
         yield f"memory floor (copy the 4 frames once):     {1000 * copy_s:7.3f} ms per frame set"
         yield f"ratio measurement / copy:                  {measure_s / copy_s:7.1f}x"
 
-        # steady-state tracking with search windows on the same frame sets
-        tracker = Tracker(cameras, ms, table=table, fps=base.fps)
-        warm = min(10, len(frames) // 3)
-        for f in frames[:warm]:
-            tracker.step(f)
-        if tracker.state == TrackingState.TRACKING:
-            tracker.times.reset()
-            wall, cpu_track = np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0)
-            track_s = float(wall)
+        if track:
+            track_a = np.array(track)
+            track_s, cpu_track = (float(x) for x in np.median(track_a, axis=0))
+            best_s, best_cpu = float(track_a[:, 0].min()), float(track_a[:, 1].min())
+            # each tracking pass against the full-frame pass just before it
+            ratios = measure_a[: len(track_a), 0] / track_a[:, 0]
+            ratios_cpu = measure_a[: len(track_a), 1] / track_a[:, 1]
             yield (
                 f"steady-state tracking, 4x640x480:         {1000 * track_s:7.2f} ms per frame set "
                 f"({1 / track_s:6.1f} frame sets/s; CPU {1000 * cpu_track:.2f} ms = {1 / cpu_track:.0f}/s), "
-                f"{measure_s / track_s:.1f}x faster than full-frame measurement (CPU {cpu / cpu_track:.1f}x)"
+                f"{float(np.median(ratios)):.1f}x faster than full-frame measurement (CPU "
+                f"{float(np.median(ratios_cpu)):.1f}x; passes " + " ".join(f"{r:.1f}x" for r in ratios) + ")"
             )
-            yield "    stages (mean ms): " + ", ".join(f"{k} {v:.2f}" for k, v in tracker.times.per_frame_ms().items())
-            for what, ratio, rate in (("wall-clock", measure_s / track_s, 1 / track_s),
-                                      ("CPU time", cpu / cpu_track, 1 / cpu_track)):
+            yield (f"    passes: " + " ".join(f"{1000 * w:.2f}" for w, _ in track_a)
+                   + f" ms; best pass {1000 * best_s:.2f} ms ({1 / best_s:.0f} frame sets/s; CPU {1000 * best_cpu:.2f} ms)")
+            yield "    stages (mean ms, last pass): " + ", ".join(
+                f"{k} {v:.2f}" for k, v in stage_times.per_frame_ms().items())
+            for what, ratio, rate in (("wall-clock, median pass", float(np.median(ratios)), 1 / track_s),
+                                      ("CPU time, median pass", float(np.median(ratios_cpu)), 1 / cpu_track),
+                                      ("wall-clock, best pass", float(ratios.max()), 1 / best_s)):
                 yield (
                     f"speed target (>= 5x full frame, >= 300 frame sets/s on one core), {what}: "
                     f"{ratio:.1f}x {'met' if ratio >= 5 else 'NOT met'}, "
