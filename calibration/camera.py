@@ -320,8 +320,7 @@ class CameraStack:
     distorted: np.ndarray = field(init=False, repr=False)
     focal_px: np.ndarray = field(init=False, repr=False)
     _rotation_t: np.ndarray = field(init=False, repr=False)
-    _k_col: tuple[np.ndarray, ...] = field(init=False, repr=False)
-    _k_row: tuple[np.ndarray, ...] = field(init=False, repr=False)
+    _k: tuple[np.ndarray, ...] = field(init=False, repr=False)
     _t_col: np.ndarray = field(init=False, repr=False)
     _distorted_list: tuple[int, ...] = field(init=False, repr=False)
 
@@ -344,10 +343,9 @@ class CameraStack:
         }
         values["_rotation_t"] = np.ascontiguousarray(values["rotation"].transpose(0, 2, 1))
         K = values["K"]
-        # the intrinsics as (C, 1) columns (project) and (C,) rows (undistort_points), so that a
-        # call pays for no indexing; the distorted cameras as a plain list
-        values["_k_col"] = tuple(np.ascontiguousarray(K[:, i, j, None]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
-        values["_k_row"] = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
+        # the intrinsics fx, skew, cx, fy, cy of every camera as (C,) arrays, so that a call pays
+        # for no indexing of K; the distorted cameras as a plain tuple
+        values["_k"] = tuple(np.ascontiguousarray(K[:, i, j]) for i, j in ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2)))
         values["_t_col"] = np.ascontiguousarray(values["t_m"][:, None, :])
         for name, value in values.items():
             if isinstance(value, np.ndarray):
@@ -373,16 +371,15 @@ class CameraStack:
             depth_m: (N, C) float64 camera-frame z of each point in each camera.
         """
         # (C, N, 3): the same products as Camera.world_to_camera, camera by camera
-        p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
-        p_cam = np.matmul(p, self._rotation_t) + self._t_col
+        p_cam = self.world_to_cameras(p_world_m).transpose(1, 0, 2)
         z = p_cam[..., 2]
-        fx, skew, cx, fy, cy = self._k_col
+        fx, skew, cx, fy, cy = (k[:, None] for k in self._k)  # (C, 1): broadcast over the points
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             x = p_cam[..., 0] / z
             y = p_cam[..., 1] / z
             if self._distorted_list:
                 x, y = self._distort(x, y)
-            uv = np.empty((p.shape[0], len(self.cameras), 2))
+            uv = np.empty((p_cam.shape[1], len(self.cameras), 2))
             uv[..., 0] = (fx * x + skew * y + cx).T
             uv[..., 1] = (fy * y + cy).T
         depth = z.T
@@ -407,7 +404,7 @@ class CameraStack:
         all points at once; the others go through :meth:`Camera.undistort_points` (OpenCV).
         """
         uv = np.asarray(uv_px, dtype=np.float64)
-        fx, skew, cx, fy, cy = self._k_row
+        fx, skew, cx, fy, cy = self._k
         xn = np.empty(uv.shape)
         y = np.divide(uv[..., 1] - cy, fy, out=xn[..., 1])
         np.divide(uv[..., 0] - cx - skew * y, fx, out=xn[..., 0])

@@ -316,9 +316,9 @@ def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np
         angles.append(s.angles_deg)
     m = len(tracker.markerset.names)
     stack = (lambda rows, shape: np.stack(rows) if rows else np.zeros(shape))
-    reported = {name: np.array([a.get(name, np.nan) for a in angles]) for name in (angles[0] if angles else ())}
+    reported = {name: np.array([a.get(name, np.nan) for a in angles]) for name in angles[0]} if angles else None
     return TrackedRun(tuple(tracker.markerset.names), stack(positions, (0, m, 3)), stack(status, (0, m)).astype(np.uint8),
-                      stack(truth, (0, m, 3)), total, identified_at, swaps, reported if angles else None)
+                      stack(truth, (0, m, 3)), total, identified_at, swaps, reported)
 
 
 def validate_tracking(settings: SimulationSettings, *, progress: bool = False) -> TrackingAccuracy:
