@@ -825,8 +825,39 @@ def test_the_per_frame_forearm_angles_in_floats_match_the_elbow_frame_and_forear
         est.update(p, measured)
         turned.append(not np.allclose(est.pivot_offset(0, 0.5 * (p[1] + p[2]), p[0]), est.pivot_offset(0)))
         fast = est._forearm_angles_f(0, p.tolist(), measured.tolist())
-        theta, psi, shape = forearm_angles(est._elbow_frame(0, p, measured), p[3], p[4])
+        theta, psi, shape = forearm_angles(est._elbow_frame(0, p, measured, square=0.0), p[3], p[4])
         assert fast[0] == pytest.approx(theta, abs=1e-12) and fast[1] == pytest.approx(psi, abs=1e-12)
         assert np.allclose([fast[2].along, fast[2].radius, fast[2].half, fast[2].tilt],
                            [shape.along, shape.radius, shape.half, shape.tilt], atol=1e-12)
     assert any(turned) == (rhythm > 0)
+
+
+def test_the_forearm_axis_square_to_the_humerus_steadies_a_hidden_styloid():
+    """One styloid hidden for 2 s while the nearly straight arm (11 +- 17 degrees of flexion)
+    turns +-57 degrees, markers 1.5 mm noisy (320x240 at 2-3 m): the wrist centre lies in the
+    plane perpendicular to the flexion axis, 25 cm from the elbow, so the epicondyle markers' noise
+    (1.1 degrees of axis tilt) moves the hidden styloid's estimate ~10 mm. With the axis made
+    perpendicular to the humerus (``axis_square=1``), the tilt towards the forearm is gone:
+    ~35 % less error."""
+    def hidden_styloid_rms(square, seed):
+        truth = []
+        for i in range(90):
+            t = i / 30.0
+            e1, e2, w1, w2 = forearm_pose(0.2 + 0.3 * math.sin(2.0 * t), 1.0 * math.sin(1.5 * t))
+            truth.append(np.stack([np.array([0.0, 0.32, 0.0]), e1, e2, w1, w2]))
+        truth = np.array(truth)
+        measured = np.ones((90, 5), dtype=bool)
+        measured[30:, 3] = False
+        est = Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
+                        np.ones((5, 5)), segments=[(1, 2, 3, 4)],
+                        hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
+                        forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0,
+                        drop_unpinned=False, axis_square=square)
+        p, s = run(est, truth, measured, noise_m=0.0015, seed=seed)
+        assert (s[30:, 3] == ESTIMATED).all()
+        return float(np.sqrt(np.mean(np.sum((p[30:, 3] - truth[30:, 3]) ** 2, axis=1))))
+
+    as_measured = np.mean([hidden_styloid_rms(0.0, seed) for seed in range(3)])
+    square = np.mean([hidden_styloid_rms(1.0, seed) for seed in range(3)])
+    assert as_measured > 0.008
+    assert square < 0.75 * as_measured, (square, as_measured)
