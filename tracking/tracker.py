@@ -196,22 +196,22 @@ class _ArcRegions:
         self.count = 0
         self._parts: list[tuple[np.ndarray, ...]] = []
 
-    def add_many(self, region: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
-                 box_lo: np.ndarray, box_hi: np.ndarray, origin_px: np.ndarray, marker: np.ndarray,
-                 camera: np.ndarray) -> None:
+    def add_many(self, region: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, prior_px: np.ndarray,
+                 radius_px: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, origin_px: np.ndarray,
+                 marker: np.ndarray, camera: np.ndarray) -> None:
         """K regions: (P,) region index 0..K-1, pixel x, y relative to each region's (K, 2) origin
-        (full-image pixels); (K, 2) centroids, (K,) radii, (K, 2) searched boxes (inclusive), all
-        relative to the origin; (K,) marker and camera of each."""
+        (full-image pixels); (K, 2) centroids and predicted centres, (K,) radii, (K, 2) searched
+        boxes (inclusive), all relative to the origin; (K,) marker and camera of each."""
         self._parts.append((region + self.count, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
-                            start_px, radius_px, np.asarray(box_lo, dtype=np.float64),
+                            start_px, prior_px, radius_px, np.asarray(box_lo, dtype=np.float64),
                             np.asarray(box_hi, dtype=np.float64), np.asarray(origin_px, dtype=np.float64),
                             marker, camera))
         self.count += len(radius_px)
 
-    def add_region(self, mask: np.ndarray, centroid_px: np.ndarray, origin_px: tuple[int, int], radius_px: float,
-                   marker: int, camera: int) -> None:
+    def add_region(self, mask: np.ndarray, centroid_px: np.ndarray, prior_px: np.ndarray, origin_px: tuple[int, int],
+                   radius_px: float, marker: int, camera: int) -> None:
         """The 8-connected region of ``mask`` (a whole searched window at ``origin_px``) nearest
-        the (full-image) ``centroid_px``."""
+        the (full-image) ``centroid_px``; ``prior_px`` the (full-image) predicted centre."""
         origin = np.array(origin_px, dtype=np.float64)
         local = centroid_px - origin
         _, regions = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
@@ -219,7 +219,8 @@ class _ArcRegions:
         nearest = np.argmin((xs - local[0]) ** 2 + (ys - local[1]) ** 2)
         ys, xs = np.nonzero(regions == regions[ys[nearest], xs[nearest]])
         h, w = mask.shape
-        self.add_many(np.zeros(xs.size, dtype=np.int64), xs, ys, local[None, :], np.array([radius_px]),
+        self.add_many(np.zeros(xs.size, dtype=np.int64), xs, ys, local[None, :], (prior_px - origin)[None, :],
+                      np.array([radius_px]),
                       np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
                       np.array([camera]))
 
@@ -229,8 +230,8 @@ class _ArcRegions:
             cols = self._parts[0]
         else:
             cols = [np.concatenate(parts) for parts in zip(*self._parts)]
-        region, x, y, start, radius, lo, hi, origin, marker, camera = cols
-        return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi)
+        region, x, y, start, prior, radius, lo, hi, origin, marker, camera = cols
+        return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi, prior_px=prior)
 
 
 class Tracker:
@@ -451,7 +452,8 @@ class Tracker:
         focal = self._stack.focal_px
         safe_depth = np.maximum(depth, 1e-3)
         r_px = focal * self.markerset.radius_m / safe_depth
-        half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * focal * sigma[:, None] / safe_depth, p.max_window_px)
+        sigma_px = focal * sigma[:, None] / safe_depth
+        half = np.minimum(r_px * 1.2 + 2.0 + p.window_sigmas * sigma_px, p.max_window_px)
         shapes = [img.shape for img in images]
         if shapes != self._image_shapes:
             self._image_shapes = shapes
@@ -467,13 +469,18 @@ class Tracker:
         self._windows_px = windows
         if valid.any():
             self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
-            self._one_ball_one_marker(uv, r_px, uv_out, rad_out)
+            self._one_ball_one_marker(uv, sigma_px, r_px, uv_out, rad_out)
         return uv_out, rad_out
 
-    def _one_ball_one_marker(self, uv, r_px, uv_out, rad_out) -> None:
+    def _one_ball_one_marker(self, uv, sigma_px, r_px, uv_out, rad_out) -> None:
         """A ball that the windows of two markers of its colour both found (the same blob in one
         camera, e.g. a hidden wrist marker behind the elbow marker of its colour on one line of
-        sight) is a view of the marker predicted nearer to it only; the other loses that view."""
+        sight) is a view of the marker whose prediction makes it likelier only; the other loses
+        that view. Likelier: the smaller ``d^2 / sigma^2 + 4 ln sigma`` (minus twice the log of a
+        2D normal density; d the distance from the prediction, sigma its uncertainty, pixels), so
+        a marker estimated for a while, whose wide uncertainty puts any ball near its prediction,
+        does not take the ball of a marker measured last frame that is a little farther from its
+        sharp prediction."""
         i, j = self._colour_pairs_ij
         d = uv_out[i] - uv_out[j]  # (P, C, 2), NaN where either has none (no warning: no inf)
         shared = (d * d).sum(axis=2) < 0.25 * np.minimum(r_px[i], r_px[j]) ** 2
@@ -481,8 +488,9 @@ class Tracker:
             return
         pair, cam = np.nonzero(shared)
         a, b = i[pair], j[pair]
-        da = np.sqrt(((uv_out[a, cam] - uv[a, cam]) ** 2).sum(axis=1))
-        db = np.sqrt(((uv_out[b, cam] - uv[b, cam]) ** 2).sum(axis=1))
+        sa, sb = sigma_px[a, cam], sigma_px[b, cam]
+        da = ((uv_out[a, cam] - uv[a, cam]) ** 2).sum(axis=1) / (sa * sa) + 4.0 * np.log(sa)
+        db = ((uv_out[b, cam] - uv[b, cam]) ** 2).sum(axis=1) / (sb * sb) + 4.0 * np.log(sb)
         loser = np.where(da <= db, b, a)
         uv_out[loser, cam] = np.nan
         rad_out[loser, cam] = np.nan
@@ -574,7 +582,8 @@ class Tracker:
             sel = part[win]
             ws = win[sel]
             arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], mxy[part],
-                          edge_r[part], first.T[part], (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
+                          uv.reshape(-1, 2)[at[part]] - centre[part], edge_r[part], first.T[part],
+                          (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
         crowded = np.flatnonzero(ok & ~simple)
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
@@ -597,7 +606,7 @@ class Tracker:
                 if blobs.radius_px[j] <= edge_r[k] and (blobs.radius_px[j] < params.arc_fit_ratio * edge_r[k]
                                                         or blobs.roundness[j] < params.arc_fit_roundness):
                     # e.g. half a ball (roundness ~0.5), or a ball beside another of its colour
-                    arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], (x0k, y0k), edge_r[k], m, c)
+                    arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c)
         if arcs.count:
             m_idx, c_idx, uv_fit = arcs.fit()
             uv_out[m_idx, c_idx] = uv_fit

@@ -101,3 +101,39 @@ def test_one_ball_is_one_markers_view():
     err = np.linalg.norm(run.positions_m - run.truth_m, axis=-1)
     measured = run.status == MarkerStatus.MEASURED
     assert err[measured].max() < 0.015, err[measured].max()
+
+
+def test_a_shared_ball_goes_to_the_marker_whose_prediction_makes_it_likelier():
+    """Two markers of one colour whose windows found the same blob in a camera: the walking
+    capture at 320x240 @15 (frame 59) had the left radial styloid, estimated for a while (window
+    uncertainty ~10 px), predicted 0.7 px from the lateral elbow marker's ball, which that marker,
+    measured last frame (~5 px), predicted 2.2 px away: the wrist marker took the ball and was
+    measured 25 mm off. The likelier prediction keeps the ball; with equal uncertainties, still
+    the nearer one."""
+    from tracking.markerset import load_markerset
+    from tracking.sim.rigs import load_rig
+
+    ms = load_markerset()
+    tracker = Tracker(load_rig("ring4", (320, 240)), ms)
+    elbow, wrist = ms.names.index("MLE1"), ms.names.index("MLW1")
+    assert tracker.colour[elbow] == tracker.colour[wrist]
+    m_count, n_cams = ms.n_markers, len(tracker.cameras)
+
+    def winner(d_elbow_px, sigma_elbow_px, d_wrist_px, sigma_wrist_px):
+        uv = np.full((m_count, n_cams, 2), 100.0)
+        ball = np.array([115.2, 160.1])
+        uv[elbow, 3] = ball + [d_elbow_px, 0.0]
+        uv[wrist, 3] = ball + [0.0, d_wrist_px]
+        sigma = np.full((m_count, n_cams), 2.0)
+        sigma[elbow, 3], sigma[wrist, 3] = sigma_elbow_px, sigma_wrist_px
+        found = np.full((m_count, n_cams, 2), np.nan)
+        found[elbow, 3] = found[wrist, 3] = ball
+        rad = np.where(np.isnan(found[..., 0]), np.nan, 3.0)
+        tracker._one_ball_one_marker(uv, sigma, np.full((m_count, n_cams), 3.0), found, rad)
+        kept = [m for m in (elbow, wrist) if np.isfinite(found[m, 3, 0])]
+        assert len(kept) == 1 and np.isfinite(rad[kept[0], 3])
+        return kept[0]
+
+    assert winner(2.2, 1.9, 0.7, 10.6) == elbow  # the walk's case: the sharp prediction wins
+    assert winner(2.2, 2.0, 0.7, 2.0) == wrist  # equally sure: the nearer
+    assert winner(0.7, 2.0, 2.2, 2.0) == elbow
