@@ -283,8 +283,9 @@ def test_small_ball_half_hidden_starts_its_arc_fit_from_the_arc_not_the_centroid
     region's centroid is 0.5-1.7 px towards the visible part (1.1 px RMS, 62 of 100 over 1 px). The
     Gauss-Newton fit from there dropped the visible arc as lying inside the circle and kept the
     centroid (1.0 px RMS, 20 over 1 px); started from the centre that best puts the arc on the
-    circle (a grid search), 0.72 px RMS and 9 over 1 px. What is left: regions of 7-15 pixels that
-    a circle fits from either side (the occluder's straight edge taken for the arc)."""
+    circle (a grid search), 0.69 px RMS and 10 over 1 px (slivers under 40 % of the ball keep the
+    centroid). What is left: regions of 7-15 pixels that a circle fits from either side (the
+    occluder's straight edge taken for the arc)."""
     rng = np.random.default_rng(7)
     errors = {"centroid": [], "arc": []}
     angle = np.linspace(0.0, np.pi, 2001)
@@ -304,7 +305,7 @@ def test_small_ball_half_hidden_starts_its_arc_fit_from_the_arc_not_the_centroid
     err = {name: np.array(e) for name, e in errors.items()}
     rms = {name: float(np.sqrt(np.mean(e**2))) for name, e in err.items()}
     assert rms["centroid"] > 1.0 and (err["centroid"] > 1.0).sum() >= 50
-    assert rms["arc"] < 0.8 and (err["arc"] > 1.0).sum() <= 12
+    assert rms["arc"] < 0.8 and (err["arc"] > 1.0).sum() <= 13
     assert np.median(err["arc"]) < 0.4
 
 
