@@ -694,7 +694,16 @@ class Estimator:
             4 mm out of the plane and the hidden styloid's estimate 8 mm (~5 degrees of
             supination), and the epicondyle markers 11 cm apart give the axis to 1-2 degrees at
             320x240. The humerus, 30 cm from the learned pivot, pins that tilt where the elbow is
-            not far bent (the forearm then runs along the humerus).
+            not far bent (the forearm then runs along the humerus). None (default): per frame,
+            the two estimates of that component weighed by their variances, ``s_m^2 / (s_m^2 +
+            axis_model_sigma^2)`` with ``s_m`` the markers' (``marker_sigma_m`` of the two
+            epicondyle markers over their distance): the humerus' where the markers are coarse
+            (320x240: ~0.85), the markers' where they are sharp (640x480: ~0.5).
+        axis_model_sigma_deg: how far the hinge's axis strays from perpendicular to the humerus
+            through the learned pivot (the pivot's error, the arm's own geometry).
+        marker_sigma_m: position noise of a measured marker (m), until the caller sets
+            :attr:`marker_sigma_m` (M,) per frame (the tracker does, from the cameras' pixel size
+            at each marker).
 
     After each :meth:`update`, ``axis_guessed`` (M,) bool marks the estimates whose direction to
     their pair (the elbow axis ``E2 - E1``, the wrist axis ``W2 - W1``), which forearm supination
@@ -744,7 +753,9 @@ class Estimator:
         view_gate_m: float = 0.025,
         drop_unpinned: bool = True,
         view_estimate_sigma_m: float = 0.01,
-        axis_square: float = 1.0,
+        axis_square: float | None = None,
+        axis_model_sigma_deg: float = 0.5,
+        marker_sigma_m: float = 0.0015,
     ) -> None:
         m = len(methods)
         self.n_markers = m
@@ -809,7 +820,9 @@ class Estimator:
         self.view_gate_m = float(view_gate_m)
         self.drop_unpinned = bool(drop_unpinned)
         self.view_estimate_sigma_m = float(view_estimate_sigma_m)
-        self.axis_square = float(axis_square)
+        self.axis_square = None if axis_square is None else float(axis_square)
+        self.axis_model_sigma_rad = math.radians(axis_model_sigma_deg)
+        self.marker_sigma_m = np.full(m, float(marker_sigma_m))
         self.rhythm_deg = (float(rhythm_deg[0]), float(rhythm_deg[1]))
         self._arm_beta = 1.0 - math.exp(-1.0 / (float(fps) * 0.1))  # angular velocity: ~0.1 s memory
         self._arm_decay = math.exp(-1.0 / (float(fps) * forearm_decay_s)) if forearm_decay_s > 0 else 0.0
@@ -1150,7 +1163,13 @@ class Estimator:
         if not np.all(np.isfinite(shoulder)):
             return None
         pivot = shoulder + self.trunk_rot @ self.pivot_offset(sh, 0.5 * (p[ea] + p[eb]), shoulder)
-        return elbow_frame(p[ea], p[eb], pivot, self.axis_square if square is None else square)
+        if square is None:
+            square = self.axis_square
+        if square is None:
+            e = p[eb] - p[ea]
+            noise = (self.marker_sigma_m[ea] ** 2 + self.marker_sigma_m[eb] ** 2) / max(float(e @ e), 1e-6)
+            square = noise / (noise + self.axis_model_sigma_rad ** 2) if noise > 0 else 0.0
+        return elbow_frame(p[ea], p[eb], pivot, square)
 
     def _arm_sigma(self, r: int, frames: float) -> np.ndarray:
         """(2,) uncertainty (rad) of arm r's flexion and supination extrapolated ``frames`` ahead:

@@ -127,6 +127,9 @@ class TrackerParams:
             hidden ball: centroid shifted by ~1 px at 0.8-0.9; a blob holding another ball of the
             colour: 0.8 of those above 1.1 were > 2 px off in the simulated motions); a
             two-view candidate needs both views at most ``oversize_ratio``.
+        marker_sigma_px: position noise of a measured marker, in pixels of the camera nearest to it
+            (its pixel's size there), for the hidden-marker estimator's weights
+            (:attr:`~tracking.hidden.Estimator.marker_sigma_m`).
         view_sigma_px: centroid uncertainty of a single full view of a marker that is not
             measured; such views go to the hidden-marker estimator as rays
             (:meth:`~tracking.hidden.Estimator.observe_views`).
@@ -165,6 +168,7 @@ class TrackerParams:
     view_choice_margin_m: float = 0.02
     oversize_ratio: float = 1.1
     view_sigma_px: float = 0.5
+    marker_sigma_px: float = 0.25
     arc_fit_ratio: float = 0.95
     arc_fit_roundness: float = 0.9
     arc_fit_all_below_px: float = 4.0
@@ -405,6 +409,10 @@ class Tracker:
             self.times.add("full-frame re-acquisition", time.perf_counter() - t3)
 
         t4 = time.perf_counter()
+        # each marker's position noise: its 3D error in pixel footprints at its distance (nearest camera)
+        footprint = np.fmin.reduce(self._pred_depth / self._stack.focal_px, axis=1)
+        self.estimator.marker_sigma_m = np.where(np.isfinite(footprint), p.marker_sigma_px * footprint,
+                                                 self.estimator.marker_sigma_m)
         est_pos, status = self.estimator.update(np.where(measured[:, None], new_pos, np.nan), measured)
         self.times.add("hidden markers", time.perf_counter() - t4)
 
