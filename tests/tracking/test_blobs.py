@@ -252,27 +252,34 @@ def region_arc_centre(mask: np.ndarray, radius_px: float, box_hi=None) -> tuple[
     return start[0], fitted[0]
 
 
-def test_partly_hidden_ball_centre_from_its_visible_arc(table, palette):
-    """A ball 10-35 % hidden behind a straight edge (skin or a dark sleeve, any direction, radius
-    3.5-8 px): the binary region's centroid lies 0.46-2.0 px towards the visible part (1.25 px
-    RMS); the circle of the ball's radius fitted to the visible arc is 0.22 px RMS, 0.40 max."""
-    rng = np.random.default_rng(3)
+def hidden_ball_errors(table, palette, *, seed: int, trials: int, radius_px, hidden) -> dict[str, np.ndarray]:
+    """Balls of a radius in ``radius_px`` (low, high), a share in ``hidden`` (low, high) of each
+    hidden behind a straight edge (skin or a dark sleeve, any direction): the distances of the
+    binary region's centroid and of its arc fit from the true centre, px."""
+    rng = np.random.default_rng(seed)
     errors = {"centroid": [], "arc": []}
     angle = np.linspace(0.0, np.pi, 2001)
     cut_area = (angle - np.sin(angle)) / (2.0 * np.pi)  # area fraction cut off by a chord
-    for trial in range(30):
-        radius, colour = rng.uniform(3.5, 8.0), trial % len(palette)
+    for trial in range(trials):
+        radius, colour = rng.uniform(*radius_px), trial % len(palette)
         centre = (30.0 + rng.uniform(), 27.0 + rng.uniform())
         image = canvas(64, 56, BACKGROUNDS_RGB[trial % len(BACKGROUNDS_RGB)])
         draw_ball(image, centre, radius, palette[colour], LIGHTS[trial % len(LIGHTS)])
-        hidden = rng.uniform(0.1, 0.35)
-        chord_distance = radius * np.cos(np.interp(hidden, cut_area, angle) / 2.0)
+        chord_distance = radius * np.cos(np.interp(rng.uniform(*hidden), cut_area, angle) / 2.0)
         hide_behind_edge(image, centre, rng.uniform(0.0, 360.0), chord_distance,
                          (224, 172, 140) if trial % 2 else (60, 60, 70))
         mask = table.classify(to_bgr(image, 1.0, trial)) == colour + 1
         centroid, fitted = region_arc_centre(mask, radius)
         errors["centroid"].append(np.hypot(*(centroid - centre)))
         errors["arc"].append(np.hypot(*(fitted - centre)))
+    return {name: np.array(e) for name, e in errors.items()}
+
+
+def test_partly_hidden_ball_centre_from_its_visible_arc(table, palette):
+    """A ball 10-35 % hidden behind a straight edge (skin or a dark sleeve, any direction, radius
+    3.5-8 px): the binary region's centroid lies 0.46-2.0 px towards the visible part (1.25 px
+    RMS); the circle of the ball's radius fitted to the visible arc is 0.22 px RMS, 0.40 max."""
+    errors = hidden_ball_errors(table, palette, seed=3, trials=30, radius_px=(3.5, 8.0), hidden=(0.1, 0.35))
     rms = {name: float(np.sqrt(np.mean(np.square(e)))) for name, e in errors.items()}
     assert min(errors["centroid"]) > 0.4 and rms["centroid"] > 1.0
     assert rms["arc"] < 0.3 and max(errors["arc"]) < 0.5
@@ -286,23 +293,7 @@ def test_small_ball_half_hidden_starts_its_arc_fit_from_the_arc_not_the_centroid
     circle (a grid search), 0.69 px RMS and 10 over 1 px (slivers under 40 % of the ball keep the
     centroid). What is left: regions of 7-15 pixels that a circle fits from either side (the
     occluder's straight edge taken for the arc)."""
-    rng = np.random.default_rng(7)
-    errors = {"centroid": [], "arc": []}
-    angle = np.linspace(0.0, np.pi, 2001)
-    cut_area = (angle - np.sin(angle)) / (2.0 * np.pi)
-    for trial in range(100):
-        radius, colour = rng.uniform(2.5, 3.8), trial % len(palette)
-        centre = (30.0 + rng.uniform(), 27.0 + rng.uniform())
-        image = canvas(64, 56, BACKGROUNDS_RGB[trial % len(BACKGROUNDS_RGB)])
-        draw_ball(image, centre, radius, palette[colour], LIGHTS[trial % len(LIGHTS)])
-        chord_distance = radius * np.cos(np.interp(rng.uniform(0.25, 0.5), cut_area, angle) / 2.0)
-        hide_behind_edge(image, centre, rng.uniform(0.0, 360.0), chord_distance,
-                         (224, 172, 140) if trial % 2 else (60, 60, 70))
-        mask = table.classify(to_bgr(image, 1.0, trial)) == colour + 1
-        centroid, fitted = region_arc_centre(mask, radius)
-        errors["centroid"].append(np.hypot(*(centroid - centre)))
-        errors["arc"].append(np.hypot(*(fitted - centre)))
-    err = {name: np.array(e) for name, e in errors.items()}
+    err = hidden_ball_errors(table, palette, seed=7, trials=100, radius_px=(2.5, 3.8), hidden=(0.25, 0.5))
     rms = {name: float(np.sqrt(np.mean(e**2))) for name, e in err.items()}
     assert rms["centroid"] > 1.0 and (err["centroid"] > 1.0).sum() >= 50
     assert rms["arc"] < 0.8 and (err["arc"] > 1.0).sum() <= 13
