@@ -698,7 +698,7 @@ class Estimator:
             the two estimates of that component weighed by their variances, ``s_m^2 / (s_m^2 +
             axis_model_sigma^2)`` with ``s_m`` the markers' (``marker_sigma_m`` of the two
             epicondyle markers over their distance): the humerus' where the markers are coarse
-            (320x240: ~0.85), the markers' where they are sharp (640x480: ~0.5).
+            (320x240, 2 m: ~0.85), the markers' where they are sharp (640x480: ~0.55).
         axis_model_sigma_deg: how far the hinge's axis strays from perpendicular to the humerus
             through the learned pivot (the pivot's error, the arm's own geometry).
         marker_sigma_m: position noise of a measured marker (m), until the caller sets
