@@ -65,6 +65,7 @@ centroid's 1.25 (docs/TRACKING.md, "Partly hidden balls").
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -389,12 +390,9 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
     spacing = (hi - lo) / (_ARC_START_GRID - 1)
     r_e = r.take(region)[:, None]
     rows = np.arange(n_reg)
-    cx = lo[:, :1] + _ARC_COARSE[0] * spacing[:, :1]  # (S, G) candidate centres
-    cy = lo[:, 1:] + _ARC_COARSE[1] * spacing[:, 1:]
-    for fine in (False, True):
-        if fine:
-            cx = bx[:, None] + _ARC_FINE[0] * spacing[:, :1]
-            cy = by[:, None] + _ARC_FINE[1] * spacing[:, 1:]
+
+    def costs(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+        """(S, G) cost of the (S, G) candidate centres."""
         dx = px[:, None] - cx.take(region, axis=0)  # (E, G)
         dy = py[:, None] - cy.take(region, axis=0)
         dx *= dx
@@ -404,18 +402,26 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
         dist -= r_e
         np.maximum(dist, -ARC_START_TAU_PX, out=dist)  # rho(d) = max(d, -tau)^2
         dist *= dist
-        cost = member @ dist  # (S, G)
-        best = cost.argmin(axis=1)
-        bx, by = cx[rows, best], cy[rows, best]
-        if not fine and prior is not None:
-            # the best candidate more than a pixel from the best: the other side's fit
-            ox, oy = cx - bx[:, None], cy - by[:, None]
-            other = np.where(ox * ox + oy * oy > 1.0, cost, np.inf).argmin(axis=1)
-            ax, ay = cx[rows, other], cy[rows, other]
-            tie = cost[rows, other] <= cost[rows, best] + ARC_START_AMBIGUOUS
-            px0, py0 = prior[:, 0], prior[:, 1]
-            swap = tie & ((ax - px0) ** 2 + (ay - py0) ** 2 < (bx - px0) ** 2 + (by - py0) ** 2)
-            bx, by = np.where(swap, ax, bx), np.where(swap, ay, by)
+        return member @ dist
+
+    cx = lo[:, :1] + _ARC_COARSE[0] * spacing[:, :1]  # (S, G) candidate centres
+    cy = lo[:, 1:] + _ARC_COARSE[1] * spacing[:, 1:]
+    cost = costs(cx, cy)
+    best = cost.argmin(axis=1)
+    bx, by = cx[rows, best], cy[rows, best]
+    if prior is not None:
+        # the best candidate more than a pixel from the best: the other side's fit
+        ox, oy = cx - bx[:, None], cy - by[:, None]
+        other = np.where(ox * ox + oy * oy > 1.0, cost, np.inf).argmin(axis=1)
+        ax, ay = cx[rows, other], cy[rows, other]
+        tie = cost[rows, other] <= cost[rows, best] + ARC_START_AMBIGUOUS
+        px0, py0 = prior[:, 0], prior[:, 1]
+        swap = tie & ((ax - px0) ** 2 + (ay - py0) ** 2 < (bx - px0) ** 2 + (by - py0) ** 2)
+        bx, by = np.where(swap, ax, bx), np.where(swap, ay, by)
+    cx = bx[:, None] + _ARC_FINE[0] * spacing[:, :1]  # the fine pass around it
+    cy = by[:, None] + _ARC_FINE[1] * spacing[:, 1:]
+    best = costs(cx, cy).argmin(axis=1)
+    bx, by = cx[rows, best], cy[rows, best]
     return np.stack((bx, by), axis=1)
 
 
@@ -496,24 +502,22 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     start = start_px.tolist()
     cx, cy = [p[0] for p in start], [p[1] for p in start]
     q32 = None
-    first = 0
+    firsts = [0] + list(itertools.accumulate(counts))[:-1]  # each region's first edge point
     for k in range(k_count):
-        r_k, n_k = radius[k], counts[k]
+        r_k, n_k, first = radius[k], counts[k], firsts[k]
         if area[k] < ARC_ENCLOSING_BELOW * np.pi * (r_k * r_k) and r_k >= ARC_ENCLOSING_MIN_PX and n_k >= 3:
             if q32 is None:
                 q32 = np.ascontiguousarray(q.T, dtype=np.float32)
             (ex, ey), enclosing_r = cv2.minEnclosingCircle(q32[first:first + n_k])
             if abs(enclosing_r - r_k) < 1.0:  # else the region is not a cut disc
                 cx[k], cy[k] = ex, ey
-        first += n_k
     # a small ball (the enclosing circle is noise there) hidden by much: its centroid is too far
     # off for the fit below, whose first iterations would drop the visible arc as inside the
     # circle; it starts from the centre that best puts the arc on the circle instead
     small = [k for k in range(k_count) if counts[k] >= 3 and radius[k] < ARC_ENCLOSING_MIN_PX
              and ARC_START_MIN_SHARE <= area[k] / (np.pi * radius[k] * radius[k]) < ARC_ENCLOSING_BELOW]
     if small:
-        ends = np.cumsum(counts).tolist()
-        starts = _arc_starts(q, [ends[k] - counts[k] for k in small], [counts[k] for k in small],
+        starts = _arc_starts(q, [firsts[k] for k in small], [counts[k] for k in small],
                              [radius[k] for k in small], None if prior_px is None else prior_px[small])
         for k, (sx, sy) in zip(small, starts.tolist()):
             cx[k], cy[k] = sx, sy

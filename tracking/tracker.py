@@ -409,10 +409,11 @@ class Tracker:
             self.times.add("full-frame re-acquisition", time.perf_counter() - t3)
 
         t4 = time.perf_counter()
-        # each marker's position noise: its 3D error in pixel footprints at its distance (nearest camera)
-        footprint = np.fmin.reduce(self._pred_depth / self._stack.focal_px, axis=1)
-        self.estimator.marker_sigma_m = np.where(np.isfinite(footprint), p.marker_sigma_px * footprint,
-                                                 self.estimator.marker_sigma_m)
+        if not measured.all():  # (the estimator reads the markers' noise only for its estimates)
+            # each marker's position noise: a share of a pixel's size at its distance (nearest camera)
+            footprint = np.fmin.reduce(self._pred_depth / self._stack.focal_px, axis=1)
+            self.estimator.marker_sigma_m = np.where(np.isfinite(footprint), p.marker_sigma_px * footprint,
+                                                     self.estimator.marker_sigma_m)
         est_pos, status = self.estimator.update(np.where(measured[:, None], new_pos, np.nan), measured)
         self.times.add("hidden markers", time.perf_counter() - t4)
 
