@@ -496,11 +496,11 @@ class Tracker:
         if not shared.any():
             return
         pair, cam = np.nonzero(shared)
-        a, b = i[pair], j[pair]
-        sa, sb = sigma_px[a, cam], sigma_px[b, cam]
-        da = ((uv_out[a, cam] - uv[a, cam]) ** 2).sum(axis=1) / (sa * sa) + 4.0 * np.log(sa)
-        db = ((uv_out[b, cam] - uv[b, cam]) ** 2).sum(axis=1) / (sb * sb) + 4.0 * np.log(sb)
-        loser = np.where(da <= db, b, a)
+        ab = np.stack((i[pair], j[pair]))  # (2, S) the two markers of each shared view
+        s = sigma_px[ab, cam]
+        score = ((uv_out[ab, cam] - uv[ab, cam]) ** 2).sum(axis=2) / (s * s) + 4.0 * np.log(s)
+        a, b = ab
+        loser = np.where(score[0] <= score[1], b, a)
         uv_out[loser, cam] = np.nan
         rad_out[loser, cam] = np.nan
 
