@@ -340,10 +340,15 @@ cost no more than at this distance (the occluder's outline, wherever it runs).""
 ARC_START_MIN_SHARE = 0.4
 """The searched start is for regions of at least this share of the ball's area: a sliver of a few
 pixels fits circles on every side of it (its centroid, within a radius of the centre, is kept)."""
-ARC_START_AMBIGUOUS = 0.3
-"""Two candidate starts more than a pixel apart whose costs differ by at most this (px^2) are a
-tie that the prediction breaks (on the simulated 320x240 motions: 4 % of small partly hidden
-views; fits over 1.5 px off 0.68 -> 0.40 %)."""
+ARC_START_EDGE_SIGMA_PX = 0.7
+"""Where the prediction is known, a small ball's start minimises its edge cost over this squared
+(px, the edge points' misfit taken as noise of this size) plus the squared distance from the
+predicted centre over the prediction's variance: a region of a few pixels may fit a circle from
+either side (the occluder's straight edge taken for the arc), and the prediction tells the sides
+apart as far as it is sure. On the simulated walk at 320x240 @15 a ball half hidden by the hand
+(a 3 x 5 pixel block) took the mirror side 1.7 px off, and its styloid 11 mm off, under the
+earlier fixed tie-break (costs within 0.3 px^2); that run's right supination went 2.11 -> 2.07 /
+2.00 / 1.91 / 1.92 degrees with 0.3 / 0.5 / 0.7 / 1.0 here."""
 _ARC_START_GRID = 11  # candidate centres per axis, coarse pass (the fine pass: 5 per axis)
 # the candidates' offsets: coarse in grid spacings from the box's corner, fine around the best
 _ARC_COARSE = np.stack(np.meshgrid(*[np.arange(float(_ARC_START_GRID))] * 2, indexing="ij")).reshape(2, -1)
@@ -351,7 +356,7 @@ _ARC_FINE = np.stack(np.meshgrid(*[np.linspace(-1.0, 1.0, 5)] * 2, indexing="ij"
 
 
 def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radius: Sequence[float],
-                prior: np.ndarray | None = None) -> np.ndarray:
+                prior: np.ndarray | None = None, prior_sigma: np.ndarray | None = None) -> np.ndarray:
     """Starting centres for the arc fits of small, partly hidden balls: per region, the centre c
     on a grid that minimises ``sum rho(|q - c| - r)`` over its edge points q, with ``rho(d) = d^2``
     outside the circle (the visible pixels are the ball's: none lies outside it) and
@@ -360,15 +365,16 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
     The grid spans the centres that the edge points allow (within ``r + tau`` of each, per axis),
     11 x 11, then 5 x 5 around the best at half the spacing (a search, not a descent: the cost is
     flat where the start is far off). A region of a few pixels may fit a circle from either side
-    (the occluder's straight edge taken for the arc): where a candidate more than a pixel from the
-    best costs at most ``ARC_START_AMBIGUOUS`` more, the one of the two nearer the ``prior``
-    (the predicted centre) is taken.
+    (the occluder's straight edge taken for the arc): with a ``prior`` (the predicted centre,
+    uncertain by ``prior_sigma``) the cost is a posterior's, ``sum rho / s^2 + |c - prior|^2 /
+    prior_sigma^2`` with ``s = ARC_START_EDGE_SIGMA_PX``.
 
     Args:
         q: (2, E) edge points of all regions, grouped by region.
         first, count: for each small region, its first edge point and their number (>= 3).
         radius: the regions' radii.
-        prior: (S, 2) predicted centres (None: no tie-break).
+        prior: (S, 2) predicted centres (None: the edges alone).
+        prior_sigma: (S,) their uncertainty, px (None: 1 px).
     Returns:
         (S, 2) starting centres.
     """
@@ -406,29 +412,30 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
 
     cx = lo[:, :1] + _ARC_COARSE[0] * spacing[:, :1]  # (S, G) candidate centres
     cy = lo[:, 1:] + _ARC_COARSE[1] * spacing[:, 1:]
-    cost = costs(cx, cy)
-    best = cost.argmin(axis=1)
+    if prior is None:
+        def total(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+            return costs(cx, cy)
+    else:
+        sigma = np.ones(n_reg) if prior_sigma is None else np.asarray(prior_sigma, dtype=np.float64)
+        weight = (ARC_START_EDGE_SIGMA_PX / sigma)[:, None] ** 2  # prior term, in the edge cost's units
+        px0, py0 = prior[:, :1], prior[:, 1:]
+
+        def total(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+            dx, dy = cx - px0, cy - py0
+            return costs(cx, cy) + weight * (dx * dx + dy * dy)
+    best = total(cx, cy).argmin(axis=1)
     bx, by = cx[rows, best], cy[rows, best]
-    if prior is not None:
-        # the best candidate more than a pixel from the best: the other side's fit
-        ox, oy = cx - bx[:, None], cy - by[:, None]
-        other = np.where(ox * ox + oy * oy > 1.0, cost, np.inf).argmin(axis=1)
-        ax, ay = cx[rows, other], cy[rows, other]
-        tie = cost[rows, other] <= cost[rows, best] + ARC_START_AMBIGUOUS
-        px0, py0 = prior[:, 0], prior[:, 1]
-        swap = tie & ((ax - px0) ** 2 + (ay - py0) ** 2 < (bx - px0) ** 2 + (by - py0) ** 2)
-        bx, by = np.where(swap, ax, bx), np.where(swap, ay, by)
     cx = bx[:, None] + _ARC_FINE[0] * spacing[:, :1]  # the fine pass around it
     cy = by[:, None] + _ARC_FINE[1] * spacing[:, 1:]
-    best = costs(cx, cy).argmin(axis=1)
+    best = total(cx, cy).argmin(axis=1)
     bx, by = cx[rows, best], cy[rows, best]
     return np.stack((bx, by), axis=1)
 
 
 def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
                 box_lo: np.ndarray, box_hi: np.ndarray, *,
-                inside_tol_px: Sequence[float] = ARC_INSIDE_TOL_PX, prior_px: np.ndarray | None = None
-                ) -> np.ndarray:
+                inside_tol_px: Sequence[float] = ARC_INSIDE_TOL_PX, prior_px: np.ndarray | None = None,
+                prior_sigma_px: np.ndarray | None = None) -> np.ndarray:
     """Centres of partly hidden balls, each from the visible arc of its region's outline.
 
     A ball partly hidden by something in front of it (an arm) or behind whose outline it sits
@@ -460,8 +467,10 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
             region.
         inside_tol_px: one tolerance per iteration: edge points nearer the centre than the
             radius less it are left out.
-        prior_px: (K, 2) predicted centres, same coordinates: where a small region fits a circle
-            from either side, the start nearer the prediction is taken (None: the better fit).
+        prior_px: (K, 2) predicted centres, same coordinates: a small region's searched start
+            weighs its distance from the prediction against the arc's misfit (a region of a few
+            pixels may fit a circle from either side; None: the better fit alone).
+        prior_sigma_px: (K,) the predictions' uncertainty, px (None: 1 px).
 
     Returns:
         (K, 2) float64 fitted centres; the start where fewer than three edge points remain or the
@@ -518,7 +527,8 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
              and ARC_START_MIN_SHARE <= area[k] / (np.pi * radius[k] * radius[k]) < ARC_ENCLOSING_BELOW]
     if small:
         starts = _arc_starts(q, [firsts[k] for k in small], [counts[k] for k in small],
-                             [radius[k] for k in small], None if prior_px is None else prior_px[small])
+                             [radius[k] for k in small], None if prior_px is None else prior_px[small],
+                             None if prior_sigma_px is None else prior_sigma_px[small])
         for k, (sx, sy) in zip(small, starts.tolist()):
             cx[k], cy[k] = sx, sy
     # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region: the

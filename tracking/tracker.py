@@ -202,20 +202,22 @@ class _ArcRegions:
 
     def add_many(self, region: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, prior_px: np.ndarray,
                  radius_px: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray, origin_px: np.ndarray,
-                 marker: np.ndarray, camera: np.ndarray) -> None:
+                 marker: np.ndarray, camera: np.ndarray, prior_sigma_px: np.ndarray) -> None:
         """K regions: (P,) region index 0..K-1, pixel x, y relative to each region's (K, 2) origin
         (full-image pixels); (K, 2) centroids and predicted centres, (K,) radii, (K, 2) searched
-        boxes (inclusive), all relative to the origin; (K,) marker and camera of each."""
+        boxes (inclusive), all relative to the origin; (K,) marker and camera of each, and the
+        prediction's uncertainty (px)."""
         self._parts.append((region + self.count, np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64),
                             start_px, prior_px, radius_px, np.asarray(box_lo, dtype=np.float64),
                             np.asarray(box_hi, dtype=np.float64), np.asarray(origin_px, dtype=np.float64),
-                            marker, camera))
+                            marker, camera, np.asarray(prior_sigma_px, dtype=np.float64)))
         self.count += len(radius_px)
 
     def add_region(self, mask: np.ndarray, centroid_px: np.ndarray, prior_px: np.ndarray, origin_px: tuple[int, int],
-                   radius_px: float, marker: int, camera: int) -> None:
+                   radius_px: float, marker: int, camera: int, prior_sigma_px: float) -> None:
         """The 8-connected region of ``mask`` (a whole searched window at ``origin_px``) nearest
-        the (full-image) ``centroid_px``; ``prior_px`` the (full-image) predicted centre."""
+        the (full-image) ``centroid_px``; ``prior_px`` the (full-image) predicted centre, uncertain
+        by ``prior_sigma_px``."""
         origin = np.array(origin_px, dtype=np.float64)
         local = centroid_px - origin
         _, regions = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
@@ -226,7 +228,7 @@ class _ArcRegions:
         self.add_many(np.zeros(xs.size, dtype=np.int64), xs, ys, local[None, :], (prior_px - origin)[None, :],
                       np.array([radius_px]),
                       np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
-                      np.array([camera]))
+                      np.array([camera]), np.array([prior_sigma_px]))
 
     def fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels."""
@@ -234,8 +236,9 @@ class _ArcRegions:
             cols = self._parts[0]
         else:
             cols = [np.concatenate(parts) for parts in zip(*self._parts)]
-        region, x, y, start, prior, radius, lo, hi, origin, marker, camera = cols
-        return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi, prior_px=prior)
+        region, x, y, start, prior, radius, lo, hi, origin, marker, camera, prior_sigma = cols
+        return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi, prior_px=prior,
+                                                    prior_sigma_px=prior_sigma)
 
 
 class Tracker:
@@ -477,7 +480,7 @@ class Tracker:
         windows[~valid] = np.nan
         self._windows_px = windows
         if valid.any():
-            self._windows(images, valid, uv, half, r_px, known, size, uv_out, rad_out)
+            self._windows(images, valid, uv, half, r_px, sigma_px, known, size, uv_out, rad_out)
             self._one_ball_one_marker(uv, sigma_px, r_px, uv_out, rad_out)
         return uv_out, rad_out
 
@@ -504,7 +507,7 @@ class Tracker:
         uv_out[loser, cam] = np.nan
         rad_out[loser, cam] = np.nan
 
-    def _windows(self, images, valid, uv, half, r_px, known, size, uv_out, rad_out) -> None:
+    def _windows(self, images, valid, uv, half, r_px, sigma_px, known, size, uv_out, rad_out) -> None:
         """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
 
         A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
@@ -592,7 +595,7 @@ class Tracker:
             ws = win[sel]
             arcs.add_many((np.cumsum(part) - 1)[ws], col[sel] + fx[ws], row[sel] + fy[ws], mxy[part],
                           uv.reshape(-1, 2)[at[part]] - centre[part], edge_r[part], first.T[part],
-                          (hi - 1 - centre)[part], centre[part], mi[part], ci[part])
+                          (hi - 1 - centre)[part], centre[part], mi[part], ci[part], sigma_px.reshape(-1)[at[part]])
         crowded = np.flatnonzero(ok & ~simple)
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
@@ -615,7 +618,8 @@ class Tracker:
                 if blobs.radius_px[j] <= edge_r[k] and (blobs.radius_px[j] < params.arc_fit_ratio * edge_r[k]
                                                         or blobs.roundness[j] < params.arc_fit_roundness):
                     # e.g. half a ball (roundness ~0.5), or a ball beside another of its colour
-                    arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c)
+                    arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c,
+                                    float(sigma_px[m, c]))
         if arcs.count:
             m_idx, c_idx, uv_fit = arcs.fit()
             uv_out[m_idx, c_idx] = uv_fit
