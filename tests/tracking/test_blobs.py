@@ -300,6 +300,28 @@ def test_small_ball_half_hidden_starts_its_arc_fit_from_the_arc_not_the_centroid
     assert np.median(err["arc"]) < 0.4
 
 
+def test_small_ball_start_weighs_the_prediction_against_a_mirror_fit():
+    """The region of a ball of 2.7 px half hidden by a hand in the simulated walk at 320x240 (a
+    3 x 5 pixel block, frame 26 of the @15 run): its edges fit a circle better on the mirror side
+    (1.66 px off the true centre, which put the marker 11 mm off in 3D). A prediction 0.23 px off
+    the true centre, sure to 1-2 px, pulls the start to its side; an unsure one (10 px) leaves the
+    edges to decide."""
+    pix = [(x, y) for y in (3, 4, 5) for x in (3, 4, 5)] + [(x, y) for y in (6, 7) for x in (4, 5)]
+    x = np.array([p[0] for p in pix], dtype=np.float64)
+    y = np.array([p[1] for p in pix], dtype=np.float64)
+    args = (np.zeros(len(pix), dtype=np.int64), x, y, np.array([[x.mean(), y.mean()]]), np.array([2.5165]),
+            np.zeros((1, 2)), np.array([[8.0, 10.0]]))
+    true_centre, prior = np.array([3.04, 5.16]), np.array([[3.27, 5.21]])
+
+    def error(**kw):
+        return float(np.hypot(*(arc_centres(*args, **kw)[0] - true_centre)))
+
+    assert error() > 1.5  # the edges alone: the mirror side
+    assert error(prior_px=prior, prior_sigma_px=np.array([10.0])) > 1.5
+    for sure in (1.0, 2.0):
+        assert error(prior_px=prior, prior_sigma_px=np.array([sure])) < 0.7
+
+
 def test_arc_centre_of_a_whole_ball_is_its_centroid_and_a_cut_window_is_no_edge(table, palette):
     """A whole ball: the arc fit stays within 0.1 px of the (binary) centroid. The same
     ball cut by the border of the searched window (the box): the cut is not the ball's outline,
