@@ -1289,9 +1289,11 @@ class Estimator:
                 continue
             theta, psi, measured = seen
             old = self.arm_angles[r]
-            if not (ok[wa] and ok[wb]) and r not in self._arm_pinned:
-                # a fit to one styloid that leans on the prediction: its step is no new evidence
-                # of speed (it would feed itself); the velocity decays instead
+            if not (ok[wa] and ok[wb]):
+                # a fit to one styloid (with or without views) leans on the prediction: its step
+                # is no new evidence of speed (it would feed itself), and where it pins the angles
+                # its step carries the other styloid's and the elbow axis' noise (2-4 degrees per
+                # frame at 320x240), which the extrapolation would carry on; the velocity decays
                 self.arm_velocity[r] = np.nan_to_num(self.arm_velocity[r]) * self._arm_decay
             elif measured and np.all(np.isfinite(old)):
                 steps = self.arm_age[r] + 1
