@@ -412,10 +412,8 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
 
     cx = lo[:, :1] + _ARC_COARSE[0] * spacing[:, :1]  # (S, G) candidate centres
     cy = lo[:, 1:] + _ARC_COARSE[1] * spacing[:, 1:]
-    if prior is None:
-        def total(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
-            return costs(cx, cy)
-    else:
+    total = costs
+    if prior is not None:
         sigma = np.ones(n_reg) if prior_sigma is None else np.asarray(prior_sigma, dtype=np.float64)
         weight = (ARC_START_EDGE_SIGMA_PX / sigma)[:, None] ** 2  # prior term, in the edge cost's units
         px0, py0 = prior[:, :1], prior[:, 1:]
