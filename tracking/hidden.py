@@ -340,7 +340,8 @@ def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray,
 
 
 def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, min_singular: float = 0.3,
-               axis_prev: np.ndarray | None = None, fixed: list[int] | None = None) -> np.ndarray:
+               axis_prev: np.ndarray | None = None, fixed: list[int] | None = None,
+               singular: list[float] | None = None) -> np.ndarray:
     """Unit vector n with ``rows @ n = values`` where they determine it, else nearest ``axis_pred``.
 
     Each row is a linear constraint ``a . n = b``, scaled to unit ``a`` (b becomes a cosine).
@@ -360,6 +361,7 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
             solutions, the one on its side is taken (continuity), not the prediction's.
         fixed: a one-element list that receives how many directions the constraints fix (2: the
             axis is pinned up to the mirror image; fewer: the prediction fills in).
+        singular: a list that receives the scaled constraints' singular values, largest first.
     """
     scale = np.sqrt((rows * rows).sum(axis=1))
     a = rows / scale[:, None]
@@ -368,6 +370,8 @@ def hinge_axis(rows: np.ndarray, values: np.ndarray, axis_pred: np.ndarray, *, m
     k = int((sv >= min_singular).sum())  # singular values come sorted, largest first
     if fixed is not None:
         fixed[0] = k
+    if singular is not None:
+        singular[:] = sv.tolist()
     coef = (u[:, :k].T @ b) / sv[:k]
     fixed = coef @ vt[:k]
     norm2 = float(coef @ coef)
@@ -656,6 +660,12 @@ class Estimator:
         pivot_memory_s: time constant of the pivot learning (older frames are forgotten).
         min_singular: hinge constraints weaker than this leave the axis to the prediction
             (:func:`hinge_axis`).
+        weak_singular: a second hinge constraint weaker than ``min_singular`` but not than this
+            (elbow nearly straight, wrists measured: about 0.28 for a straight arm whatever the
+            body's size, as the angle between the two conditions is the epicondyle markers'
+            half-distance over the humerus and forearm lengths) gives an axis that is averaged with
+            the prediction's instead of leaving the turn to it (see ``_hinge``); its turn is still
+            counted as guessed (``axis_guessed``).
         estimate_weight: weight of a marker estimated earlier in the same frame as support of a
             rigid fit (measured markers weigh 1).
         velocity_decay_s: where a fit leaves a direction free, the hidden marker moves with its
@@ -739,6 +749,7 @@ class Estimator:
         pivot_prior_m: Sequence[float] = (0.0, -0.06, 0.0),
         pivot_memory_s: float = 3.0,
         min_singular: float = 0.3,
+        weak_singular: float = 0.25,
         estimate_weight: float = 0.3,
         velocity_decay_s: float | Sequence[float] = 0.15,
         max_rigid_residual_m: float = 0.004,
@@ -848,6 +859,7 @@ class Estimator:
         self.prior_weight = float(prior_weight)
         self.min_spread_m = float(min_spread_m)
         self.min_singular = float(min_singular)
+        self.weak_singular = float(weak_singular)
         self.estimate_weight = float(estimate_weight)
         self.max_rigid_residual_m = float(max_rigid_residual_m)
         self.pivot_prior_m = np.asarray(pivot_prior_m, dtype=np.float64)
@@ -887,6 +899,7 @@ class Estimator:
         self.hinge_free = np.zeros(len(self._h_idx), dtype=np.int64)  # frames in a row with the axis extrapolated
         self.hinge_sense = np.zeros(len(self._h_idx))  # sign of n . (humerus x forearm), learned (0: unknown)
         self._hinge_free_now: set[int] = set()
+        self._hinge_weak_now: set[int] = set()  # rows whose axis' turn rests on a weak condition
         # per forearm: wrist centre along the flexion axis and distance from it
         self.fore_along = np.full(len(self._f_idx), np.nan)
         self.fore_radius = np.full(len(self._f_idx), np.nan)
@@ -1089,10 +1102,19 @@ class Estimator:
             # of the two mirror images the one on the side the elbow bends (anatomy), rather than
             # the previous axis' (which may itself be an extrapolation, or unknown after LOST)
             side = math.copysign(1.0, self.hinge_sense[r]) * _unit(_cross(rows[0], rows[1]))
-        fixed = [0]
-        n = hinge_axis(np.array(rows), np.array(values), axis_pred, min_singular=self.min_singular,
-                       axis_prev=side, fixed=fixed)
-        if fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
+        fixed, sv = [0], []
+        rows_a, values_a = np.array(rows), np.array(values)
+        n = hinge_axis(rows_a, values_a, axis_pred, min_singular=self.min_singular, axis_prev=side, fixed=fixed,
+                       singular=sv)
+        if fixed[0] < 2 and len(sv) == 2 and sv[1] >= self.weak_singular:
+            # elbow nearly straight, wrists measured: the second condition pins the axis' turn
+            # about the arm only weakly (its error follows the learned pivot's), the prediction
+            # (the previous axis, or the rigid fit that turns with the forearm) drifts with the
+            # forearm's turn: two estimates with independent errors of similar size, averaged.
+            # Not extrapolated, so not dropped; supination still withheld (axis_guessed)
+            n = _unit(n + hinge_axis(rows_a, values_a, axis_pred, min_singular=self.weak_singular, axis_prev=side))
+            self._hinge_weak_now.add(r)
+        elif fixed[0] < 2:  # the axis' turn about the arm is extrapolated (elbow straight, wrists hidden)
             free = self.hinge_free[r] + 1
             arm = self._arm_of_elbow.get(k)
             speed = abs(float(self.arm_velocity[arm][1])) * self.fps if arm is not None and np.isfinite(self.arm_velocity[arm][1]) else 0.0
@@ -1474,9 +1496,11 @@ class Estimator:
                     est, viewed = self._refine_with_views(k, est)
                 if self.methods[k] == Method.HINGE:
                     # the elbow axis' turn about the arm: pinned by the hinge (elbow bent, or the
-                    # wrists measured) or by a view of the marker; else extrapolated or a rigid
-                    # fit's guess (a straight elbow while the forearm turns: supination unknown)
-                    guessed[k] = not (viewed or (how == Method.HINGE and self._h_row[k] not in self._hinge_free_now))
+                    # wrists measured) or by a view of the marker; else extrapolated, a rigid
+                    # fit's guess or a weak condition's mean with it (a straight elbow while the
+                    # forearm turns: supination unknown)
+                    guessed[k] = not (viewed or (how == Method.HINGE and self._h_row[k] not in self._hinge_free_now
+                                                 and self._h_row[k] not in self._hinge_weak_now))
                 elif k in self._arm_of:
                     # the wrist's turn: a styloid marker of the arm measured, or views that pin
                     # the forearm's angles; else the angles extrapolated from earlier frames
@@ -1506,6 +1530,7 @@ class Estimator:
             self.hinge_free = np.array([self.hinge_free[r] + 1 if r in self._hinge_free_now else 0
                                         for r in range(len(self._h_idx))], dtype=np.int64)
             self._hinge_free_now = set()
+            self._hinge_weak_now = set()
         if self._arms:
             self._arm_update(p, ok)
         known = ok | hidden

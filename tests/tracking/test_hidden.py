@@ -789,6 +789,27 @@ def test_an_elbow_marker_estimated_on_a_straight_arm_has_its_axis_guessed():
         assert len(flags) >= 10 and set(flags) == {guessed}, (flexion, view, flags)
 
 
+def test_a_straight_elbows_weak_condition_is_averaged_with_the_prediction():
+    """Arm straight, wrists measured, inner elbow marker hidden while the forearm pronates: the
+    second hinge condition is weak (singular value ~0.28), so the rigid fit's prediction, which
+    turns with the forearm, leaves the axis' turn free and the marker drifts; averaged with the
+    weak condition's solution (exact here) it drifts half as far. The turn stays a guess."""
+    shoulder = np.array([0.0, 0.32, 0.0])
+    drift = {}
+    for weak in (0.3, 0.25):  # 0.3 = min_singular: the weak band switched off
+        est = _arm_estimator()
+        est.weak_singular = weak
+        for i in range(45):
+            x = np.stack([shoulder, *forearm_pose(0.0, 0.4 - 0.02 * i)])
+            measured = np.ones(5, dtype=bool)
+            measured[2] = i < 20
+            p, s = est.update(np.where(measured[:, None], x, np.nan), measured)
+        assert s[2] == ESTIMATED and est.axis_guessed[2]
+        drift[weak] = float(np.linalg.norm(p[2] - x[2]))
+    assert drift[0.3] > 0.04  # 28 degrees of pronation carried into the axis
+    assert drift[0.25] == pytest.approx(0.5 * drift[0.3], rel=0.1)
+
+
 def test_styloid_markers_estimated_with_neither_measured_have_their_axis_guessed():
     """Both styloid markers hidden: the forearm's angles are extrapolated, so the wrist axis'
     direction is a guess; with one measured it is fitted, not guessed."""

@@ -3,7 +3,8 @@
 In right_shoulder_extension the arm swings back straight while the forearm pronates and the inner
 elbow marker MRE2 hides behind the body. With the elbow straight nothing measured shows the
 elbow axis' turn about the arm: the marker's estimate serves the elbow centre (the shoulder's
-angles), but the supination read from it was 10-20 degrees off. The tracker reports no
+angles), but the supination read from it was 10-20 degrees off (4 RMS since a weak hinge condition
+is averaged in). The tracker reports no
 supination there (``Estimator.axis_guessed``) and keeps every other angle (``rehab track``'s
 angles CSV writes the tracker's angles).
 """
@@ -40,9 +41,11 @@ def test_supination_is_withheld_where_the_straight_elbow_leaves_its_axis_free(ru
     reported = run.angles_deg
     withheld = np.isfinite(from_positions[SUPINATION]) & ~np.isfinite(reported[SUPINATION])
     assert withheld.sum() >= 15
-    # the withheld values were the bad ones; what is reported follows the truth
-    assert _rmse(np.where(withheld, from_positions[SUPINATION], np.nan), truth[SUPINATION]) > 8.0
-    assert _rmse(reported[SUPINATION], truth[SUPINATION]) < 2.0
+    # the withheld values were the bad ones (10.2 degrees RMS off with the turn extrapolated, 4.2
+    # since a weak hinge condition is averaged in); what is reported follows the truth
+    withheld_rmse = _rmse(np.where(withheld, from_positions[SUPINATION], np.nan), truth[SUPINATION])
+    reported_rmse = _rmse(reported[SUPINATION], truth[SUPINATION])
+    assert withheld_rmse > 3.0 and reported_rmse < 2.0 and withheld_rmse > 2.0 * reported_rmse
     # only that angle: the others are the positions' (the estimate still gives the elbow centre)
     for name, values in reported.items():
         if name != SUPINATION:
