@@ -180,6 +180,8 @@ def _add_validate(sub) -> None:
     p.add_argument("--tracker", action="store_true",
                    help="run the tracker (labels, windows, hidden markers) instead of full-frame measurement")
     _add_studio_options(p, fps=15.0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the sensor noise (the figures in docs/ are for 0; other seeds show the spread)")
     p.set_defaults(func=_cmd_validate)
 
 
@@ -191,7 +193,7 @@ def _cmd_validate(args) -> int:
 
     base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
-                              sex=args.sex)
+                              sex=args.sex, seed=args.seed)
     if args.tracker:
         from tracking.sim.motions import available_motions
         from tracking.sim.validate import validate_tracking
