@@ -684,6 +684,10 @@ class Estimator:
             forearm's angles are extrapolated; their uncertainty grows as an unknown angular
             acceleration (``forearm_accel_deg_s2``) plus 30 % of the angular speed, and past
             ``max_forearm_sigma_deg`` both styloid estimates are dropped to LOST.
+        forearm_reversal: the prior of a forearm fit (the angles extrapolated ``age`` frames with
+            their velocity v) is uncertain by ``forearm_sigma_rad`` plus the unknown acceleration's
+            share plus this times ``|v| age``: the turn may reverse within those frames (2: a full
+            reversal, a change of 2 v).
         max_hinge_sigma_deg: the same for an elbow marker whose axis the hinge's conditions do not
             pin (elbow nearly straight, or the styloids hidden): the axis' turn about the arm is
             extrapolated, and dropped past this uncertainty.
@@ -759,6 +763,7 @@ class Estimator:
         rhythm_deg: tuple[float, float] = (30.0, 150.0),
         forearm_accel_deg_s2: float = 150.0,
         max_forearm_sigma_deg: float = 3.0,
+        forearm_reversal: float = 2.0,
         max_hinge_sigma_deg: float = 10.0,
         max_forearm_stale_s: float = 0.5,
         view_gate_m: float = 0.025,
@@ -826,6 +831,7 @@ class Estimator:
         self.fps = float(fps)
         self.forearm_accel_rad_s2 = math.radians(forearm_accel_deg_s2)
         self.max_forearm_sigma_rad = math.radians(max_forearm_sigma_deg)
+        self.forearm_reversal = float(forearm_reversal)
         self.max_hinge_sigma_rad = math.radians(max_hinge_sigma_deg)
         self.max_forearm_stale_frames = max_forearm_stale_s * float(fps)
         self.view_gate_m = float(view_gate_m)
@@ -1223,7 +1229,12 @@ class Estimator:
         evidence = bool(measured)
         theta = psi = math.nan
         if measured or rays:
-            sigma = self.forearm_sigma_rad + self._arm_sigma(r, age - 1)
+            # the prediction carries the velocity over ``age`` frames, in which the turn may
+            # reverse: a change of up to twice the velocity (the walking capture's supination
+            # reverses at up to 4000 degrees/s^2, the median being 130)
+            t = age / self.fps
+            sigma = (self.forearm_sigma_rad + 0.5 * self.forearm_accel_rad_s2 * t * t
+                     + self.forearm_reversal * np.abs(np.nan_to_num(vel)) * age)
             pinned = [False]
             theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
                                      float(sigma[0]), float(sigma[1]), pinned=pinned, rays=rays,
@@ -1253,7 +1264,8 @@ class Estimator:
     def _styloid_rays(self, r: int, frame: ElbowFrame, shape: ForearmShape, pred: np.ndarray,
                       ok: np.ndarray) -> list[tuple[int, list[float], list[float], float]]:
         """Single camera views (:meth:`observe_views`) of arm r's hidden styloid markers that pass
-        within ``view_gate_m`` of the predicted marker, as :func:`fit_forearm`'s rays."""
+        within ``view_gate_m`` of the predicted marker, the nearest one per marker, as
+        :func:`fit_forearm`'s rays."""
         if not self._views:
             return []
         wa, wb = self._arms[r][:2]
@@ -1265,11 +1277,18 @@ class Estimator:
             if pts is None:
                 pts = forearm_markers(frame, shape, float(pred[0]), float(pred[1]))
             q = pts[slot].tolist()
+            # of several views within the gate only the nearest: the tracker passes a marker's
+            # full-sized single views when they made no consistent point, so two or more hold
+            # at most one of the marker (the walk: a second ball 41 mm off moved MRW1 19 mm)
+            nearest = None
             for o, d, sigma_rad in self._views[w]:
                 v = [q[i] - o[i] for i in range(3)]
                 s = v[0] * d[0] + v[1] * d[1] + v[2] * d[2]
-                if sum((v[i] - s * d[i]) ** 2 for i in range(3)) <= self.view_gate_m ** 2:
-                    out.append((slot, o, d, sigma_rad))
+                off2 = sum((v[i] - s * d[i]) ** 2 for i in range(3))
+                if off2 <= self.view_gate_m ** 2 and (nearest is None or off2 < nearest[0]):
+                    nearest = (off2, (slot, o, d, sigma_rad))
+            if nearest is not None:
+                out.append(nearest[1])
         return out
 
     def _refine_with_views(self, k: int, est: np.ndarray) -> tuple[np.ndarray, bool]:
