@@ -1199,12 +1199,13 @@ class Estimator:
             square = noise / (noise + self.axis_model_sigma_rad ** 2) if noise > 0 else 0.0
         return elbow_frame(p[ea], p[eb], pivot, square)
 
-    def _arm_sigma(self, r: int, frames: float) -> np.ndarray:
+    def _arm_sigma(self, r: int, frames: float, speed_share: float = 0.3) -> np.ndarray:
         """(2,) uncertainty (rad) of arm r's flexion and supination extrapolated ``frames`` ahead:
-        an unknown angular acceleration up to ``forearm_accel`` plus a share of the speed."""
+        an unknown angular acceleration up to ``forearm_accel`` plus ``speed_share`` of the
+        speed."""
         t = frames / self.fps
         speed = np.abs(np.nan_to_num(self.arm_velocity[r])) * self.fps
-        return 0.5 * self.forearm_accel_rad_s2 * t * t + 0.3 * speed * t
+        return 0.5 * self.forearm_accel_rad_s2 * t * t + speed_share * speed * t
 
     def _arm_estimate(self, k: int, p: np.ndarray, ok: np.ndarray, weight: np.ndarray):
         """Styloid marker k from its arm's flexion and supination: fitted to the arm's measured
@@ -1232,9 +1233,7 @@ class Estimator:
             # the prediction carries the velocity over ``age`` frames, in which the turn may
             # reverse: a change of up to twice the velocity (the walking capture's supination
             # reverses at up to 4000 degrees/s^2, the median being 130)
-            t = age / self.fps
-            sigma = (self.forearm_sigma_rad + 0.5 * self.forearm_accel_rad_s2 * t * t
-                     + self.forearm_reversal * np.abs(np.nan_to_num(vel)) * age)
+            sigma = self.forearm_sigma_rad + self._arm_sigma(r, age, self.forearm_reversal)
             pinned = [False]
             theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
                                      float(sigma[0]), float(sigma[1]), pinned=pinned, rays=rays,
