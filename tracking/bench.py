@@ -19,6 +19,7 @@ from typing import Callable, Iterator, Sequence
 import cv2
 import numpy as np
 
+from tracking import window_kernel
 from tracking.colour_table import ColourTable
 from tracking.measure import FrameMeasurer
 from tracking.sim.studio import SimulationSettings, studio_from_settings
@@ -110,7 +111,7 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
         measurer.measure(frames[0])  # warm-up (page in the table)
         measurer.times.reset()
         warm = min(10, len(frames) // 3)
-        measure, track = [], []  # per pass: (wall s, CPU s) medians over its frame sets
+        measure, track, track_plain = [], [], []  # per pass: (wall s, CPU s) medians over its frame sets
         stage_times = None
         for _ in range(max(1, passes)):
             measure.append(np.median([_timed(lambda f=f: measurer.measure(f)) for f in frames], axis=0))
@@ -122,6 +123,11 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
             tracker.times.reset()
             track.append(np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0))
             stage_times = tracker.times
+            if tracker._kernel:  # the same pass without the compiled window kernel, for its share
+                plain = Tracker(cameras, ms, table=table, fps=base.fps, compiled=False)
+                for f in frames[:warm]:
+                    plain.step(f)
+                track_plain.append(np.median([_timed(lambda f=f: plain.step(f)) for f in frames[warm:]], axis=0))
         measure_a = np.array(measure)
         measure_s, cpu = (float(x) for x in np.median(measure_a, axis=0))
         yield (
@@ -150,6 +156,14 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
                    + f" ms; best pass {1000 * best_s:.2f} ms ({1 / best_s:.0f} frame sets/s; CPU {1000 * best_cpu:.2f} ms)")
             yield "    stages (mean ms, last pass): " + ", ".join(
                 f"{k} {v:.2f}" for k, v in stage_times.per_frame_ms().items())
+            if track_plain:
+                plain_a = np.array(track_plain)
+                yield (f"    search windows read by the compiled kernel (tracking.window_kernel); the numpy path "
+                       f"instead: {1000 * float(np.median(plain_a[:, 0])):.2f} ms per frame set, the kernel saves "
+                       f"{100 * (1 - float(np.median(track_a[:, 0] / plain_a[:, 0]))):.0f} % (median of the passes' ratios)")
+            else:
+                yield ("    search windows read by the numpy path (" + ("numba is not installed" if not window_kernel.AVAILABLE
+                       else "the images are not plain C-contiguous arrays") + ")")
             for what, ratio, rate in (("wall-clock, median pass", float(np.median(ratios)), 1 / track_s),
                                       ("CPU time, median pass", float(np.median(ratios_cpu)), 1 / cpu_track),
                                       ("wall-clock, best pass", float(ratios.max()), 1 / best_s)):

@@ -39,6 +39,7 @@ from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer, StageTimes, blob_gates
 from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
 from tracking.status import MarkerStatus
+from tracking import window_kernel
 from tracking.triangulation import Triangulator
 
 log = logging.getLogger(__name__)
@@ -250,10 +251,12 @@ class Tracker:
         table: the colour lookup table (default: built from the marker set's colours).
         params: tracking knobs.
         fps: frame rate of the source (for time stamps when none are given).
+        compiled: read the search windows with the compiled kernel (:mod:`tracking.window_kernel`)
+            where numba is installed; False: the numpy path (the same results, slower).
     """
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, table: ColourTable | None = None,
-                 params: TrackerParams = TrackerParams(), fps: float = 30.0):
+                 params: TrackerParams = TrackerParams(), fps: float = 30.0, compiled: bool = True):
         from tracking.hidden import Estimator, estimator_config
         from tracking.identify import Identifier
 
@@ -272,6 +275,8 @@ class Tracker:
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
+        # the windows' look-up and moments compiled (tracking.window_kernel) where numba is there
+        self._kernel = bool(compiled) and window_kernel.AVAILABLE
         self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
         self.times = StageTimes(STEP_STAGES)
@@ -507,24 +512,14 @@ class Tracker:
         uv_out[loser, cam] = np.nan
         rad_out[loser, cam] = np.nan
 
-    def _windows(self, images, valid, uv, half, r_px, sigma_px, known, size, uv_out, rad_out) -> None:
-        """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
-
-        A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
-        the image border; the moments are taken about that pixel centre.
-        """
-        at = np.flatnonzero(valid)  # (K,) flat (marker, camera) index of each window
-        mi, ci = np.divmod(at, valid.shape[1])
-        centre = np.round(uv.reshape(-1, 2)[at]).astype(np.int64)  # (K, 2) window centre pixel x, y
-        ext = half.reshape(-1)[at].astype(np.int64)[:, None]  # half size rounded down (it is positive)
-        size_k = size[ci]
-        lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
-        hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
+    def _window_moments_numpy(self, images, mi, ci, lo, hi):
+        """:func:`tracking.window_kernel.window_moments` in numpy (where numba is missing or an
+        image is not C-contiguous): count (K,), sums (5, K), col, row (n,) of each window's pixels
+        of its marker's colour."""
         labels, starts = self.table.classify_windows(images, ci, np.concatenate([lo, hi], axis=1))
         # the marker's own colour among the (few) marker-coloured pixels of each window; the
         # pixels come window after window, so each window's share is one run of them, found by
         # K binary searches (runs and repeats: no per-pixel window look-up)
-        k_count = mi.size
         hit = np.flatnonzero(labels != 0)  # (a bool array has numpy's fast nonzero)
         bounds = np.searchsorted(hit, starts)
         own = labels[hit] == np.repeat(self._label[mi], np.diff(bounds))
@@ -550,6 +545,29 @@ class Tracker:
         # integers, exact in float64 whatever the order
         sums = np.add.reduceat(cr, run, axis=1)
         sums[:, count == 0] = 0.0
+        return count, sums, col, row
+
+    def _windows(self, images, valid, uv, half, r_px, sigma_px, known, size, uv_out, rad_out) -> None:
+        """Fill uv_out/rad_out from the windows of the ``valid`` (M, C) markers and cameras.
+
+        A window holds the pixels within ``half`` (rounded down) of the rounded prediction, cut at
+        the image border; the moments are taken about that pixel centre.
+        """
+        at = np.flatnonzero(valid)  # (K,) flat (marker, camera) index of each window
+        mi, ci = np.divmod(at, valid.shape[1])
+        centre = np.round(uv.reshape(-1, 2)[at]).astype(np.int64)  # (K, 2) window centre pixel x, y
+        ext = half.reshape(-1)[at].astype(np.int64)[:, None]  # half size rounded down (it is positive)
+        size_k = size[ci]
+        lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
+        hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
+        k_count = mi.size
+        if self._kernel and window_kernel.usable(images):
+            # one compiled pass over the windows' pixels (tracking.window_kernel): the same
+            # counts, sums and pixel coordinates as the numpy path below, to the bit
+            count, sums, col, row = window_kernel.window_moments(
+                images, self.table.lut, ci, np.concatenate([lo, hi], axis=1), self._label[mi], self.table.bits)
+        else:
+            count, sums, col, row = self._window_moments_numpy(images, mi, ci, lo, hi)
         sc, sr, scc, srr, scr = sums
         first = (lo - centre).astype(np.float64).T  # (2, K) offsets of each window's first pixel
         fx, fy = first
