@@ -231,15 +231,16 @@ class _ArcRegions:
                       np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
                       np.array([camera]), np.array([prior_sigma_px]))
 
-    def fit(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels."""
+    def fit(self, compiled: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels (``compiled``:
+        see :func:`~tracking.blobs.arc_centres`)."""
         if len(self._parts) == 1:
             cols = self._parts[0]
         else:
             cols = [np.concatenate(parts) for parts in zip(*self._parts)]
         region, x, y, start, prior, radius, lo, hi, origin, marker, camera, prior_sigma = cols
         return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi, prior_px=prior,
-                                                    prior_sigma_px=prior_sigma)
+                                                    prior_sigma_px=prior_sigma, compiled=compiled)
 
 
 class Tracker:
@@ -252,7 +253,9 @@ class Tracker:
         params: tracking knobs.
         fps: frame rate of the source (for time stamps when none are given).
         compiled: read the search windows with the compiled kernel (:mod:`tracking.window_kernel`)
-            where numba is installed; False: the numpy path (the same results, slower).
+            and triangulate and fit arcs with compiled loops (:class:`~tracking.triangulation.Triangulator`,
+            :func:`~tracking.blobs.arc_centres`) where numba is installed; False: the numpy paths (the same results to ~1e-12 m,
+            slower).
     """
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, table: ColourTable | None = None,
@@ -269,14 +272,15 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
-        self._triangulate = Triangulator(self.geometry.extrinsics)
+        # the windows' look-up and moments (tracking.window_kernel), the triangulation and the
+        # arc fits' iterations compiled, where numba is installed
+        self._kernel = bool(compiled) and window_kernel.AVAILABLE
+        self._triangulate = Triangulator(self.geometry.extrinsics, compiled=self._kernel)
         self._ones_cams = np.ones(len(self.cameras))
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
         self.colour = markerset.colour_index
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
-        # the windows' look-up and moments compiled (tracking.window_kernel) where numba is there
-        self._kernel = bool(compiled) and window_kernel.AVAILABLE
         self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
         self.times = StageTimes(STEP_STAGES)
@@ -639,7 +643,7 @@ class Tracker:
                     arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c,
                                     float(sigma_px[m, c]))
         if arcs.count:
-            m_idx, c_idx, uv_fit = arcs.fit()
+            m_idx, c_idx, uv_fit = arcs.fit(self._kernel)
             uv_out[m_idx, c_idx] = uv_fit
 
     def _choose(self, obs, pred, sigma, known):

@@ -1,4 +1,4 @@
-"""The compiled window kernel gives the numpy path's results to the bit."""
+"""The compiled kernels (search windows, triangulation) give the numpy paths' results."""
 
 import numpy as np
 import pytest
@@ -7,6 +7,7 @@ from tracking import window_kernel
 from tracking.colour_table import ColourTable
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.tracker import Tracker
+from tracking.triangulation import Triangulator, _triangulate_loop
 
 needs_numba = pytest.mark.skipif(not window_kernel.AVAILABLE, reason="numba is not installed")
 
@@ -76,6 +77,80 @@ def test_tracker_is_the_same_with_and_without_the_kernel():
         for i, sf in enumerate(studio.play(motion, 15.0, seconds=2.0, noise_sigma=1.5)):
             a = compiled.step(sf.frames.images, sf.frames.time_s)
             b = plain.step(sf.frames.images, sf.frames.time_s)
-            np.testing.assert_array_equal(a.positions_m, b.positions_m)
+            # the windows' moments are equal to the bit; the triangulation's 3x3 solves differ in
+            # rounding (cofactors against LAPACK's LU)
+            np.testing.assert_allclose(a.positions_m, b.positions_m, rtol=0, atol=1e-9)
             np.testing.assert_array_equal(a.status, b.status)
     assert i >= 20
+
+
+def _rig(rng, n_cams=4):
+    import cv2
+
+    ext = []
+    for c in range(n_cams):
+        rot, _ = cv2.Rodrigues(rng.normal(size=3) * 0.3)
+        ext.append(np.hstack([rot, np.array([[0.1 * c], [-0.2], [3.0]])]))
+    return np.array(ext)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_triangulation_loop_equals_the_numpy_path(compiled):
+    if compiled and not window_kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(1)
+    ext = _rig(rng)
+    pts = rng.normal(size=(30, 3)) * 0.4
+    cam = np.einsum("cij,nj->nci", ext[:, :, :3], pts) + ext[None, :, :, 3]
+    xn = cam[..., :2] / cam[..., 2:3] + rng.normal(size=(30, 4, 2)) * 2e-4
+    seen = rng.random((30, 4)) > 0.35
+    xn[~seen] = np.nan
+    want = Triangulator(ext)(xn, seen)
+    if compiled:
+        got = Triangulator(ext, compiled=True)(xn, seen)
+    else:  # the loop uncompiled, as numba compiles it
+        tri = Triangulator(ext)
+        got = np.empty((30, 3))
+        _triangulate_loop(np.ascontiguousarray(xn), seen, tri._basis, tri._depth_rot, tri._depth_t, got)
+    one_view = seen.sum(axis=1) < 2
+    assert one_view.any() and (~one_view).sum() > 10
+    assert np.isnan(got[one_view]).all()
+    np.testing.assert_allclose(got[~one_view], want[~one_view], rtol=0, atol=1e-12)
+    # and near the truth (noise 2e-4 in normalized coordinates, cameras 0.1-0.3 m apart at ~3 m)
+    assert np.abs(got[~one_view] - pts[~one_view]).max() < 0.02
+
+
+def _cut_discs(rng, count=25):
+    """Pixel regions of discs (radius 2.5-9 px) cut by a straight edge, in one arc_centres call."""
+    win, xs, ys, starts, radii = [], [], [], [], []
+    yy, xx = np.mgrid[0:40, 0:40]
+    for k in range(count):
+        r = rng.uniform(2.5, 9.0)
+        c = 20.0 + rng.uniform(-1, 1, 2)
+        ang = rng.uniform(0, 2 * np.pi)
+        inside = ((xx - c[0]) ** 2 + (yy - c[1]) ** 2 <= r * r)
+        inside &= (xx - c[0]) * np.cos(ang) + (yy - c[1]) * np.sin(ang) < rng.uniform(0.0, 0.8) * r
+        py, px = np.nonzero(inside)
+        win.append(np.full(px.size, k))
+        xs.append(px.astype(float))
+        ys.append(py.astype(float))
+        starts.append([px.mean(), py.mean()])
+        radii.append(r - 0.5)
+    n = count
+    return (np.concatenate(win), np.concatenate(xs), np.concatenate(ys), np.array(starts), np.array(radii),
+            np.zeros((n, 2)), np.full((n, 2), 39.0))
+
+
+def test_arc_fit_loop_equals_the_numpy_iterations(monkeypatch):
+    from tracking import blobs
+
+    args = _cut_discs(np.random.default_rng(4))
+    want = blobs.arc_centres(*args)
+    assert np.abs(want - args[3]).max() > 0.3, "the cuts must move the centres off the centroids"
+    # the loop uncompiled (as numba compiles it), then compiled
+    monkeypatch.setattr(blobs, "_NUMBA", True)
+    monkeypatch.setattr(blobs, "_arc_loop", lambda: blobs._arc_gauss_newton)
+    np.testing.assert_allclose(blobs.arc_centres(*args, compiled=True), want, rtol=0, atol=1e-9)
+    if window_kernel.AVAILABLE:
+        monkeypatch.undo()
+        np.testing.assert_allclose(blobs.arc_centres(*args, compiled=True), want, rtol=0, atol=1e-9)
