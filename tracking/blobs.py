@@ -65,7 +65,6 @@ centroid's 1.25 (docs/TRACKING.md, "Partly hidden balls").
 
 from __future__ import annotations
 
-import importlib.util
 import itertools
 import math
 from dataclasses import dataclass
@@ -73,6 +72,8 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+
+from tracking.jit import compile_loop
 
 DEFAULT_MIN_AREA_PX = 12
 """Fewer pixels than a disc of radius 2 px: noise (e.g. deep-shadow dark skin), not a marker."""
@@ -431,10 +432,6 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
     return np.stack((bx, by), axis=1)
 
 
-_NUMBA = importlib.util.find_spec("numba") is not None
-_loop = None
-
-
 def _arc_gauss_newton(q, pw, radius, c, tols):
     """The Gauss-Newton iterations of :func:`arc_centres` (one per tolerance) as one loop over
     the edge points: q (2, E) edge points grouped by region pw (E,), radius (K,), c (2, K)
@@ -468,12 +465,7 @@ def _arc_gauss_newton(q, pw, radius, c, tols):
 
 
 def _arc_loop():
-    global _loop
-    if _loop is None:
-        from numba import njit
-
-        _loop = njit(cache=True, nogil=True)(_arc_gauss_newton)
-    return _loop
+    return compile_loop(_arc_gauss_newton)
 
 
 def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndarray, radius_px: np.ndarray,
@@ -581,9 +573,10 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region: the
     # per-region sums of one iteration are one product with the (K, E) region indicator
     # (few numpy calls per iteration: on these small arrays their count, not their size, is the cost)
-    if compiled and _NUMBA:
+    loop = _arc_loop() if compiled else None
+    if loop is not None:
         c = np.array([cx, cy])
-        _arc_loop()(np.ascontiguousarray(q), pw, np.ascontiguousarray(radius_px, dtype=np.float64), c,
+        loop(np.ascontiguousarray(q), pw, np.ascontiguousarray(radius_px, dtype=np.float64), c,
                     np.asarray(inside_tol_px, dtype=np.float64))
         cx, cy = c.tolist()
     else:

@@ -14,10 +14,11 @@ the same point as :func:`triangulate` (tests show it).
 
 from __future__ import annotations
 
-import importlib.util
 import math
 
 import numpy as np
+
+from tracking.jit import INSTALLED, compile_loop
 
 
 def triangulate(extrinsics: np.ndarray, xn: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
@@ -66,7 +67,7 @@ class Triangulator:
         self._depth_t = np.ascontiguousarray(ext[:, 2, 3])
         # compiled (numba): the same two solves per point in one loop, no numpy call per step;
         # equal to the numpy path to ~1e-12 m (its 3x3 solves by cofactors, not LAPACK's LU)
-        self.compiled = bool(compiled) and _NUMBA
+        self.compiled = bool(compiled) and INSTALLED
 
     def __call__(self, xn: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
         """(N, C, 2) normalized observations, (N, C) bool seen -> (N, 3) points (as :func:`triangulate`)."""
@@ -79,10 +80,10 @@ class Triangulator:
         if seen is None:
             seen = np.isfinite(xn).all(axis=-1)
         seen = np.asarray(seen, dtype=bool).reshape(n_pts, n_cams)
-        if self.compiled:
+        loop = compile_loop(_triangulate_loop) if self.compiled else None
+        if loop is not None:
             out = np.empty((n_pts, 3))
-            _compiled_loop()(np.ascontiguousarray(xn), np.ascontiguousarray(seen), self._basis, self._depth_rot,
-                             self._depth_t, out)
+            loop(np.ascontiguousarray(xn), np.ascontiguousarray(seen), self._basis, self._depth_rot, self._depth_t, out)
             return out
         ok = np.count_nonzero(seen, axis=1) >= 2
         all_ok = bool(ok.all())
@@ -111,10 +112,6 @@ class Triangulator:
             return X
         out[ok] = X
         return out
-
-
-_NUMBA = importlib.util.find_spec("numba") is not None
-_loop = None
 
 
 def _triangulate_loop(xn, seen, basis, depth_rot, depth_t, out):
@@ -173,15 +170,6 @@ def _triangulate_loop(xn, seen, basis, depth_rot, depth_t, out):
                     for k in range(4):
                         feat[c, k] *= scale
         out[i, 0], out[i, 1], out[i, 2] = x0, x1, x2
-
-
-def _compiled_loop():
-    global _loop
-    if _loop is None:
-        from numba import njit
-
-        _loop = njit(cache=True, nogil=True)(_triangulate_loop)
-    return _loop
 
 
 def _solve_normal(gram: np.ndarray) -> np.ndarray:

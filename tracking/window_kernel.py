@@ -16,16 +16,12 @@ module where it is writable).
 
 from __future__ import annotations
 
-import importlib.util
-import logging
-
 import numpy as np
 
-logger = logging.getLogger(__name__)
+from tracking.jit import INSTALLED, compile_loop
 
-# numba is a dependency; the numpy path keeps the tracker working without it. It is imported on
-# the first call only (importing it takes a few tenths of a second that other commands need not pay)
-AVAILABLE = importlib.util.find_spec("numba") is not None
+AVAILABLE = INSTALLED
+"""numba is installed (numba is a dependency; the numpy path keeps the tracker working without it)."""
 
 
 def _window_moments(images, lut, cam, boxes, label, bits):
@@ -77,23 +73,15 @@ def _window_moments(images, lut, cam, boxes, label, bits):
     return count, sums, col[:n], row[:n]
 
 
-_compiled = None
-
-
 def _kernel():
-    global _compiled
-    if _compiled is None:
-        from numba import njit
-
-        _compiled = njit(cache=True, nogil=True)(_window_moments)
-    return _compiled
+    return compile_loop(_window_moments)
 
 
 def usable(images) -> bool:
     """Whether :func:`window_moments` can read these images: numba present, and every image a
     C-contiguous (H, W, 3) uint8 array (one compiled variant for all)."""
     return AVAILABLE and all(img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
-                             and img.flags.c_contiguous for img in images)
+                             and img.flags.c_contiguous for img in images) and _kernel() is not None
 
 
 def window_moments(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, label: np.ndarray,
@@ -112,9 +100,10 @@ def window_moments(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, 
         row, column^2, row^2 and column x row (window coordinates: 0 at ``x0``, ``y0``); col, row
         (n,) float64 window coordinates of those pixels, window after window, each in row order.
     """
-    if not AVAILABLE:
-        raise RuntimeError("numba is not installed: the tracker uses its numpy path")
-    return _kernel()(tuple(images), lut, np.ascontiguousarray(cam, dtype=np.int64),
+    kernel = _kernel()
+    if kernel is None:
+        raise RuntimeError("numba is not installed or does not import: the tracker uses its numpy path")
+    return kernel(tuple(images), lut, np.ascontiguousarray(cam, dtype=np.int64),
                      np.ascontiguousarray(boxes, dtype=np.int64), np.ascontiguousarray(label, dtype=np.int64),
                      int(bits))
 

@@ -148,9 +148,23 @@ def test_arc_fit_loop_equals_the_numpy_iterations(monkeypatch):
     want = blobs.arc_centres(*args)
     assert np.abs(want - args[3]).max() > 0.3, "the cuts must move the centres off the centroids"
     # the loop uncompiled (as numba compiles it), then compiled
-    monkeypatch.setattr(blobs, "_NUMBA", True)
     monkeypatch.setattr(blobs, "_arc_loop", lambda: blobs._arc_gauss_newton)
     np.testing.assert_allclose(blobs.arc_centres(*args, compiled=True), want, rtol=0, atol=1e-9)
     if window_kernel.AVAILABLE:
         monkeypatch.undo()
         np.testing.assert_allclose(blobs.arc_centres(*args, compiled=True), want, rtol=0, atol=1e-9)
+
+
+def test_a_numba_that_does_not_import_leaves_the_numpy_paths(monkeypatch, caplog):
+    import sys
+
+    from tracking import jit
+
+    def twice(x):
+        return 2 * x
+
+    monkeypatch.setattr(jit, "INSTALLED", True)
+    monkeypatch.setitem(sys.modules, "numba", None)  # "import numba" raises ImportError
+    monkeypatch.setattr(jit, "_warned", False)
+    assert jit.compile_loop(twice) is None
+    assert "numpy paths" in caplog.text
