@@ -158,11 +158,11 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
                 f"{k} {v:.2f}" for k, v in stage_times.per_frame_ms().items())
             if track_plain:
                 plain_a = np.array(track_plain)
-                yield (f"    search windows read by the compiled kernel (tracking.window_kernel); the numpy path "
-                       f"instead: {1000 * float(np.median(plain_a[:, 0])):.2f} ms per frame set, the kernel saves "
+                yield (f"    compiled loops (numba: search windows, triangulation, arc fits); the numpy paths "
+                       f"instead: {1000 * float(np.median(plain_a[:, 0])):.2f} ms per frame set, the compiled loops save "
                        f"{100 * (1 - float(np.median(track_a[:, 0] / plain_a[:, 0]))):.0f} % (median of the passes' ratios)")
             else:
-                yield ("    search windows read by the numpy path (" + ("numba is not installed" if not window_kernel.AVAILABLE
+                yield ("    the numpy paths (" + ("numba is not installed or does not import" if not window_kernel.usable([])
                        else "the images are not plain C-contiguous arrays") + ")")
             for what, ratio, rate in (("wall-clock, median pass", float(np.median(ratios)), 1 / track_s),
                                       ("CPU time, median pass", float(np.median(ratios_cpu)), 1 / cpu_track),

@@ -274,7 +274,7 @@ class Tracker:
         self._stack = CameraStack(self.cameras)
         # the windows' look-up and moments (tracking.window_kernel), the triangulation and the
         # arc fits' iterations compiled, where numba is installed
-        self._kernel = bool(compiled) and window_kernel.AVAILABLE
+        self._kernel = bool(compiled) and window_kernel.usable([])  # (imports numba once)
         self._triangulate = Triangulator(self.geometry.extrinsics, compiled=self._kernel)
         self._ones_cams = np.ones(len(self.cameras))
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
