@@ -225,9 +225,18 @@ class _ArcRegions:
         ys, xs = np.nonzero(mask)
         nearest = np.argmin((xs - local[0]) ** 2 + (ys - local[1]) ** 2)
         ys, xs = np.nonzero(regions == regions[ys[nearest], xs[nearest]])
-        h, w = mask.shape
-        self.add_many(np.zeros(xs.size, dtype=np.int64), xs, ys, local[None, :], (prior_px - origin)[None, :],
-                      np.array([radius_px]),
+        self.add_pixels(xs, ys, centroid_px, prior_px, origin_px, mask.shape[::-1], radius_px, marker, camera,
+                        prior_sigma_px)
+
+    def add_pixels(self, xs: np.ndarray, ys: np.ndarray, centroid_px: np.ndarray, prior_px: np.ndarray,
+                   origin_px: tuple[int, int], size_px: tuple[int, int], radius_px: float, marker: int, camera: int,
+                   prior_sigma_px: float) -> None:
+        """One region given by its pixels (window coordinates, raster order) in a searched window
+        of ``size_px`` (width, height) at ``origin_px``; the rest as :meth:`add_region`."""
+        origin = np.array(origin_px, dtype=np.float64)
+        w, h = size_px
+        self.add_many(np.zeros(len(xs), dtype=np.int64), xs, ys, (np.asarray(centroid_px) - origin)[None, :],
+                      (np.asarray(prior_px) - origin)[None, :], np.array([radius_px]),
                       np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
                       np.array([camera]), np.array([prior_sigma_px]))
 
@@ -565,7 +574,8 @@ class Tracker:
         lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
         hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
         k_count = mi.size
-        if self._kernel and window_kernel.usable(images):
+        compiled = self._kernel and window_kernel.usable(images)
+        if compiled:
             # one compiled pass over the windows' pixels (tracking.window_kernel): the same
             # counts, sums and pixel coordinates as the numpy path below, to the bit
             count, sums, col, row = window_kernel.window_moments(
@@ -629,6 +639,18 @@ class Tracker:
             (cx, cy), (w_img, h_img) = centre[k].tolist(), size_k[k].tolist()
             x0k, y0k = max(0, cx - hw), max(0, cy - hw)
             x1k, y1k = min(w_img, cx + hw + 1), min(h_img, cy + hw + 1)
+            if compiled:  # the same regions, gates and choice in one compiled pass
+                found, uv_j, area, round_j, xs, ys = window_kernel.crowded_window(
+                    img, self.table.lut, self.table.bits, (x0k, y0k, x1k, y1k), int(self._label[m]), uv[m, c], gate)
+                if found:
+                    radius_j = math.sqrt(area / math.pi)
+                    uv_out[m, c] = uv_j
+                    rad_out[m, c] = radius_j
+                    if radius_j <= edge_r[k] and (radius_j < params.arc_fit_ratio * edge_r[k]
+                                                  or round_j < params.arc_fit_roundness):
+                        arcs.add_pixels(xs, ys, np.array(uv_j), uv[m, c], (x0k, y0k), (x1k - x0k, y1k - y0k), edge_r[k],
+                                        m, c, float(sigma_px[m, c]))
+                continue
             win_labels = self.table.classify_window(img, x0k, y0k, x1k, y1k)
             blobs = find_blobs(win_labels, self.table.n_colours, min_area_px=gate.min_area_px,
                                max_area_px=gate.max_area_px, min_roundness=gate.min_roundness,

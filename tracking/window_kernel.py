@@ -113,3 +113,170 @@ def window_moments_py(images, lut, cam, boxes, label, bits: int = 8):
     hold the compiled kernel and the tracker's numpy path to, on small windows."""
     return _window_moments(tuple(images), lut, np.asarray(cam, dtype=np.int64), np.asarray(boxes, dtype=np.int64),
                            np.asarray(label, dtype=np.int64), int(bits))
+
+
+def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_area, max_area, min_roundness):
+    """The regions of colour label ``own`` in the window ``img[y0:y1, x0:x1]`` and the one nearest
+    the prediction, as :func:`tracking.blobs.find_blobs` (binary centroids, one colour) measures
+    and gates them: 8-connected regions whose outer outline's area (holes filled) lies in
+    [min_area, max_area] and whose roundness is >= min_roundness; the nearest to (pred_u, pred_v)
+    (window coordinates) of those, ties to the first in raster order of the regions' first pixels.
+
+    Returns (found, u, v, area, roundness, xs, ys): the centroid in window coordinates, and the
+    pixels (raster order) of the region that holds the marker-coloured pixel nearest that
+    centroid (the arc fit's region, as ``_ArcRegions.add_region`` picks it).
+    """
+    h, w = y1 - y0, x1 - x0
+    s = 8 - bits
+    m = (1 << bits) - 1
+    comp = np.full((h, w), -1, np.int64)
+    for y in range(h):
+        for x in range(w):
+            b, g, r = np.int64(img[y0 + y, x0 + x, 0]), np.int64(img[y0 + y, x0 + x, 1]), np.int64(img[y0 + y, x0 + x, 2])
+            word = b | (g << 8) | (r << 16)
+            if bits < 8:
+                word = (((word >> s) & m) | ((word >> (8 + s - bits)) & (m << bits))
+                        | ((word >> (16 + s - 2 * bits)) & (m << (2 * bits))))
+            if lut[word] == own:
+                comp[y, x] = -2  # own colour, not yet labelled
+    # 8-connected regions, labelled in raster order of their first pixels
+    n_comp = 0
+    stack = np.empty(h * w, np.int64)
+    bx0 = np.empty(h * w, np.int64)
+    by0 = np.empty(h * w, np.int64)
+    bx1 = np.empty(h * w, np.int64)
+    by1 = np.empty(h * w, np.int64)
+    first = np.empty(h * w, np.int64)
+    for y in range(h):
+        for x in range(w):
+            if comp[y, x] != -2:
+                continue
+            lab = n_comp
+            n_comp += 1
+            first[lab] = y * w + x
+            bx0[lab], by0[lab], bx1[lab], by1[lab] = x, y, x, y
+            comp[y, x] = lab
+            top = 0
+            stack[top] = y * w + x
+            top += 1
+            while top > 0:
+                top -= 1
+                p = stack[top]
+                py, px = p // w, p % w
+                bx0[lab] = min(bx0[lab], px)
+                bx1[lab] = max(bx1[lab], px)
+                by0[lab] = min(by0[lab], py)
+                by1[lab] = max(by1[lab], py)
+                for dy in range(-1, 2):
+                    qy = py + dy
+                    if qy < 0 or qy >= h:
+                        continue
+                    for dx in range(-1, 2):
+                        qx = px + dx
+                        if qx < 0 or qx >= w or comp[qy, qx] != -2:
+                            continue
+                        comp[qy, qx] = lab
+                        stack[top] = qy * w + qx
+                        top += 1
+    # each region with its holes filled: the cells of its box grown by one that the outside does
+    # not reach through 4-connected cells of other labels; a region inside another's hole has no
+    # outer outline of its own
+    nested = np.zeros(max(n_comp, 1), np.bool_)
+    best = -1
+    best_d = np.inf
+    bu = bv = barea = bround = 0.0
+    for lab in range(n_comp):
+        if nested[lab]:
+            continue
+        gx0, gy0 = bx0[lab] - 1, by0[lab] - 1
+        gw, gh = bx1[lab] - bx0[lab] + 3, by1[lab] - by0[lab] + 3
+        outside = np.zeros((gh, gw), np.bool_)
+        top = 0
+        for i in range(gh):
+            for j in range(gw):
+                if i == 0 or j == 0 or i == gh - 1 or j == gw - 1:
+                    outside[i, j] = True
+                    stack[top] = i * gw + j
+                    top += 1
+        while top > 0:
+            top -= 1
+            p = stack[top]
+            i, j = p // gw, p % gw
+            for k in range(4):
+                ii = i + (1 if k == 0 else -1 if k == 1 else 0)
+                jj = j + (1 if k == 2 else -1 if k == 3 else 0)
+                if ii <= 0 or jj <= 0 or ii >= gh - 1 or jj >= gw - 1 or outside[ii, jj]:
+                    continue
+                if comp[gy0 + ii, gx0 + jj] == lab:
+                    continue
+                outside[ii, jj] = True
+                stack[top] = ii * gw + jj
+                top += 1
+        n = 0.0
+        sx = sy = sxx = syy = sxy = 0.0
+        for i in range(1, gh - 1):
+            for j in range(1, gw - 1):
+                if outside[i, j]:
+                    continue
+                other = comp[gy0 + i, gx0 + j]
+                if other >= 0 and other != lab:
+                    nested[other] = True
+                fx, fy = float(gx0 + j), float(gy0 + i)
+                n += 1.0
+                sx += fx
+                sy += fy
+                sxx += fx * fx
+                syy += fy * fy
+                sxy += fx * fy
+        if (bx1[lab] - bx0[lab] + 1) * (by1[lab] - by0[lab] + 1) < min_area or n < min_area or n > max_area:
+            continue
+        u, v = sx / n, sy / n
+        mu20, mu02, mu11 = sxx / n - u * u, syy / n - v * v, sxy / n - u * v
+        mean_var = 0.5 * (mu20 + mu02) + 1.0 / 12.0
+        spread = np.sqrt(0.25 * (mu20 - mu02) ** 2 + mu11 * mu11)
+        roundness = np.sqrt(max(mean_var - spread, 0.0) / (mean_var + spread))
+        if roundness < min_roundness:
+            continue
+        d = np.sqrt((u - pred_u) ** 2 + (v - pred_v) ** 2)
+        if d < best_d:  # (regions in raster order of their first pixels: ties to the first)
+            best, best_d, bu, bv, barea, bround = lab, d, u, v, n, roundness
+    xs = np.empty(0, np.float64)
+    ys = np.empty(0, np.float64)
+    if best < 0:
+        return False, 0.0, 0.0, 0.0, 0.0, xs, ys
+    # the arc fit's region: that of the marker-coloured pixel nearest the centroid (first in
+    # raster order on a tie)
+    near, near_d = -1, np.inf
+    for y in range(h):
+        for x in range(w):
+            if comp[y, x] >= 0:
+                d2 = (x - bu) ** 2 + (y - bv) ** 2
+                if d2 < near_d:
+                    near, near_d = comp[y, x], d2
+    count = 0
+    for y in range(h):
+        for x in range(w):
+            if comp[y, x] == near:
+                count += 1
+    xs = np.empty(count, np.float64)
+    ys = np.empty(count, np.float64)
+    count = 0
+    for y in range(h):
+        for x in range(w):
+            if comp[y, x] == near:
+                xs[count] = x
+                ys[count] = y
+                count += 1
+    return True, bu, bv, barea, bround, xs, ys
+
+
+def crowded_window(image, lut: np.ndarray, bits: int, box, own: int, pred_px, gate):
+    """:func:`_crowded_window` compiled, for one C-contiguous (H, W, 3) uint8 image (:func:`usable`);
+    ``box`` (x0, y0, x1, y1) inside it, ``pred_px`` the predicted centre in full-image pixels,
+    ``gate`` a :class:`tracking.measure.BlobGates`. Returns (found, (u, v) full-image pixels,
+    area, roundness, xs, ys window pixels of the arc fit's region)."""
+    x0, y0, x1, y1 = (int(v) for v in box)
+    found, u, v, area, roundness, xs, ys = compile_loop(_crowded_window)(
+        image, lut, int(bits), x0, y0, x1, y1, int(own), float(pred_px[0]) - x0, float(pred_px[1]) - y0,
+        float(gate.min_area_px), float(gate.max_area_px), float(gate.min_roundness))
+    return found, (u + x0, v + y0), area, roundness, xs, ys

@@ -168,3 +168,64 @@ def test_a_numba_that_does_not_import_leaves_the_numpy_paths(monkeypatch, caplog
     monkeypatch.setattr(jit, "_warned", False)
     assert jit.compile_loop(twice) is None
     assert "numpy paths" in caplog.text
+
+
+def _crowded_scene(rng, h=48, w=56):
+    """Balls of one colour, some touching, some with a highlight hole or a ring with a ball inside,
+    plus specks: the cases a crowded window meets."""
+    img = rng.integers(40, 110, (h, w, 3)).astype(np.uint8)
+    yy, xx = np.mgrid[0:h, 0:w]
+    green = PALETTE[1][::-1]
+    for _ in range(rng.integers(1, 5)):
+        cx, cy, r = rng.uniform(0, w), rng.uniform(0, h), rng.uniform(1.0, 9.0)
+        disc = (xx - cx) ** 2 + (yy - cy) ** 2 <= r * r
+        img[disc] = green
+        if r > 5 and rng.random() < 0.5:  # a highlight: a hole of background colour
+            img[(xx - cx - 1) ** 2 + (yy - cy - 1) ** 2 <= 2.0] = (230, 230, 230)
+    if rng.random() < 0.3:  # a ring with a ball inside its hole
+        cx, cy = rng.uniform(15, w - 15), rng.uniform(15, h - 15)
+        d2 = (xx - cx) ** 2 + (yy - cy) ** 2
+        img[(d2 <= 100) & (d2 >= 49)] = green
+        img[d2 <= 6] = green
+    for _ in range(rng.integers(0, 6)):  # specks
+        img[rng.integers(0, h), rng.integers(0, w)] = green
+    return img
+
+
+@needs_numba
+def test_crowded_window_equals_find_blobs_and_the_arc_region():
+    from tracking.blobs import find_blobs
+    from tracking.measure import BlobGates
+
+    table = ColourTable.build(PALETTE)
+    rng = np.random.default_rng(11)
+    gate = BlobGates(min_area_px=3.0, max_area_px=400.0, min_roundness=0.5)
+    checked = 0
+    for trial in range(150):
+        img = _crowded_scene(rng)
+        box = (int(rng.integers(0, 8)), int(rng.integers(0, 8)), int(rng.integers(44, 57)), int(rng.integers(38, 49)))
+        x0, y0, x1, y1 = box
+        labels = table.classify_window(img, x0, y0, x1, y1)
+        blobs = find_blobs(labels, table.n_colours, min_area_px=gate.min_area_px, max_area_px=gate.max_area_px,
+                           min_roundness=gate.min_roundness, offset_px=(x0, y0), colours=(1,))
+        for pred in rng.uniform((x0, y0), (x1, y1), (3, 2)):
+            found, uv, area, roundness, xs, ys = window_kernel.crowded_window(img, table.lut, table.bits, box, 2, pred, gate)
+            assert found == (len(blobs) > 0)
+            if not found:
+                continue
+            j = np.argmin(np.linalg.norm(blobs.uv_px - pred, axis=1))
+            np.testing.assert_allclose(uv, blobs.uv_px[j], rtol=0, atol=1e-9)
+            assert area == blobs.area_px[j]
+            assert abs(roundness - blobs.roundness[j]) < 1e-9
+            # the arc fit's region: the 8-connected region of the coloured pixel nearest the centroid
+            import cv2
+
+            mask = labels == 2
+            _, regions = cv2.connectedComponents(mask.view(np.uint8), connectivity=8)
+            py, px = np.nonzero(mask)
+            near = np.argmin((px - (uv[0] - x0)) ** 2 + (py - (uv[1] - y0)) ** 2)
+            ry, rx = np.nonzero(regions == regions[py[near], px[near]])
+            np.testing.assert_array_equal(xs, rx)
+            np.testing.assert_array_equal(ys, ry)
+            checked += 1
+    assert checked > 200
