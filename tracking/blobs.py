@@ -241,8 +241,27 @@ def _measure(
     total = mom["m00"]
     if total <= 0.0:
         return None
-    roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
+    if image_bgr is None:
+        roundness = binary_roundness(total, mom["m10"], mom["m01"], mom["m20"], mom["m02"], mom["m11"])
+    else:
+        roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
     return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
+
+
+def binary_roundness(m00: float, m10: float, m01: float, m20: float, m02: float, m11: float) -> float:
+    """:func:`axis_ratio` (with :data:`PIXEL_MOMENT`) of a binary region from its raw moments
+    (integer sums about a corner near it): the central moments as exact integer differences
+    (``m00 m20 - m10^2`` ...), divided once. OpenCV's own central moments round differently from
+    build to build (fused multiply-adds), which decides on which side of the roundness gate a small
+    region of exactly 0.5 falls (a 10-pixel region 3 x 5 pixels wide); these do not, and the
+    compiled crowded-window pass (:mod:`tracking.window_kernel`) takes them the same way."""
+    nn = m00 * m00
+    a = (m00 * m20 - m10 * m10) / nn
+    b = (m00 * m02 - m01 * m01) / nn
+    c = (m00 * m11 - m10 * m01) / nn
+    mean_var = 0.5 * (a + b) + PIXEL_MOMENT
+    spread = math.sqrt(0.25 * (a - b) * (a - b) + c * c)
+    return math.sqrt(max(mean_var - spread, 0.0) / (mean_var + spread))
 
 
 PIXEL_MOMENT = 1.0 / 12.0

@@ -16,6 +16,8 @@ module where it is writable).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from tracking.jit import INSTALLED, compile_loop
@@ -212,6 +214,9 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 outside[ii, jj] = True
                 stack[top] = ii * gw + jj
                 top += 1
+        # the moments as find_blobs takes them, in its patch (the box less 3 px, cut at 0):
+        # integer sums, the roundness by tracking.blobs.binary_roundness's operations
+        px0, py0 = max(bx0[lab] - 3, 0), max(by0[lab] - 3, 0)
         n = 0.0
         sx = sy = sxx = syy = sxy = 0.0
         for i in range(1, gh - 1):
@@ -221,7 +226,7 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 other = comp[gy0 + i, gx0 + j]
                 if other >= 0 and other != lab:
                     nested[other] = True
-                fx, fy = float(gx0 + j), float(gy0 + i)
+                fx, fy = float(gx0 + j - px0), float(gy0 + i - py0)
                 n += 1.0
                 sx += fx
                 sy += fy
@@ -230,11 +235,14 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 sxy += fx * fy
         if (bx1[lab] - bx0[lab] + 1) * (by1[lab] - by0[lab] + 1) < min_area or n < min_area or n > max_area:
             continue
-        u, v = sx / n, sy / n
-        mu20, mu02, mu11 = sxx / n - u * u, syy / n - v * v, sxy / n - u * v
-        mean_var = 0.5 * (mu20 + mu02) + 1.0 / 12.0
-        spread = np.sqrt(0.25 * (mu20 - mu02) ** 2 + mu11 * mu11)
-        roundness = np.sqrt(max(mean_var - spread, 0.0) / (mean_var + spread))
+        nn = n * n
+        a = (n * sxx - sx * sx) / nn
+        b = (n * syy - sy * sy) / nn
+        c = (n * sxy - sx * sy) / nn
+        mean_var = 0.5 * (a + b) + 1.0 / 12.0
+        spread = math.sqrt(0.25 * (a - b) * (a - b) + c * c)
+        roundness = math.sqrt(max(mean_var - spread, 0.0) / (mean_var + spread))
+        u, v = px0 + sx / n, py0 + sy / n
         if roundness < min_roundness:
             continue
         d = np.sqrt((u - pred_u) ** 2 + (v - pred_v) ** 2)
