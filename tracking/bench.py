@@ -158,7 +158,7 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
                 f"{k} {v:.2f}" for k, v in stage_times.per_frame_ms().items())
             if track_plain:
                 plain_a = np.array(track_plain)
-                yield (f"    compiled loops (numba: search windows, triangulation, arc fits); the numpy paths "
+                yield (f"    compiled loops (numba: search windows, crowded windows, triangulation, arc fits); the numpy paths "
                        f"instead: {1000 * float(np.median(plain_a[:, 0])):.2f} ms per frame set, the compiled loops save "
                        f"{100 * (1 - float(np.median(track_a[:, 0] / plain_a[:, 0]))):.0f} % (median of the passes' ratios)")
             else:
