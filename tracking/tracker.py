@@ -322,6 +322,30 @@ class Tracker:
         self.frame_count = 0
         self._lost_streak = 0
 
+    def compile_loops(self, images: Sequence[np.ndarray]) -> None:
+        """Compile (or load from numba's disk cache) every compiled loop for these images' types
+        now, on a few pixels, instead of at the first frame set that needs each: a first
+        compilation takes seconds, which the tracker process must spend before it reports ready,
+        not between heartbeats. Nothing to do without numba."""
+        if not (self._kernel and window_kernel.usable(images)):
+            return
+        n = len(images)
+        boxes = np.zeros((n, 4), dtype=np.int64)
+        boxes[:, 2:] = 2
+        window_kernel.window_moments(images, self.table.lut, np.arange(n), boxes, self._label[np.zeros(n, int)],
+                                     self.table.bits)
+        window_kernel.crowded_window(images[0], self.table.lut, self.table.bits, (0, 0, 2, 2), int(self._label[0]),
+                                     np.zeros(2), self.gates[0])
+        seen = np.zeros((1, n), dtype=bool)
+        seen[0, :2] = True
+        self._triangulate(np.zeros((1, n, 2)), seen)
+        region = np.zeros(3, dtype=np.int64)
+        arcs = _ArcRegions()
+        arcs.add_many(region, np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]), np.zeros((1, 2)), np.zeros((1, 2)),
+                      np.array([1.0]), np.zeros((1, 2)), np.full((1, 2), 4.0), np.zeros((1, 2)), np.zeros(1, int),
+                      np.zeros(1, int), np.ones(1))
+        arcs.fit(compiled=True)
+
     def reidentify(self) -> None:
         """Identify the markers again from the next frame (the patient takes the reference pose)."""
         self.reset()

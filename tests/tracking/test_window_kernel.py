@@ -229,3 +229,24 @@ def test_crowded_window_equals_find_blobs_and_the_arc_region():
             np.testing.assert_array_equal(ys, ry)
             checked += 1
     assert checked > 200
+
+
+@needs_numba
+def test_compile_loops_compiles_every_loop_for_the_frames_types():
+    """The tracker process compiles the loops before it reports ready (a first compilation takes
+    seconds, longer than the heartbeat allows); the loops a frame set then calls need no other
+    compilation."""
+    from tracking import blobs, jit, triangulation
+
+    studio, motion = studio_from_settings(SimulationSettings(motion="reach", size_px=(320, 240), fps=15.0))
+    with studio:
+        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0)
+        frames = [sf.frames for _, sf in zip(range(4), studio.play(motion, 15.0, seconds=1.0))]
+        tracker.compile_loops(frames[0].images)
+        loops = [jit.compile_loop(f) for f in (window_kernel._window_moments, window_kernel._crowded_window,
+                                              triangulation._triangulate_loop, blobs._arc_gauss_newton)]
+        before = [len(loop.signatures) for loop in loops]
+        assert all(n >= 1 for n in before)
+        for f in frames:
+            tracker.step(f.images, f.time_s)
+        assert [len(loop.signatures) for loop in loops] == before

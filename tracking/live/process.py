@@ -466,13 +466,17 @@ def _warm_up(source: FrameSource, tracker) -> None:
     """Render and track one frame set before reporting ready, then forget it.
 
     The first frame set pays one-off costs (shader compilation, first-touch allocations, the
-    full-frame identification) that would otherwise stall the first heartbeats.
+    full-frame identification, the tracker's compiled loops) that would otherwise stall the first
+    heartbeats.
     """
     frame = source.grab(0, 0.0, False)
     if frame is None:
         reason = "; ".join(getattr(source, "warnings", tuple)()) or "it ended at once"
         raise LiveError(f"the source delivered no frame set: {reason}")
     tracker.step(frame.images, 0.0)
+    compile_loops = getattr(tracker, "compile_loops", None)  # (a test's stand-in tracker may lack it)
+    if compile_loops is not None:
+        compile_loops(frame.images)  # numba's first compilation, seconds without its disk cache
     tracker.reset()
     source.handle(Reidentify())  # a motion starts again from its reference pose
 
