@@ -261,10 +261,11 @@ class Tracker:
         table: the colour lookup table (default: built from the marker set's colours).
         params: tracking knobs.
         fps: frame rate of the source (for time stamps when none are given).
-        compiled: read the search windows with the compiled kernel (:mod:`tracking.window_kernel`)
-            and triangulate and fit arcs with compiled loops (:class:`~tracking.triangulation.Triangulator`,
-            :func:`~tracking.blobs.arc_centres`) where numba is installed; False: the numpy paths (the same results to ~1e-12 m,
-            slower).
+        compiled: where numba is installed and imports, run the search windows, the crowded
+            windows (:mod:`tracking.window_kernel`), the triangulation
+            (:class:`~tracking.triangulation.Triangulator`) and the arc fits' iterations
+            (:func:`~tracking.blobs.arc_centres`) as compiled loops; False: the numpy paths (the
+            same results to ~1e-12 m, 25-40 % slower per frame set).
     """
 
     def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, *, table: ColourTable | None = None,
@@ -281,8 +282,7 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
-        # the windows' look-up and moments (tracking.window_kernel), the triangulation and the
-        # arc fits' iterations compiled, where numba is installed
+        # the hot loops compiled where numba is installed and imports (see ``compiled``)
         self._kernel = bool(compiled) and window_kernel.usable([])  # (imports numba once)
         self._triangulate = Triangulator(self.geometry.extrinsics, compiled=self._kernel)
         self._ones_cams = np.ones(len(self.cameras))

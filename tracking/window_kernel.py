@@ -134,8 +134,8 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
     comp = np.full((h, w), -1, np.int64)
     for y in range(h):
         for x in range(w):
-            b, g, r = np.int64(img[y0 + y, x0 + x, 0]), np.int64(img[y0 + y, x0 + x, 1]), np.int64(img[y0 + y, x0 + x, 2])
-            word = b | (g << 8) | (r << 16)
+            yy, xx = y0 + y, x0 + x
+            word = np.int64(img[yy, xx, 0]) | (np.int64(img[yy, xx, 1]) << 8) | (np.int64(img[yy, xx, 2]) << 16)
             if bits < 8:
                 word = (((word >> s) & m) | ((word >> (8 + s - bits)) & (m << bits))
                         | ((word >> (16 + s - 2 * bits)) & (m << (2 * bits))))

@@ -50,7 +50,8 @@ def test_kernel_equals_the_table_look_up_and_moments(bits):
     k = 40
     cam = rng.integers(0, 3, k)
     x0, y0 = rng.integers(0, 150, k), rng.integers(0, 110, k)
-    boxes = np.stack([x0, y0, np.minimum(x0 + rng.integers(0, 30, k), 160), np.minimum(y0 + rng.integers(0, 30, k), 120)], axis=1)
+    x1, y1 = np.minimum(x0 + rng.integers(0, 30, k), 160), np.minimum(y0 + rng.integers(0, 30, k), 120)
+    boxes = np.stack([x0, y0, x1, y1], axis=1)
     label = rng.integers(1, 4, k)
     got = window_kernel.window_moments(images, table.lut, cam, boxes, label, table.bits)
     ref = window_kernel.window_moments_py(images, table.lut, cam, boxes, label, table.bits)
@@ -209,7 +210,8 @@ def test_crowded_window_equals_find_blobs_and_the_arc_region():
         blobs = find_blobs(labels, table.n_colours, min_area_px=gate.min_area_px, max_area_px=gate.max_area_px,
                            min_roundness=gate.min_roundness, offset_px=(x0, y0), colours=(1,))
         for pred in rng.uniform((x0, y0), (x1, y1), (3, 2)):
-            found, uv, area, roundness, xs, ys = window_kernel.crowded_window(img, table.lut, table.bits, box, 2, pred, gate)
+            found, uv, area, roundness, xs, ys = window_kernel.crowded_window(
+                img, table.lut, table.bits, box, 2, pred, gate)
             assert found == (len(blobs) > 0)
             if not found:
                 continue
