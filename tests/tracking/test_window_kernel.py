@@ -70,11 +70,13 @@ def test_only_plain_images_go_to_the_kernel():
 
 
 @needs_numba
-def test_tracker_is_the_same_with_and_without_the_kernel():
+@pytest.mark.parametrize("bits", [8, 6])
+def test_tracker_is_the_same_with_and_without_the_kernel(bits):
     studio, motion = studio_from_settings(SimulationSettings(motion="reach", size_px=(320, 240), fps=15.0))
     with studio:
-        compiled = Tracker(studio.cameras, studio.markerset, fps=15.0)
-        plain = Tracker(studio.cameras, studio.markerset, fps=15.0, compiled=False)
+        table = ColourTable.build(studio.markerset.palette, bits=bits)
+        compiled = Tracker(studio.cameras, studio.markerset, table=table, fps=15.0)
+        plain = Tracker(studio.cameras, studio.markerset, table=table, fps=15.0, compiled=False)
         for i, sf in enumerate(studio.play(motion, 15.0, seconds=2.0, noise_sigma=1.5)):
             a = compiled.step(sf.frames.images, sf.frames.time_s)
             b = plain.step(sf.frames.images, sf.frames.time_s)
@@ -194,11 +196,12 @@ def _crowded_scene(rng, h=48, w=56):
 
 
 @needs_numba
-def test_crowded_window_equals_find_blobs_and_the_arc_region():
+@pytest.mark.parametrize("bits", [8, 6])
+def test_crowded_window_equals_find_blobs_and_the_arc_region(bits):
     from tracking.blobs import find_blobs
     from tracking.measure import BlobGates
 
-    table = ColourTable.build(PALETTE)
+    table = ColourTable.build(PALETTE, bits=bits)
     rng = np.random.default_rng(11)
     gate = BlobGates(min_area_px=3.0, max_area_px=400.0, min_roundness=0.5)
     checked = 0
