@@ -143,7 +143,9 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 comp[y, x] = -2  # own colour, not yet labelled
     # 8-connected regions, labelled in raster order of their first pixels
     n_comp = 0
-    stack = np.empty(h * w, np.int64)
+    # (the fill below pushes each cell of a region's box grown by one at most once: up to
+    # (h + 2) (w + 2) cells, more than the window's when a region spans it, e.g. a diagonal line)
+    stack = np.empty((h + 2) * (w + 2), np.int64)
     bx0 = np.empty(h * w, np.int64)
     by0 = np.empty(h * w, np.int64)
     bx1 = np.empty(h * w, np.int64)

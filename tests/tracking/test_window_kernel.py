@@ -192,6 +192,9 @@ def _crowded_scene(rng, h=48, w=56):
         img[d2 <= 6] = green
     for _ in range(rng.integers(0, 6)):  # specks
         img[rng.integers(0, h), rng.integers(0, w)] = green
+    if rng.random() < 0.2:  # a diagonal line across the whole image: its filled box is all outside
+        k = np.arange(min(h, w))
+        img[k, k] = green
     return img
 
 
