@@ -123,7 +123,7 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
             tracker.times.reset()
             track.append(np.median([_timed(lambda f=f: tracker.step(f)) for f in frames[warm:]], axis=0))
             stage_times = tracker.times
-            if tracker._kernel:  # the same pass without the compiled window kernel, for its share
+            if tracker.compiled:  # the same pass without the compiled window kernel, for its share
                 plain = Tracker(cameras, ms, table=table, fps=base.fps, compiled=False)
                 for f in frames[:warm]:
                     plain.step(f)

@@ -22,9 +22,13 @@ _compiled: dict[Callable, Callable | None] = {}
 _warned = False
 
 
-def compile_loop(fn: Callable) -> Callable | None:
+def compile_loop(fn: Callable, helpers: tuple[Callable, ...] = ()) -> Callable | None:
     """``fn`` compiled by numba (``njit``, cached on disk; the compilation itself happens at the
-    first call, ~0.1-0.5 s), or None where numba is missing or fails to import."""
+    first call, ~0.1-0.5 s), or None where numba is missing or fails to import.
+
+    ``helpers``: plain functions ``fn`` calls (by their names in its module); each is compiled
+    too and its name in ``fn``'s module rebound to the compiled one, which plain Python calls
+    just as well."""
     global _warned
     if fn in _compiled:
         return _compiled[fn]
@@ -33,6 +37,11 @@ def compile_loop(fn: Callable) -> Callable | None:
         try:
             from numba import njit
 
+            for helper in helpers:
+                helper = getattr(helper, "py_func", helper)  # (its name may already be rebound)
+                if helper not in _compiled:
+                    _compiled[helper] = njit(cache=True, nogil=True)(helper)
+                fn.__globals__[helper.__name__] = _compiled[helper]
             result = njit(cache=True, nogil=True)(fn)
         except Exception as exc:  # an unusable numba must not stop the tracker
             if not _warned:

@@ -283,8 +283,8 @@ class Tracker:
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)
         # the hot loops compiled where numba is installed and imports (see ``compiled``)
-        self._kernel = bool(compiled) and window_kernel.usable([])  # (imports numba once)
-        self._triangulate = Triangulator(self.geometry.extrinsics, compiled=self._kernel)
+        self.compiled = bool(compiled) and window_kernel.usable([])  # (imports numba once)
+        self._triangulate = Triangulator(self.geometry.extrinsics, compiled=self.compiled)
         self._ones_cams = np.ones(len(self.cameras))
         self._cam_centres = np.array([c.centre_m for c in self.cameras])
         self._min_area_px = np.array([g.min_area_px for g in self.gates])
@@ -327,7 +327,7 @@ class Tracker:
         now, on a few pixels, instead of at the first frame set that needs each: a first
         compilation takes seconds, which the tracker process must spend before it reports ready,
         not between heartbeats. Nothing to do without numba."""
-        if not (self._kernel and window_kernel.usable(images)):
+        if not (self.compiled and window_kernel.usable(images)):
             return
         n = len(images)
         boxes = np.zeros((n, 4), dtype=np.int64)
@@ -598,7 +598,7 @@ class Tracker:
         lo = np.minimum(np.maximum(centre - ext, 0), size_k)  # (K, 2) x0, y0
         hi = np.maximum(np.minimum(centre + ext + 1, size_k), lo)  # (K, 2) x1, y1 (exclusive)
         k_count = mi.size
-        compiled = self._kernel and window_kernel.usable(images)
+        compiled = self.compiled and window_kernel.usable(images)
         if compiled:
             # one compiled pass over the windows' pixels (tracking.window_kernel): the same
             # counts, sums and pixel coordinates as the numpy path below, to the bit
@@ -689,7 +689,7 @@ class Tracker:
                     arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c,
                                     float(sigma_px[m, c]))
         if arcs.count:
-            m_idx, c_idx, uv_fit = arcs.fit(self._kernel)
+            m_idx, c_idx, uv_fit = arcs.fit(self.compiled)
             uv_out[m_idx, c_idx] = uv_fit
 
     def _choose(self, obs, pred, sigma, known):

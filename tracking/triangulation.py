@@ -67,7 +67,8 @@ class Triangulator:
         self._depth_t = np.ascontiguousarray(ext[:, 2, 3])
         # compiled (numba): the same two solves per point in one loop, no numpy call per step;
         # equal to the numpy path to ~1e-12 m (its 3x3 solves by cofactors, not LAPACK's LU)
-        self.compiled = bool(compiled) and INSTALLED
+        self._loop = compile_loop(_triangulate_loop) if compiled and INSTALLED else None
+        self.compiled = self._loop is not None
 
     def __call__(self, xn: np.ndarray, seen: np.ndarray | None = None) -> np.ndarray:
         """(N, C, 2) normalized observations, (N, C) bool seen -> (N, 3) points (as :func:`triangulate`)."""
@@ -80,10 +81,9 @@ class Triangulator:
         if seen is None:
             seen = np.isfinite(xn).all(axis=-1)
         seen = np.asarray(seen, dtype=bool).reshape(n_pts, n_cams)
-        loop = compile_loop(_triangulate_loop) if self.compiled else None
-        if loop is not None:
+        if self._loop is not None:
             out = np.empty((n_pts, 3))
-            loop(np.ascontiguousarray(xn), np.ascontiguousarray(seen), self._basis, self._depth_rot, self._depth_t, out)
+            self._loop(np.ascontiguousarray(xn), np.ascontiguousarray(seen), self._basis, self._depth_rot, self._depth_t, out)
             return out
         ok = np.count_nonzero(seen, axis=1) >= 2
         all_ok = bool(ok.all())

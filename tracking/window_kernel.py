@@ -16,14 +16,24 @@ module where it is writable).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from tracking.blobs import binary_roundness
 from tracking.jit import INSTALLED, compile_loop
 
 AVAILABLE = INSTALLED
 """numba is installed (numba is a dependency; the numpy path keeps the tracker working without it)."""
+
+
+def _table_index(img, y, x, bits):
+    """The colour table's index of pixel (x, y): ``B | G << 8 | R << 16``, quantized to ``bits``
+    per channel as :func:`tracking.colour_table._quantize_index` does for a table of fewer bits."""
+    word = np.int64(img[y, x, 0]) | (np.int64(img[y, x, 1]) << 8) | (np.int64(img[y, x, 2]) << 16)
+    if bits < 8:
+        s, m = 8 - bits, (1 << bits) - 1
+        word = (((word >> s) & m) | ((word >> (8 + s - bits)) & (m << bits))
+                | ((word >> (16 + s - 2 * bits)) & (m << (2 * bits))))
+    return word
 
 
 def _window_moments(images, lut, cam, boxes, label, bits):
@@ -35,8 +45,6 @@ def _window_moments(images, lut, cam, boxes, label, bits):
     sums = np.zeros((5, k_count))
     col = np.empty(total, np.float64)
     row = np.empty(total, np.float64)
-    s = 8 - bits
-    m = (1 << bits) - 1
     n = 0
     for k in range(k_count):
         img = images[cam[k]]
@@ -51,11 +59,7 @@ def _window_moments(images, lut, cam, boxes, label, bits):
         for y in range(y0, y1):
             fy = float(y - y0)
             for x in range(x0, x1):
-                word = np.int64(img[y, x, 0]) | (np.int64(img[y, x, 1]) << 8) | (np.int64(img[y, x, 2]) << 16)
-                if bits < 8:
-                    word = (((word >> s) & m) | ((word >> (8 + s - bits)) & (m << bits))
-                            | ((word >> (16 + s - 2 * bits)) & (m << (2 * bits))))
-                if lut[word] == own:
+                if lut[_table_index(img, y, x, bits)] == own:
                     fx = float(x - x0)
                     col[n] = fx
                     row[n] = fy
@@ -76,7 +80,7 @@ def _window_moments(images, lut, cam, boxes, label, bits):
 
 
 def _kernel():
-    return compile_loop(_window_moments)
+    return compile_loop(_window_moments, helpers=(_table_index,))
 
 
 def usable(images) -> bool:
@@ -110,13 +114,6 @@ def window_moments(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, 
                      int(bits))
 
 
-def window_moments_py(images, lut, cam, boxes, label, bits: int = 8):
-    """:func:`window_moments` in plain Python (the same loop, uncompiled): the reference the tests
-    hold the compiled kernel and the tracker's numpy path to, on small windows."""
-    return _window_moments(tuple(images), lut, np.asarray(cam, dtype=np.int64), np.asarray(boxes, dtype=np.int64),
-                           np.asarray(label, dtype=np.int64), int(bits))
-
-
 def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_area, max_area, min_roundness):
     """The regions of colour label ``own`` in the window ``img[y0:y1, x0:x1]`` and the one nearest
     the prediction, as :func:`tracking.blobs.find_blobs` (binary centroids, one colour) measures
@@ -129,17 +126,10 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
     centroid (the arc fit's region, as ``_ArcRegions.add_region`` picks it).
     """
     h, w = y1 - y0, x1 - x0
-    s = 8 - bits
-    m = (1 << bits) - 1
     comp = np.full((h, w), -1, np.int64)
     for y in range(h):
         for x in range(w):
-            yy, xx = y0 + y, x0 + x
-            word = np.int64(img[yy, xx, 0]) | (np.int64(img[yy, xx, 1]) << 8) | (np.int64(img[yy, xx, 2]) << 16)
-            if bits < 8:
-                word = (((word >> s) & m) | ((word >> (8 + s - bits)) & (m << bits))
-                        | ((word >> (16 + s - 2 * bits)) & (m << (2 * bits))))
-            if lut[word] == own:
+            if lut[_table_index(img, y0 + y, x0 + x, bits)] == own:
                 comp[y, x] = -2  # own colour, not yet labelled
     # 8-connected regions, labelled in raster order of their first pixels
     n_comp = 0
@@ -150,14 +140,12 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
     by0 = np.empty(h * w, np.int64)
     bx1 = np.empty(h * w, np.int64)
     by1 = np.empty(h * w, np.int64)
-    first = np.empty(h * w, np.int64)
     for y in range(h):
         for x in range(w):
             if comp[y, x] != -2:
                 continue
             lab = n_comp
             n_comp += 1
-            first[lab] = y * w + x
             bx0[lab], by0[lab], bx1[lab], by1[lab] = x, y, x, y
             comp[y, x] = lab
             top = 0
@@ -217,7 +205,7 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 stack[top] = ii * gw + jj
                 top += 1
         # the moments as find_blobs takes them, in its patch (the box less 3 px, cut at 0):
-        # integer sums, the roundness by tracking.blobs.binary_roundness's operations
+        # integer sums, and its roundness from them
         px0, py0 = max(bx0[lab] - 3, 0), max(by0[lab] - 3, 0)
         n = 0.0
         sx = sy = sxx = syy = sxy = 0.0
@@ -237,13 +225,7 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
                 sxy += fx * fy
         if (bx1[lab] - bx0[lab] + 1) * (by1[lab] - by0[lab] + 1) < min_area or n < min_area or n > max_area:
             continue
-        nn = n * n
-        a = (n * sxx - sx * sx) / nn
-        b = (n * syy - sy * sy) / nn
-        c = (n * sxy - sx * sy) / nn
-        mean_var = 0.5 * (a + b) + 1.0 / 12.0
-        spread = math.sqrt(0.25 * (a - b) * (a - b) + c * c)
-        roundness = math.sqrt(max(mean_var - spread, 0.0) / (mean_var + spread))
+        roundness = binary_roundness(n, sx, sy, sxx, syy, sxy)
         u, v = px0 + sx / n, py0 + sy / n
         if roundness < min_roundness:
             continue
@@ -286,7 +268,7 @@ def crowded_window(image, lut: np.ndarray, bits: int, box, own: int, pred_px, ga
     ``gate`` a :class:`tracking.measure.BlobGates`. Returns (found, (u, v) full-image pixels,
     area, roundness, xs, ys window pixels of the arc fit's region)."""
     x0, y0, x1, y1 = (int(v) for v in box)
-    found, u, v, area, roundness, xs, ys = compile_loop(_crowded_window)(
+    found, u, v, area, roundness, xs, ys = compile_loop(_crowded_window, helpers=(_table_index, binary_roundness))(
         image, lut, int(bits), x0, y0, x1, y1, int(own), float(pred_px[0]) - x0, float(pred_px[1]) - y0,
         float(gate.min_area_px), float(gate.max_area_px), float(gate.min_roundness))
     return found, (u + x0, v + y0), area, roundness, xs, ys
