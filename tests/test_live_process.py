@@ -256,3 +256,19 @@ def test_stale_blocks_of_a_dead_game_are_removed():
     assert f"{BLOCK_PREFIX}{dead_pid}_abcd_samples" in remove_stale_blocks()
     assert not Path(f"/dev/shm/{BLOCK_PREFIX}{dead_pid}_abcd_samples").exists()
 
+
+
+def test_a_start_that_reports_progress_gets_a_new_start_timeout():
+    """A first start compiles the tracker's loops (seconds without numba's disk cache): the
+    process says so, and the game counts its start timeout from then, not from the spawn."""
+    from tracking.live.client import _Child
+
+    child = object.__new__(_Child)  # its pipe only, no process
+    child.conn, other = multiprocessing.Pipe()
+    child.proc = type("P", (), {"pid": 1})()
+    child.started_at = child.progress_at = time.perf_counter() - 25.0
+    child.ready, child.failed = False, ""
+    other.send(("progress", "compiling the tracker's loops"))
+    child.receive()
+    assert time.perf_counter() - child.progress_at < 1.0
+    assert not child.ready and not child.failed

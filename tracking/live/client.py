@@ -43,7 +43,9 @@ log = logging.getLogger(__name__)
 BLOCK_PREFIX = "rehab_live_"
 #: A running process whose heartbeat is older than this is taken as hung and restarted.
 STALE_HEARTBEAT_S = 1.0
-#: A starting process has this long to report ready (imports, GL context, rig).
+#: A starting process has this long to report ready (imports, GL context, rig), or, after it
+#: reports the progress of a long stage (the first compilation of the tracker's loops), this long
+#: again from then.
 START_TIMEOUT_S = 30.0
 #: Time a process gets to stop on request before it is killed.
 STOP_TIMEOUT_S = 2.0
@@ -126,6 +128,7 @@ class _Child:
         child_conn.close()
         self.standby = args.standby
         self.started_at = time.perf_counter()
+        self.progress_at = self.started_at  # last sign of a start going on (its start, a progress message)
         self.ready = False  # reported ready (a standby: prepared and waiting)
         self.failed = ""  # why it could not start
 
@@ -134,7 +137,7 @@ class _Child:
         return self.proc.pid
 
     def receive(self) -> None:
-        """Read its messages: ("ready" | "standby", pid) or ("failed", line)."""
+        """Read its messages: ("ready" | "standby", pid), ("progress", what) or ("failed", line)."""
         try:
             while self.conn.poll():
                 kind, value = self.conn.recv()
@@ -142,6 +145,9 @@ class _Child:
                     self.ready = True
                     log.info("tracker process %d %s in %.2f s", value, "ready" if kind == "ready" else "standing by",
                              time.perf_counter() - self.started_at)
+                elif kind == "progress":  # a long stage of the start (not hung): a new START_TIMEOUT_S
+                    self.progress_at = time.perf_counter()
+                    log.info("tracker process %d: %s", self.pid, value)
                 elif kind == "failed":
                     self.failed = str(value)
         except (EOFError, OSError):
@@ -367,7 +373,7 @@ class LiveTracker:
             hung = state in (ProcessState.RUNNING, ProcessState.PAUSED) and self._heartbeat_age_s() > STALE_HEARTBEAT_S
             if not hung:
                 return
-        elif alive and now - child.started_at < START_TIMEOUT_S:
+        elif alive and now - child.progress_at < START_TIMEOUT_S:
             return  # still starting
         reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
         if not child.ready:
@@ -412,7 +418,7 @@ class LiveTracker:
             self._reader.header["state"] = ProcessState.STARTING
             spare.ready = False  # until it reports ready as the running process
             spare.standby = False
-            spare.started_at = time.perf_counter()
+            spare.started_at = spare.progress_at = time.perf_counter()
             self._child = spare
             log.info("standby tracker process %d takes over", spare.pid)
         else:

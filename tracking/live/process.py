@@ -385,7 +385,7 @@ def tracker_main(args: ProcessArgs, conn) -> None:
             source = open_source(args.config)
             _check_geometry(source, args)
             tracker, adapter = make_tracker(args.config, source)
-            _warm_up(source, tracker)
+            _warm_up(source, tracker, progress=lambda what: conn.send(("progress", what)))
         except Exception as exc:
             line = " ".join(str(exc).split()) or type(exc).__name__
             # A user's error (a missing camera, a bad file) reaches the game, which says it once; a
@@ -462,12 +462,13 @@ def make_tracker(config: SourceConfig, source: FrameSource):
     return Tracker(source.cameras, source.markerset, table=table, fps=config.fps), adapter
 
 
-def _warm_up(source: FrameSource, tracker) -> None:
+def _warm_up(source: FrameSource, tracker, progress=lambda what: None) -> None:
     """Render and track one frame set before reporting ready, then forget it.
 
     The first frame set pays one-off costs (shader compilation, first-touch allocations, the
     full-frame identification, the tracker's compiled loops) that would otherwise stall the first
-    heartbeats.
+    heartbeats. ``progress`` is told before a long stage (the game then gives the start another
+    ``START_TIMEOUT_S``).
     """
     frame = source.grab(0, 0.0, False)
     if frame is None:
@@ -476,7 +477,10 @@ def _warm_up(source: FrameSource, tracker) -> None:
     tracker.step(frame.images, 0.0)
     compile_loops = getattr(tracker, "compile_loops", None)  # (a test's stand-in tracker may lack it)
     if compile_loops is not None:
-        compile_loops(frame.images)  # numba's first compilation, seconds without its disk cache
+        # numba's first compilation: seconds without its disk cache (10 s on a busy machine), so
+        # the game is told that the start goes on, lest it take the process for hung
+        progress("compiling the tracker's loops")
+        compile_loops(frame.images)
     tracker.reset()
     source.handle(Reidentify())  # a motion starts again from its reference pose
 
