@@ -146,6 +146,11 @@ class TrackerParams:
             neither size nor roundness tells a partly hidden ball, and the fit leaves a whole
             ball's centre where its centroid is (0.168 px RMS either way on the 5661 whole views
             of trunk_lean_compensation at 320x240).
+        arc_subpixel: fit those arcs a second time on edges placed by the pixels' coverage
+            (``colours`` of :func:`~tracking.blobs.arc_centres`): a binary region reaches into a
+            dark background and stops short of a bright one, which moved the centres of partly
+            hidden balls 0.2-0.4 px (docs/TRACKING.md, "Partly hidden balls: edges placed by
+            coverage"). False: the binary fit alone.
     """
 
     base_sigma_m: float = 0.008
@@ -173,6 +178,7 @@ class TrackerParams:
     arc_fit_ratio: float = 0.95
     arc_fit_roundness: float = 0.9
     arc_fit_all_below_px: float = 4.0
+    arc_subpixel: bool = True
 
     def full_view(self, ratio: np.ndarray) -> np.ndarray:
         """Views whose blob radius over the ball's projected radius (``ratio``) shows the whole
@@ -240,16 +246,20 @@ class _ArcRegions:
                       np.zeros((1, 2)), np.array([[w - 1.0, h - 1.0]]), origin[None, :], np.array([marker]),
                       np.array([camera]), np.array([prior_sigma_px]))
 
-    def fit(self, compiled: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def fit(self, compiled: bool = False, images: Sequence[np.ndarray] | None = None
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(K,) markers, (K,) cameras and (K, 2) fitted centres in full-image pixels (``compiled``:
-        see :func:`~tracking.blobs.arc_centres`)."""
+        see :func:`~tracking.blobs.arc_centres`; ``images``: the frame set's images, for the
+        sub-pixel fit on the pixels' coverage, ``colours`` there)."""
         if len(self._parts) == 1:
             cols = self._parts[0]
         else:
             cols = [np.concatenate(parts) for parts in zip(*self._parts)]
         region, x, y, start, prior, radius, lo, hi, origin, marker, camera, prior_sigma = cols
+        colours = None if images is None else (images, camera, origin)
         return marker, camera, origin + arc_centres(region, x, y, start, radius, lo, hi, prior_px=prior,
-                                                    prior_sigma_px=prior_sigma, compiled=compiled)
+                                                    prior_sigma_px=prior_sigma, compiled=compiled,
+                                                    colours=colours)
 
 
 class Tracker:
@@ -344,7 +354,7 @@ class Tracker:
         arcs.add_many(region, np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]), np.zeros((1, 2)), np.zeros((1, 2)),
                       np.array([1.0]), np.zeros((1, 2)), np.full((1, 2), 4.0), np.zeros((1, 2)), np.zeros(1, int),
                       np.zeros(1, int), np.ones(1))
-        arcs.fit(compiled=True)
+        arcs.fit(compiled=True, images=images if self.params.arc_subpixel else None)
 
     def reidentify(self) -> None:
         """Identify the markers again from the next frame (the patient takes the reference pose)."""
@@ -689,7 +699,7 @@ class Tracker:
                     arcs.add_region(win_labels == self._label[m], blobs.uv_px[j], uv[m, c], (x0k, y0k), edge_r[k], m, c,
                                     float(sigma_px[m, c]))
         if arcs.count:
-            m_idx, c_idx, uv_fit = arcs.fit(self.compiled)
+            m_idx, c_idx, uv_fit = arcs.fit(self.compiled, images if params.arc_subpixel else None)
             uv_out[m_idx, c_idx] = uv_fit
 
     def _choose(self, obs, pred, sigma, known):

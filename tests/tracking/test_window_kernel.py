@@ -252,7 +252,8 @@ def test_compile_loops_compiles_every_loop_for_the_frames_types():
         frames = [sf.frames for _, sf in zip(range(4), studio.play(motion, 15.0, seconds=1.0))]
         tracker.compile_loops(frames[0].images)
         loops = [jit.compile_loop(f) for f in (window_kernel._window_moments, window_kernel._crowded_window,
-                                              triangulation._triangulate_loop, blobs._arc_gauss_newton)]
+                                              triangulation._triangulate_loop, blobs._arc_gauss_newton,
+                                              blobs._subpixel_share_loop, blobs._arc_starts_loop)]
         before = [len(loop.signatures) for loop in loops]
         assert all(n >= 1 for n in before)
         for f in frames:
