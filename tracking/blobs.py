@@ -78,7 +78,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from tracking.jit import compile_loop
+from tracking.jit import compile_loop, plain_images
 
 DEFAULT_MIN_AREA_PX = 12
 """Fewer pixels than a disc of radius 2 px: noise (e.g. deep-shadow dark skin), not a marker."""
@@ -521,12 +521,6 @@ def _arc_loop():
     return compile_loop(_arc_gauss_newton)
 
 
-def _plain_images(images) -> bool:
-    """Every image a C-contiguous (H, W, 3) uint8 array (what the compiled loop reads)."""
-    return all(img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 and img.flags.c_contiguous
-               for img in images)
-
-
 def _subpixel_edges(xy: np.ndarray, pixel: np.ndarray, direction: np.ndarray, region: np.ndarray,
                     inner_inside: np.ndarray, colours, compiled: bool = False) -> np.ndarray:
     """Edge points of :func:`arc_centres` placed by the pixels' coverage instead of halfway.
@@ -557,7 +551,7 @@ def _subpixel_edges(xy: np.ndarray, pixel: np.ndarray, direction: np.ndarray, re
     share = np.full(pixel.size, 0.5)
     at = xy[:, pixel].astype(np.intp) + np.asarray(origin, dtype=np.intp)[region].T  # (2, E) full-image pixel
     cam = np.asarray(camera)[region]
-    loop = _subpixel_loop() if compiled and _plain_images(images) else None
+    loop = _subpixel_loop() if compiled and plain_images(images) else None
     if loop is not None:
         loop(tuple(images), cam.astype(np.int64), at[0].astype(np.int64), at[1].astype(np.int64),
              step[0].astype(np.int64), step[1].astype(np.int64), inner_inside.astype(np.int64),

@@ -13,6 +13,8 @@ import importlib.util
 import logging
 from typing import Callable
 
+import numpy as np
+
 logger = logging.getLogger(__name__)
 
 INSTALLED = importlib.util.find_spec("numba") is not None
@@ -49,3 +51,10 @@ def compile_loop(fn: Callable, helpers: tuple[Callable, ...] = ()) -> Callable |
                 _warned = True
     _compiled[fn] = result
     return result
+
+
+def plain_images(images) -> bool:
+    """Every image a C-contiguous (H, W, 3) uint8 array: the one layout the compiled loops that
+    read images take (one compiled variant for all)."""
+    return all(img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3 and img.flags.c_contiguous
+               for img in images)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracking.blobs import binary_roundness
-from tracking.jit import INSTALLED, compile_loop
+from tracking.jit import INSTALLED, compile_loop, plain_images
 
 AVAILABLE = INSTALLED
 """numba is installed (numba is a dependency; the numpy path keeps the tracker working without it)."""
@@ -86,8 +86,7 @@ def _kernel():
 def usable(images) -> bool:
     """Whether :func:`window_moments` can read these images: numba present, and every image a
     C-contiguous (H, W, 3) uint8 array (one compiled variant for all)."""
-    return AVAILABLE and all(img.dtype == np.uint8 and img.ndim == 3 and img.shape[2] == 3
-                             and img.flags.c_contiguous for img in images) and _kernel() is not None
+    return AVAILABLE and plain_images(images) and _kernel() is not None
 
 
 def window_moments(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, label: np.ndarray,
