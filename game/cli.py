@@ -392,14 +392,12 @@ def _cmd_bench(args) -> int:
     if args.skip_live:
         return 0
     seconds = 2.0 if args.quick else args.seconds
-    _bench_live(seconds)
-    return 0
+    return 0 if _bench_live(seconds) else 1
 
 
-def _bench_live(seconds: float) -> None:
-    """The tracker process (latency, pace) and the application (frame rate) with it running."""
-    from game.app import Settings
-    from game.play import PlayOptions, run_play
+def _bench_live(seconds: float) -> bool:
+    """The tracker process (latency, pace) and the application (frame rate) with it running;
+    False when the application could not be measured."""
     from tracking.live.bench import format_result, measure_latency
 
     print("\nTracker process (simulated patient, 30 frame sets/s): frame ready -> sample seen by the game "
@@ -417,10 +415,47 @@ def _bench_live(seconds: float) -> None:
     where = "in a window" if window else "headless EGL"
     print(f"\nApplication (live avatar scene, 1280x720, {where}, uncapped) while the tracker process "
           "measures the simulated patient at 320x240, 30 frame sets/s:", flush=True)
-    summary = run_play(PlayOptions(settings=Settings(window_px=(1280, 720), max_fps=0.0, show_fps=False),
-                                   headless=not window, seconds=seconds, scene="live", motion="shoulder_abduction"))
+    try:
+        summary = bench_app(seconds, window)
+    except RehabError as exc:
+        print(f"  not measured: {exc}", flush=True)
+        return False
     print(f"  {summary.line()}", flush=True)
     print(f"  target 60 frames/s: {'met' if summary.fps >= 60.0 else 'NOT met'} on this machine", flush=True)
+    return True
+
+
+def bench_app(seconds: float, window: bool):
+    """The application's frame rate (a :class:`game.app.RunSummary`), measured in a process of its own.
+
+    A fresh process, as the application runs: the figures before it render the simulated cameras
+    on EGL contexts in this process, and once a thread has made an EGL context current, GLX
+    refuses it the window's context (X error BadAccess on X_GLXMakeCurrent, which ends the process).
+
+    Raises:
+        RehabError: the application could not run (its one-line reason).
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        try:
+            return pool.submit(_app_figure, seconds, window).result()
+        except BrokenProcessPool:
+            raise RehabError("the application's process ended abruptly (see the messages above)") from None
+        except Exception as exc:  # NoDisplayError, GraphicsUnavailable, RehabError from the child
+            raise RehabError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+
+
+def _app_figure(seconds: float, window: bool):
+    """:func:`bench_app`'s child: the live avatar scene uncapped for ``seconds``."""
+    from game.app import Settings
+    from game.play import PlayOptions, run_play
+
+    return run_play(PlayOptions(settings=Settings(window_px=(1280, 720), max_fps=0.0, show_fps=False),
+                                headless=not window, seconds=seconds, scene="live", motion="shoulder_abduction",
+                                wait_for_tracker=True))
 
 
 # --------------------------------------------------------------------------- main

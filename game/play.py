@@ -60,6 +60,8 @@ class PlayOptions:
             shows, named cam1, cam2, ...; () : the simulated studio's.
         calibration_board: the board held up in the calibration scene (a Checkerboard or
             CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
+        wait_for_tracker: the run's ``seconds`` begin once the tracker is ready, in a window too
+            (headless runs always wait; ``rehab bench`` measures the window with the avatar moving).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -82,6 +84,7 @@ class PlayOptions:
     calibration_path: Path | None = None
     calibrate_devices: tuple[str, ...] = ()
     calibration_board: object = None
+    wait_for_tracker: bool = False
 
 
 def make_avatar(ctx, marker_names):
@@ -231,7 +234,7 @@ def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_cou
     app = None
     try:
         link.start()
-        if options.headless:
+        if options.headless or options.wait_for_tracker:
             # Offscreen there is nobody to watch "Starting...": the run's seconds begin with the tracker.
             if not link.wait_ready(options.start_timeout_s):
                 raise RehabError(link.error or "the tracker did not start")
