@@ -23,11 +23,20 @@ Numerical conventions (documented choices where the spec leaves room):
   size of what it was made from (coincident markers, a projection of a vector onto the plane
   normal to it). Lengths may be in any unit.
 - In the planar angles (flexion, abduction, horizontal flexion) a unit-vector component smaller
-  than ``_REL_EPS`` is rounding noise and is taken as exactly 0. So an arm pointing exactly along
-  the plane's normal reads 0 (arm straight sideways: flexion 0; straight forward: abduction 0),
-  and an arm straight up reads +180, not -180 or a random angle. Near the normal these angles are
-  ill-conditioned by nature (the spec gates only horizontal flexion, by elevation).
-- Every signed angle is wrapped into (-180, 180], and -0 is written as 0.
+  than ``_REL_EPS`` is rounding noise and is taken as exactly 0, so an arm straight up reads
+  +180, not -180 or a random angle.
+- Near its plane's normal a planar angle is ill-conditioned by nature: every value occurs within
+  a few degrees of the normal, and a reading would jump by up to 360 degrees between two frames.
+  It is withheld (NaN) there, as the spec withholds horizontal flexion below 45 degrees of
+  elevation: flexion while the upper arm is within ``MIN_FROM_PLANE_NORMAL_DEG`` of pointing
+  sideways, abduction within it of pointing forward or backward, horizontal flexion within 45
+  degrees of vertical, up as well as down. (The spec's canonical "straight sideways: flexion 0"
+  and "straight forward: abduction 0" read empty.)
+- Flexion and abduction are continued past 180 rather than wrapped to -180: they are read in
+  ``(PLANAR_FROM_DEG, PLANAR_FROM_DEG + 360]`` = (-135, 225], so an arm raised overhead and a
+  little behind the trunk (e.g. leaning forward) reads 185, not -175. The cut lies where the
+  arm's projection points 45 degrees behind (across) the vertical, beyond every normal range.
+- Every other signed angle is wrapped into (-180, 180], and -0 is written as 0.
 """
 
 from __future__ import annotations
@@ -77,8 +86,19 @@ AXIS_ANGLES: dict[str, str] = {
 
 #: Horizontal flexion is undefined (NaN) below this shoulder elevation (degrees).
 MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 45.0
+#: ... and above this one (the arm within 45 degrees of straight up: as ill-conditioned as down).
+MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 135.0
 #: Shoulder external rotation is undefined (NaN) below this elbow flexion (degrees).
 MIN_ELBOW_FLEXION_FOR_ROTATION_DEG = 30.0
+#: Flexion (abduction) is undefined (NaN) while the upper arm is within this angle (degrees) of the
+#: normal of its plane: pointing sideways (forward or backward). A direction error of the upper
+#: arm is multiplied by 1 / sin(angle from the normal) in the planar angle: 3.9x at 15 degrees,
+#: which keeps the ~0.5 degree direction noise of the tracked arm within the 2 degrees of the
+#: angles' accuracy target.
+MIN_FROM_PLANE_NORMAL_DEG = 15.0
+#: Flexion and abduction are read in (PLANAR_FROM_DEG, PLANAR_FROM_DEG + 360] (see above).
+PLANAR_FROM_DEG = -135.0
+_COS_FROM_NORMAL = math.cos(math.radians(MIN_FROM_PLANE_NORMAL_DEG))
 
 # Relative size under which a vector or a unit-vector component is rounding noise (float64 has
 # ~1e-16 relative precision; real marker noise is many orders above 1e-9).
@@ -127,8 +147,10 @@ def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.nd
     Returns:
         A dict with the keys of :data:`ANGLE_COLUMNS`, in that order, each a float64 array of
         shape ``positions.shape[:-2]`` (0-d for one frame) in degrees. NaN where undefined:
-        a marker it needs is missing or NaN, a vector is degenerate, horizontal flexion below
-        45 degrees of elevation, external rotation below 30 degrees of elbow flexion.
+        a marker it needs is missing or NaN, a vector is degenerate, flexion (abduction) with
+        the upper arm within 15 degrees of pointing sideways (forward or backward), horizontal
+        flexion below 45 or above 135 degrees of elevation, external rotation below 30 degrees
+        of elbow flexion.
     """
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim < 2 or p.shape[-1] != 3 or p.shape[-2] != len(names):
@@ -190,12 +212,15 @@ def _arm_angles(
     # Supination: wrist axis about the forearm, relative to the epicondyle axis; 0 = thumb up.
     supination = wrap180(90.0 + _signed_angle(_reject(e2 - e1, f), _reject(w2 - w1, f), sign * f))
 
+    flexion = _continued(_planar_deg(u, down, forward))
+    abduction = _continued(_planar_deg(u, down, outward))
     return {
-        "shoulder_flexion": _planar_deg(u, down, forward),
-        "shoulder_abduction": _planar_deg(u, down, outward),
+        "shoulder_flexion": np.where(np.abs(_dot(u, outward)) > _COS_FROM_NORMAL, np.nan, flexion),
+        "shoulder_abduction": np.where(np.abs(_dot(u, forward)) > _COS_FROM_NORMAL, np.nan, abduction),
         "shoulder_elevation": elevation,
         "shoulder_horizontal_flexion": np.where(
-            elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG, horizontal, np.nan
+            (elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG)
+            & (elevation <= MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG), horizontal, np.nan
         ),
         "shoulder_external_rotation": np.where(
             elbow_flexion >= MIN_ELBOW_FLEXION_FOR_ROTATION_DEG, external, np.nan
@@ -203,6 +228,11 @@ def _arm_angles(
         "elbow_flexion": elbow_flexion,
         "forearm_supination": supination,
     }
+
+
+def _continued(angle_deg: np.ndarray) -> np.ndarray:
+    """A (-180, 180] planar angle read in (PLANAR_FROM_DEG, PLANAR_FROM_DEG + 360]."""
+    return np.where(angle_deg <= PLANAR_FROM_DEG, angle_deg + 360.0, angle_deg)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -301,11 +331,14 @@ def _frame_angles(p: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
         external = _f_signed_angle(_f_reject(forward, u), _f_reject(f, u), _f_scale(sign, u))
         supination = _f_wrap180(90.0 + _f_signed_angle(_f_reject(_f_sub(e2, e1), f), _f_reject(_f_sub(w2, w1), f),
                                                        _f_scale(sign, f)))
-        out[f"{side}_shoulder_flexion"] = _f_planar_deg(u, down, forward)
-        out[f"{side}_shoulder_abduction"] = _f_planar_deg(u, down, outward)
+        flexion = _f_continued(_f_planar_deg(u, down, forward))
+        abduction = _f_continued(_f_planar_deg(u, down, outward))
+        out[f"{side}_shoulder_flexion"] = math.nan if abs(_f_dot(u, outward)) > _COS_FROM_NORMAL else flexion
+        out[f"{side}_shoulder_abduction"] = math.nan if abs(_f_dot(u, forward)) > _COS_FROM_NORMAL else abduction
         out[f"{side}_shoulder_elevation"] = elevation
         out[f"{side}_shoulder_horizontal_flexion"] = (
-            horizontal if elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG else math.nan)
+            horizontal if MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG <= elevation
+            <= MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG else math.nan)
         out[f"{side}_shoulder_external_rotation"] = (
             external if elbow_flexion >= MIN_ELBOW_FLEXION_FOR_ROTATION_DEG else math.nan)
         out[f"{side}_elbow_flexion"] = elbow_flexion
@@ -353,6 +386,10 @@ def _f_reject(v, axis):
 
 def _f_wrap180(a: float) -> float:
     return (180.0 - (180.0 - a) % 360.0) + 0.0
+
+
+def _f_continued(a: float) -> float:
+    return a + 360.0 if a <= PLANAR_FROM_DEG else a
 
 
 def _f_angle_between(a, b) -> float:
