@@ -485,10 +485,16 @@ class RomTestScene(BaseScene):
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT
-            return f"Get into the start position: {p.message.split('(')[-1].rstrip(')')}", theme.ATTENTION
+            return f"Get into the start position: {'; '.join(p.start_problems)}", theme.ATTENTION
         if p.state == RomState.RECORDING:
             return "Move as far as you can, then come back.", theme.ACCENT
         return p.message[:1].upper() + p.message[1:], theme.ATTENTION
+
+    def status_lines(self, c, width: float) -> tuple[list[str], int, tuple]:
+        """The status line wrapped to ``width`` (at most 3 lines), its text size and colour."""
+        text, colour = self.status_line()
+        size = round(theme.BODY * self.scale)
+        return c.wrap(text, size, width)[:3], size, colour
 
     def render_2d(self, frame: Frame) -> None:
         self.consume()
@@ -503,9 +509,8 @@ class RomTestScene(BaseScene):
         self._draw_steps(c, x, y, width)
         y += 48 * s
         y = self._draw_readout(c, x, y, right)
-        text, colour = self.status_line()
-        size = round(theme.BODY * s)
-        for line in c.wrap(text, size, width)[:3]:
+        lines, size, colour = self.status_lines(c, width)
+        for line in lines:
             c.text(line, (x, y), size, colour)
             y += 34 * s
         y += 6 * s
