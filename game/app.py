@@ -270,6 +270,7 @@ class App:
         self._last_frame_s = clock()
         self._work_total_s = 0.0
         self._pending = False  # a frame drawn and flushed but not presented yet
+        self._loading = ""     # words shown while a scene is being opened (:meth:`open`)
 
     # ------------------------------------------------------------------ scenes
     @property
@@ -296,6 +297,25 @@ class App:
 
     def quit(self) -> None:
         self.running = False
+
+    def open(self, make: Callable[[], "BaseScene"], words: str = "Opening...", *, replace: bool = False) -> None:
+        """Push the scene ``make()`` builds (``replace``: in place of the top scene), showing
+        ``words`` over the current scene while it is built: a scene may take seconds to open (a
+        database read, plots, cameras), and a screen that sits unchanged looks broken."""
+        self.present()
+        if self.scene is not None:
+            self._loading = words
+            try:
+                self.render(self.scene)
+            finally:
+                self._loading = ""
+            self.screen.flush()
+            self.screen.present()
+        scene = make()
+        if replace:
+            self.replace(scene)
+        else:
+            self.push(scene)
 
     # ------------------------------------------------------------------ input
     def dispatch(self, event: InputEvent) -> None:
@@ -362,9 +382,21 @@ class App:
         scene.render_3d(frame)
         self.canvas.begin()
         scene.render_2d(frame)
+        if self._loading:
+            self._draw_loading(self._loading)
         if self.show_fps:
             self._draw_fps()
         self.canvas.end()
+
+    def _draw_loading(self, words: str) -> None:
+        w, h = self.screen.size_px
+        s = min(w / 1280.0, h / 720.0)
+        self.canvas.rect((0, 0, w, h), (0, 0, 0, 110))
+        size = round(theme.MEDIUM * s)
+        tw, th = self.canvas.measure(words, size)
+        box = (w / 2 - tw / 2 - 40 * s, h / 2 - th / 2 - 26 * s, tw + 80 * s, th + 52 * s)
+        self.canvas.rect(box, theme.PANEL, radius=theme.RADIUS * s, border=3 * s, border_colour=theme.ACCENT)
+        self.canvas.text(words, (w / 2, h / 2), size, theme.TEXT, anchor="center")
 
     def _draw_fps(self) -> None:
         fps = self.rate.fps

@@ -341,7 +341,8 @@ def _cmd_play(args) -> int:
     from game.cli_calibrate import board_from_spec
 
     options = PlayOptions(
-        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
+        # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False),
         source=source,
         headless=args.headless,
         seconds=seconds,

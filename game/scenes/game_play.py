@@ -491,7 +491,8 @@ class GameScene(BaseScene):
         x = self.panel_x + 30 * s
         right = w - theme.MARGIN * s
         y = theme.MARGIN * s
-        c.text(self.spec.title, (x, y), round(theme.MEDIUM * s), theme.TEXT)
+        title, title_size = c.fit(self.spec.title, round(theme.MEDIUM * s), right - x)
+        c.text(title, (x, y), title_size, theme.TEXT)
         y += 48 * s
         c.text(f"Patient {self.patient_id}, {self.side} arm" + ("   (demo: plays by itself)" if self.auto else ""),
                (x, y), round(theme.SMALL * 0.85 * s), theme.TEXT_DIM)
@@ -525,8 +526,9 @@ class GameScene(BaseScene):
         for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
             c.text(line, (x, y), size, theme.TEXT_DIM)
             y += 30 * s
-        c.text("Esc: end and save   Q/E: turn forearm   M: demo on/off", (x, h - 20 * s), round(theme.SMALL * 0.75 * s),
-               theme.TEXT_FAINT, anchor="bottomleft")
+        keys, keys_size = c.fit("Mouse: move the arm   Q/E: turn forearm   M: demo on/off   Esc: end and save",
+                                round(theme.SMALL * 0.75 * s), right - x)
+        c.text(keys, (x, h - 20 * s), keys_size, theme.TEXT_FAINT, anchor="bottomleft")
 
     def _draw_gauge(self, c, x: float, y: float, right: float) -> float:
         """The rotation range as a half dial: the measured range, the target, the arm now."""
@@ -552,13 +554,16 @@ class GameScene(BaseScene):
                 c.circle(at(t.target.value_deg + dv, r), 9 * s, (*sess.spec.colour, 235))
         v = sess.value_now()
         if math.isfinite(v):
+            needle = min(max(v, lo), hi)   # beyond the dial's ends it would point down, over the text below
             for k in range(1, 9):
-                c.circle(at(v, r * k / 9), 5 * s, theme.TEXT)
-            c.circle(at(v, r), 12 * s, GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
+                c.circle(at(needle, r * k / 9), 5 * s, theme.TEXT)
+            c.circle(at(needle, r), 12 * s,
+                     GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
             c.text(f"{round(v):d}\N{DEGREE SIGN}", (cx, cy + 6 * s), round(theme.BODY * s), theme.TEXT, anchor="midtop")
         words = ("in", "out") if sess.spec.kind == "rotation" else ("palm down", "palm up")
-        c.text(words[0], at(lo, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
-        c.text(words[1], at(hi, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
+        for v_end, word in ((lo, words[0]), (hi, words[1])):   # under the dial's ends, clear of its dots
+            ex, ey = at(v_end, r)
+            c.text(word, (ex, max(ey, cy) + 14 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="midtop")
         return cy + 50 * s
 
     def _draw_banner(self, c) -> None:

@@ -408,7 +408,8 @@ class LiveScene(BaseScene):
         else:
             title = "Live"
             mode = "From the cameras" if self.source_kind == "cameras" else "From a recording"
-        c.text(title, (x, y), round(theme.LARGE * s), theme.TEXT)
+        title, title_size = c.fit(title, round(theme.LARGE * s), right - x)
+        c.text(title, (x, y), title_size, theme.TEXT)
         y += 58 * s
         c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
@@ -451,8 +452,9 @@ class LiveScene(BaseScene):
             x += w + 44 * s
         error_mm = truth_error_mm(sample.positions_m, sample.truth_m, status)
         if math.isfinite(error_mm):
-            c.text(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
-                   (pos[0], pos[1] + 34 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT)
+            text, size = c.fit(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
+                               round(theme.SMALL * 0.8 * s), right - pos[0])
+            c.text(text, (pos[0], pos[1] + 34 * s), size, theme.TEXT_FAINT)
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""

@@ -106,7 +106,8 @@ def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, in
             if r.game == game:
                 reps[order[r.session_uid]] += r.repetitions
         xs = sorted(reps)
-        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width, label=game,
+        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width,
+                label=game.replace("_", " "),
                 color=palette[k % len(palette)])
     minutes: dict[int, float] = defaultdict(float)
     for r in rows:
@@ -119,11 +120,22 @@ def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, in
         ax.set_xticklabels([f"#{x}" for x in xs])
         ax.set_title(label, color=_TEXT, fontsize=13, loc="left")
         ax.grid(True, axis="y", color=_GRID)
-    legend = ax1.legend(fontsize=11, facecolor=_BG, edgecolor=_GRID)
+    # the legend right of both plots: inside one it covered the bars
+    handles, labels = ax1.get_legend_handles_labels()
+    legend = fig.legend(handles, labels, fontsize=11, loc="center right", facecolor=_BG, edgecolor=_GRID)
     for text in legend.get_texts():
         text.set_color(_TEXT)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, _legend_share(fig, legend), 1.0))
     return _figure_rgb(fig)
+
+
+def _legend_share(fig, legend) -> float:
+    """The share of the figure's width left of a legend placed at its right edge."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    width = legend.get_window_extent(renderer).width
+    return max(0.5, 1.0 - (width + 8.0) / (fig.get_figwidth() * fig.dpi))
 
 
 @dataclass(frozen=True, slots=True)
@@ -173,6 +185,9 @@ class ProgressScene(BaseScene):
     def enter(self, app) -> None:
         super().enter(app)
         self.load()
+        if not self.error:   # the first plots now, while "Opening ..." is on the screen (matplotlib takes seconds)
+            _, _, plot, games = self._layout()
+            self._ensure_plots(plot, games)
 
     def load(self) -> None:
         from game.db import Database
@@ -205,7 +220,9 @@ class ProgressScene(BaseScene):
         m = theme.MARGIN * s
         list_w = 330 * s
         top = 120 * s
-        rows = [(m, top + i * 58 * s, list_w, 50 * s) for i in range(len(self.tests))]
+        # every test's row fits above the key line at the bottom
+        pitch = min(58 * s, (h - 60 * s - top) / max(len(self.tests), 1))
+        rows = [(m, top + i * pitch, list_w, pitch - 8 * s) for i in range(len(self.tests))]
         plot_x = m + list_w + 24 * s
         plot = (plot_x, top, w - plot_x - m, (h - top - 60 * s) * 0.66)
         games = (plot_x, plot[1] + plot[3] + 14 * s, plot[2], h - 60 * s - plot[1] - plot[3] - 14 * s)
@@ -264,6 +281,29 @@ class ProgressScene(BaseScene):
         return "  ".join(parts)
 
     # ------------------------------------------------------------------ drawing
+    def row_texts(self, c, rect: tuple, test: str) -> list[tuple[str, int, tuple[float, float], str]]:
+        """A test's row of the list: (text, size, position, anchor) of its title, made to fit
+        beside the latest values (on two lines when long), and of the values."""
+        s = min(self.app.screen.size_px[0] / 1280.0, self.app.screen.size_px[1] / 720.0)
+        size = round(theme.SMALL * s)
+        values = self.latest_words(test)
+        values_w = c.measure(values, size)[0]
+        room = rect[2] - 16 * s - 14 * s - values_w - 14 * s
+        mid = rect[1] + rect[3] / 2
+        out = [(values, size, (rect[0] + rect[2] - 14 * s, mid), "midright")]
+        title = self.infos[test].title
+        if c.measure(title, size)[0] <= room:
+            return [(title, size, (rect[0] + 16 * s, mid), "midleft")] + out
+        # a long title: two lines, a little smaller (cut with an ellipsis only beyond that)
+        small = round(size * 0.85)
+        lines = c.wrap(title, small, room)
+        if len(lines) > 2:
+            lines = [lines[0], c.fit(" ".join(lines[1:]), small, room, min_size=small)[0]]
+        lines = [c.fit(line, small, room, min_size=small)[0] for line in lines]
+        step = c.measure("Ag", small)[1] * 0.95
+        top = mid - step * (len(lines) - 1) / 2
+        return [(line, small, (rect[0] + 16 * s, top + k * step), "midleft") for k, line in enumerate(lines)] + out
+
     def render_2d(self, frame: Frame) -> None:
         c = frame.canvas
         w, h = frame.size_px
@@ -283,10 +323,9 @@ class ProgressScene(BaseScene):
             chosen = i == self.selected
             if chosen:
                 c.rect(rect, (*theme.ACCENT_DARK, 255), radius=12 * s, border=3 * s, border_colour=theme.ACCENT)
-            c.text(self.infos[test].title, (rect[0] + 16 * s, rect[1] + rect[3] / 2), round(theme.SMALL * s),
-                   theme.TEXT if chosen else theme.TEXT_DIM, anchor="midleft")
-            c.text(self.latest_words(test), (rect[0] + rect[2] - 14 * s, rect[1] + rect[3] / 2),
-                   round(theme.SMALL * s), theme.TEXT if chosen else theme.TEXT_DIM, anchor="midright")
+            colour = theme.TEXT if chosen else theme.TEXT_DIM
+            for text, size, pos, anchor in self.row_texts(c, rect, test):
+                c.text(text, pos, size, colour, anchor=anchor)
         self._ensure_plots(plot, games)
         if self.tests:
             c.texture(self._textures["rom"], plot)

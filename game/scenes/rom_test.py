@@ -502,9 +502,11 @@ class RomTestScene(BaseScene):
         x, right, bottom = self._panel()
         width = right - x
         y = theme.MARGIN * s
-        c.text(f"{self.test.title}, {self.side}", (x, y), round(theme.MEDIUM * s), theme.TEXT)
-        c.text(f"Patient {self.visit.patient_id}", (right, y + 6 * s), round(theme.SMALL * s), theme.TEXT_DIM,
-               anchor="topright")
+        patient = f"Patient {self.visit.patient_id}"
+        patient_w = c.measure(patient, round(theme.SMALL * s))[0]
+        title, title_size = c.fit(f"{self.test.title}, {self.side}", round(theme.MEDIUM * s), width - patient_w - 24 * s)
+        c.text(title, (x, y), title_size, theme.TEXT)
+        c.text(patient, (right, y + 6 * s), round(theme.SMALL * s), theme.TEXT_DIM, anchor="topright")
         y += 50 * s
         self._draw_steps(c, x, y, width)
         y += 48 * s

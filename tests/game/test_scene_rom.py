@@ -144,9 +144,11 @@ def test_patient_picker_lists_ids_adds_a_new_one_and_opens_the_next_scene(screen
     picker = PatientsScene(db_path, Next, title="ROM test: choose the patient")
     app.push(picker)
     assert picker.entries == [NEW_PATIENT, "P001"]
-    app.dispatch(Press(Action.DOWN))
+    assert picker.selected == 1                            # the patient, not "New patient": Enter adds none
     app.dispatch(Press(Action.SELECT))
     assert opened == ["P001"] and isinstance(app.scene, Next)
+    with Database(db_path) as db:
+        assert [p.id for p in db.patients()] == ["P001"]
     # new patient: the next ID is added to the database and chosen (mouse click on the first row)
     picker = PatientsScene(db_path, Next, title="again")
     app.push(picker)
