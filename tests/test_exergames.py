@@ -314,6 +314,51 @@ def test_the_log_is_stored_and_read_back(tmp_path):
     assert details["limits"]["positive_deg"] == 70.0
 
 
+def test_a_stored_session_spans_its_duration_and_the_demo_is_logged_apart(tmp_path):
+    """The session's ended_utc is its duration after started_utc (they were equal); the demo's
+    play time and the targets it collected are logged, and a session the demo played from start
+    to end is stored with the source "demo"."""
+    from datetime import datetime
+
+    spec = load_game("turn_key")
+    path = tmp_path / "db.sqlite3"
+    with Database(path) as db:
+        db.add_patient("P001")
+    rest = elbow_at_side_hand_m(frame(), 0.0)
+    for demo_from in (2, 0):               # the patient plays, M hands over to the demo after 2 targets; the demo alone
+        s = GameSession(spec, RomLimits(70.0, 60.0), seed=5)
+        t = 0.0
+        for k in range(4):
+            demo = k >= demo_from
+            while s.target is None:        # getting ready, the rest between targets
+                s.update(t, reading(rest), demo=demo)
+                t += DT
+            goal = s.target.target.value_deg
+            n = s.log.reached
+            while s.log.reached == n:
+                s.update(t, reading(elbow_at_side_hand_m(frame(), 0.0), sup=goal), demo=demo)
+                t += DT
+        log = s.finish()
+        store_log(path, "P001", log, source="sim")
+        by_demo = [d["demo"] for d in json.loads(log.details_json())["targets"]]
+        assert by_demo == ([False, False, True, True] if demo_from == 2 else [True] * 4)
+        assert 0.0 < log.demo_s <= log.active_s
+    with Database(path) as db:
+        rows = db.exercise_results("P001")
+        sessions = db.sessions("P001")
+    assert [x.source for x in sessions] == ["sim", "demo"]
+    for row, session in zip(rows, sessions):
+        span = (datetime.fromisoformat(session.ended_utc.rstrip("Z"))
+                - datetime.fromisoformat(session.started_utc.rstrip("Z"))).total_seconds()
+        assert row.duration_s > 5.0 and abs(span - row.duration_s) <= 1.0
+    from game.report import demo_part, score_words
+
+    mixed, alone = demo_part(rows[0]), demo_part(rows[1])
+    assert mixed.repetitions == 2 and mixed.words.startswith("patient + demo")
+    assert alone.repetitions == 4 and alone.words == "demo"
+    assert score_words(rows[0]) == "100 %"
+
+
 def test_play_game_options_are_checked_in_one_line(tmp_path, capsys):
     from game.cli import main
 

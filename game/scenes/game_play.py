@@ -385,7 +385,7 @@ class GameScene(BaseScene):
             if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
                 self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))
             reading, reason = self._read[1]
-        self.session.update(now, reading, reason)
+        self.session.update(now, reading, reason, demo=self.auto)
         for cue in self.session.take_cues():
             self._cue(cue, now)
         if self.river_view is not None:

@@ -13,7 +13,6 @@ uploaded as one texture; the scene's colours match the application's theme.
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -24,7 +23,7 @@ from calibration.errors import RehabError
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.report import HistoryLook, plot_rom_history, session_order
+from game.report import HistoryLook, plot_games, plot_rom_history, session_order
 from game.rom.session import round_to_5
 
 #: Plot colours (sRGB hex) on the application's dark background.
@@ -91,29 +90,15 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
 
 
 def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, int]) -> np.ndarray:
-    """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image."""
+    """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image; what
+    the automatic demo played is stacked on the patient's own, hatched and faded."""
     from matplotlib.figure import Figure
 
     dpi = 100
     fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
     ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    games = sorted({r.game for r in rows})
-    width = 0.8 / max(len(games), 1)
-    palette = ("#5ec8be", "#f2be5c", "#8fb4ff", "#e87068")
-    for k, game in enumerate(games):
-        reps: dict[int, int] = defaultdict(int)
-        for r in rows:
-            if r.game == game:
-                reps[order[r.session_uid]] += r.repetitions
-        xs = sorted(reps)
-        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width,
-                label=game.replace("_", " "),
-                color=palette[k % len(palette)])
-    minutes: dict[int, float] = defaultdict(float)
-    for r in rows:
-        minutes[order[r.session_uid]] += r.duration_s / 60.0
-    xs = sorted(minutes)
-    ax2.bar(xs, [minutes[x] for x in xs], width=0.6, color="#a3aebe")
+    handles = plot_games(ax1, ax2, rows, order, ("#5ec8be", "#f2be5c", "#8fb4ff", "#e87068"), "#a3aebe", _DIM)
+    xs = sorted({order[r.session_uid] for r in rows})
     for ax, label in ((ax1, "repetitions"), (ax2, "minutes played")):
         _style(ax)
         ax.set_xticks(xs)
@@ -121,8 +106,7 @@ def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, in
         ax.set_title(label, color=_TEXT, fontsize=13, loc="left")
         ax.grid(True, axis="y", color=_GRID)
     # the legend right of both plots: inside one it covered the bars
-    handles, labels = ax1.get_legend_handles_labels()
-    legend = fig.legend(handles, labels, fontsize=11, loc="center right", facecolor=_BG, edgecolor=_GRID)
+    legend = fig.legend(handles=handles, fontsize=11, loc="center right", facecolor=_BG, edgecolor=_GRID)
     for text in legend.get_texts():
         text.set_color(_TEXT)
     fig.tight_layout(rect=(0.0, 0.0, _legend_share(fig, legend), 1.0))

@@ -85,7 +85,8 @@ def frame_texts(app: App) -> Recorder:
 
 @pytest.fixture
 def clinic(tmp_path):
-    """A patient with every ROM test on both sides over three sessions, and three games played."""
+    """A patient with every ROM test on both sides over three sessions, and three games played
+    (one by the automatic demo)."""
     db_path = tmp_path / "clinic.sqlite3"
     tests = ("shoulder_flexion", "shoulder_abduction", "elbow_flexion", "shoulder_external_rotation",
              "shoulder_internal_rotation", "forearm_supination", "forearm_pronation", "shoulder_extension",
@@ -104,8 +105,10 @@ def clinic(tmp_path):
                         ended_s=5.0, compensations=(), estimated_markers=(), n_samples=100))
             db.end_session(session)
     for game, reached in (("reach", 12), ("rotation", 7), ("turn_key", 9)):
+        # the key game played by the demo: its bars hatched, "played by the demo" in the legend
         store_log(db_path, "P001", GameLog(game, "right", reached=reached, missed=3, started_s=0.0, ended_s=60.0,
-                                           active_s=55.0, level_start=0.3, level_end=0.4), source="test")
+                                           active_s=55.0, demo_s=55.0 if game == "turn_key" else 0.0,
+                                           level_start=0.3, level_end=0.4), source="test")
     return db_path
 
 
