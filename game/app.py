@@ -311,10 +311,9 @@ class App:
     def quit(self) -> None:
         self.running = False
 
-    def open(self, make: Callable[[], "BaseScene"], words: str = "Opening...", *, replace: bool = False) -> None:
-        """Push the scene ``make()`` builds (``replace``: in place of the top scene), showing
-        ``words`` over the current scene while it is built: a scene may take seconds to open (a
-        database read, plots, cameras), and a screen that sits unchanged looks broken."""
+    def busy(self, words: str, work: Callable[[], object]):
+        """Run ``work()`` (seconds of it: a scene to build, a report to write) with ``words`` shown
+        over the current scene meanwhile; returns what it returns."""
         self.present()
         if self.scene is not None:
             self._loading = words
@@ -324,7 +323,13 @@ class App:
                 self._loading = ""
             self.screen.flush()
             self.screen.present()
-        scene = make()
+        return work()
+
+    def open(self, make: Callable[[], "BaseScene"], words: str = "Opening...", *, replace: bool = False) -> None:
+        """Push the scene ``make()`` builds (``replace``: in place of the top scene), showing
+        ``words`` over the current scene while it is built: a scene may take seconds to open (a
+        database read, plots, cameras), and a screen that sits unchanged looks broken."""
+        scene = self.busy(words, make)
         if replace:
             self.replace(scene)
         else:

@@ -423,7 +423,7 @@ def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
 
 
 def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
-    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit
+    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit, whose
     from game.exergames.spec import TherapistLimits, check_limits, limit_bounds
 
     for name in available_games():
@@ -440,7 +440,7 @@ def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
                     values.append(getattr(lim, key))
             assert None in values and any(v is not None for v in values), (name, key)
             assert all(v is None or lo - 1e-9 <= v <= hi + 1e-9 for v in values)
-            assert "(no limit)" in describe(spec, TherapistLimits(), key)
+            assert whose(TherapistLimits(), key) == "the game's own" and describe(spec, TherapistLimits(), key)
         # one step stricter than the game's own from unset
         rot = load_game("rotation")
         assert step_limit(rot, TherapistLimits(), "min_size", 1).min_size == free_value(rot, "min_size") + 1
@@ -448,6 +448,7 @@ def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
     reach = load_game("reach")
     lim = step_limit(reach, TherapistLimits(), "max_range", -1)
     assert lim.max_range == pytest.approx(1.0) and describe(reach, lim, "max_range") == "100 % of the measured range"
+    assert whose(lim, "max_range") == "set for this patient"
 
 
 def _menu_for(db_path):
@@ -499,7 +500,7 @@ def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_th
 
 
 def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_stays_there(tmp_path):
-    from game.exergames.limits import LIMIT_KEYS, describe, load_limits
+    from game.exergames.limits import LIMIT_KEYS, describe, load_limits, whose
     from game.exergames.spec import TherapistLimits
     from game.input import Action, Press
     from game.scenes.game_play import level_shown
@@ -512,7 +513,7 @@ def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_s
     for _ in range(1 + LIMIT_KEYS.index("min_level")):           # down from Play to the lowest level
         menu.handle(Press(Action.DOWN, True))
     spec0 = menu.game
-    assert "(no limit)" in describe(spec0, menu.limits[spec0.name], "min_level")
+    assert whose(menu.limits[spec0.name], "min_level") == "the game's own"
     for _ in range(4):
         menu.handle(Press(Action.RIGHT, True))                   # level 1 -> level 5
     lim = menu.limits[spec0.name]
@@ -622,3 +623,25 @@ def test_limits_out_of_a_games_bounds_are_one_line_naming_the_key(tmp_path):
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ContentError, match="approach_share"):
         load_game(path)
+
+
+def test_no_sound_card_is_silence_without_messages_on_the_terminal():
+    """Without a sound card the mixer fails once, quietly: ALSA's lines (eight per try, twice for
+    two games) go to the debug log, and a second game does not try again."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "SDL_AUDIODRIVER"}
+    code = ("import logging, sys\n"
+            "logging.basicConfig(level=logging.DEBUG, stream=sys.stdout)\n"
+            "from game.exergames.audio import Sounds\n"
+            "a, b = Sounds(), Sounds()\n"
+            "print('enabled', a.enabled, b.enabled)\n")
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert "ALSA" not in run.stderr and run.stderr.strip() == "", run.stderr
+    enabled = run.stdout.split("enabled ")[-1].split()
+    assert enabled[0] == enabled[1]
+    if enabled[0] == "False":
+        assert run.stdout.count("no sound:") == 1          # tried once

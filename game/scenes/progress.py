@@ -8,7 +8,9 @@ crosses maxima that rested on estimated markers. Below, the games' repetitions a
 session, or "No games yet".
 
 Plots are drawn by matplotlib (Agg, no pyplot state) into an RGB array once per choice and
-uploaded as one texture; the scene's colours match the application's theme.
+uploaded as one texture; the scene's colours match the application's theme. **Export report**
+(the button, or Enter) writes what ``rehab report`` writes (HTML with the plots and the table, CSV
+beside it) into ``reports/`` beside the database, readable by the user only, and says where.
 """
 
 from __future__ import annotations
@@ -130,6 +132,10 @@ class TestInfo:
     normal_deg: float | None
 
 
+def _inside(rect, x: float, y: float) -> bool:
+    return rect[0] <= x < rect[0] + rect[2] and rect[1] <= y < rect[1] + rect[3]
+
+
 def test_info(test: str, standard: str) -> TestInfo:
     """What the content says about a stored test (a test this installation lacks keeps its name)."""
     from game.rom.spec import load_rom_test
@@ -164,6 +170,7 @@ class ProgressScene(BaseScene):
         self.error = ""
         self._textures: dict[str, object] = {}
         self._shown: tuple | None = None
+        self.notice: tuple[str, tuple] = ("", theme.TEXT_DIM)   # what the export did
 
     # ------------------------------------------------------------------ data
     def enter(self, app) -> None:
@@ -212,6 +219,33 @@ class ProgressScene(BaseScene):
         games = (plot_x, plot[1] + plot[3] + 14 * s, plot[2], h - 60 * s - plot[1] - plot[3] - 14 * s)
         return s, rows, plot, games
 
+    def export_rect(self) -> tuple[float, float, float, float]:
+        """The Export report button, top right under the standard's line."""
+        w, h = self.app.screen.size_px
+        s = min(w / 1280.0, h / 720.0)
+        bw, bh = 230 * s, 44 * s
+        return (w - theme.MARGIN * s - bw, 66 * s, bw, bh)
+
+    def export(self) -> Path | None:
+        """Write the report (HTML and CSV) into ``reports/`` beside the database; says where."""
+        from game.db import Database
+        from game.report import write_report
+        from game.db.database import utc_now
+
+        folder = self.db_path.parent / "reports"
+        out = folder / f"{self.patient_id}_{utc_now()[:10]}.html"
+        try:
+            folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+            with Database(self.db_path) as db:
+                html_path, csv_path = write_report(db, self.patient_id, out, standard=self.standard)
+            for path in (html_path, csv_path):   # patient data: readable by the user only
+                path.chmod(0o600)
+        except (RehabError, OSError) as exc:
+            self.notice = (f"Not exported: {exc}", theme.FAILURE)
+            return None
+        self.notice = (f"Exported: {html_path} (and the CSV beside it)", theme.ACCENT)
+        return html_path
+
     def _texture(self, key: str, rgb: np.ndarray):
         old = self._textures.pop(key, None)
         if old is not None:
@@ -246,8 +280,13 @@ class ProgressScene(BaseScene):
                 self.selected = (self.selected - 1) % n
             elif event.action is Action.DOWN and n:
                 self.selected = (self.selected + 1) % n
+            elif event.action is Action.SELECT and not self.error:
+                self.app.busy("Writing the report...", self.export)
             elif event.action is Action.BACK:
                 self.app.pop()
+        elif isinstance(event, Pointer) and event.kind is PointerKind.PRESS and event.button == 1 and not self.error \
+                and _inside(self.export_rect(), event.x * self.app.screen.size_px[0], event.y * self.app.screen.size_px[1]):
+            self.app.busy("Writing the report...", self.export)
         elif isinstance(event, Pointer) and event.kind in (PointerKind.MOVE, PointerKind.PRESS) and n:
             w, h = self.app.screen.size_px
             _, rows, _, _ = self._layout()
@@ -317,5 +356,14 @@ class ProgressScene(BaseScene):
             c.texture(self._textures["games"], games)
         else:
             c.text("No games yet.", (games[0] + 20 * s, games[1] + 20 * s), round(theme.BODY * s), theme.TEXT_DIM)
-        c.text("Up / Down: test   Esc: back   (rehab report writes this as a file)", (w / 2, h - 16 * s),
-               round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")
+        if not self.error:
+            bx, by, bw, bh = self.export_rect()
+            c.rect((bx, by, bw, bh), (*theme.ACCENT_DARK, 255), radius=12 * s, border=2 * s, border_colour=theme.ACCENT)
+            c.text("Export report", (bx + bw / 2, by + bh / 2), round(theme.BODY * s), theme.TEXT, anchor="center")
+        notice, colour = self.notice
+        if notice:
+            text, size = c.fit(notice, round(theme.SMALL * s), w - 2 * m)
+            c.text(text, (w / 2, h - 16 * s), size, colour, anchor="midbottom")
+        else:
+            c.text("Up / Down: test   Enter or the button: export the report (HTML and CSV)   Esc: back",
+                   (w / 2, h - 16 * s), round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")

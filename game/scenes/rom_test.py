@@ -117,6 +117,14 @@ class RomVisit:
             self.session_id = None
 
 
+def range_words(result) -> tuple[str, str]:
+    """The range moved beside the raw maximum, with the start it is counted from: "moved 157° from
+    the start" / "(the start position read -12°)" (a lone "active ROM, from start 157" beside a 145
+    result was not understood)."""
+    return (f"moved {result.range_deg:.0f}\N{DEGREE SIGN} from the start",
+            f"(the start position read {result.start_deg:.0f}\N{DEGREE SIGN})")
+
+
 def reference_line(test: RomTest, standard: str) -> str:
     """The normal value of ``standard`` in words, never another standard's: e.g. ``JARM normal 180``."""
     ref = test.reference(standard)
@@ -561,8 +569,10 @@ class RomTestScene(BaseScene):
         c.text("Maximum", (mx, y), round(theme.SMALL * s), theme.TEXT_DIM)
         if result is not None:
             c.text(f"raw {result.max_deg:.1f}\N{DEGREE SIGN}", (mx, y + 30 * s), round(theme.MEDIUM * s), theme.TEXT)
-            c.text(f"active ROM, from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s),
-                   round(theme.SMALL * s), theme.TEXT_DIM)
+            # the range moved differs from the raw maximum by the start position's own angle: say so
+            for k, line in enumerate(range_words(result)):
+                line, size = c.fit(line, round(theme.SMALL * s), right - mx)
+                c.text(line, (mx, y + (74 + 26 * k) * s), size, theme.TEXT_DIM)
         elif math.isfinite(best):
             # whole degrees while moving (never below "now"); the result is rounded to 5
             c.text(f"{round(best):d}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)

@@ -14,7 +14,7 @@ from game.app import App, BaseScene, Services, Settings
 from game.db import Database
 from game.exergames.session import GameLog, store_log
 from game.exergames.spec import load_game
-from game.rom.session import RomResult
+from game.rom.session import RomResult, RomState
 from game.rom.spec import load_rom_test
 from game.scenes.game_play import GameScene
 from game.scenes.live import LiveScene
@@ -143,6 +143,19 @@ def test_rom_test_long_title_beside_the_patient(open_headless, tmp_path, size):
         assert_text_fits(rec, size)
         assert any("Patient P001" in t for t, _ in rec.texts)
         assert any(t.startswith("Shoulder external rotation") for t, _ in rec.texts)
+        # the result: the raw maximum, the range moved and the start it is counted from
+        link.set_motion("right_external_rotation")
+        for _ in range(600):
+            if scene.state == RomState.DONE:
+                break
+            link.queue(4)
+            app.frame()
+        assert scene.state == RomState.DONE
+        rec = frame_texts(app)
+        assert_text_fits(rec, size)
+        r = scene.session.result
+        assert f"moved {r.range_deg:.0f}\N{DEGREE SIGN} from the start" in [t for t, _ in rec.texts]
+        assert any(t.startswith("(the start position read") for t, _ in rec.texts)
     finally:
         app.close()
 
@@ -189,5 +202,31 @@ def test_key_game_dial_with_the_forearm_turned_past_its_end(open_headless, tmp_p
         rec = frame_texts(app)
         assert scene.session.value_now() > 80.0
         assert_text_fits(rec, size)
+    finally:
+        app.close()
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_game_menu_limits(open_headless, tmp_path, size):
+    """The game menu with its limits in words (the game's own, or set for this patient)."""
+    from game.exergames.limits import LIMIT_KEYS
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+
+    db_path = tmp_path / "c.sqlite3"
+    with Database(db_path) as db:
+        db.add_patient("P001")
+    app = App(open_headless(size), Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: BaseScene(), db_path=db_path)
+    app.push(menu)
+    try:
+        for name in [g.name for g in menu.games]:
+            menu.selected = [g.name for g in menu.games].index(name)
+            menu.handle(Press(Action.SELECT))                 # its column: Play and the limits
+            rec = frame_texts(app)
+            assert_text_fits(rec, size)
+            assert sum("the game's own" in t for t, _ in rec.texts) == len(LIMIT_KEYS)
+            menu.handle(Press(Action.BACK))
     finally:
         app.close()
