@@ -526,9 +526,12 @@ class GameScene(BaseScene):
         for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
             c.text(line, (x, y), size, theme.TEXT_DIM)
             y += 30 * s
-        keys, keys_size = c.fit("Mouse: move the arm   Q/E: turn forearm   M: demo on/off   Esc: end and save",
-                                round(theme.SMALL * 0.75 * s), right - x)
-        c.text(keys, (x, h - 20 * s), keys_size, theme.TEXT_FAINT, anchor="bottomleft")
+        keys_size = round(theme.SMALL * 0.75 * s)   # on two lines where one does not fit (not smaller)
+        lines = c.wrap("Mouse: move the arm   Q/E: turn forearm   M: demo on/off   Esc: end and save", keys_size,
+                       right - x)[:2]
+        for k, line in enumerate(reversed(lines)):
+            c.text(line.strip(), (x, h - 20 * s - k * (keys_size + 6 * s)), keys_size, theme.TEXT_FAINT,
+                   anchor="bottomleft")
 
     def _draw_gauge(self, c, x: float, y: float, right: float) -> float:
         """The rotation range as a half dial: the measured range, the target, the arm now."""
