@@ -23,7 +23,7 @@ from game.scenes.rom_test import RomTestScene, RomVisit
 from tracking.sim.body import ArmPose, reference_pose
 from tracking.sim.motions import available_motions
 
-from test_scene_rom import MotionLink
+from test_scene_rom import MotionLink, db_path  # noqa: F401 - db_path: the fixture (P001, no results)
 from test_scenes_live import BodyLink, Clock
 
 SIZES = [(1280, 720), (1600, 1000)]
@@ -127,10 +127,7 @@ def test_progress_review(open_headless, clinic, size):
 
 
 @pytest.mark.parametrize("size", SIZES)
-def test_rom_test_long_title_beside_the_patient(open_headless, tmp_path, size):
-    db_path = tmp_path / "c.sqlite3"
-    with Database(db_path) as db:
-        db.add_patient("P001")
+def test_rom_test_long_title_beside_the_patient(open_headless, db_path, size):
     link = MotionLink()
     app = App(open_headless(size), Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, sleep=lambda s: None,
               services=Services(link), events=lambda: [])
@@ -181,12 +178,9 @@ def test_live_view_every_motion_title(open_headless, size):
 
 
 @pytest.mark.parametrize("size", SIZES)
-def test_key_game_dial_with_the_forearm_turned_past_its_end(open_headless, tmp_path, size):
+def test_key_game_dial_with_the_forearm_turned_past_its_end(open_headless, db_path, size):
     """The forearm turned 88 degrees (the dial ends at 52): the needle stays on the dial, above
     the instructions."""
-    db_path = tmp_path / "c.sqlite3"
-    with Database(db_path) as db:
-        db.add_patient("P001")
     clock = Clock()
     link = BodyLink(clock)
     link.motion_names = []
@@ -207,15 +201,12 @@ def test_key_game_dial_with_the_forearm_turned_past_its_end(open_headless, tmp_p
 
 
 @pytest.mark.parametrize("size", SIZES)
-def test_game_menu_limits(open_headless, tmp_path, size):
+def test_game_menu_limits(open_headless, db_path, size):
     """The game menu with its limits in words (the game's own, or set for this patient)."""
     from game.exergames.limits import LIMIT_KEYS
     from game.input import Action, Press
     from game.scenes.game_menu import ChooseGameScene
 
-    db_path = tmp_path / "c.sqlite3"
-    with Database(db_path) as db:
-        db.add_patient("P001")
     app = App(open_headless(size), Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
     app.push(BaseScene())
     menu = ChooseGameScene("P001", lambda spec, pid, **kw: BaseScene(), db_path=db_path)
