@@ -3,9 +3,8 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S`` while it uses no CPU
-time; a process still using CPU time is slow on a busy machine, not dead, until
-``BUSY_HEARTBEAT_S``) and replaces it without waiting: a warm standby process (source and tracker already built) takes over, or a new
+that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and replaces it
+without waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
 
@@ -42,12 +41,8 @@ log = logging.getLogger(__name__)
 
 #: Prefix of every shared-memory block of the live tracker.
 BLOCK_PREFIX = "rehab_live_"
-#: A running process whose heartbeat is older than this, and which used no CPU time for as long,
-#: is taken as hung (stopped, deadlocked) and restarted.
+#: A running process whose heartbeat is older than this is taken as hung and restarted.
 STALE_HEARTBEAT_S = 1.0
-#: A process that still uses CPU time is slow, not hung (a busy machine shares its cores): it is
-#: restarted only when its heartbeat is older than this (a loop that spins without beating).
-BUSY_HEARTBEAT_S = 8.0
 #: A starting process has this long to report ready (imports, GL context, rig), or, after it
 #: reports the progress of a long stage (the first compilation of the tracker's loops), this long
 #: again from then.
@@ -99,16 +94,6 @@ def remove_stale_blocks() -> list[str]:
     return removed
 
 
-def _cpu_ticks(pid: int) -> int | None:
-    """User + system CPU time of a process in clock ticks, from /proc (None where unreadable)."""
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as fh:
-            fields = fh.read().rsplit(b")", 1)[1].split()
-        return int(fields[11]) + int(fields[12])   # utime, stime (fields 14 and 15 of proc(5))
-    except (OSError, ValueError, IndexError):
-        return None
-
-
 def _exit_reason(exitcode: int | None) -> str:
     if exitcode is None:
         return "stopped answering (no heartbeat)"
@@ -146,17 +131,6 @@ class _Child:
         self.progress_at = self.started_at  # last sign of a start going on (its start, a progress message)
         self.ready = False  # reported ready (a standby: prepared and waiting)
         self.failed = ""  # why it could not start
-        self.cpu_ticks: int | None = None   # its CPU time when last read (clock ticks; None: unknown)
-        self.cpu_moved_at = math.nan        # when its CPU time last grew
-
-    def cpu_busy(self, now: float, within_s: float) -> bool | None:
-        """Whether the process used CPU time within the last ``within_s`` (None: /proc unreadable)."""
-        ticks = _cpu_ticks(self.pid)
-        if ticks is None:
-            return None
-        if ticks != self.cpu_ticks or not math.isfinite(self.cpu_moved_at):
-            self.cpu_ticks, self.cpu_moved_at = ticks, now
-        return now - self.cpu_moved_at <= within_s
 
     @property
     def pid(self) -> int:
@@ -396,16 +370,8 @@ class LiveTracker:
         alive = child.proc.is_alive()
         if alive and child.ready:
             state = int(self._reader.header["state"])
-            if state not in (ProcessState.RUNNING, ProcessState.PAUSED):
-                return
-            age = self._heartbeat_age_s()
-            if age > STALE_HEARTBEAT_S / 4:   # watch its CPU time from before the heartbeat is stale
-                busy = child.cpu_busy(now, STALE_HEARTBEAT_S)
-                # a slow step on a busy machine still uses CPU time: slow is not dead
-                if age <= STALE_HEARTBEAT_S or (busy and age <= BUSY_HEARTBEAT_S):
-                    return
-            else:
-                child.cpu_moved_at = math.nan   # beating: start afresh next time
+            hung = state in (ProcessState.RUNNING, ProcessState.PAUSED) and self._heartbeat_age_s() > STALE_HEARTBEAT_S
+            if not hung:
                 return
         elif alive and now - child.progress_at < START_TIMEOUT_S:
             return  # still starting
