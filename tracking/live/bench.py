@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from tracking.live.client import LiveTracker
+from tracking.live.client import LiveTracker, process_cpu_s
 from tracking.live.protocol import SourceConfig
 
 log = logging.getLogger(__name__)
@@ -39,15 +39,6 @@ def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
         return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
     return {"p50": float(np.percentile(values_ms, 50)), "p99": float(np.percentile(values_ms, 99)),
             "max": float(values_ms.max())}
-
-
-def process_cpu_s(pid: int) -> float:
-    """CPU seconds (user + system, all threads) a process has used so far; NaN if unknown (not Linux)."""
-    try:
-        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
-    except OSError:
-        return float("nan")
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *, fps: float = 30.0,
