@@ -120,7 +120,12 @@ def _add_track(sub) -> None:
     p.add_argument("--status", type=Path, default=None,
                    help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
     p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
-    p.add_argument("--c3d", type=Path, default=None, help="labelled markers as a C3D file")
+    p.add_argument("--c3d", type=Path, default=None,
+                   help="labelled markers and joint angles as a C3D file (residual > 0 measured, 0 estimated, -1 lost)")
+    p.add_argument("--mot", type=Path, default=None, help="joint angles as an OpenSim motion file (.mot)")
+    p.add_argument("--bvh", type=Path, default=None, help="the avatar's skeleton driven by the joint angles (.bvh)")
+    p.add_argument("--detections", type=Path, default=None,
+                   help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.set_defaults(func=_cmd_track)
@@ -129,11 +134,12 @@ def _add_track(sub) -> None:
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
 
-    labelled = args.out or args.status or args.angles or args.c3d
+    labelled = args.out or args.status or args.angles or args.c3d or args.mot or args.bvh or args.detections
     if args.points and labelled:
         raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
     if not (args.points or labelled):
-        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --points)")
+        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --mot, --bvh, "
+                         "--detections, --points)")
     report = track_recording(
         args.recording,
         calibration=args.calibration,
@@ -144,6 +150,9 @@ def _cmd_track(args) -> int:
         status_csv=args.status,
         angles_csv=args.angles,
         c3d=args.c3d,
+        mot=args.mot,
+        bvh=args.bvh,
+        detections=args.detections,
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,

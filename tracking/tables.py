@@ -133,7 +133,7 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path) -> int:
 
     trc = read_trc(trc_path)
     require_markers(trc.names, Path(trc_path).name)
-    write_angles_csv(out_csv, trc.frame_numbers, trc.times_s, joint_angles(trc.positions_mm, trc.names))
+    write_angles_csv(out_csv, trc.frame_indices, trc.times_s, joint_angles(trc.positions_mm, trc.names))
     return trc.n_frames
 
 
