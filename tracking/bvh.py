@@ -136,7 +136,7 @@ def humerus_rotation(flexion_deg: float, abduction_deg: float, elevation_deg: fl
 def forearm_rotation(elbow_flexion_deg: float, supination_deg: float) -> np.ndarray:
     """(3, 3) forearm frame in the upper arm's, right-side convention: flexion about the epicondyle
     axis, then supination about the forearm's long axis."""
-    return Rotation.from_euler("xy", [elbow_flexion_deg, -supination_deg], degrees=True).as_matrix()
+    return Rotation.from_euler("XY", [elbow_flexion_deg, -supination_deg], degrees=True).as_matrix()
 
 
 _JOINTS = ("Hips", "Spine", "Neck", "Head", "RightArm", "RightForeArm", "RightHand", "LeftArm", "LeftForeArm",

@@ -12,6 +12,11 @@ what OpenSim 3 and 4, the GUI's plotter and ``TimeSeriesTable`` read)::
     time<TAB>left_shoulder_flexion<TAB>...<TAB>trunk_lateral_lean
     0.00000000<TAB>12.345678<TAB>...               (seconds, then degrees; NaN where undefined)
 
+Undefined angles are written ``NaN``: OpenSim 4's ``TimeSeriesTable`` (scripting, the table
+tools) reads them as missing, but the older ``Storage`` reader (OpenSim 4.6's *File > Load
+Motion*) stops at the row after the first NaN (measured with opensim 4.6); horizontal flexion and
+external rotation are undefined in many frames by definition (spec/JOINT_ANGLES.md).
+
 Columns are those of the angles CSV (``spec/JOINT_ANGLES.md``), times the recording's. These are
 the project's clinical angles, not the coordinates of an OpenSim model: they plot and compare in
 OpenSim but do not drive a model's coordinates by name.
