@@ -166,13 +166,16 @@ def _add_angles(sub) -> None:
     p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
     p.add_argument("trc", type=Path, help="marker file with the marker set's names (mm)")
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
+    p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",
+                   help="the file's names for the angles' markers, one 'MB: STER' line each (TRCs of other marker sets)")
     p.set_defaults(func=_cmd_angles)
 
 
 def _cmd_angles(args) -> int:
-    from tracking.tables import angles_csv_from_trc
+    from tracking.tables import angles_csv_from_trc, read_marker_map
 
-    n = angles_csv_from_trc(args.trc, args.out)
+    marker_map = read_marker_map(args.map) if args.map is not None else None
+    n = angles_csv_from_trc(args.trc, args.out, marker_map)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 
