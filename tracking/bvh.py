@@ -139,28 +139,49 @@ def forearm_rotation(elbow_flexion_deg: float, supination_deg: float) -> np.ndar
     return Rotation.from_euler("XY", [elbow_flexion_deg, -supination_deg], degrees=True).as_matrix()
 
 
-_JOINTS = ("Hips", "Spine", "Neck", "Head", "RightArm", "RightForeArm", "RightHand", "LeftArm", "LeftForeArm",
-           "LeftHand")
+#: The skeleton's joints and their parents, in the file's order (depth first).
+JOINTS: tuple[tuple[str, str | None], ...] = (
+    ("Hips", None), ("Spine", "Hips"), ("Neck", "Spine"), ("Head", "Neck"),
+    ("RightArm", "Spine"), ("RightForeArm", "RightArm"), ("RightHand", "RightForeArm"),
+    ("LeftArm", "Spine"), ("LeftForeArm", "LeftArm"), ("LeftHand", "LeftForeArm"),
+)
+_JOINTS = tuple(name for name, _ in JOINTS)
 _CHANNELS = "CHANNELS 3 Zrotation Xrotation Yrotation"
 
 
-def _hierarchy(sk: BvhSkeleton) -> str:
-    cm = lambda *v: " ".join(f"{_CM_PER_M * x:.4f}" for x in v)  # noqa: E731
-    lines = ["HIERARCHY", "ROOT Hips", "{", f"  OFFSET {cm(0.0, sk.hip_height_m, 0.0)}",
-             "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
-             "  JOINT Spine", "  {", f"    OFFSET {cm(0.0, sk.lumbar_m, 0.0)}", f"    {_CHANNELS}",
-             "    JOINT Neck", "    {", f"      OFFSET {cm(0.0, sk.neck_m, 0.0)}", f"      {_CHANNELS}",
-             "      JOINT Head", "      {", f"        OFFSET {cm(0.0, sk.head_m / 2, 0.0)}", f"        {_CHANNELS}",
-             "        End Site", "        {", f"          OFFSET {cm(0.0, sk.head_m, 0.0)}", "        }",
-             "      }", "    }"]
+def joint_offsets_m(sk: BvhSkeleton) -> dict[str, np.ndarray]:
+    """Joint name -> (3,) offset from its parent (the root: from the floor), metres; ``"<joint>
+    End"`` -> the end sites' offsets (head top, fingertips)."""
+    out = {"Hips": (0.0, sk.hip_height_m, 0.0), "Spine": (0.0, sk.lumbar_m, 0.0), "Neck": (0.0, sk.neck_m, 0.0),
+           "Head": (0.0, sk.head_m / 2, 0.0), "Head End": (0.0, sk.head_m, 0.0)}
     for side, sign in (("Right", 1.0), ("Left", -1.0)):
-        lines += [f"    JOINT {side}Arm", "    {", f"      OFFSET {cm(sign * sk.shoulder_half_width_m, sk.shoulder_height_m, 0.0)}",
-                  f"      {_CHANNELS}",
-                  f"      JOINT {side}ForeArm", "      {", f"        OFFSET {cm(0.0, -sk.upper_arm_m, 0.0)}", f"        {_CHANNELS}",
-                  f"        JOINT {side}Hand", "        {", f"          OFFSET {cm(0.0, -sk.forearm_m, 0.0)}",
-                  f"          {_CHANNELS}", "          End Site", "          {",
-                  f"            OFFSET {cm(0.0, -sk.hand_m, 0.0)}", "          }", "        }", "      }", "    }"]
-    lines += ["  }", "}"]
+        out[f"{side}Arm"] = (sign * sk.shoulder_half_width_m, sk.shoulder_height_m, 0.0)
+        out[f"{side}ForeArm"] = (0.0, -sk.upper_arm_m, 0.0)
+        out[f"{side}Hand"] = (0.0, -sk.forearm_m, 0.0)
+        out[f"{side}Hand End"] = (0.0, -sk.hand_m, 0.0)
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def _hierarchy(sk: BvhSkeleton) -> str:
+    offsets = joint_offsets_m(sk)
+    cm = lambda v: " ".join(f"{_CM_PER_M * x:.4f}" for x in v)  # noqa: E731
+    lines = ["HIERARCHY"]
+
+    def joint(name: str, depth: int) -> None:
+        pad = "  " * depth
+        if depth == 0:
+            lines.extend([f"ROOT {name}", "{", f"  OFFSET {cm(offsets[name])}",
+                          "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"])
+        else:
+            lines.extend([f"{pad}JOINT {name}", f"{pad}{{", f"{pad}  OFFSET {cm(offsets[name])}", f"{pad}  {_CHANNELS}"])
+        children = [child for child, parent in JOINTS if parent == name]
+        for child in children:
+            joint(child, depth + 1)
+        if not children:
+            lines.extend([f"{pad}  End Site", f"{pad}  {{", f"{pad}    OFFSET {cm(offsets[name + ' End'])}", f"{pad}  }}"])
+        lines.append(f"{pad}}}")
+
+    joint("Hips", 0)
     return "\n".join(lines)
 
 
