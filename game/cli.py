@@ -284,6 +284,9 @@ def _add_play(sub) -> None:
                        help="track a recording folder (rehab record) in real time instead of the simulated patient")
     p.add_argument("--calibration", type=Path, default=None,
                    help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+    from game.cli_stream import add_stream_options
+
+    add_stream_options(p)
     p.set_defaults(func=_cmd_play)
 
 
@@ -351,6 +354,7 @@ def _cmd_play(args) -> int:
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
                           adapt_colours=args.adapt_colours, **_play_source(args))
     from game.cli_calibrate import board_from_spec
+    from game.cli_stream import stream_config
 
     options = PlayOptions(
         settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
@@ -371,6 +375,7 @@ def _cmd_play(args) -> int:
         max_level=args.max_level,
         calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
         calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
+        stream=stream_config(args),
     )
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
@@ -453,11 +458,13 @@ def build_parser() -> argparse.ArgumentParser:
     from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
     from game import cli_colour  # colour learn|drift-check
     from game import cli_record  # record
+    from game import cli_stream  # stream
 
     cli_calibrate.add_commands(sub)
     cli_clinic.add_commands(sub)
     cli_colour.add_commands(sub)
     cli_record.add_commands(sub)
+    cli_stream.add_commands(sub)
     return parser
 
 

@@ -209,3 +209,35 @@ def test_the_tracker_process_streams_to_an_lsl_inlet_and_an_osc_server():
     assert np.isfinite(np.array(angle_samples)[:, k]).any()
     assert server_messages >= fps and len(bones) >= 10 * fps
     assert len(records) > 0  # the game's shared memory still gets every sample
+
+
+def test_rehab_stream_and_rehab_play_send_osc(capsys):
+    from game.cli import main
+
+    server = OscCollector()
+    try:
+        assert main(["stream", "--osc", f"127.0.0.1:{server.port}", "--seconds", "4", "--fps", "15"]) == 0
+        out = capsys.readouterr().out
+        assert "streaming OSC to 127.0.0.1" in out and "frame sets streamed" in out
+        streamed = len(server.of("/rehab/frame"))
+        assert streamed >= 10
+        assert main(["play", "--headless", "--seconds", "3", "--osc", f"127.0.0.1:{server.port}"]) == 0
+        assert wait_for(lambda: len(server.of("/rehab/frame")) >= streamed + 10)
+        names = {m[1] for m in server.of("/rehab/marker")}
+        assert {"MB", "MRW2"} <= names
+    finally:
+        server.close()
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["stream"], "nothing to stream: give --lsl and/or --osc"),
+    (["stream", "--osc", "localhost"], "give HOST:PORT or PORT"),
+    (["play", "--headless", "--osc", "x:99999"], "give HOST:PORT or PORT"),
+    (["stream", "--lsl", "--stream-name", " "], "--stream-name"),
+])
+def test_stream_options_are_one_line_errors(capsys, argv, needle):
+    from game.cli import main
+
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and needle in err

@@ -143,6 +143,8 @@ class StreamSender:
             return True
         except queue.Full:
             self.dropped += 1
+            if self.dropped % 100 == 1:
+                log.warning("streaming falls behind: %d frame sets dropped so far", self.dropped)
             return False
 
     def close(self, timeout_s: float = 1.0) -> None:
@@ -299,10 +301,13 @@ class OscOutput:
     def __init__(self, target: tuple[str, int], names: tuple[str, ...], angle_names: tuple[str, ...]):
         from pythonosc.udp_client import SimpleUDPClient
 
+        from tracking.angles import ANGLE_COLUMNS
+
         self.client = SimpleUDPClient(*target)
         self.names = names
         self.angle_names = angle_names
         self._held: dict[str, float] = {}
+        vmc_bones(dict.fromkeys(ANGLE_COLUMNS, 0.0))  # first-call imports now, not while frame sets queue up
 
     def send(self, frame: StreamFrame) -> None:
         from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
