@@ -397,6 +397,8 @@ def _add_bench(sub) -> None:
                    help="measuring time of the live-process and application figures (default: %(default)s)")
     p.add_argument("--skip-live", action="store_true",
                    help="only the per-frame pipeline (no tracker process, no application)")
+    p.add_argument("--streaming", action="store_true",
+                   help="also compare the tracker process with LSL + OSC streaming off and on (alternating passes)")
     p.set_defaults(func=_cmd_bench)
 
 
@@ -410,6 +412,14 @@ def _cmd_bench(args) -> int:
         return 0
     seconds = 2.0 if args.quick else args.seconds
     _bench_live(seconds)
+    if args.streaming:
+        from tracking.live.bench import compare_streaming
+
+        print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, {1 if args.quick else 3} "
+              f"alternating passes of {seconds:g} s (LSL inlets and an OSC socket receive in this process):",
+              flush=True)
+        for line in compare_streaming(seconds, passes=1 if args.quick else 3):
+            print("  " + line, flush=True)
     return 0
 
 

@@ -30,6 +30,7 @@ tracker never waits for a network). A thread sends from the queue:
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import os
@@ -259,6 +260,7 @@ VMC_BONES = {"Hips": "Hips", "Spine": "Spine", "Neck": "Neck", "Head": "Head",
              "LeftArm": "LeftUpperArm", "LeftForeArm": "LeftLowerArm", "LeftHand": "LeftHand"}
 
 
+@functools.lru_cache(maxsize=1)
 def _rest_to_t_pose() -> dict[str, np.ndarray]:
     """Per joint, the rotation C taking its T-pose rest direction to the skeleton's (arms hanging)."""
     from scipy.spatial.transform import Rotation
@@ -286,13 +288,14 @@ def vmc_bones(angles: dict[str, float], skeleton=None) -> dict[str, tuple[np.nda
     offsets = joint_offsets_m(sk)
     rest = _rest_to_t_pose()
     flip = np.diag([1.0, 1.0, -1.0])  # ours (faces -Z, right-handed) -> Unity (faces +Z, left-handed)
-    out = {}
+    positions, rotations = [], []
     for joint, parent in JOINTS:
         c_parent = rest[parent] if parent else np.eye(3)
         normalised = c_parent.T @ local[joint] @ rest[joint]  # relative to the T-pose frames
-        offset = c_parent.T @ offsets[joint]
-        out[VMC_BONES[joint]] = (flip @ offset, Rotation.from_matrix(flip @ normalised @ flip).as_quat())
-    return out
+        positions.append(flip @ (c_parent.T @ offsets[joint]))
+        rotations.append(flip @ normalised @ flip)
+    quats = Rotation.from_matrix(np.stack(rotations)).as_quat()  # one call for all bones
+    return {VMC_BONES[joint]: (p, q) for (joint, _), p, q in zip(JOINTS, positions, quats)}
 
 
 class OscOutput:
