@@ -226,6 +226,36 @@ def _cmd_validate(args) -> int:
 
 
 # --------------------------------------------------------------------------- play
+def add_tracker_source_options(p) -> None:
+    """What the tracker process measures (``rehab play``, ``rehab stream``): the simulated studio
+    (``--rig --size --fps --body``), ``--devices`` or ``--recording`` (and ``--calibration``), and
+    ``--adapt-colours``; read back by :func:`_play_source`."""
+    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
+    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--body", default="p50_male",
+                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
+    p.add_argument("--adapt-colours", action="store_true",
+                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
+                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
+                            "video files, one per camera of --calibration, in its order")
+    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
+                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+
+
+def check_motion(motion: str | None) -> None:
+    """A one-line error for a motion that is neither built in nor a file (None passes)."""
+    from tracking.sim.motions import available_motions
+
+    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
+        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
+                         "or give a motion YAML file")
+
+
 def _add_play(sub) -> None:
     p = sub.add_parser(
         "play",
@@ -238,11 +268,6 @@ def _add_play(sub) -> None:
     p.add_argument("--motion", default=None,
                    help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
                    f"patient (headless: {_HEADLESS_MOTION})")
-    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--body", default="p50_male",
-                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=float, default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
@@ -264,8 +289,6 @@ def _add_play(sub) -> None:
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
     p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
                    help="reference standard of the ROM tests and the progress band (default: %(default)s)")
-    p.add_argument("--adapt-colours", action="store_true",
-                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
     p.add_argument("--calibrate-cameras", default=None, metavar="DEV,DEV,...",
                    help="the calibration scene shows these cameras (OpenCV indices, URLs or video files) instead of the "
                    "simulated studio")
@@ -276,14 +299,7 @@ def _add_play(sub) -> None:
     p.add_argument("--seconds", type=_positive_float, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
     p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
-                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
-                            "video files, one per camera of --calibration, in its order")
-    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
-                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
-    p.add_argument("--calibration", type=Path, default=None,
-                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+    add_tracker_source_options(p)
     from game.cli_stream import add_stream_options
 
     add_stream_options(p)
@@ -325,7 +341,6 @@ def _cmd_play(args) -> int:
     from game.app import Settings
     from game.play import PlayOptions, run_play
     from tracking.live import SourceConfig
-    from tracking.sim.motions import available_motions
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
     if args.game is not None or args.scene == "game":
@@ -341,9 +356,7 @@ def _cmd_play(args) -> int:
 
         # the ROM scene plays the test's own motion (its demo); start the tracker on it
         motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
-    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
-        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
-                         "or give a motion YAML file")
+    check_motion(motion)
     if args.devices is not None or args.recording is not None:
         if args.motion is not None:
             raise RehabError("--motion plays on the simulated patient: leave it out with --devices or --recording")

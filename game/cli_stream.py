@@ -7,10 +7,9 @@ Registered on the ``rehab`` parser by :func:`add_commands`; :func:`add_stream_op
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 from calibration.errors import RehabError
-from game.cli import _positive_float, _size
+from game.cli import _positive_float, add_tracker_source_options
 
 #: Seconds between the progress lines of ``rehab stream``.
 REPORT_EVERY_S = 5.0
@@ -54,34 +53,21 @@ def add_commands(sub) -> None:
     add_stream_options(p)
     p.add_argument("--motion", default="shoulder_flexion",
                    help="scripted motion of the simulated patient (built-in name or motion YAML; default: %(default)s)")
-    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--body", default="p50_male", help="simulated body as p<percentile>_<sex> (default: %(default)s)")
     p.add_argument("--seconds", type=_positive_float, default=None, help="stop after this many seconds")
-    p.add_argument("--adapt-colours", action="store_true", help="the colour table follows lighting drift")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
-                       help="live cameras instead of the simulated patient, one per camera of --calibration")
-    where.add_argument("--recording", type=Path, default=None, metavar="DIR", help="a recording folder, played in real time")
-    p.add_argument("--calibration", type=Path, default=None,
-                   help="calibration file (needed with --devices; replaces a recording's own)")
+    add_tracker_source_options(p)
     p.set_defaults(func=_cmd_stream)
 
 
 def _cmd_stream(args) -> int:
-    from game.cli import _play_source
+    from game.cli import _play_source, check_motion
     from tracking.live import LiveTracker, SourceConfig
-    from tracking.sim.motions import available_motions
 
     stream = stream_config(args)
     if stream is None:
         raise RehabError("nothing to stream: give --lsl and/or --osc HOST:PORT")
     where = _play_source(args)
     motion = None if where else args.motion
-    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
-        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
-                         "or give a motion YAML file")
+    check_motion(motion)
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
                           adapt_colours=args.adapt_colours, **where)
     source.check()

@@ -112,3 +112,26 @@ def test_defaults_every_present_point_measured(tmp_path):
     assert rate == 100.0
     np.testing.assert_allclose(res, [[0.1, 0.1, 0.1, 0.1], [0.1, 0.1, -1, 0.1]], atol=1e-6)
     np.testing.assert_allclose(q[0], p[0], atol=1e-5)
+
+
+@pytest.mark.parametrize("reader", ["kineticstoolkit", "pyomeca"])
+def test_gait_lab_toolkits_read_the_same_positions(tmp_path, reader):
+    """kineticstoolkit and pyomeca (both on ezc3d; not dependencies: skipped where not installed)."""
+    path = tmp_path / "m.c3d"
+    p, status, residuals, seen, angles = sample(seed=5)
+    write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
+    lost = status == MarkerStatus.LOST
+    if reader == "kineticstoolkit":
+        ktk = pytest.importorskip("kineticstoolkit")
+        points = ktk.read_c3d(str(path))["Points"]
+        q = np.stack([points.data[n][:, :3] for n in NAMES], axis=1) * 1000.0  # it converts to metres
+        assert set(angles) <= set(points.data)
+    else:
+        pytest.importorskip("pyomeca")
+        from pyomeca import Markers
+
+        markers = Markers.from_c3d(str(path))
+        assert markers.attrs["units"] == "mm"
+        q = np.asarray(markers.sel(channel=list(NAMES)).values)[:3].transpose(2, 1, 0)
+    assert (np.isnan(q).any(axis=2) == lost).all()
+    np.testing.assert_allclose(q[~lost], p[~lost], rtol=1e-6, atol=1e-3)
