@@ -298,6 +298,38 @@ def vmc_bones(angles: dict[str, float], skeleton=None) -> dict[str, tuple[np.nda
     return {VMC_BONES[joint]: (p, q) for (joint, _), p, q in zip(JOINTS, positions, quats)}
 
 
+def _osc_message(address: str, *args) -> bytes:
+    """One OSC message's bytes (python-osc's encoders: its builder also parses back each message it
+    builds, which tripled the sender's time per frame set)."""
+    from pythonosc.parsing import osc_types
+
+    tags, body = [","], []
+    for a in args:
+        if isinstance(a, str):
+            tags.append("s")
+            body.append(osc_types.write_string(a))
+        elif isinstance(a, int):
+            tags.append("i")
+            body.append(osc_types.write_int(a))
+        else:
+            tags.append("f")
+            body.append(osc_types.write_float(a))
+    return osc_types.write_string(address) + osc_types.write_string("".join(tags)) + b"".join(body)
+
+
+class _OscBundle:
+    """An OSC bundle to be sent at once (what ``UDPClient.send`` needs: its ``dgram``)."""
+
+    def __init__(self, messages: list[bytes]) -> None:
+        from pythonosc.parsing import osc_types
+
+        parts = [osc_types.write_string("#bundle"), osc_types.write_date(osc_types.IMMEDIATELY)]
+        for m in messages:
+            parts.append(osc_types.write_int(len(m)))
+            parts.append(m)
+        self.dgram = b"".join(parts)
+
+
 class OscOutput:
     """OSC bundles to one UDP target (module docstring)."""
 
@@ -313,41 +345,27 @@ class OscOutput:
         vmc_bones(dict.fromkeys(ANGLE_COLUMNS, 0.0))  # first-call imports now, not while frame sets queue up
 
     def send(self, frame: StreamFrame) -> None:
-        from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-        from pythonosc.osc_message_builder import OscMessageBuilder
-
-        def message(address: str, *args) -> object:
-            builder = OscMessageBuilder(address)
-            for a in args:
-                builder.add_arg(a)
-            return builder.build()
-
-        bundle = OscBundleBuilder(IMMEDIATELY)
-        bundle.add_content(message("/rehab/frame", int(frame.frame_index), float(frame.time_s), int(frame.state)))
+        messages = [_osc_message("/rehab/frame", int(frame.frame_index), float(frame.time_s), int(frame.state))]
         for name, p, s in zip(self.names, frame.positions_m.tolist(), frame.status.tolist()):
-            bundle.add_content(message("/rehab/marker", name, float(p[0]), float(p[1]), float(p[2]), int(s)))
+            messages.append(_osc_message("/rehab/marker", name, p[0], p[1], p[2], int(s)))
         angles = dict(zip(self.angle_names, frame.angles_deg.tolist()))
         for name, value in angles.items():
-            bundle.add_content(message("/rehab/angle", name, float(value)))
-        self.client.send(bundle.build())
-        self._send_vmc(angles, frame.time_s, message)
+            messages.append(_osc_message("/rehab/angle", name, value))
+        self.client.send(_OscBundle(messages))
+        self._send_vmc(angles, frame.time_s)
 
-    def _send_vmc(self, angles: dict[str, float], time_s: float, message) -> None:
-        from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-
+    def _send_vmc(self, angles: dict[str, float], time_s: float) -> None:
         from tracking.angles import ANGLE_COLUMNS
 
         for name in ANGLE_COLUMNS:  # the skeleton holds an undefined angle (tracking/bvh.py)
             value = angles.get(name, math.nan)
             if math.isfinite(value) or name not in self._held:
                 self._held[name] = value if math.isfinite(value) else 0.0
-        bundle = OscBundleBuilder(IMMEDIATELY)
-        bundle.add_content(message("/VMC/Ext/OK", 1))
-        bundle.add_content(message("/VMC/Ext/T", float(time_s)))
-        bundle.add_content(message("/VMC/Ext/Root/Pos", "root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0))
+        messages = [_osc_message("/VMC/Ext/OK", 1), _osc_message("/VMC/Ext/T", float(time_s)),
+                    _osc_message("/VMC/Ext/Root/Pos", "root", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)]
         for bone, (p, q) in vmc_bones(self._held).items():
-            bundle.add_content(message("/VMC/Ext/Bone/Pos", bone, *(float(v) for v in p), *(float(v) for v in q)))
-        self.client.send(bundle.build())
+            messages.append(_osc_message("/VMC/Ext/Bone/Pos", bone, *p.tolist(), *q.tolist()))
+        self.client.send(_OscBundle(messages))
 
     def close(self) -> None:
         try:
