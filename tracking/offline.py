@@ -249,9 +249,12 @@ def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_cs
 
         write_mot(mot, run.times_s, run.angles_deg, name=Path(mot).stem)
     if bvh:
-        from tracking.bvh import write_bvh
+        from tracking.bvh import BvhSkeleton, write_bvh
+        from tracking.status import MarkerStatus
 
-        write_bvh(bvh, run.times_s, run.angles_deg, run.rate_hz)
+        # segment lengths from the measured positions only (an estimate must not teach them)
+        measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
+        write_bvh(bvh, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
     if detections:
         from tracking.detections import write_detections_csv
 

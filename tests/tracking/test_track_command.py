@@ -75,6 +75,10 @@ def test_field_formats_read_by_independent_readers(tmp_path):
                               "endheader"]
     skeleton = bvh.Bvh((out / "s.bvh").read_text())
     assert skeleton.nframes == 5 and skeleton.frame_time == pytest.approx(1 / 15.0)
+    # the upper arm as long as the tracked acromion-to-elbow-centre distances (mean of the sides, cm)
+    upper_cm = np.mean([np.median(np.linalg.norm((trc.marker(f"M{s}E1") + trc.marker(f"M{s}E2")) / 2
+                                                 - trc.marker(f"M{s}S"), axis=1)) for s in "RL"]) / 10.0
+    assert skeleton.joint_offset("RightForeArm") == pytest.approx([0.0, -upper_cm, 0.0], abs=0.05)
     with open(out / "d.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert {r["camera"] for r in rows} <= {"cam1", "cam2", "cam3", "cam4"} and len(rows) >= 4 * m * 2
