@@ -241,3 +241,30 @@ def test_stream_options_are_one_line_errors(capsys, argv, needle):
     assert main(argv) == 1
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and needle in err
+
+
+def test_rehab_stream_of_a_recording_stops_at_its_end(tmp_path, capsys):
+    from game.cli import main
+    from tracking.recording import RecordingWriter
+    from tracking.sim.body import reference_pose
+    from tracking.sim.studio import SimulationSettings, studio_from_settings
+
+    studio, _ = studio_from_settings(SimulationSettings(motion="reference", size_px=(320, 240)))
+    with studio:
+        writer = RecordingWriter(tmp_path / "rec", studio.cameras, 15.0)
+        for i in range(12):
+            writer.write(studio.render(reference_pose(), i, i / 15.0, noise_sigma=1.5).frames.images)
+        writer.close()
+        writer.write_meta(studio.markerset.name, studio.markerset.rgb)
+    server = OscCollector()
+    try:
+        t0 = time.monotonic()
+        assert main(["stream", "--osc", str(server.port), "--recording", str(tmp_path / "rec"), "--seconds", "60"]) == 0
+        assert time.monotonic() - t0 < 30  # ended with the recording, not at --seconds
+        out = capsys.readouterr().out
+        assert "frame sets streamed" in out
+        frames = [m[1] for m in server.of("/rehab/frame")]
+        # every frame set once, in order (a loaded machine may skip some to keep real time)
+        assert frames == sorted(set(frames)) and frames[-1] <= 11 and len(frames) >= 6
+    finally:
+        server.close()
