@@ -268,3 +268,44 @@ def test_rehab_stream_of_a_recording_stops_at_its_end(tmp_path, capsys):
         assert frames == sorted(set(frames)) and frames[-1] <= 11 and len(frames) >= 6
     finally:
         server.close()
+
+
+def test_an_lsl_inlet_started_after_rehab_stream_receives_at_the_trackers_rate():
+    """The acceptance check: `rehab stream --lsl` in its own process, an inlet here started after it."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, SDL_VIDEODRIVER="dummy", SDL_AUDIODRIVER="dummy")
+    proc = subprocess.Popen([sys.executable, "-m", "game.cli", "stream", "--lsl", "--stream-name", "rehab-cli-test",
+                             "--fps", "15", "--seconds", "25"], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        found = pylsl.resolve_byprop("source_id", "rehab-cli-test-markers", timeout=20.0)
+        assert found, "no marker stream: " + (proc.stderr.read() if proc.poll() is not None else "still running")
+        markers = pylsl.StreamInlet(found[0])
+        angles = pylsl.StreamInlet(pylsl.resolve_byprop("source_id", "rehab-cli-test-angles", timeout=5.0)[0])
+        labels = []
+        channel = markers.info(timeout=5.0).desc().child("channels").child("channel")
+        while not channel.empty():
+            labels.append(channel.child_value("label"))
+            channel = channel.next_sibling()
+        angle_channel = angles.info(timeout=5.0).desc().child("channels").child("channel")
+        markers.open_stream(timeout=5.0)
+        angles.open_stream(timeout=5.0)
+        t0 = pylsl.local_clock()
+        time.sleep(4.0)
+        m, m_stamps = pull_all(markers)
+        a, _ = pull_all(angles)
+        elapsed = pylsl.local_clock() - t0
+        markers.close_stream()
+        angles.close_stream()
+    finally:
+        proc.terminate()
+        proc.wait(timeout=20)
+    assert labels[:3] == ["MB_X", "MB_Y", "MB_Z"] and len(labels) == 42
+    assert angle_channel.child_value("label") == "left_shoulder_flexion"
+    rate = len(m) / elapsed
+    assert 5.0 <= rate <= 16.5, rate  # 15 frame sets/s asked; a loaded machine keeps less
+    assert abs(len(a) - len(m)) <= 3
+    assert np.median(np.diff(m_stamps)) == pytest.approx(1 / 15.0, rel=0.35)
