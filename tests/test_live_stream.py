@@ -234,6 +234,7 @@ def test_rehab_stream_and_rehab_play_send_osc(capsys):
     (["stream", "--osc", "localhost"], "give HOST:PORT or PORT"),
     (["play", "--headless", "--osc", "x:99999"], "give HOST:PORT or PORT"),
     (["stream", "--lsl", "--stream-name", " "], "--stream-name"),
+    (["stream", "--osc", "no-such-host.invalid:9000"], "unknown host 'no-such-host.invalid'"),
 ])
 def test_stream_options_are_one_line_errors(capsys, argv, needle):
     from game.cli import main

@@ -86,6 +86,13 @@ class StreamConfig:
                 import pythonosc  # noqa: F401
             except ImportError:
                 raise StreamError("--osc needs python-osc; install rehab-mocap's dependencies") from None
+            import socket
+
+            try:
+                socket.getaddrinfo(self.osc[0], self.osc[1], type=socket.SOCK_DGRAM)
+            except (socket.gaierror, UnicodeError):
+                raise StreamError(f"--osc {self.osc[0]}:{self.osc[1]}: unknown host {self.osc[0]!r}; give an IP "
+                                  "address or a name this machine resolves") from None
 
 
 def parse_osc_target(text: str) -> tuple[str, int]:
