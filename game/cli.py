@@ -428,8 +428,8 @@ def _cmd_bench(args) -> int:
     if args.streaming:
         from tracking.live.bench import compare_streaming
 
-        print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, {1 if args.quick else 3} "
-              f"alternating passes of {seconds:g} s (LSL inlets and an OSC socket receive in this process):",
+        print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, alternating passes of "
+              f"{seconds:g} s, {1 if args.quick else 3} of each (LSL inlets and an OSC socket receive in this process):",
               flush=True)
         for line in compare_streaming(seconds, passes=1 if args.quick else 3):
             print("  " + line, flush=True)

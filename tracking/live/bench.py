@@ -70,6 +70,9 @@ class StreamConsumers:
         if self.stream.lsl:
             import pylsl
 
+            from tracking.live.stream import quiet_lsl
+
+            quiet_lsl()
             for kind in ("markers", "angles", "status"):
                 found = pylsl.resolve_byprop("source_id", f"{self.stream.name}-{kind}", timeout=timeout_s)
                 if found:

@@ -187,7 +187,7 @@ class StreamSender:
 # ------------------------------------------------------------------------------------ LSL
 
 
-def _quiet_lsl() -> None:
+def quiet_lsl() -> None:
     """liblsl logs INFO lines to stderr; keep warnings only, unless the user configured LSL
     (a config file LSL would read, whose KnownPeers or SessionID must stay in force)."""
     import pylsl
@@ -207,7 +207,7 @@ class LslOutput:
     def __init__(self, name: str, names: tuple[str, ...], markerset: str, angle_names: tuple[str, ...], fps: float):
         import pylsl
 
-        _quiet_lsl()
+        quiet_lsl()
         self._pylsl = pylsl
         self._offset_s = pylsl.local_clock() - time.perf_counter()
         markers = pylsl.StreamInfo(f"{name} markers", "Mocap", 3 * len(names), fps, "float32", f"{name}-markers")
