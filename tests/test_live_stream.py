@@ -185,7 +185,7 @@ def test_the_tracker_process_streams_to_an_lsl_inlet_and_an_osc_server():
     # about 3 s of frame sets at the tracker's rate (loaded machine: at least a third of it)
     assert len(samples) >= fps and len(angle_samples) >= fps and len(status_samples) >= fps
     steps = np.diff(stamps)
-    assert np.median(steps) == pytest.approx(1.0 / fps, rel=0.35)
+    assert 0.9 / fps <= np.median(steps) <= 3.0 / fps  # the frame rate, or less on a loaded machine
     # time stamps: each sample's is the instant its frame set was ready (the ring's t_frame_ready_s),
     # and it carries that frame set's positions
     ready = np.array([float(r["t_frame_ready_s"]) for r in records])
@@ -309,4 +309,4 @@ def test_an_lsl_inlet_started_after_rehab_stream_receives_at_the_trackers_rate()
     rate = len(m) / elapsed
     assert 5.0 <= rate <= 16.5, rate  # 15 frame sets/s asked; a loaded machine keeps less
     assert abs(len(a) - len(m)) <= 3
-    assert np.median(np.diff(m_stamps)) == pytest.approx(1 / 15.0, rel=0.35)
+    assert 0.9 / 15.0 <= np.median(np.diff(m_stamps)) <= 3.0 / 15.0
