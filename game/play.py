@@ -60,6 +60,8 @@ class PlayOptions:
             shows, named cam1, cam2, ...; () : the simulated studio's.
         calibration_board: the board held up in the calibration scene (a Checkerboard or
             CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process also streams
+            over LSL and/or OSC (None: no streaming).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -82,6 +84,7 @@ class PlayOptions:
     calibration_path: Path | None = None
     calibrate_devices: tuple[str, ...] = ()
     calibration_board: object = None
+    stream: object = None
 
 
 def make_avatar(ctx, marker_names):
@@ -227,7 +230,7 @@ def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_cou
     source.check()
     screen = open_screen(options.settings.window_px, options.settings.title, headless=options.headless,
                          vsync=options.settings.max_fps > 0)
-    link = LiveLink(lambda: LiveTracker(source), start_timeout_s=options.start_timeout_s)
+    link = LiveLink(lambda: LiveTracker(source, stream=options.stream), start_timeout_s=options.start_timeout_s)
     app = None
     try:
         link.start()

@@ -152,7 +152,10 @@ def test_missing_markers_and_one_line_error():
     with pytest.raises(MissingMarkersError) as info:
         require_markers(names, "markers.trc")
     assert isinstance(info.value, RehabError)
-    assert str(info.value) == "markers.trc lacks MLW2, MRW2: the angles need the upper_limb_seated names"
+    message = str(info.value)
+    assert message.startswith("markers.trc lacks MLW2, MRW2 (it has MB, MP, ")  # wanted and found
+    assert ", EXTRA): the angles need the upper_limb_seated names MB, MP, MLS" in message
+    assert message.endswith("rehab angles --map FILE.yaml") and "\n" not in message
     require_markers(REQUIRED_MARKERS, "markers.trc")
 
 

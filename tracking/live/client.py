@@ -241,13 +241,16 @@ class LiveTracker:
             idle machine, several seconds on a loaded one). Costs the memory of a second process
             and its start-up CPU shortly after :meth:`start`. Never for live cameras (a device
             opens in one process at a time).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process streams every
+            sample over LSL and/or OSC (a standby opens its streams when it takes over).
 
     After :meth:`start`: ``cameras``, ``markerset`` and ``angle_names`` describe the samples.
     """
 
     def __init__(self, source: SourceConfig = SourceConfig(), *, ring_size: int = 256, auto_restart: bool = True,
-                 warm_standby: bool = True) -> None:
+                 warm_standby: bool = True, stream=None) -> None:
         self.source = source
+        self.stream = stream
         self.ring_size = int(ring_size)
         self.auto_restart = auto_restart
         self.warm_standby = warm_standby and auto_restart
@@ -316,7 +319,7 @@ class LiveTracker:
             self._notify_r, notify_w = self._ctx.Pipe(duplex=False)
             os.set_blocking(self._notify_r.fileno(), False)
             self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid(),
-                                     notify=notify_w)
+                                     notify=notify_w, stream=self.stream)
             self._child = self._spawn(standby=False)
             if wait:
                 self._wait_ready(timeout_s)
