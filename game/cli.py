@@ -120,7 +120,12 @@ def _add_track(sub) -> None:
     p.add_argument("--status", type=Path, default=None,
                    help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
     p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
-    p.add_argument("--c3d", type=Path, default=None, help="labelled markers as a C3D file")
+    p.add_argument("--c3d", type=Path, default=None,
+                   help="labelled markers and joint angles as a C3D file (residual > 0 measured, 0 estimated, -1 lost)")
+    p.add_argument("--mot", type=Path, default=None, help="joint angles as an OpenSim motion file (.mot)")
+    p.add_argument("--bvh", type=Path, default=None, help="the avatar's skeleton driven by the joint angles (.bvh)")
+    p.add_argument("--detections", type=Path, default=None,
+                   help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.set_defaults(func=_cmd_track)
@@ -129,11 +134,12 @@ def _add_track(sub) -> None:
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
 
-    labelled = args.out or args.status or args.angles or args.c3d
+    labelled = args.out or args.status or args.angles or args.c3d or args.mot or args.bvh or args.detections
     if args.points and labelled:
         raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
     if not (args.points or labelled):
-        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --points)")
+        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --mot, --bvh, "
+                         "--detections, --points)")
     report = track_recording(
         args.recording,
         calibration=args.calibration,
@@ -144,6 +150,9 @@ def _cmd_track(args) -> int:
         status_csv=args.status,
         angles_csv=args.angles,
         c3d=args.c3d,
+        mot=args.mot,
+        bvh=args.bvh,
+        detections=args.detections,
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,
@@ -157,13 +166,16 @@ def _add_angles(sub) -> None:
     p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
     p.add_argument("trc", type=Path, help="marker file with the marker set's names (mm)")
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
+    p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",
+                   help="the file's names for the angles' markers, one 'MB: STER' line each (TRCs of other marker sets)")
     p.set_defaults(func=_cmd_angles)
 
 
 def _cmd_angles(args) -> int:
-    from tracking.tables import angles_csv_from_trc
+    from tracking.tables import angles_csv_from_trc, read_marker_map
 
-    n = angles_csv_from_trc(args.trc, args.out)
+    marker_map = read_marker_map(args.map) if args.map is not None else None
+    n = angles_csv_from_trc(args.trc, args.out, marker_map)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 
@@ -214,6 +226,36 @@ def _cmd_validate(args) -> int:
 
 
 # --------------------------------------------------------------------------- play
+def add_tracker_source_options(p) -> None:
+    """What the tracker process measures (``rehab play``, ``rehab stream``): the simulated studio
+    (``--rig --size --fps --body``), ``--devices`` or ``--recording`` (and ``--calibration``), and
+    ``--adapt-colours``; read back by :func:`_play_source`."""
+    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
+    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--body", default="p50_male",
+                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
+    p.add_argument("--adapt-colours", action="store_true",
+                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
+                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
+                            "video files, one per camera of --calibration, in its order")
+    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
+                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+
+
+def check_motion(motion: str | None) -> None:
+    """A one-line error for a motion that is neither built in nor a file (None passes)."""
+    from tracking.sim.motions import available_motions
+
+    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
+        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
+                         "or give a motion YAML file")
+
+
 def _add_play(sub) -> None:
     p = sub.add_parser(
         "play",
@@ -226,11 +268,6 @@ def _add_play(sub) -> None:
     p.add_argument("--motion", default=None,
                    help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
                    f"patient (headless: {_HEADLESS_MOTION})")
-    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--body", default="p50_male",
-                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=float, default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
@@ -252,8 +289,6 @@ def _add_play(sub) -> None:
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
     p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
                    help="reference standard of the ROM tests and the progress band (default: %(default)s)")
-    p.add_argument("--adapt-colours", action="store_true",
-                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
     p.add_argument("--calibrate-cameras", default=None, metavar="DEV,DEV,...",
                    help="the calibration scene shows these cameras (OpenCV indices, URLs or video files) instead of the "
                    "simulated studio")
@@ -264,14 +299,10 @@ def _add_play(sub) -> None:
     p.add_argument("--seconds", type=_positive_float, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
     p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
-                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
-                            "video files, one per camera of --calibration, in its order")
-    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
-                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
-    p.add_argument("--calibration", type=Path, default=None,
-                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+    add_tracker_source_options(p)
+    from game.cli_stream import add_stream_options
+
+    add_stream_options(p)
     p.set_defaults(func=_cmd_play)
 
 
@@ -310,7 +341,6 @@ def _cmd_play(args) -> int:
     from game.app import Settings
     from game.play import PlayOptions, run_play
     from tracking.live import SourceConfig
-    from tracking.sim.motions import available_motions
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
     if args.game is not None or args.scene == "game":
@@ -326,9 +356,7 @@ def _cmd_play(args) -> int:
 
         # the ROM scene plays the test's own motion (its demo); start the tracker on it
         motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
-    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
-        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
-                         "or give a motion YAML file")
+    check_motion(motion)
     if args.devices is not None or args.recording is not None:
         if args.motion is not None:
             raise RehabError("--motion plays on the simulated patient: leave it out with --devices or --recording")
@@ -339,6 +367,7 @@ def _cmd_play(args) -> int:
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
                           adapt_colours=args.adapt_colours, **_play_source(args))
     from game.cli_calibrate import board_from_spec
+    from game.cli_stream import stream_config
 
     options = PlayOptions(
         # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
@@ -360,6 +389,7 @@ def _cmd_play(args) -> int:
         max_level=args.max_level,
         calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
         calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
+        stream=stream_config(args),
     )
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
@@ -381,6 +411,8 @@ def _add_bench(sub) -> None:
                    help="measuring time of the live-process and application figures (default: %(default)s)")
     p.add_argument("--skip-live", action="store_true",
                    help="only the per-frame pipeline (no tracker process, no application)")
+    p.add_argument("--streaming", action="store_true",
+                   help="also compare the tracker process with LSL + OSC streaming off and on (alternating passes)")
     p.set_defaults(func=_cmd_bench)
 
 
@@ -393,7 +425,16 @@ def _cmd_bench(args) -> int:
     if args.skip_live:
         return 0
     seconds = 2.0 if args.quick else args.seconds
-    return 0 if _bench_live(seconds) else 1
+    app_measured = _bench_live(seconds)
+    if args.streaming:
+        from tracking.live.bench import compare_streaming
+
+        print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, alternating passes of "
+              f"{seconds:g} s, {1 if args.quick else 3} of each (LSL inlets and an OSC socket receive in this process):",
+              flush=True)
+        for line in compare_streaming(seconds, passes=1 if args.quick else 3):
+            print("  " + line, flush=True)
+    return 0 if app_measured else 1
 
 
 def _bench_live(seconds: float) -> bool:
@@ -477,11 +518,13 @@ def build_parser() -> argparse.ArgumentParser:
     from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
     from game import cli_colour  # colour learn|drift-check
     from game import cli_record  # record
+    from game import cli_stream  # stream
 
     cli_calibrate.add_commands(sub)
     cli_clinic.add_commands(sub)
     cli_colour.add_commands(sub)
     cli_record.add_commands(sub)
+    cli_stream.add_commands(sub)
     return parser
 
 

@@ -62,6 +62,8 @@ class PlayOptions:
             CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
         wait_for_tracker: the run's ``seconds`` begin once the tracker is ready, in a window too
             (headless runs always wait; ``rehab bench`` measures the window with the avatar moving).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process also streams
+            over LSL and/or OSC (None: no streaming).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -85,6 +87,7 @@ class PlayOptions:
     calibrate_devices: tuple[str, ...] = ()
     calibration_board: object = None
     wait_for_tracker: bool = False
+    stream: object = None
 
 
 def make_avatar(ctx, marker_names):
@@ -230,7 +233,7 @@ def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_cou
     source.check()
     screen = open_screen(options.settings.window_px, options.settings.title, headless=options.headless,
                          vsync=options.settings.max_fps > 0)
-    link = LiveLink(lambda: LiveTracker(source), start_timeout_s=options.start_timeout_s)
+    link = LiveLink(lambda: LiveTracker(source, stream=options.stream), start_timeout_s=options.start_timeout_s)
     app = None
     try:
         link.start()

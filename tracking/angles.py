@@ -120,12 +120,18 @@ def missing_markers(names: Sequence[str]) -> list[str]:
 def require_markers(names: Sequence[str], source: str) -> None:
     """Raise :class:`MissingMarkersError` (one line) if ``names`` lack any required marker.
 
-    ``source`` names where the names came from, e.g. ``"markers.trc"``; the message reads
-    ``markers.trc lacks MRW1, MRW2: the angles need the upper_limb_seated names``.
+    ``source`` names where the names came from, e.g. ``"markers.trc"``; the message lists the
+    names wanted and those found: ``markers.trc lacks MRW1, MRW2 (it has MB, MP, ..., RWRA): the
+    angles need the upper_limb_seated names ...``.
     """
     missing = missing_markers(names)
     if missing:
-        raise MissingMarkersError(f"{source} lacks {', '.join(missing)}: the angles need the {MARKER_SET} names")
+        found = ", ".join(names) if names else "no markers"
+        wanted = "" if len(missing) == len(REQUIRED_MARKERS) else " " + ", ".join(REQUIRED_MARKERS)
+        raise MissingMarkersError(
+            f"{source} lacks {', '.join(missing)} (it has {found}): the angles need the {MARKER_SET} names"
+            f"{wanted}; map your names to them with rehab angles --map FILE.yaml"
+        )
 
 
 def wrap180(angle_deg: np.ndarray) -> np.ndarray:

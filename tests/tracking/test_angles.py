@@ -155,7 +155,10 @@ def test_missing_markers_and_one_line_error():
     with pytest.raises(MissingMarkersError) as info:
         require_markers(names, "markers.trc")
     assert isinstance(info.value, RehabError)
-    assert str(info.value) == "markers.trc lacks MLW2, MRW2: the angles need the upper_limb_seated names"
+    message = str(info.value)
+    assert message.startswith("markers.trc lacks MLW2, MRW2 (it has MB, MP, ")  # wanted and found
+    assert ", EXTRA): the angles need the upper_limb_seated names MB, MP, MLS" in message
+    assert message.endswith("rehab angles --map FILE.yaml") and "\n" not in message
     require_markers(REQUIRED_MARKERS, "markers.trc")
 
 
@@ -482,8 +485,16 @@ def test_vectorized_over_frames_equals_per_frame():
     assert all(v.shape == (20,) for v in batch.values())
 
 
-def test_one_frame_path_gives_the_same_bits_as_the_array_path():
-    """One frame is computed in Python floats (speed); it must equal the array code exactly."""
+#: How closely the one-frame path (Python floats) and the array path (numpy) must agree. The two
+#: round differently in the last bit (libm against numpy's vectorised atan2 and sqrt, which change
+#: between releases); 1e-9 degrees is ten orders of magnitude below what markers can measure, and
+#: far below any real disagreement (a sign flip, +180 against -180, a missed NaN).
+PATHS_AGREE_DEG = 1e-9
+
+
+def test_one_frame_path_agrees_with_the_array_path():
+    """One frame is computed in Python floats (speed); it must give the array code's angles, with
+    the same missing values and the same side of +-180."""
     rng = np.random.default_rng(11)
     frames = rng.normal(0.0, 0.3, (400, len(REQUIRED_MARKERS), 3))
     frames[rng.random(frames.shape[:2]) < 0.05] = np.nan  # missing markers
@@ -496,7 +507,7 @@ def test_one_frame_path_gives_the_same_bits_as_the_array_path():
         single = joint_angles(frame, REQUIRED_MARKERS)
         for c in ANGLE_COLUMNS:
             a, b = float(single[c]), float(batch[c][t])
-            assert (np.isnan(a) and np.isnan(b)) or (a == b and np.signbit(a) == np.signbit(b)), (t, c, a, b)
+            assert (np.isnan(a) and np.isnan(b)) or abs(a - b) <= PATHS_AGREE_DEG, (t, c, a, b)
 
 
 def test_unit_independent():
