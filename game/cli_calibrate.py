@@ -24,6 +24,7 @@ from calibration.errors import RehabError
 log = logging.getLogger("rehab")
 
 SIM_CHARUCO_SPEC = ("10x7", 40.0, 30.0, "DICT_4X4_50")  # the simulator's ChArUco board: squares, square mm, marker mm
+SIM_CHARUCO_EXTRINSICS_SPEC = ("7x5", 100.0, 75.0, "DICT_4X4_50")  # large enough to be read from 2 m at 640x480
 
 
 
@@ -525,6 +526,7 @@ def _cmd_simulate_calibration(args) -> int:
     from calibration.charuco import CharucoBoard
 
     charuco = CharucoBoard.parse(*SIM_CHARUCO_SPEC) if args.charuco else None
+    charuco_ext = CharucoBoard.parse(*SIM_CHARUCO_EXTRINSICS_SPEC) if args.charuco else None
     from tracking.sim.calibration_material import write_calibration_material
     from tracking.sim.rigs import load_rig
 
@@ -539,7 +541,7 @@ def _cmd_simulate_calibration(args) -> int:
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
                                      wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed,
-                                     charuco=charuco, progress=True))
+                                     charuco=charuco, charuco_extrinsics=charuco_ext, progress=True))
     if args.check:
         for line in check_material(args.out_dir, seed=args.seed):
             print(line, flush=True)
@@ -566,7 +568,7 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(intr, truth)])
     lines.append(f"intrinsics: focal length error max {focal.max():.3f} %, reprojection max {max(r.rms_px for r in intr):.3f} px")
     if "charuco" in material:
-        lines.append(charuco_check(folder, material["charuco"], truth))
+        lines += charuco_check(folder, material, truth)
     cams = [r.camera for r in intr]
     ext = run_extrinsics(folder / "extrinsics", cams, board, floor="seat", origin_m=origin, turn_deg=0.0, verbose=False)
     pos, ang = rig_errors(ext.cameras, truth)
@@ -585,15 +587,32 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     return lines
 
 
-def charuco_check(folder: Path, spec: dict, truth) -> str:
-    """ChArUco intrinsics from ``intrinsics_charuco/`` against the truth, as a report line."""
+def charuco_check(folder: Path, material: dict, truth) -> list[str]:
+    """ChArUco intrinsics from ``intrinsics_charuco/`` (and extrinsics from ``extrinsics_charuco/``
+    when the material has them) against the truth: a summary line, then one line per camera."""
     from calibration.charuco import CharucoBoard
+    from calibration.extrinsics import rig_errors
 
+    spec = material["charuco"]
     board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
     res = run_intrinsics([folder / "intrinsics_charuco"], board, verbose=False)
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(res, truth)])
-    return (f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
-            f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %")
+    centre = np.array([float(np.linalg.norm(r.camera.K[:2, 2] - t.K[:2, 2])) for r, t in zip(res, truth)])
+    lines = [f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
+             f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %"]
+    pos = ang = None
+    spec = material.get("charuco_extrinsics")
+    if spec is not None and (folder / "extrinsics_charuco").is_dir():
+        board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
+        ext = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
+                             origin_m=tuple(spec["seat_origin_m"]), turn_deg=0.0, verbose=False)
+        pos, ang = rig_errors(ext.cameras, truth)
+        lines.append(f"ChArUco extrinsics: position error max {pos.max():.2f} mm, orientation max {ang.max():.3f} deg, "
+                     f"reprojection max {np.nanmax(ext.rms_px):.3f} px")
+    for c, t in enumerate(truth):
+        extra = "" if pos is None else f", position {pos[c]:.2f} mm, orientation {ang[c]:.3f} deg"
+        lines.append(f"  ChArUco {t.name}: focal {focal[c]:.3f} %, image centre {centre[c]:.2f} px{extra}")
+    return lines
 
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:

@@ -17,6 +17,7 @@ What is made (:func:`write_calibration_material`)::
       material.yaml                 board, seat-board origin, wand length and colours
       intrinsics/cam1/000.png ...   the board close to each camera, in many places and tilts
       intrinsics_charuco/cam1/...   on request: a ChArUco board likewise, some views partly out of the picture
+      extrinsics_charuco/cam1/...   on request: a larger ChArUco board seen by neighbouring cameras, and on the seat
       extrinsics/cam1/000.png ...   the board seen by neighbouring cameras at once (same name = same instant)
       extrinsics/cam1/seat.png ...  the board lying on the seat: sets the world frame
       wand/cam1.avi ... meta.yaml   the wand waved through the volume (lossless FFV1)
@@ -396,12 +397,13 @@ def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: flo
 def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: Checkerboard = DEFAULT_BOARD,
                                n_intrinsics: int = 15, per_pair: int = 4, wand_seconds: float = 20.0,
                                wand_fps: float = 15.0, noise_sigma: float = 1.5, seed: int = 0,
-                               charuco=None, n_partial: int = 5, progress: bool = False) -> str:
+                               charuco=None, charuco_extrinsics=None, n_partial: int = 5, progress: bool = False) -> str:
     """Write board images, a wand sequence and the truth (module docstring). Returns a summary line.
 
     With ``charuco`` (a :class:`calibration.charuco.CharucoBoard`), also ``intrinsics_charuco/``:
     ``n_intrinsics`` images of the whole ChArUco board per camera and ``n_partial`` with the board
-    partly out of the picture.
+    partly out of the picture. With ``charuco_extrinsics`` (a ChArUco board large enough to be
+    seen from the cameras' distance), also ``extrinsics_charuco/``: its shared views and the seat.
     """
     from tqdm import tqdm
 
@@ -436,6 +438,17 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
             name = "seat" if v == len(poses) else f"{v:03d}"
             cv2.imwrite(str(folder / f"{name}.png"), per_cam[c])
     n_images += len(views) * len(cams)
+    if charuco_extrinsics is not None:
+        c_poses = extrinsics_poses(cams, charuco_extrinsics, per_pair, np.random.default_rng(seed + 11))
+        c_seat = seat_board_pose(charuco_extrinsics)
+        views = render_views(cams, backgrounds, charuco_extrinsics, [*c_poses, c_seat], seed=seed + 13, noise_sigma=noise_sigma)
+        for c, cam in enumerate(cams):
+            folder = out_dir / "extrinsics_charuco" / cam.name
+            folder.mkdir(parents=True, exist_ok=True)
+            for v, per_cam in enumerate(views):
+                name = "seat" if v == len(c_poses) else f"{v:03d}"
+                cv2.imwrite(str(folder / f"{name}.png"), per_cam[c])
+        n_images += len(views) * len(cams)
     n_wand = int(round(wand_seconds * wand_fps))
     balls = wand_path(n_wand, wand_fps, seed=seed)
     write_wand_sequence(out_dir / "wand", cams, balls, wand_fps, noise_sigma=noise_sigma, seed=seed, progress=progress)
@@ -451,6 +464,12 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
         material["charuco"] = {"squares": f"{charuco.squares_x}x{charuco.squares_y}", "square_mm": charuco.square_m * 1000.0,
                                "marker_mm": charuco.marker_m * 1000.0, "dictionary": charuco.dictionary,
                                "images": "intrinsics_charuco/<camera>/", "partial_views": n_partial}
+    if charuco_extrinsics is not None:
+        b = charuco_extrinsics
+        material["charuco_extrinsics"] = {
+            "squares": f"{b.squares_x}x{b.squares_y}", "square_mm": b.square_m * 1000.0, "marker_mm": b.marker_m * 1000.0,
+            "dictionary": b.dictionary, "images": "extrinsics_charuco/<camera>/",
+            "seat_origin_m": [float(v) for v in seat_board_pose(b).t_m]}
     (out_dir / "material.yaml").write_text(yaml.safe_dump(material, sort_keys=False), encoding="utf-8")
     return (f"wrote {n_images} board images and a {n_wand}-frame wand sequence from {len(cams)} cameras "
             f"to {out_dir} (truth in truth_calibration.toml)")
