@@ -77,10 +77,13 @@ def board_pose_in_camera(camera: Camera, det: Detection, board) -> Pose:
     """T_cam_board from one detection (PnP with the camera's intrinsics and distortion)."""
     obj = det.object_points(board)
     uv = det.uv_px.reshape(-1, 1, 2)
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE)
+    K, dist = camera.K, camera.dist
+    if camera.fisheye:  # PnP on the undistorted normalized points: OpenCV's PnP knows the pinhole model only
+        uv, K, dist = camera.undistort_points(uv).reshape(-1, 1, 2), np.eye(3), None
+    ok, rvec, tvec = cv2.solvePnP(obj, uv, K, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
-        ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist)
-    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, camera.K, camera.dist, rvec, tvec)
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, K, dist)
+    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, K, dist, rvec, tvec)
     return rotation_from_rvec(rvec.ravel()), tvec.ravel().astype(np.float64)
 
 

@@ -98,6 +98,20 @@ def add_commands(sub) -> None:
     q.add_argument("--frames", type=int, default=30, help="frame sets to learn from after identification (default 30)")
     q.set_defaults(func=_cmd_colour)
 
+    q = cal.add_parser("import", help="convert calibration files of other tools (OpenCV, stereo_calib, Caliscope, Qualisys, "
+                       "anipose) into this project's TOML",
+                       description="Read one rig file, or several files of one camera each (OpenCV's calibration "
+                       "sample, stereo_calib's intrinsics.yml), and write them as one TOML calibration. Cameras "
+                       "without a position (lens data only) are written at the origin, to be placed with "
+                       "'rehab calibrate extrinsics --intrinsics OUT' or 'wand'.")
+    q.add_argument("files", nargs="+", type=Path, help="calibration files (.toml, .yaml/.yml/.xml, .qca/.qca.txt)")
+    q.add_argument("--out", type=Path, required=True, help="TOML calibration to write")
+    q.add_argument("--translation-unit", choices=("m", "mm"), default="m",
+                   help="unit of the files' translations (default: %(default)s); mm divides them by 1000")
+    q.add_argument("--size", default=None, help="image size WxH for files that do not store it (stereo_calib)")
+    q.add_argument("--names", default=None, help="camera names, comma-separated, in order (default: from the files)")
+    q.set_defaults(func=_cmd_import)
+
     p = sub.add_parser("simulate-calibration", help="render calibration material of a virtual rig, with ground truth",
                        description="Render board images (intrinsics, extrinsics, seat board) and a wand recording "
                        "of a virtual camera rig, with the true calibration, so that the calibration commands can be "
@@ -487,6 +501,56 @@ def _cmd_wand(args) -> int:
                             origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
     _save(args, cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(cameras)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- import
+def _cmd_import(args) -> int:
+    from calibration.camera import Camera
+    from calibration.files import read_cameras, save_calibration_toml
+    from calibration.foreign import check_units, scaled
+
+    size = None
+    if args.size is not None:
+        try:
+            size = tuple(int(v) for v in args.size.lower().split("x"))
+        except ValueError:
+            size = ()
+        if len(size) != 2 or min(size) < 1:
+            raise RehabError(f"--size {args.size!r}: give the image size as WxH, e.g. 1280x720")
+    cameras, placed = [], len(args.files) == 1
+    for path in args.files:
+        cams, ok = read_cameras(path, size_px=size)
+        if args.translation_unit == "mm":
+            cams = scaled(cams, 0.001)
+        elif ok:
+            check_units(path, cams, hint=f"rehab calibrate import {path} --translation-unit mm --out {args.out}")
+        placed &= ok
+        cameras += cams
+    if args.names:
+        names = [n.strip() for n in args.names.split(",")]
+        if len(names) != len(cameras) or not all(names):
+            raise RehabError(f"--names: give {len(cameras)} names for the {len(cameras)} cameras read, comma-separated")
+        cameras = [Camera(n, c.size_px, c.K, c.dist, c.rvec, c.t_m, c.fisheye) for n, c in zip(names, cameras)]
+    seen = [c.name for c in cameras]
+    twice = sorted({n for n in seen if seen.count(n) > 1})
+    if twice:
+        raise RehabError(f"two cameras are named {twice[0]!r}: give --names cam1,cam2,... in the files' order")
+    if len(cameras) < 2:
+        raise RehabError(f"{args.files[0]} holds one camera: give the files of every camera together, e.g. "
+                         f"'rehab calibrate import cam1.yml cam2.yml --out {args.out}'")
+    if not placed:
+        cameras = [Camera(c.name, c.size_px, c.K, c.dist, np.zeros(3), np.zeros(3), c.fisheye) for c in cameras]
+    if args.out.suffix.lower() != ".toml":
+        raise RehabError(f"--out {args.out}: the calibration file must end in .toml")
+    save_calibration_toml(args.out, cameras)
+    lens = ", ".join(f"{c.name} {c.size_px[0]}x{c.size_px[1]} f {c.K[0, 0]:.1f} px{' fisheye' if c.fisheye else ''}"
+                     for c in cameras)
+    if placed:
+        print(f"wrote the calibration of {len(cameras)} cameras to {args.out} ({lens})")
+    else:
+        print(f"wrote the lens data of {len(cameras)} cameras to {args.out} ({lens}); they are not placed yet: "
+              f"next, 'rehab calibrate extrinsics VIEWS --intrinsics {args.out} ...' or 'rehab calibrate wand'")
     return 0
 
 
