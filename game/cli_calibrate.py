@@ -66,6 +66,10 @@ def add_commands(sub) -> None:
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
     _board_options(q)
     _floor_options(q)
+    q.add_argument("--floor-views", type=Path, default=None,
+                   help="folder with one sub-folder per camera holding the floor board's image (named as --floor); "
+                   "default: the views folder")
+    q.add_argument("--list-skipped", action="store_true", help="name every image without a usable board")
     _output_options(q)
     q.set_defaults(func=_cmd_extrinsics)
 
@@ -182,14 +186,57 @@ def board_name(board) -> str:
     return f"{board.cols}x{board.rows} board"
 
 
+TRIPLE_OPTIONS = ("--origin", "--board-centre")
+FLOOR_BOARD_HELP = ("Lay the board face up on the seat (or the floor), its rows of corners running left-right across the "
+                    "patient, the black outer corner square at the patient's front left (the corner nearest the front "
+                    "cameras on the patient's left); the first inner corner is the one next to that square.")
+
+
 def _floor_options(p) -> None:
     p.add_argument("--floor", default="seat", type=lambda v: None if v.lower() == "none" else v,
                    help="file name (without extension) of the floor/seat board view; 'none': keep the first "
                    "camera's frame, Y not up (default: %(default)s)")
-    p.add_argument("--origin", default="0,0,0", help="world position X,Y,Z in metres of the floor board's first corner "
-                   "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat; write --origin=-0.2,0.45,0 when X is negative)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--origin", default=None, metavar="X,Y,Z",
+                       help="world position in metres of the floor board's first inner corner (default 0,0,0). "
+                       + FLOOR_BOARD_HELP + " Negative numbers are fine: --origin -0.2,0.45,0")
+    where.add_argument("--board-centre", default=None, metavar="X,Y,Z",
+                       help="world position in metres of the centre of the board's corners instead, e.g. 0,0.45,0: "
+                       "the board centred over the origin on a 45 cm seat")
     p.add_argument("--turn-deg", type=float, default=0.0,
                    help="the board's rows point this many degrees from the patient's right, counter-clockwise from above")
+    p.add_argument("--no-world-check", action="store_true",
+                   help="accept a world frame with a camera below the floor, facing away from the floor board or on its "
+                   "side (refused by default: the usual sign of a wrong floor view)")
+
+
+def origin_from_args(args, board) -> tuple[float, float, float]:
+    """The floor board's corner 0 in the world from --origin or --board-centre."""
+    if getattr(args, "board_centre", None):
+        from calibration.extrinsics import floor_board_centre_m
+
+        target = np.array(_triple(args.board_centre, "--board-centre"))
+        offset = floor_board_centre_m(board, (0.0, 0.0, 0.0), args.turn_deg)
+        return tuple(float(v) for v in target - offset)  # type: ignore[return-value]
+    return _triple(args.origin or "0,0,0", "--origin")
+
+
+def join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--origin -0.2,0.45,0`` -> ``--origin=-0.2,0.45,0`` (argparse takes a leading '-' for an option)."""
+    out: list[str] = []
+    it = iter(argv)
+    for a in it:
+        if a in TRIPLE_OPTIONS:
+            nxt = next(it, None)
+            if nxt is None:
+                out.append(a)
+            elif nxt.startswith("-") and nxt[1:2].isdigit() or nxt.startswith("-."):
+                out.append(f"{a}={nxt}")
+            else:
+                out += [a, nxt]
+        else:
+            out.append(a)
+    return out
 
 
 def _output_options(p) -> None:
@@ -236,9 +283,21 @@ def _save(args, cameras, error_px: float) -> None:
         save_calibration_opencv(args.opencv, cameras)
 
 
-def _report_skipped(skipped: dict[str, str]) -> None:
-    for name, reason in skipped.items():
-        print(f"  skipped {name}: {reason}")
+SKIPPED_LISTED = 5  # more skipped images than this are summed up in one line
+
+
+def _report_skipped(skipped: dict[str, str], *, every: bool = False) -> None:
+    """Each skipped image with its reason, or past SKIPPED_LISTED a summary by reason."""
+    if every or len(skipped) <= SKIPPED_LISTED:
+        for name, reason in skipped.items():
+            print(f"  skipped {name}: {reason}")
+        return
+    from collections import Counter
+
+    common = Counter(skipped.values()).most_common()
+    first, n = common[0]
+    rest = f"; {len(skipped) - n} for other reasons" if len(common) > 1 else ""
+    print(f"  skipped {len(skipped)} images: {n} \"{first}\"{rest} (--list-skipped names them)")
 
 
 # --------------------------------------------------------------------------- intrinsics
@@ -384,8 +443,9 @@ def run_live_intrinsics(captures, board, *, fit_k3: bool = False, min_views: int
 
 
 # --------------------------------------------------------------------------- extrinsics
-def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[str, str]]:
-    """Board detections of every view: {view name: [Detection | None per camera]}, and skipped reasons."""
+def detect_views(folder: Path, cameras, board, *, only: str | None = None) -> tuple[dict[str, list], dict[str, str]]:
+    """Board detections of every view (or of the view named ``only``): {view name: [Detection | None
+    per camera]}, and skipped reasons."""
     from calibration.board import detect_board, read_gray
 
     if not folder.is_dir():
@@ -397,6 +457,8 @@ def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[st
         raise RehabError(f"{folder}: no image folder for {', '.join(missing)}: give one sub-folder per camera, named as in the intrinsics")
     for c, cam in enumerate(cameras):
         for path in _images_in(folder / cam.name):
+            if only is not None and path.stem != only:
+                continue
             row = views.setdefault(path.stem, [None] * len(cameras))
             gray, reason = read_gray(path)
             if gray is not None:
@@ -420,18 +482,26 @@ def _check_floor_view(folder: Path, cameras, floor: str | None) -> None:
         raise RehabError(f"{folder}: no image named {floor!r} (the board on the floor or seat) in the camera folders: give --floor NAME")
 
 
-def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True):
+def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True,
+                   floor_views: Path | None = None, list_skipped: bool = False, check_world: bool = True):
+    """Board extrinsics from shared views; the floor board's view from ``floor_views`` when given
+    (a folder with one sub-folder per camera), else from ``views_dir``."""
     from calibration.extrinsics import calibrate_extrinsics
 
-    _check_floor_view(views_dir, cameras, floor)
+    _check_floor_view(floor_views or views_dir, cameras, floor)
     views, skipped = detect_views(views_dir, cameras, board)
-    res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg)
+    if floor_views is not None and floor is not None:
+        floor_rows, floor_skipped = detect_views(floor_views, cameras, board, only=floor)
+        views[floor] = floor_rows[floor]
+        skipped.update({f"{floor_views.name}/{k}": v for k, v in floor_skipped.items()})
+    res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg,
+                               check_world=check_world)
     if verbose:
         for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
             print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
         if skipped:
             print(f"  {len(skipped)} camera images without a usable board (normal for cameras that do not face it):")
-            _report_skipped(skipped)
+            _report_skipped(skipped, every=list_skipped)
         for w in res.warnings:
             print(f"  warning: {w}")
     return res
@@ -442,8 +512,9 @@ def _cmd_extrinsics(args) -> int:
 
     board = board_from_args(args)
     cameras = load_calibration(args.intrinsics)
-    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=_triple(args.origin, "--origin"),
-                         turn_deg=args.turn_deg)
+    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, board),
+                         turn_deg=args.turn_deg, floor_views=args.floor_views, list_skipped=args.list_skipped,
+                         check_world=not args.no_world_check)
     _save(args, res.cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(res.cameras)} cameras to {args.out}")
     return 0
@@ -451,7 +522,8 @@ def _cmd_extrinsics(args) -> int:
 
 # --------------------------------------------------------------------------- wand
 def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colours, ball_mm: float,
-             floor_views: Path | None, board, floor: str, origin_m, turn_deg: float, verbose: bool = True):
+             floor_views: Path | None, board, floor: str, origin_m, turn_deg: float, verbose: bool = True,
+             check_world: bool = True):
     """Wand calibration, world frame from the floor board if given. Returns (WandResult, cameras)."""
     from calibration.extrinsics import world_from_floor_board
     from calibration.wand import calibrate_wand
@@ -479,8 +551,9 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
     out = res.cameras
     if floor_views is not None and floor is not None:
         _check_floor_view(floor_views, out, floor)
-        views, _ = detect_views(floor_views, out, board)
-        out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg)
+        views, _ = detect_views(floor_views, out, board, only=floor)
+        out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg,
+                                                check_world=check_world)
         if verbose:
             print(f"world frame from the floor board ({sum(d is not None for d in views[floor])} cameras, {floor_rms:.3f} px)")
     elif verbose:
@@ -498,7 +571,8 @@ def _cmd_wand(args) -> int:
     board = board_from_args(args) if args.floor_views else None
     res, cameras = run_wand(args.recording, args.intrinsics, length_mm=args.length_mm, colours=args.colour,
                             ball_mm=args.ball_mm, floor_views=args.floor_views, board=board, floor=args.floor,
-                            origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
+                            origin_m=origin_from_args(args, board) if board is not None else (0.0, 0.0, 0.0),
+                            turn_deg=args.turn_deg, check_world=not args.no_world_check)
     _save(args, cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(cameras)} cameras to {args.out}")
     return 0
