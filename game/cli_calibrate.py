@@ -80,7 +80,8 @@ def add_commands(sub) -> None:
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
     q.add_argument("--length-mm", type=float, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
     q.add_argument("--colour", action="append", default=None, metavar="R,G,B",
-                   help="ball colours, twice: ball 0 then ball 1 (default: meta.yaml wand_colours)")
+                   help="ball colours, twice: ball 0 then ball 1; once when both balls have one colour "
+                   "(default: meta.yaml wand_colours)")
     q.add_argument("--ball-mm", type=float, default=40.0, help="ball diameter (default: %(default)s)")
     q.add_argument("--floor-views", type=Path, default=None, help="folder with one sub-folder of board images per camera")
     _board_options(q, required=False)
@@ -526,27 +527,33 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
              check_world: bool = True):
     """Wand calibration, world frame from the floor board if given. Returns (WandResult, cameras)."""
     from calibration.extrinsics import world_from_floor_board
-    from calibration.wand import calibrate_wand
+    from calibration.wand import calibrate_wand, match_same_colour_balls
     from tracking.markerset import parse_rgb
     from tracking.recording import read_meta
     from tracking.wand_capture import wand_centroids
 
     if not recording.is_dir():
         raise RehabError(f"{recording}: no such wand recording folder")
-    extra = read_meta(recording).extra
+    extra = read_meta(recording).extra if (recording / "meta.yaml").is_file() else {}
     if length_mm is None:
         length_mm = extra.get("wand_length_mm")
         if not isinstance(length_mm, (int, float)):
             raise RehabError("give the wand length with --length-mm (distance between the ball centres)")
     if colours:
-        if len(colours) != 2:
-            raise RehabError("give --colour twice: the colour of ball 0, then of ball 1")
+        if len(colours) not in (1, 2):
+            raise RehabError("give --colour twice (ball 0, then ball 1), or once when both balls have one colour")
         rgb = [parse_rgb(c) for c in colours]
+        if len(rgb) == 1:
+            rgb *= 2
     else:
         rgb = extra.get("wand_colours")
         if not (isinstance(rgb, list) and len(rgb) == 2):
             raise RehabError("give the two ball colours with --colour R,G,B --colour R,G,B")
     cameras, uv = wand_centroids(recording, intrinsics, rgb, ball_mm / 2000.0, progress=verbose)
+    if tuple(rgb[0]) == tuple(rgb[1]):
+        uv, dropped = match_same_colour_balls(cameras, uv)
+        if verbose:
+            print(f"balls of one colour told apart by the cameras' geometry ({dropped} camera frames undecided, left out)")
     res = calibrate_wand(cameras, uv, float(length_mm) / 1000.0)
     out = res.cameras
     if floor_views is not None and floor is not None:

@@ -384,13 +384,15 @@ def wand_scene(balls_m: np.ndarray, radius_m: float = WAND_BALL_RADIUS_M,
     )
 
 
-def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: float = 1.5, seed: int = 0) -> Iterator[tuple[np.ndarray, ...]]:
+def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: float = 1.5, seed: int = 0,
+                colours_rgb255=WAND_COLOURS_RGB255) -> Iterator[tuple[np.ndarray, ...]]:
     """Images of every camera, frame by frame, of the wand at ``balls_m`` (T, 2, 3)."""
     from tracking.sim.renderer import StudioRenderer
 
     with StudioRenderer(cams) as renderer:
         for k, balls in enumerate(balls_m):
-            yield renderer.render(wand_scene(balls), noise_sigma=noise_sigma, seed=seed * 1_000_003 + k, with_visibility=False).images
+            yield renderer.render(wand_scene(balls, colours_rgb255=colours_rgb255), noise_sigma=noise_sigma,
+                                  seed=seed * 1_000_003 + k, with_visibility=False).images
 
 
 # ----------------------------------------------------------------------------- all of it
@@ -476,7 +478,8 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
 
 
 def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarray, fps: float, *,
-                        noise_sigma: float = 1.5, seed: int = 0, progress: bool = False) -> None:
+                        noise_sigma: float = 1.5, seed: int = 0, progress: bool = False,
+                        colours_rgb255=WAND_COLOURS_RGB255) -> None:
     """A wand recording: one lossless FFV1 video per camera, meta.yaml, truth_wand.csv (mm)."""
     from tqdm import tqdm
 
@@ -487,7 +490,8 @@ def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarra
     try:
         if not all(w.isOpened() for w in writers):
             raise RecordingError(f"{folder}: cannot write FFV1 videos here")
-        for images in tqdm(render_wand(cams, balls_m, noise_sigma=noise_sigma, seed=seed), total=len(balls_m),
+        for images in tqdm(render_wand(cams, balls_m, noise_sigma=noise_sigma, seed=seed, colours_rgb255=colours_rgb255),
+                           total=len(balls_m),
                            desc="wand", unit="frame", disable=not progress):
             for w, img in zip(writers, images):
                 w.write(img)
@@ -495,7 +499,7 @@ def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarra
         for w in writers:
             w.release()
     meta = {"fps": float(fps), "n_frames": int(len(balls_m)), "source": "simulator: calibration wand",
-            "wand_length_mm": WAND_LENGTH_M * 1000.0, "wand_colours": [list(c) for c in WAND_COLOURS_RGB255]}
+            "wand_length_mm": WAND_LENGTH_M * 1000.0, "wand_colours": [list(c) for c in colours_rgb255]}
     (folder / "meta.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
     np.savetxt(folder / "truth_wand.csv", balls_m.reshape(len(balls_m), 6) * 1000.0, delimiter=",", fmt="%.3f",
                header="ball0_x_mm,ball0_y_mm,ball0_z_mm,ball1_x_mm,ball1_y_mm,ball1_z_mm", comments="")
