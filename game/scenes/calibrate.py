@@ -771,18 +771,20 @@ class CalibrateScene(BaseScene):
                 y += (size + 8) * s
         return y
 
-    def _render_positions(self, c, w: float, h: float, s: float) -> None:
-        from game.scenes.calibrate_rig import link_diagram
-
+    def _rig_layout(self, c, w: float, h: float, s: float, instruction: str, colour) -> tuple[float, float, float]:
+        """The cameras' pictures on the left, the instruction at the top right; returns (x, y, width) below it."""
         m = theme.MARGIN * s
         left_w = 0.58 * w
         self._thumbnails(c, s, (m, 70 * s, left_w, h - 170 * s))
         x = m + left_w + 24 * s
         col_w = w - x - m
-        y = 72 * s
-        y = self._side_text(c, ["Hold the board still where two or more cameras see all of it; go round the "
-                                "cameras so that every neighbouring pair shares 3 views."], x, y, s, col_w,
-                            theme.SMALL, theme.TEXT_DIM)
+        return x, self._side_text(c, [instruction], x, 72 * s, s, col_w, theme.SMALL, colour), col_w
+
+    def _render_positions(self, c, w: float, h: float, s: float) -> None:
+        from game.scenes.calibrate_rig import link_diagram
+
+        x, y, col_w = self._rig_layout(c, w, h, s, "Hold the board still where two or more cameras see all of it; go round the "
+                                "cameras so that every neighbouring pair shares 3 views.", theme.TEXT_DIM)
         side = min(col_w, 0.36 * h)
         c.image("calibrate-links", link_diagram(self.rig_views.names, self.rig_views.pair_counts()),
                 (x, y + 4 * s, side * 1.2, side))
@@ -797,14 +799,8 @@ class CalibrateScene(BaseScene):
     def _render_floor(self, c, w: float, h: float, s: float) -> None:
         from game.scenes.calibrate_rig import floor_board_picture
 
-        m = theme.MARGIN * s
-        left_w = 0.58 * w
-        self._thumbnails(c, s, (m, 70 * s, left_w, h - 170 * s))
-        x = m + left_w + 24 * s
-        col_w = w - x - m
-        y = 72 * s
-        y = self._side_text(c, ["Lay the board face up on the seat, its rows across the patient, the black corner "
-                                "square at the patient's front left."], x, y, s, col_w, theme.SMALL, theme.TEXT)
+        x, y, col_w = self._rig_layout(c, w, h, s, "Lay the board face up on the seat, its rows across the patient, "
+                                       "the black corner square at the patient's front left.", theme.TEXT)
         side = min(col_w / 1.2, 0.42 * h)
         c.image("calibrate-floor", floor_board_picture(self.board), (x, y + 4 * s, side * 1.2, side))
         y += side + 16 * s

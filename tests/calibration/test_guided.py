@@ -6,26 +6,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from calibration.board import Checkerboard, Detection
+from calibration.board import Checkerboard
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
 from calibration.extrinsics import rig_errors
 from calibration.guided import RigViews, quality_report, solve_rig
 from tracking.sim.calibration_material import extrinsics_poses, seat_board_pose
+from tests.calibration.test_calib_extrinsics import _projected_views
 from tracking.sim.rigs import load_rig
 
 BOARD = Checkerboard(9, 6, 0.06)
 
 
 def _detections(cams, pose, noise_px, rng):
-    row = []
-    for cam in cams:
-        uv = cam.project(BOARD.object_points() @ pose.R.T + pose.t_m)
-        w, h = cam.size_px
-        front = float((cam.R @ pose.R)[:, 2] @ (cam.R @ pose.t_m + cam.t_m)) > 0
-        inside = np.all(np.isfinite(uv)) and uv.min() > 0 and uv[:, 0].max() < w - 1 and uv[:, 1].max() < h - 1
-        row.append(Detection(uv + rng.normal(0, noise_px, uv.shape), cam.size_px) if front and inside else None)
-    return row
+    """Exact corner projections (+ noise) of one board pose in every camera that sees it whole."""
+    return _projected_views(cams, [pose], ["v"], noise_px, seed=int(rng.integers(1 << 30)))["v"]
 
 
 @pytest.mark.parametrize("rig", ["ring4", "tri3"])

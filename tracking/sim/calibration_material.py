@@ -430,27 +430,12 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
             for i, img in enumerate(images):
                 cv2.imwrite(str(folder / f"{i:03d}.png"), img)
             n_images += len(images)
-    poses = extrinsics_poses(cams, board, per_pair, rng)
-    seat = seat_board_pose(board)
-    views = render_views(cams, backgrounds, board, [*poses, seat], seed=seed + 7, noise_sigma=noise_sigma)
-    for c, cam in enumerate(cams):
-        folder = out_dir / "extrinsics" / cam.name
-        folder.mkdir(parents=True, exist_ok=True)
-        for v, per_cam in enumerate(views):
-            name = "seat" if v == len(poses) else f"{v:03d}"
-            cv2.imwrite(str(folder / f"{name}.png"), per_cam[c])
-    n_images += len(views) * len(cams)
+    n, seat = _write_shared_views(out_dir / "extrinsics", cams, backgrounds, board, per_pair, rng, seed=seed + 7,
+                                  noise_sigma=noise_sigma)
+    n_images += n
     if charuco_extrinsics is not None:
-        c_poses = extrinsics_poses(cams, charuco_extrinsics, per_pair, np.random.default_rng(seed + 11))
-        c_seat = seat_board_pose(charuco_extrinsics)
-        views = render_views(cams, backgrounds, charuco_extrinsics, [*c_poses, c_seat], seed=seed + 13, noise_sigma=noise_sigma)
-        for c, cam in enumerate(cams):
-            folder = out_dir / "extrinsics_charuco" / cam.name
-            folder.mkdir(parents=True, exist_ok=True)
-            for v, per_cam in enumerate(views):
-                name = "seat" if v == len(c_poses) else f"{v:03d}"
-                cv2.imwrite(str(folder / f"{name}.png"), per_cam[c])
-        n_images += len(views) * len(cams)
+        n_images += _write_shared_views(out_dir / "extrinsics_charuco", cams, backgrounds, charuco_extrinsics, per_pair,
+                                        np.random.default_rng(seed + 11), seed=seed + 13, noise_sigma=noise_sigma)[0]
     n_wand = int(round(wand_seconds * wand_fps))
     balls = wand_path(n_wand, wand_fps, seed=seed)
     write_wand_sequence(out_dir / "wand", cams, balls, wand_fps, noise_sigma=noise_sigma, seed=seed, progress=progress)
@@ -475,6 +460,21 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
     (out_dir / "material.yaml").write_text(yaml.safe_dump(material, sort_keys=False), encoding="utf-8")
     return (f"wrote {n_images} board images and a {n_wand}-frame wand sequence from {len(cams)} cameras "
             f"to {out_dir} (truth in truth_calibration.toml)")
+
+
+def _write_shared_views(folder: Path, cams: Sequence[Camera], backgrounds, board, per_pair: int,
+                        rng: np.random.Generator, *, seed: int, noise_sigma: float) -> tuple[int, BoardPose]:
+    """The extrinsics views and the seat board as ``folder/<camera>/000.png ... seat.png``.
+    Returns the number of images and the seat board's pose."""
+    poses = extrinsics_poses(cams, board, per_pair, rng)
+    seat = seat_board_pose(board)
+    views = render_views(cams, backgrounds, board, [*poses, seat], seed=seed, noise_sigma=noise_sigma)
+    for c, cam in enumerate(cams):
+        (folder / cam.name).mkdir(parents=True, exist_ok=True)
+        for v, per_cam in enumerate(views):
+            name = "seat" if v == len(poses) else f"{v:03d}"
+            cv2.imwrite(str(folder / cam.name / f"{name}.png"), per_cam[c])
+    return len(views) * len(cams), seat
 
 
 def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarray, fps: float, *,
