@@ -287,9 +287,11 @@ def _save(args, cameras, error_px: float) -> None:
 SKIPPED_LISTED = 5  # more skipped images than this are summed up in one line
 
 
-def _report_skipped(skipped: dict[str, str], *, every: bool = False) -> None:
-    """Each skipped image with its reason, or past SKIPPED_LISTED a summary by reason."""
+def _report_skipped(skipped: dict[str, str], *, head: str = "", every: bool = False) -> None:
+    """Each skipped image with its reason, or past SKIPPED_LISTED one summary line by reason."""
     if every or len(skipped) <= SKIPPED_LISTED:
+        if head:
+            print(f"{head}:")
         for name, reason in skipped.items():
             print(f"  skipped {name}: {reason}")
         return
@@ -298,7 +300,7 @@ def _report_skipped(skipped: dict[str, str], *, every: bool = False) -> None:
     common = Counter(skipped.values()).most_common()
     first, n = common[0]
     rest = f"; {len(skipped) - n} for other reasons" if len(common) > 1 else ""
-    print(f"  skipped {len(skipped)} images: {n} \"{first}\"{rest} (--list-skipped names them)")
+    print(f"{head or f'  skipped {len(skipped)} images'}: {n} \"{first}\"{rest} (--list-skipped names them)")
 
 
 # --------------------------------------------------------------------------- intrinsics
@@ -501,8 +503,8 @@ def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin
         for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
             print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
         if skipped:
-            print(f"  {len(skipped)} camera images without a usable board (normal for cameras that do not face it):")
-            _report_skipped(skipped, every=list_skipped)
+            _report_skipped(skipped, every=list_skipped, head=f"  {len(skipped)} camera images without a usable board "
+                            "(normal for cameras that do not face it)")
         for w in res.warnings:
             print(f"  warning: {w}")
     return res
