@@ -76,7 +76,8 @@ def add_commands(sub) -> None:
     q = cal.add_parser("wand", help="camera positions from a wand (two balls at a known distance) waved through the volume",
                        description="Calibrate the cameras' positions from a recording of a two-ball wand; the world "
                        "frame comes from board images of the board lying on the floor or seat (--floor-views).")
-    q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera, meta.yaml)")
+    q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera; meta.yaml "
+                   "optional: without it the frame rate comes from the videos)")
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
     q.add_argument("--length-mm", type=float, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
     q.add_argument("--colour", action="append", default=None, metavar="R,G,B",
