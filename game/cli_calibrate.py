@@ -70,6 +70,9 @@ def add_commands(sub) -> None:
                    help="folder with one sub-folder per camera holding the floor board's image (named as --floor); "
                    "default: the views folder")
     q.add_argument("--list-skipped", action="store_true", help="name every image without a usable board")
+    q.add_argument("--floor-board", default=None, metavar="SPEC",
+                   help="another board on the floor or seat than the shared views': 9x6:60 (checkerboard inner "
+                   "corners : square mm) or charuco:10x7:40[:30]; --origin and --board-centre then refer to it")
     _output_options(q)
     q.set_defaults(func=_cmd_extrinsics)
 
@@ -487,19 +490,32 @@ def _check_floor_view(folder: Path, cameras, floor: str | None) -> None:
 
 
 def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True,
-                   floor_views: Path | None = None, list_skipped: bool = False, check_world: bool = True):
+                   floor_views: Path | None = None, list_skipped: bool = False, check_world: bool = True,
+                   floor_board=None):
     """Board extrinsics from shared views; the floor board's view from ``floor_views`` when given
-    (a folder with one sub-folder per camera), else from ``views_dir``."""
-    from calibration.extrinsics import calibrate_extrinsics
+    (a folder with one sub-folder per camera), else from ``views_dir``. With ``floor_board`` (another
+    board than the shared views', e.g. a checkerboard on the seat after ChArUco views) the rig is
+    solved from the shared views alone and then set in the floor board's world frame."""
+    from dataclasses import replace
+
+    from calibration.extrinsics import calibrate_extrinsics, world_from_floor_board
 
     _check_floor_view(floor_views or views_dir, cameras, floor)
     views, skipped = detect_views(views_dir, cameras, board)
-    if floor_views is not None and floor is not None:
-        floor_rows, floor_skipped = detect_views(floor_views, cameras, board, only=floor)
-        views[floor] = floor_rows[floor]
-        skipped.update({f"{floor_views.name}/{k}": v for k, v in floor_skipped.items()})
-    res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg,
-                               check_world=check_world)
+    if floor is not None and (floor_views is not None or floor_board is not None):
+        floor_rows, floor_skipped = detect_views(floor_views or views_dir, cameras, floor_board or board, only=floor)
+        views[floor] = floor_rows.get(floor, [None] * len(cameras))
+        where = f"{floor_views.name}/" if floor_views is not None else ""
+        skipped.update({f"{where}{k}": v for k, v in floor_skipped.items()})
+    if floor_board is not None and floor is not None:
+        floor_row = views.pop(floor)
+        res = calibrate_extrinsics(cameras, board, views, floor_view=None)
+        placed, _ = world_from_floor_board(res.cameras, floor_row, floor_board, origin_m=origin_m, turn_deg=turn_deg,
+                                           check_world=check_world)
+        res = replace(res, cameras=placed, world_set=True, warnings=tuple(w for w in res.warnings if "floor" not in w))
+    else:
+        res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg,
+                                   check_world=check_world)
     if verbose:
         for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
             print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
@@ -515,10 +531,11 @@ def _cmd_extrinsics(args) -> int:
     from calibration.files import load_calibration
 
     board = board_from_args(args)
+    floor_board = board_from_spec(args.floor_board) if args.floor_board else None
     cameras = load_calibration(args.intrinsics)
-    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, board),
+    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, floor_board or board),
                          turn_deg=args.turn_deg, floor_views=args.floor_views, list_skipped=args.list_skipped,
-                         check_world=not args.no_world_check)
+                         check_world=not args.no_world_check, floor_board=floor_board)
     _save(args, res.cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(res.cameras)} cameras to {args.out}")
     return 0
@@ -757,6 +774,17 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
         pos, ang = rig_errors(ext.cameras, truth)
         lines.append(f"ChArUco extrinsics: position error max {pos.max():.2f} mm, orientation max {ang.max():.3f} deg, "
                      f"reprojection max {np.nanmax(ext.rms_px):.3f} px")
+        floor_board = material.get("board")
+        if floor_board is not None and (folder / "extrinsics").is_dir():   # the world frame from the checkerboard instead
+            from calibration.board import Checkerboard
+
+            cb = Checkerboard.parse(floor_board["pattern"], floor_board["square_mm"])
+            mixed = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
+                                   origin_m=tuple(material["seat_board"]["origin_m"]), turn_deg=0.0, verbose=False,
+                                   floor_views=folder / "extrinsics", floor_board=cb)
+            p2, a2 = rig_errors(mixed.cameras, truth)
+            lines.append(f"ChArUco extrinsics, checkerboard on the seat: position error max {p2.max():.2f} mm, "
+                         f"orientation max {a2.max():.3f} deg")
     for c, t in enumerate(truth):
         extra = "" if pos is None else f", position {pos[c]:.2f} mm, orientation {ang[c]:.3f} deg"
         lines.append(f"  ChArUco {t.name}: focal {focal[c]:.3f} %, image centre {centre[c]:.2f} px{extra}")

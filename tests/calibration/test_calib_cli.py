@@ -122,6 +122,13 @@ def test_world_frame_options_and_a_separate_floor_folder(material, tmp_path, cap
     assert main(["calibrate", "extrinsics", str(views), "--intrinsics", str(material / "truth_calibration.toml"), "--board",
                  "9x6", "--square-mm", "60", "--out", str(out2)]) == 1
     assert "no image named 'seat'" in capsys.readouterr().err
+    # the floor board named on its own (as after ChArUco views): the rig solved first, then placed by it
+    out3 = tmp_path / "c3.toml"
+    assert main(["calibrate", "extrinsics", str(views), "--intrinsics", str(material / "truth_calibration.toml"), "--board",
+                 "9x6", "--square-mm", "60", "--floor-views", str(floor), "--floor-board", "9x6:60",
+                 "--board-centre", ",".join(map(str, centre)), "--out", str(out3)]) == 0
+    pos, ang = rig_errors(load_calibration(out3), truth)
+    assert pos.max() < 10.0 and ang.max() < 0.3
 
 
 def test_a_held_board_taken_for_the_floor_board_is_refused(material, tmp_path, capsys):
