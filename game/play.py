@@ -170,7 +170,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         MenuEntry("ROM test", "Measure a range of motion", open_rom),
         MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
-        MenuEntry("Calibrate cameras", "Lens and focal length of each camera from a checkerboard", open_calibrate),
+        MenuEntry("Calibrate cameras", "Lenses, camera positions and the floor, step by step", open_calibrate),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
     app.push(home)
