@@ -24,6 +24,7 @@ sub-pixel refinement a little.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -32,6 +33,12 @@ import numpy as np
 
 from calibration.board import Detection, grid_points, usable_gray
 from calibration.errors import CalibrationError
+
+log = logging.getLogger(__name__)
+
+#: OpenCV before 5 interpolates ChArUco corners less exactly: on the simulated boards 0.66 px RMS
+#: from the true corners with OpenCV 4.8-4.10 against 0.14-0.28 px with OpenCV 5 (docs/CALIBRATION.md).
+PRECISE_CHARUCO_OPENCV = 5
 
 MIN_CORNERS = 6  # fewer corners in one view constrain a camera too weakly (and may be collinear)
 TEXTURE_PX_PER_SQUARE = 120  # marker bit edges placed to 1/120 of a square in the simulator's drawing
@@ -157,8 +164,17 @@ def _texture(board: CharucoBoard) -> np.ndarray:
     return board.image(TEXTURE_PX_PER_SQUARE) < 128
 
 
+def opencv_major() -> int:
+    """The installed OpenCV's major version."""
+    return int(cv2.__version__.split(".", 1)[0])
+
+
 @lru_cache(maxsize=8)
 def _detector(board: CharucoBoard) -> "cv2.aruco.CharucoDetector":
+    if opencv_major() < PRECISE_CHARUCO_OPENCV:
+        log.warning("OpenCV %s places ChArUco corners about 0.6 px off (OpenCV %d: about 0.2 px): for a precise "
+                    "calibration install opencv-python-headless>=%d.0 (the README's lock file has it) or use a "
+                    "checkerboard", cv2.__version__, PRECISE_CHARUCO_OPENCV, PRECISE_CHARUCO_OPENCV)
     params = cv2.aruco.CharucoParameters()
     params.minMarkers = 2  # OpenCV's default: a corner needs both neighbouring markers (1 lets in corners 1-3 px off)
     params.tryRefineMarkers = True  # look again for markers the board's layout predicts (small, oblique boards)
