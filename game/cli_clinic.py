@@ -29,10 +29,18 @@ def _add_db(p) -> None:
                    help="database file (default: the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
 
 
-def _open_db(args):
+def _open_db(args, *, check_integrity: bool = True):
+    """The command's database, checked in full at the command's start (``PRAGMA integrity_check``)."""
     from game.db import Database, default_db_path
 
-    return Database(args.db or default_db_path())
+    return Database(args.db or default_db_path(), check_integrity=check_integrity)
+
+
+def _tell(message: str) -> None:
+    """A progress line for the user (waiting for a locked database, a result kept aside)."""
+    import sys
+
+    print(f"rehab: {message}", file=sys.stderr, flush=True)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -102,8 +110,8 @@ def _cmd_rom_test(args) -> int:
         run = run_simulated_test(test, args.side, args.standard, motion=args.motion, rig=args.rig, size_px=args.size,
                                  fps=args.fps, max_attempts=args.attempts, decide=decide)
         for i, attempt in enumerate(run.attempts, 1):
-            verdict = "accepted" if attempt.accepted else "discarded (compensation: repeat)"
-            print(f"attempt {i}: {attempt.result.line()} -> {verdict}")
+            if not attempt.accepted:
+                print(f"attempt {i}: {attempt.result.line()} -> discarded (compensation: repeat)")
         print(f"{run.frames} frame sets ({run.motion_s:.1f} s of motion {run.motion}) in {run.wall_s:.1f} s")
         accepted = run.accepted
         if accepted is None:
@@ -117,11 +125,18 @@ def _cmd_rom_test(args) -> int:
         if previous:
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
-        if db is not None:
-            session = db.start_session(args.patient, "rom", source=f"sim:{run.motion}")
-            uid = db.add_rom_result(session, r)
-            db.end_session(session)
-            print(f"stored result {uid} for patient {args.patient} in {db.path}")
+        number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
+        if db is None:
+            print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
+            return 0
+        from game.db import pending, rom_record
+
+        db.close()   # storing opens its own connection, waiting out another program's lock
+        outcome = pending.store_durably(db.path, rom_record(args.patient, r, source=f"sim:{run.motion}"),
+                                        wait_s=pending.WAIT_S, notify=_tell)
+        # "accepted" only once the result is on disk (in the database, or in its pending file)
+        print(f"attempt {number}: {r.line()} -> accepted")
+        print(f"{outcome.line(db.path)} for patient {args.patient}")
         return 0
     finally:
         if db is not None:

@@ -521,17 +521,20 @@ class GameSession:
 
 
 # ============================================================================ storing
-def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "") -> str | None:
+def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wait_s: float = 3.0) -> str | None:
     """Store a session's log as an exercise result of a new ``exercise`` session; returns its uid.
 
+    The session and its result are one transaction. A database locked by another program is
+    waited for ``wait_s``, then the result is kept in a pending file that the next open stores
+    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost.
     Nothing is stored for a session that never started playing (no active time).
     """
-    from game.db import Database
+    from game.db import exercise_record
+    from game.db.database import utc_now
+    from game.db.pending import store_durably
 
     if log.active_s <= 0.0:
         return None
-    with Database(db_path) as db:
-        session = db.start_session(patient_id, "exercise", source=source)
-        uid = db.add_exercise_result(session, log.game, log.reached, log.duration_s, log.score, log.details_json())
-        db.end_session(session)
-    return uid
+    record = exercise_record(patient_id, log.game, log.reached, log.duration_s, log.score, log.details_json(),
+                             source=source, started_utc=utc_now(ago_s=log.duration_s))
+    return store_durably(db_path, record, wait_s=wait_s).uid
