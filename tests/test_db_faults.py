@@ -168,3 +168,172 @@ def test_the_game_scene_store_keeps_a_result_while_locked(tmp_path):
     with Database(path) as db:
         (row,) = db.exercise_results("P001")
     assert row.uid == uid and row.repetitions == 7
+
+
+# ------------------------------------------------------------------------------ item 2: a killed backup
+BACKUP_CHILD = """
+import sys
+from game.db import Database
+with Database(sys.argv[1]) as db:
+    print("ready", flush=True)
+    db.backup(sys.argv[2])
+    print("done", flush=True)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "kill") or sys.platform.startswith("win"), reason="needs SIGKILL")
+def test_a_killed_backup_leaves_no_file_under_the_chosen_name(tmp_path):
+    import random
+    import signal
+
+    path = new_db(tmp_path / "big.sqlite3")
+    with Database(path) as db:   # ~4 MB, so that the copy takes a while
+        big = "x" * 4000
+        db.conn.execute("BEGIN")
+        for i in range(1000):
+            db.conn.execute("INSERT INTO patients (id, created_utc, note) VALUES (?, ?, ?)",
+                            (f"Q{i:04d}", "2026-01-01T00:00:00Z", big))
+        db.conn.execute("COMMIT")
+    rng = random.Random(3)
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    outcomes = {"killed before done": 0, "complete": 0}
+    for k in range(8):
+        dest = tmp_path / f"backup{k}.sqlite3"
+        child = subprocess.Popen([sys.executable, "-c", BACKUP_CHILD, str(path), str(dest)], stdout=subprocess.PIPE,
+                                 cwd=ROOT, env=env, text=True)
+        assert child.stdout.readline().strip() == "ready"
+        time.sleep(rng.uniform(0.0, 0.08))
+        child.send_signal(signal.SIGKILL)
+        out, _ = child.communicate(timeout=30)
+        if dest.exists():   # then it is whole: every patient there, and a later open is no "new database"
+            with Database(dest, check_integrity=True) as db:
+                assert len(db.patients()) == 1001
+            assert stat.S_IMODE(dest.stat().st_mode) == 0o600
+            outcomes["complete"] += 1
+        else:
+            assert "done" not in out
+            outcomes["killed before done"] += 1
+            with Database(path) as db:   # the same name is free for the next try
+                db.backup(dest)
+            with Database(dest) as db:
+                assert len(db.patients()) == 1001
+    assert outcomes["killed before done"] >= 1, outcomes
+
+
+def test_a_backup_refuses_an_existing_file_and_checks_the_copy(tmp_path):
+    path = new_db(tmp_path / "r.sqlite3")
+    with Database(path) as db:
+        out = db.backup(tmp_path / "b" / "copy.sqlite3")
+        with pytest.raises(DatabaseError, match="exists: give a new file name"):
+            db.backup(out)
+    assert sorted(p.name for p in out.parent.iterdir()) == ["copy.sqlite3"]   # no temporary file left
+    with sqlite3.connect(out) as c:
+        assert c.execute("PRAGMA journal_mode").fetchone()[0] == "delete"   # one self-contained file
+
+
+# ------------------------------------------------------------------------------ item 9: the user's only
+@pytest.mark.skipif(sys.platform.startswith("win"), reason="POSIX permissions")
+@pytest.mark.parametrize("umask", [0o022, 0o000])
+def test_patient_files_are_0600_in_a_0700_folder_whatever_the_umask(tmp_path, umask, capsys):
+    from game.cli import main
+
+    old = os.umask(umask)
+    try:
+        folder = tmp_path / "data" / "rehab"
+        db_path = folder / "rehab.sqlite3"
+        with Database(db_path) as db:
+            db.add_patient("P001")
+            db.store_result(rom_record("P001", rom()))
+            db.backup(tmp_path / "backups" / "b.sqlite3")
+            db.export_csv(tmp_path / "export")
+        assert main(["report", "P001", "--out", str(tmp_path / "reports" / "p.html"), "--db", str(db_path)]) == 0
+        keep = folder / "rehab.sqlite3.pending"
+        from game.db.pending import keep_pending
+
+        keep_pending(db_path, rom_record("P001", rom()))
+    finally:
+        os.umask(old)
+    for d in (tmp_path / "data", folder, keep, tmp_path / "backups", tmp_path / "export", tmp_path / "reports"):
+        assert stat.S_IMODE(d.stat().st_mode) == 0o700, d
+    files = [p for d in (folder, keep, tmp_path / "backups", tmp_path / "export", tmp_path / "reports")
+             for p in d.iterdir() if p.is_file()]
+    assert len(files) >= 10
+    for f in files:
+        assert stat.S_IMODE(f.stat().st_mode) == 0o600, f
+
+
+def test_an_existing_world_readable_database_is_made_private(tmp_path):
+    path = new_db(tmp_path / "r.sqlite3")
+    os.chmod(path, 0o644)
+    with Database(path):
+        pass
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600
+
+
+# ------------------------------------------------------------------------------ item 14: integrity where it matters
+def test_integrity_check_runs_at_start_up_backup_and_import_not_on_every_open(tmp_path, monkeypatch, capsys):
+    import game.db.database as dbmod
+    from game.cli import main
+
+    path = new_db(tmp_path / "r.sqlite3")
+    seen: list[str] = []
+    real_connect = sqlite3.connect
+
+    def traced(*args, **kwargs):
+        conn = real_connect(*args, **kwargs)
+        conn.set_trace_callback(seen.append)
+        return conn
+
+    monkeypatch.setattr(dbmod.sqlite3, "connect", traced)
+
+    def checks() -> int:
+        n = sum("integrity_check" in s for s in seen)
+        seen.clear()
+        return n
+
+    for _ in range(5):   # a game session opens the database several times
+        with Database(path) as db:
+            db.patients()
+    assert checks() == 0
+    with Database(path, check_integrity=True):
+        pass
+    assert checks() == 1
+    assert main(["patients", "--db", str(path)]) == 0 and checks() == 1   # a command's start
+    assert main(["backup", "--out", str(tmp_path / "b.sqlite3"), "--db", str(path)]) == 0
+    assert checks() == 2   # at the start and of the copy
+    assert main(["export", "--out", str(tmp_path / "csv"), "--db", str(path)]) == 0 and checks() == 1
+    assert main(["import", str(tmp_path / "csv"), "--db", str(path)]) == 0 and checks() == 1
+
+
+# ------------------------------------------------------------------------------ item 12: damaged schemas
+@pytest.mark.parametrize("damage, words", [
+    ("UPDATE schema_version SET version = 'abc'", "schema_version 'abc' is not a whole number"),
+    ("DROP TABLE rom_results", "missing table rom_results"),
+    ("DROP TABLE game_limits", "missing table game_limits"),
+    ("UPDATE schema_version SET version = 2.5", "is not a whole number"),
+])
+def test_a_damaged_schema_is_one_line(tmp_path, damage, words, capsys):
+    from game.cli import main
+
+    path = new_db(tmp_path / "r.sqlite3")
+    with sqlite3.connect(path) as c:
+        c.execute(damage)
+    before = path.read_bytes()
+    code = main(["patients", "--db", str(path)])
+    err = capsys.readouterr().err
+    assert code == 1 and words in err and "restore a backup" in err and err.count("\n") == 1, err
+    assert path.read_bytes() == before
+
+
+def test_a_read_only_database_is_one_line(tmp_path, capsys):
+    from game.db.database import sqlite_error
+
+    path = new_db(tmp_path / "r.sqlite3")
+    ro = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
+    try:
+        with pytest.raises(sqlite3.OperationalError) as raw:
+            ro.execute("INSERT INTO patients (id, created_utc) VALUES ('X', 'y')")
+    finally:
+        ro.close()
+    err = sqlite_error(path, raw.value)
+    assert "read-only" in str(err) and "writable" in str(err) and "damaged" not in str(err)
