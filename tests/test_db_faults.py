@@ -337,3 +337,89 @@ def test_a_read_only_database_is_one_line(tmp_path, capsys):
         ro.close()
     err = sqlite_error(path, raw.value)
     assert "read-only" in str(err) and "writable" in str(err) and "damaged" not in str(err)
+
+
+# ------------------------------------------------------------------------------ items 3, 11: imports' values
+def _export(tmp_path) -> Path:
+    path = new_db(tmp_path / "a.sqlite3")
+    with Database(path) as db:
+        db.store_result(rom_record("P001", rom(120.0)))
+        db.store_result(exercise_record("P001", "reach", 12, 95.0, 0.5))
+        db.export_csv(tmp_path / "csv")
+    return tmp_path / "csv"
+
+
+def _set(folder: Path, table: str, column: str, value: str) -> None:
+    import csv
+
+    with open(folder / f"{table}.csv", newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    rows[-1][column] = value
+    with open(folder / f"{table}.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+@pytest.mark.parametrize("table, column, value, words", [
+    ("rom_results", "value_deg", "inf", "value_deg 'inf' is out of range"),
+    ("rom_results", "value_deg", "nan", "value_deg 'nan' is out of range"),
+    ("rom_results", "value_deg", "1e300", "out of range"),
+    ("rom_results", "start_deg", "-1e9", "out of range"),
+    ("rom_results", "range_deg", "lots", "range_deg 'lots' is not a number"),
+    ("rom_results", "side", "up", "side 'up': use right or left"),
+    ("rom_results", "test", "knee_bend", "unknown ROM test 'knee_bend'"),
+    ("rom_results", "standard", "who", "standard 'who'"),
+    ("rom_results", "recorded_utc", "yesterday", "recorded_utc 'yesterday' is not a UTC time"),
+    ("rom_results", "duration_s", "-10", "duration_s '-10' is out of range"),
+    ("exercise_results", "repetitions", "-5", "repetitions '-5' is out of range"),
+    ("exercise_results", "repetitions", "2.7", "repetitions '2.7' is not a whole number"),
+    ("exercise_results", "duration_s", "-10", "duration_s '-10' is out of range"),
+    ("exercise_results", "score", "nan", "score 'nan' is out of range"),
+    ("sessions", "kind", "banana", "session kind 'banana'"),
+    ("sessions", "started_utc", "yesterday", "started_utc 'yesterday'"),
+    ("sessions", "ended_utc", "2026-13-45T99:00:00Z", "not a valid date"),
+    ("patients", "created_utc", "", "created_utc ''"),
+    ("game_limits", "limits", "{\"max\": NaN}", "limits are not valid JSON"),
+])
+def test_an_import_refuses_values_the_rest_cannot_handle(tmp_path, table, column, value, words, capsys):
+    from game.cli import main
+
+    folder = _export(tmp_path)
+    if table == "game_limits":
+        (folder / "game_limits.csv").write_text("patient_id,game,limits,updated_utc\n"
+                                                "P001,reach,\"{\"\"max\"\": NaN}\",2026-01-01T00:00:00Z\n")
+    else:
+        _set(folder, table, column, value)
+    target = tmp_path / "b.sqlite3"
+    code = main(["import", str(folder), "--db", str(target)])
+    err = capsys.readouterr().err
+    assert code == 1 and words in err and f"{table}.csv line" in err and err.count("\n") == 1, err
+    with Database(target) as db:   # one transaction: nothing imported
+        assert db.patients() == []
+
+
+def test_an_import_of_the_export_round_trips(tmp_path):
+    folder = _export(tmp_path)
+    with Database(tmp_path / "b.sqlite3") as db:
+        assert db.import_csv(folder) == {"patients": 1, "sessions": 2, "rom_results": 1, "exercise_results": 1,
+                                         "game_limits": 0}
+
+
+def test_export_of_an_empty_patient_id_is_refused_not_everyone(tmp_path, capsys):
+    from game.cli import main
+
+    path = new_db(tmp_path / "r.sqlite3")
+    code = main(["export", "--out", str(tmp_path / "x"), "--patient", "", "--db", str(path)])
+    err = capsys.readouterr().err
+    assert code == 1 and "give a patient ID" in err and not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize("note, warned", [("left hemiparesis, 2nd visit", False), ("born 1961-03-02", True),
+                                          ("Jane Doe", True), ("stroke in 2019", True), ("", False)])
+def test_a_note_that_looks_identifying_is_warned_about(tmp_path, capsys, note, warned):
+    from game.cli import main
+
+    assert main(["patients", "--add", "P001", "--note", note, "--db", str(tmp_path / "r.sqlite3")]) == 0
+    err = capsys.readouterr().err
+    assert ("must not identify the patient" in err) == warned, err

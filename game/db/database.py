@@ -122,6 +122,24 @@ def _guarded(method):
     return wrapper
 
 
+_DATE = re.compile(r"\b\d{1,4}\s*[-/.]\s*\d{1,2}\s*[-/.]\s*\d{1,4}\b|\b(19|20)\d{2}\b")
+_NAME = re.compile(r"\b[A-Z][a-z\u00C0-\u024F'-]+\s+[A-Z][a-z\u00C0-\u024F'-]+\b")
+_IDENTIFYING = re.compile(r"\b(born|birth|dob|name|geb|n[ée]e?|address|street|phone|tel)\b", re.IGNORECASE)
+
+
+def identifying_hint(note: str) -> str:
+    """What in a free-text note looks like it could identify the patient ("" when nothing does).
+
+    A heuristic for a warning (a date, two capitalised words in a row, words like "born"); notes
+    must never hold names, birth dates or addresses.
+    """
+    for pattern, what in ((_DATE, "a date"), (_NAME, "a name"), (_IDENTIFYING, "identifying words")):
+        m = pattern.search(note or "")
+        if m:
+            return f"{what} ({m.group(0)!r})"
+    return ""
+
+
 # --------------------------------------------------------------------------------- rows
 @dataclass(frozen=True, slots=True)
 class PatientRow:
