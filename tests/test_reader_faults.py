@@ -1,0 +1,118 @@
+"""The reported bad inputs of the readers, one by one: each is one line that names the file and the fix."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from calibration.errors import RehabError
+from content import content_path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_latin1_accent_in_a_content_yaml_names_the_line_and_byte(tmp_path):
+    from game.exergames.spec import load_game
+
+    text = content_path("games", "reach.yaml").read_bytes()
+    path = tmp_path / "mine.yaml"
+    path.write_bytes(b"# caf\xe9 du matin\n" + text)
+    with pytest.raises(RehabError) as err:
+        load_game(path)
+    assert str(err.value) == f"{path}: not UTF-8 text: byte 0xE9 at line 1 (byte position 5): save the file as UTF-8"
+
+
+def test_a_latin1_accent_in_meta_yaml_is_one_line(tmp_path):
+    from tracking.recording import read_meta
+
+    (tmp_path / "meta.yaml").write_bytes(b"fps: 30\n# r\xe9glage\n")
+    with pytest.raises(RehabError, match=r"meta.yaml: not UTF-8 text: byte 0xE9 at line 2"):
+        read_meta(tmp_path)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("fps: .nan\n", "'fps' must be a positive number"),
+    ("fps: .inf\n", "'fps' must be a positive number"),
+    ("fps: 30\nn_frames: 1.0e-320\n", "'n_frames' must be a whole number"),
+    ("fps: 30\nmarker_colours: [[999, 0, 0]]\n", "whole numbers 0-255"),
+    ("fps: 30\nmarker_colours: [[1, 2]]\n", "whole numbers 0-255"),
+    ("fps: 30\nmarkerset: [a, b]\n", "'markerset' must be a marker set name"),
+])
+def test_meta_yaml_values_are_checked_once_at_load(tmp_path, text, words):
+    from tracking.recording import read_meta
+
+    (tmp_path / "meta.yaml").write_text(text)
+    with pytest.raises(RehabError, match=words):
+        read_meta(tmp_path)
+
+
+def test_meta_yaml_with_3_of_14_colours_is_refused_not_ignored(tmp_path):
+    from types import SimpleNamespace
+
+    from tracking.offline import markerset_for
+    from tracking.recording import RecordingMeta
+
+    rec = SimpleNamespace(folder=tmp_path, meta=RecordingMeta(fps=30.0, marker_colours=((255, 0, 0),) * 3))
+    with pytest.raises(RehabError, match="gives 3 marker_colours but the marker set upper_limb_seated has 14"):
+        markerset_for(rec, None, None)
+
+
+def test_a_nan_in_a_game_yaml_is_refused(tmp_path):
+    from game.exergames.spec import load_game
+
+    path = tmp_path / "nan.yaml"
+    path.write_text(content_path("games", "reach.yaml").read_text().replace("limits: {}", "limits: {max_level: .nan}"))
+    with pytest.raises(RehabError, match=r"limits.max_level: Input should be a finite number"):
+        load_game(path)
+
+
+def _trc(tmp_path) -> Path:
+    from tracking.trc import write_trc
+
+    path = tmp_path / "m.trc"
+    write_trc(path, ["RSHO", "RELB", "RWRI"], np.arange(60, dtype=float).reshape(5, 4, 3)[:, :3], 30.0)
+    return path
+
+
+def test_a_trc_cut_mid_row_is_refused(tmp_path):
+    from tracking.trc import read_trc
+
+    path = _trc(tmp_path)
+    data = path.read_bytes()
+    path.write_bytes(data[:data.rindex(b"\t", 0, len(data) - 8)])
+    with pytest.raises(RehabError, match="without a line end: the file is truncated"):
+        read_trc(path)
+
+
+def test_a_trc_with_its_header_only_is_refused(tmp_path):
+    from tracking.trc import read_trc
+
+    path = _trc(tmp_path)
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:6]))
+    with pytest.raises(RehabError, match="NumFrames says 5 but the file holds|header but no frames"):
+        read_trc(path)
+
+
+def test_a_c3d_cut_to_30_percent_is_refused(tmp_path):
+    from tracking.c3d_io import read_c3d_points
+
+    data = content_path("captures", "ezc3d_vicon_upper_limb.c3d").read_bytes()
+    path = tmp_path / "cut.c3d"
+    path.write_bytes(data[:int(0.3 * len(data))])
+    with pytest.raises(RehabError, match="the file says 580 frames but holds 171: it is truncated"):
+        read_c3d_points(path)
+    path.write_bytes(data[:700])   # a header and part of the parameters: ezc3d would crash on it
+    with pytest.raises(RehabError, match="parameter section is cut short"):
+        read_c3d_points(path)
+
+
+def test_a_marker_colour_of_999_is_one_line(capsys):
+    from game.cli import main
+
+    code = main(["track", str(ROOT / "nothing"), "--marker-color", "999,0,0", "--out", "x.trc"])
+    err = capsys.readouterr().err
+    assert code == 1 and err.count("\n") == 1, err
