@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 
 from calibration.errors import RehabError
-from game.cli_options import COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, handle_broken_pipe, number
+from game.cli_options import (COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, check_outputs, handle_broken_pipe,
+                              number)
 
 log = logging.getLogger("rehab")
 
@@ -125,7 +126,10 @@ def _cmd_track(args) -> int:
         raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
     if not (args.points or labelled):
         raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --points)")
-    report = track_recording(
+    # before the work, not after minutes of tracking
+    check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
+                   "--points": args.points})
+    report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,
         markerset=args.markerset,
@@ -143,6 +147,20 @@ def _cmd_track(args) -> int:
     return 0
 
 
+def _writing(work, what: str):
+    """``work`` with an OSError while writing its outputs (full disk, a folder gone) as one line."""
+
+    def run(*args, **kwargs):
+        try:
+            return work(*args, **kwargs)
+        except OSError as exc:
+            where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+            raise RehabError(f"cannot write {what}{where} ({exc.strerror or exc}): check the folder and the free "
+                             f"space") from None
+
+    return run
+
+
 # --------------------------------------------------------------------------- angles
 def _add_angles(sub) -> None:
     p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
@@ -154,7 +172,8 @@ def _add_angles(sub) -> None:
 def _cmd_angles(args) -> int:
     from tracking.tables import angles_csv_from_trc
 
-    n = angles_csv_from_trc(args.trc, args.out)
+    check_outputs({"--out": args.out})
+    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -72,3 +73,42 @@ def handle_broken_pipe() -> int:
     except (OSError, ValueError):
         pass
     return 141
+
+
+def check_outputs(outputs: dict[str, Path | None]) -> None:
+    """Check the files a command will write, before its work: each writable, none a folder, no two the same.
+
+    Missing folders are created (as the writers do); a probe file shows that the folder takes
+    files (a read-only disk, a folder of someone else). ``outputs`` maps an option (``--out``) to
+    its path (None: not asked for).
+
+    Raises:
+        RehabError: one line naming the option, the path and the fix.
+    """
+    import os
+    import tempfile
+
+    from calibration.errors import RehabError
+
+    seen: dict[Path, str] = {}
+    for option, path in outputs.items():
+        if path is None:
+            continue
+        path = Path(path)
+        key = path.resolve()
+        if key in seen:
+            raise RehabError(f"{option} {path} is also given to {seen[key]}: give each output its own file")
+        seen[key] = option
+        if path.is_dir():
+            raise RehabError(f"{option} {path} is a folder: give a file name, e.g. {path / 'out'}")
+        if path.name in ("", ".", ".."):
+            raise RehabError(f"{option} {path}: give a file name")
+        folder = path.parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, probe = tempfile.mkstemp(prefix=".rehab-probe-", dir=folder)
+            os.close(fd)
+            os.unlink(probe)
+        except OSError as exc:
+            raise RehabError(f"{option} {path}: cannot write in {folder} ({exc.strerror or exc}): choose a folder "
+                             f"you can write") from None

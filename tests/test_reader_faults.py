@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import yaml
 
 from calibration.errors import RehabError
 from content import content_path
@@ -116,3 +115,62 @@ def test_a_marker_colour_of_999_is_one_line(capsys):
     code = main(["track", str(ROOT / "nothing"), "--marker-color", "999,0,0", "--out", "x.trc"])
     err = capsys.readouterr().err
     assert code == 1 and err.count("\n") == 1, err
+
+
+# ------------------------------------------------------------------------------ recordings and outputs
+def _recording(folder: Path, n_cams: int = 3):
+    from tests.tracking.test_recording import make_recording
+
+    return make_recording(folder, n_frames=2, n_cams=n_cams)
+
+
+def test_a_calibration_missing_one_of_the_recordings_cameras_is_stated(tmp_path, capsys):
+    from calibration.files import save_calibration_toml
+    from game.cli import main
+
+    cams = _recording(tmp_path / "rec")
+    save_calibration_toml(tmp_path / "two.toml", cams[:2])
+    code = main(["track", str(tmp_path / "rec"), "--calibration", str(tmp_path / "two.toml"),
+                 "--points", str(tmp_path / "p.csv")])
+    err = capsys.readouterr().err
+    assert code == 1 and "two.toml has 2 cameras (cam1, cam2) but the recording" in err and "cam3" in err
+    assert err.count("\n") == 1
+
+
+def test_one_image_of_another_size_is_one_line(tmp_path):
+    import cv2
+
+    from tracking.recording import Recording, RecordingWriter
+    from tracking.sim.rigs import load_rig
+
+    cams = load_rig("tri3", (160, 120))
+    w = RecordingWriter(tmp_path, cams, 15.0, images=True)
+    for _ in range(3):
+        w.write([np.zeros((120, 160, 3), np.uint8) for _ in cams])
+    w.close()
+    w.write_meta("upper_limb_seated", np.zeros((14, 3), np.uint8) + 200)
+    second = sorted((tmp_path / "cam2").iterdir())[1]
+    cv2.imwrite(str(second), np.zeros((100, 80, 3), np.uint8))
+    with Recording(tmp_path) as rec, pytest.raises(RehabError, match=r"80x100 pixels but the other images of cam2"):
+        list(rec)
+
+
+@pytest.mark.parametrize("option", ["--out", "--angles", "--points"])
+def test_track_refuses_an_impossible_output_before_the_work(tmp_path, capsys, monkeypatch, option):
+    import tracking.offline
+    from game.cli import main
+
+    _recording(tmp_path / "rec")
+    monkeypatch.setattr(tracking.offline, "track_recording", lambda *a, **k: pytest.fail("the work began"))
+    (tmp_path / "file").write_text("x")
+    for target, words in [(tmp_path / "rec", "is a folder"), (tmp_path / "file" / "out.trc", "cannot write in")]:
+        code = main(["track", str(tmp_path / "rec"), option, str(target)])
+        err = capsys.readouterr().err
+        assert code == 1 and words in err and err.count("\n") == 1, err
+
+
+def test_the_same_file_for_two_outputs_is_refused(tmp_path, capsys):
+    from game.cli import main
+
+    code = main(["track", str(tmp_path), "--out", str(tmp_path / "a"), "--angles", str(tmp_path / "a")])
+    assert code == 1 and "is also given to --out" in capsys.readouterr().err

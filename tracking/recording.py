@@ -147,8 +147,12 @@ class _ImageFolderReader:
     def read(self) -> np.ndarray | None:
         if self._next >= len(self.files):
             return None
-        img = self._load(self.files[self._next])
+        file = self.files[self._next]
+        img = self._load(file)
         self._next += 1
+        if (img.shape[1], img.shape[0]) != self.size:
+            raise RecordingError(f"{file}: {img.shape[1]}x{img.shape[0]} pixels but the other images of "
+                                 f"{self.path.name} are {self.size[0]}x{self.size[1]}: replace or delete it")
         return img
 
     def close(self) -> None:
@@ -188,6 +192,16 @@ class Recording:
         )
         readers = [_camera_source(self.folder, c.name) for c in self.cameras]
         n_sources = sum(r is not None for r in readers)
+        used = {r.path.stem if r.path.is_file() else r.path.name for r in readers if r is not None}
+        unused = [name for name in found if name not in used]
+        if n_sources == len(self.cameras) and unused:
+            for r in readers:
+                r.close()
+            # a calibration of 3 cameras with a recording of 4 would silently drop a quarter of the views
+            raise RecordingError(
+                f"{calib_path.name} has {len(self.cameras)} cameras ({', '.join(c.name for c in self.cameras)}) but "
+                f"the recording {self.folder} also has {', '.join(unused)}: give the calibration of all "
+                f"{len(found)} cameras with --calibration FILE, or move the extra videos out of the folder")
         if n_sources != len(self.cameras):
             for r in readers:
                 if r is not None:
