@@ -174,3 +174,70 @@ def test_the_same_file_for_two_outputs_is_refused(tmp_path, capsys):
 
     code = main(["track", str(tmp_path), "--out", str(tmp_path / "a"), "--angles", str(tmp_path / "a")])
     assert code == 1 and "is also given to --out" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ crashes found by the fuzz test
+def test_an_opencv_matrix_without_cols_is_one_line_and_no_crash(tmp_path):
+    """FileNode.mat() on it corrupted the heap: the process died later (malloc abort or segfault)."""
+    import os
+    import subprocess
+    import sys
+
+    from calibration.files import save_calibration_opencv
+    from tracking.sim.rigs import load_rig
+
+    path = tmp_path / "cv.yaml"
+    save_calibration_opencv(path, load_rig("ring4", (320, 240)))
+    lines = path.read_text().splitlines(keepends=True)
+    t = [i for i, line in enumerate(lines) if line.strip() == "t: !!opencv-matrix"][2]
+    del lines[t + 2]   # the third camera's "cols: 1" (the case tests/test_fuzz_inputs.py found)
+    path.write_text("".join(lines))
+    copies = []   # the corruption shows in some heap layouts only: vary them with the path's length
+    for k in range(12):
+        copies.append(tmp_path / f"cv{'x' * k}.yaml")
+        copies[-1].write_bytes(path.read_bytes())
+    code = ("import sys\nfrom calibration.files import load_calibration\n"
+            "for p in sys.argv[1:]:\n    try:\n        load_calibration(p)\n"
+            "    except Exception as e:\n        print(type(e).__name__, e)\n")
+    # glibc's heap checks make the corruption abort at once instead of some time later
+    env = dict(os.environ, MALLOC_CHECK_="3", MALLOC_PERTURB_="165")
+    proc = subprocess.run([sys.executable, "-c", code, *map(str, copies)], capture_output=True, text=True, cwd=ROOT,
+                          timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr[-300:]
+    assert proc.stdout.count("CalibrationError") == 12 and "'t' is neither numbers" in proc.stdout
+
+
+def _c3d_bytes(tmp_path) -> bytearray:
+    from tracking.c3d_io import write_c3d
+
+    path = tmp_path / "s.c3d"
+    write_c3d(path, ["A", "B", "C"], np.zeros((20, 3, 3)) + 1.0, 30.0)
+    return bytearray(path.read_bytes())
+
+
+def test_a_c3d_whose_rotation_group_lost_its_data_start_is_refused_quickly(tmp_path):
+    import time
+
+    from tracking.c3d_io import read_c3d_points
+
+    data = _c3d_bytes(tmp_path)
+    i = data.index(b"DATA_START", data.index(b"ROTATION"))
+    data[i + 1] = 0xF9   # D?TA_START: ezc3d searched for the rotations for 20 s
+    path = tmp_path / "rot.c3d"
+    path.write_bytes(bytes(data))
+    t0 = time.monotonic()
+    with pytest.raises(RehabError, match="ROTATION group has no valid DATA_START"):
+        read_c3d_points(path)
+    assert time.monotonic() - t0 < 2.0
+
+
+def test_a_c3d_parameter_of_no_group_is_refused(tmp_path):
+    from tracking.c3d_io import read_c3d_points
+
+    data = _c3d_bytes(tmp_path)
+    i = data.index(b"LABELS", data.index(b"ANALOG"))
+    data[i - 1] = 47   # the parameter's group id: no group 47
+    path = tmp_path / "orphan.c3d"
+    path.write_bytes(bytes(data))
+    with pytest.raises(RehabError, match="parameters of a group 47 that does not exist"):
+        read_c3d_points(path)

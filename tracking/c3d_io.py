@@ -113,9 +113,13 @@ def read_c3d_points(
     if not path.is_file():
         raise C3dError(f"{path}: no such file")
     frame_bytes, data_offset, declared = check_c3d_layout(path)
+    held = max(0, path.stat().st_size - data_offset) // max(1, frame_bytes)
+    if held < declared:   # checked before ezc3d: a damaged count made it read for minutes
+        raise C3dError(f"{path}: the file says {declared} frames but holds {held}: it is truncated (an interrupted "
+                       f"copy or write?); export it again")
     try:
         c3d = ezc3d.c3d(str(path))
-    except (OSError, RuntimeError) as exc:
+    except (OSError, RuntimeError, ValueError, IndexError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else "invalid"
         raise C3dError(f"{path}: not a readable C3D file ({reason})") from None
     point = c3d["parameters"]["POINT"]
@@ -132,7 +136,6 @@ def read_c3d_points(
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise C3dError(f"{path}: POINT:RATE {rate_hz} is not a positive frame rate")
 
-    held = max(0, path.stat().st_size - data_offset) // max(1, frame_bytes)
     if points.shape[2] < declared or held < points.shape[2]:
         raise C3dError(f"{path}: the file says {declared} frames but holds {min(held, points.shape[2])}: it is "
                        f"truncated (an interrupted copy or write?); export it again")
@@ -190,7 +193,8 @@ def check_c3d_layout(path: Path) -> tuple[int, int, int]:
         params = fh.read(n_param_blocks * _BLOCK)
     if n_param_blocks == 0 or len(params) < n_param_blocks * _BLOCK:
         raise C3dError(f"{path}: the parameter section is cut short: the file is truncated; export it again")
-    frames_param = _walk_parameters(path, params, endian)
+    numbers = _walk_parameters(path, params, endian)
+    frames_param = numbers.get((b"POINT", b"FRAMES"))
     words = struct.unpack(f"{endian}hhHHhh", head[2:14])
     n_points, n_analog, first, last = words[0], words[1], words[2], words[3]
     declared = frames_param if frames_param is not None else max(0, last - first + 1)
@@ -200,23 +204,33 @@ def check_c3d_layout(path: Path) -> tuple[int, int, int]:
         raise C3dError(f"{path}: the C3D header is damaged (points {n_points}, analog {n_analog}, data start "
                        f"block {data_start}): export the file again")
     bytes_per = 4 if scale < 0 else 2
+    rotation_start = numbers.get((b"ROTATION", b"DATA_START"))
+    if any(group == b"ROTATION" for group, _ in numbers) and (
+            rotation_start is None or not 1 < rotation_start <= size // _BLOCK + 1):
+        # without it ezc3d searched for the rotations for half a minute
+        raise C3dError(f"{path}: the ROTATION group has no valid DATA_START: the file is damaged; export it again")
     if (data_start - 1) * _BLOCK > size:
         raise C3dError(f"{path}: the C3D data would start after the end of the file: it is truncated; export it "
                        f"again")
     return (4 * n_points + n_analog) * bytes_per, (data_start - 1) * _BLOCK, declared
 
 
-def _walk_parameters(path: Path, params: bytes, endian: str) -> int | None:
-    """Follow the parameter records' offsets (each must stay inside the section); returns POINT:FRAMES."""
+def _walk_parameters(path: Path, params: bytes, endian: str) -> dict[tuple[bytes, bytes], int]:
+    """Follow the parameter records' offsets: each must stay inside the section and belong to a group.
+
+    Returns the whole-number scalar parameters, e.g. ``{(b"POINT", b"FRAMES"): 580}``.
+    """
     import struct
 
     groups: dict[int, bytes] = {}
-    frames = None
-    i, n = 4, 0
-    while i < len(params) - 4:
+    owners: set[int] = set()
+    numbers: dict[tuple[int, bytes], int] = {}
+    i, n, ended = 4, 0, False
+    while i < len(params) - 4 and n <= 100_000:
         n_chars = struct.unpack("b", params[i:i + 1])[0]
         if n_chars == 0:
-            return frames
+            ended = True
+            break
         name = params[i + 2:i + 2 + abs(n_chars)].upper()
         name_end = i + 2 + abs(n_chars)
         if name_end + 2 > len(params):
@@ -232,20 +246,29 @@ def _walk_parameters(path: Path, params: bytes, endian: str) -> int | None:
             start = name_end + 4 + n_dims
             if kind not in (-1, 1, 2, 4) or len(dims) < n_dims or start + abs(kind) * count > len(params):
                 break
-            if groups.get(group_id) == b"POINT" and name == b"FRAMES" and count >= 1 and kind in (2, 4):
+            owners.add(group_id)
+            if count >= 1 and kind in (2, 4):
                 value = struct.unpack(f"{endian}{'H' if kind == 2 else 'f'}", params[start:start + kind])[0]
-                frames = int(value) if np.isfinite(value) and value >= 0 else None
+                if np.isfinite(value) and 0 <= value < 2**31:
+                    numbers[(group_id, name)] = int(value)
+        else:
+            break
         if offset == 0:
-            return frames
+            ended = True
+            break
         if name_end + offset > len(params):
             break
         i = name_end + offset
         n += 1
-        if n > 100_000:
-            break
     else:
-        return frames
-    raise C3dError(f"{path}: the C3D parameter section is damaged (record {n + 1}): export the file again")
+        ended = True
+    if not ended:
+        raise C3dError(f"{path}: the C3D parameter section is damaged (record {n + 1}): export the file again")
+    orphans = sorted(owners - set(groups))
+    if orphans:   # ezc3d searched for half a minute on such a file
+        raise C3dError(f"{path}: the C3D parameter section is damaged (parameters of a group {orphans[0]} that does "
+                       f"not exist): export the file again")
+    return {(groups[g], name): value for (g, name), value in numbers.items()}
 
 
 def _param_text(group: dict, name: str) -> str:

@@ -198,9 +198,9 @@ def read_trc(path: str | Path) -> TrcData:
         bad = np.flatnonzero(~np.isfinite(column))
         if bad.size:
             raise TrcError(f"{path}: line {line_numbers[bad[0]]}: the {label} cell is empty or not a number")
-    if not np.array_equal(frame_col, np.round(frame_col)):
-        bad = np.flatnonzero(frame_col != np.round(frame_col))[0]
-        raise TrcError(f"{path}: line {line_numbers[bad]}: Frame# {frame_col[bad]:g} is not a whole number")
+    if not np.array_equal(frame_col, np.round(frame_col)) or (np.abs(frame_col) > 2**53).any():
+        bad = np.flatnonzero((frame_col != np.round(frame_col)) | (np.abs(frame_col) > 2**53))[0]
+        raise TrcError(f"{path}: line {line_numbers[bad]}: Frame# {frame_col[bad]:g} is not a whole frame number")
     positions = table[:, 2:].reshape(len(rows), len(names), 3) * scale
     if np.isinf(positions).any():
         bad = int(np.argwhere(np.isinf(positions))[0][0])

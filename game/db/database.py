@@ -87,6 +87,7 @@ def utc_now(ago_s: float = 0.0) -> str:
 
 
 def _damaged(path: Path, detail: str) -> DatabaseError:
+    detail = " ".join(str(detail).split())   # SQLite's integrity report spans lines
     return DatabaseError(f"{path} is not a rehab database or is damaged ({detail}): restore a backup "
                          f"(rehab backup) or move it away")
 
@@ -118,6 +119,8 @@ def _guarded(method):
             return method(self, *args, **kwargs)
         except sqlite3.Error as exc:
             raise sqlite_error(self.path, exc) from None
+        except UnicodeDecodeError:   # a TEXT cell that is not UTF-8: the file was damaged
+            raise _damaged(self.path, "text that is not UTF-8") from None
 
     return wrapper
 
@@ -823,6 +826,9 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
     except sqlite3.Error as exc:
         conn.close()
         raise sqlite_error(path, exc) from None
+    except UnicodeDecodeError:
+        conn.close()
+        raise _damaged(path, "text that is not UTF-8") from None
     except BaseException:
         conn.close()
         raise
