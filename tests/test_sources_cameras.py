@@ -177,3 +177,22 @@ def test_opencv_reads_video_files_as_cameras(tmp_path):
     for fs in complete:
         a, b = (int(img[0, 0, 0]) for img in fs.images)
         assert b - a == 1 and a % 10 == 0  # frame k of both files (FFV1 is lossless)
+
+
+def test_a_video_file_given_as_a_camera_is_read_at_its_frame_rate(tmp_path):
+    from tracking.sources.cameras import PacedCapture
+
+    cams = cameras(2)
+    writer = RecordingWriter(tmp_path, cams, 20.0)
+    for k in range(10):
+        writer.write([np.full((SIZE[1], SIZE[0], 3), k, np.uint8)] * 2)
+    writer.close()
+    cap = open_capture(str(tmp_path / "cam1.avi"), SIZE, 30.0)
+    assert isinstance(cap, PacedCapture) and cap.period_s == pytest.approx(1 / 20.0)   # the file's own rate
+    t0 = time.perf_counter()
+    n = 0
+    while cap.read()[0]:
+        n += 1
+    wall = time.perf_counter() - t0
+    cap.release()
+    assert n == 10 and wall >= 9 / 20.0 - 0.02   # 10 frames at 20 fps: ~0.45 s, not as fast as they decode
