@@ -423,3 +423,23 @@ def test_a_note_that_looks_identifying_is_warned_about(tmp_path, capsys, note, w
     assert main(["patients", "--add", "P001", "--note", note, "--db", str(tmp_path / "r.sqlite3")]) == 0
     err = capsys.readouterr().err
     assert ("must not identify the patient" in err) == warned, err
+
+
+@pytest.mark.skipif(sys.platform.startswith("win"), reason="POSIX permissions")
+def test_rehabs_own_data_folder_made_0755_earlier_is_made_0700(tmp_path, monkeypatch):
+    from game.db import default_db_path
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "share"))
+    folder = default_db_path().parent
+    folder.mkdir(parents=True, mode=0o755)
+    os.chmod(folder, 0o755)
+    new_db(default_db_path())
+    os.chmod(folder, 0o755)   # as an older rehab left it
+    with Database(default_db_path()):
+        pass
+    assert stat.S_IMODE(folder.stat().st_mode) == 0o700
+    other = tmp_path / "shared"   # a folder the user chose: left as it is
+    other.mkdir(mode=0o755)
+    os.chmod(other, 0o755)
+    new_db(other / "r.sqlite3")
+    assert stat.S_IMODE(other.stat().st_mode) == 0o755

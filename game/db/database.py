@@ -37,7 +37,7 @@ from typing import Any, Iterable, Sequence
 
 from calibration.errors import RehabError
 from game.db.migrations import LATEST_VERSION, STEPS, schema_v1_sql
-from game.db.private import FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
+from game.db.private import DIR_MODE, FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
 
 log = logging.getLogger(__name__)
 
@@ -795,6 +795,8 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
             raise _damaged(path, "no SQLite header")
         for p in (path, Path(f"{path}-wal"), Path(f"{path}-shm")):
             make_private(p)
+        if path.parent.absolute() == default_db_path().parent.absolute():
+            make_private(path.parent, DIR_MODE)   # rehab's own data folder, maybe made 0755 by an older rehab
     else:
         _create_private_file(path)
     try:

@@ -45,12 +45,12 @@ def make_private_dir(path: str | Path) -> Path:
     return path
 
 
-def make_private(path: str | Path) -> None:
-    """Make an existing file of ours 0600 (does nothing for a file owned by someone else)."""
+def make_private(path: str | Path, mode: int = FILE_MODE) -> None:
+    """Make an existing file (or, with ``mode=DIR_MODE``, folder) of ours private; others' are left alone."""
     with contextlib.suppress(OSError):
         st = os.stat(path)
         if hasattr(os, "getuid") and st.st_uid == os.getuid() and st.st_mode & 0o077:
-            os.chmod(path, FILE_MODE)
+            os.chmod(path, mode)
 
 
 def fsync_dir(folder: str | Path) -> None:
