@@ -3,7 +3,11 @@
 Conventions (spec/INTERFACES.md): world frame right-handed, metres, +Y up, patient faces -Z.
 Extrinsics are world -> camera: ``x_cam = R @ x_world + t`` with ``R`` from the Rodrigues vector
 ``rvec``. The camera looks along its +Z axis, image x to the right, image y down (OpenCV).
-Distortion coefficients are in OpenCV order (k1, k2, p1, p2[, k3[, k4, k5, k6]]).
+Distortion coefficients are in OpenCV order (k1, k2, p1, p2[, k3[, k4, k5, k6]]), or for a
+fisheye camera (``fisheye=True``, OpenCV's ``cv2.fisheye`` model, as aniposelib and Caliscope
+write it) the four k1..k4 of ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``
+with ``theta`` the angle from the optical axis: projection, undistortion and so triangulation
+follow the model of each camera.
 """
 
 from __future__ import annotations
@@ -60,6 +64,20 @@ def rvec_from_rotation(rot: np.ndarray) -> np.ndarray:
     return v * (2.0 * np.arctan2(s, q[0]) / s)
 
 
+def fisheye_distort(x: np.ndarray, y: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal normalized x, y (any shape) -> distorted ones under OpenCV's fisheye model k1..k4
+    (``k`` broadcasts against x and y, so one row per camera works too)."""
+    k = np.asarray(k, dtype=np.float64)
+    k1, k2, k3, k4 = (k[..., i] for i in range(4))
+    r = np.sqrt(x * x + y * y)
+    theta = np.arctan(r)
+    t2 = theta * theta
+    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = np.where(r > 1e-12, theta_d / r, 1.0)
+    return x * scale, y * scale
+
+
 def check_rotation(rot: np.ndarray, what: str, tol: float = 1e-6) -> None:
     """Raise CalibrationError unless ``rot`` is a proper rotation (orthonormal, det +1)."""
     rot = np.asarray(rot, dtype=np.float64)
@@ -83,7 +101,7 @@ class Camera:
         dist: (n,) float64 OpenCV distortion coefficients, n in {4, 5, 8}.
         rvec: (3,) float64 Rodrigues vector, world -> camera.
         t_m: (3,) float64 translation in metres, world -> camera.
-        fisheye: True for the OpenCV fisheye model (read and written, not used for projection here).
+        fisheye: True for the OpenCV fisheye model (``dist`` holds k1..k4).
     """
 
     name: str
@@ -118,6 +136,8 @@ class Camera:
                 f"{what}: distortions must hold 4, 5 or 8 finite numbers (k1,k2,p1,p2[,k3...]), "
                 f"got {dist.size}"
             )
+        if self.fisheye and dist.size != 4:
+            raise CalibrationError(f"{what}: a fisheye camera's distortions are the 4 numbers k1..k4, got {dist.size}")
         rvec = np.asarray(self.rvec, dtype=np.float64).reshape(-1)
         t_m = np.asarray(self.t_m, dtype=np.float64).reshape(-1)
         if rvec.size != 3 or t_m.size != 3 or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(t_m))):
@@ -197,7 +217,8 @@ class Camera:
 
     @property
     def has_distortion(self) -> bool:
-        return bool(np.any(self.dist != 0.0))
+        """False for an ideal pinhole; a fisheye camera is never one (its angle maps like no pinhole)."""
+        return self.fisheye or bool(np.any(self.dist != 0.0))
 
     # ----------------------------------------------------------------- geometry
     def world_to_camera(self, p_world_m: np.ndarray) -> np.ndarray:
@@ -222,7 +243,9 @@ class Camera:
         """(N, 2) ideal normalized coordinates -> (N, 2) distorted pixel coordinates."""
         xn = np.asarray(xn, dtype=np.float64).reshape(-1, 2)
         x, y = xn[:, 0], xn[:, 1]
-        if self.has_distortion:
+        if self.fisheye:
+            xd, yd = fisheye_distort(x, y, self.dist)
+        elif self.has_distortion:
             d = np.zeros(8)
             d[: self.dist.size] = self.dist
             k1, k2, p1, p2, k3, k4, k5, k6 = d
@@ -242,6 +265,9 @@ class Camera:
         uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
         if uv.shape[0] == 0:
             return np.zeros((0, 2))
+        if self.fisheye:
+            crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 40, 1e-12)
+            return cv2.fisheye.undistortPoints(uv, self.K, self.dist, criteria=crit).reshape(-1, 2)
         if not self.has_distortion:
             K = self.K
             y = (uv[:, 0, 1] - K[1, 2]) / K[1, 1]
@@ -281,6 +307,8 @@ class Camera:
         """Remove lens distortion from an image of this camera (same K, same size)."""
         if not self.has_distortion:
             return image
+        if self.fisheye:
+            return cv2.fisheye.undistortImage(image, self.K, self.dist, Knew=self.K)
         return cv2.undistort(image, self.K, self.dist)
 
     def check_image_size(self, size_px: tuple[int, int], source: str) -> None:
@@ -308,7 +336,8 @@ class CameraStack:
         t_m: (C, 3) float64 world -> camera translations, metres.
         K: (C, 3, 3) float64 intrinsic matrices, pixels.
         dist: (C, 8) float64 distortion coefficients, zero-padded to (k1, k2, p1, p2, k3, k4, k5, k6).
-        distorted: (C,) bool, True for a camera with a non-zero distortion coefficient.
+        distorted: (C,) bool, True for a camera with distortion (``Camera.has_distortion``).
+        fisheye: (C,) bool, True for a camera with the fisheye model.
         focal_px: (C,) float64 mean focal length (fx + fy) / 2.
     """
 
@@ -318,6 +347,7 @@ class CameraStack:
     K: np.ndarray = field(init=False, repr=False)
     dist: np.ndarray = field(init=False, repr=False)
     distorted: np.ndarray = field(init=False, repr=False)
+    fisheye: np.ndarray = field(init=False, repr=False)
     focal_px: np.ndarray = field(init=False, repr=False)
     _rotation_t: np.ndarray = field(init=False, repr=False)
     _k: tuple[np.ndarray, ...] = field(init=False, repr=False)
@@ -338,6 +368,7 @@ class CameraStack:
             "K": np.stack([c.K for c in cams]),
             "dist": dist,
             "distorted": np.array([c.has_distortion for c in cams]),
+            "fisheye": np.array([c.fisheye for c in cams]),
             "focal_px": np.array([(c.K[0, 0] + c.K[1, 1]) / 2.0 for c in cams]),
             "_distorted_list": tuple(c for c, cam in enumerate(cams) if cam.has_distortion),
         }
@@ -393,6 +424,10 @@ class CameraStack:
         radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
         xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
         yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        if self.fisheye.any():
+            fx_, fy_ = fisheye_distort(x, y, self.dist[:, None, :4])
+            xd = np.where(self.fisheye[:, None], fx_, xd)
+            yd = np.where(self.fisheye[:, None], fy_, yd)
         # a camera without distortion keeps its coordinates bit for bit, as in Camera.project
         plain = ~self.distorted[:, None]
         return np.where(plain, x, xd), np.where(plain, y, yd)

@@ -12,15 +12,14 @@ fastest), so ``object_points()[ids]`` are the positions of detected corners. Ope
 frame has its origin at the outer corner of the first square; the two differ by one square in
 x and y. The square beyond corner 0 is black (OpenCV's layout), as on the project's checkerboards.
 
-Detection uses OpenCV's ``cv2.aruco.CharucoDetector`` (markers found, then the chessboard corners
-between them interpolated and refined to sub-pixel). On simulated boards the corners come out
-0.11-0.17 px RMS from the truth (a checkerboard's: ~0.06-0.1 px): the markers in the white
-squares pull the refinement a little, and now and then a corner by 1-1.4 px. Two remedies were
-tried and left out: a second refinement with a window clear of the markers (lower RMS on one
-camera, a 2 px worst corner on another) and dropping corners that disagree with a homography of
-their neighbours (it dropped good corners at the board's edge and missed the bad ones, whose
-neighbours share their bias). The calibration absorbs it: 0.12 % focal error at worst
-(docs/CALIBRATION.md).
+Detection uses OpenCV's ``cv2.aruco.CharucoDetector`` with its default of two markers per
+corner: a chessboard corner is interpolated only when the markers on both sides of it are found
+(with one allowed, corners of small, tilted boards came out 1.5-2.5 px off and the rig 5-8 mm off
+on the simulator, docs/CALIBRATION.md), and markers missed at first are looked for again where
+the board's layout puts them (``tryRefineMarkers``), which finds the board lying on the seat.
+On simulated boards the corners come out 0.12-0.13 px RMS from the truth close to a camera and
+0.13-0.18 px from 2 m (a checkerboard's: ~0.06-0.1 px): the markers in the white squares pull the
+sub-pixel refinement a little.
 """
 
 from __future__ import annotations
@@ -161,7 +160,8 @@ def _texture(board: CharucoBoard) -> np.ndarray:
 @lru_cache(maxsize=8)
 def _detector(board: CharucoBoard) -> "cv2.aruco.CharucoDetector":
     params = cv2.aruco.CharucoParameters()
-    params.minMarkers = 1  # a corner between two squares is kept when one neighbouring marker is found
+    params.minMarkers = 2  # OpenCV's default: a corner needs both neighbouring markers (1 lets in corners 1-3 px off)
+    params.tryRefineMarkers = True  # look again for markers the board's layout predicts (small, oblique boards)
     det_params = cv2.aruco.DetectorParameters()
     det_params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE  # the ChArUco corners are refined, not the markers
     return cv2.aruco.CharucoDetector(board.cv_board(), params, det_params)

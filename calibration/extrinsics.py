@@ -77,10 +77,13 @@ def board_pose_in_camera(camera: Camera, det: Detection, board) -> Pose:
     """T_cam_board from one detection (PnP with the camera's intrinsics and distortion)."""
     obj = det.object_points(board)
     uv = det.uv_px.reshape(-1, 1, 2)
-    ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist, flags=cv2.SOLVEPNP_IPPE)
+    K, dist = camera.K, camera.dist
+    if camera.fisheye:  # PnP on the undistorted normalized points: OpenCV's PnP knows the pinhole model only
+        uv, K, dist = camera.undistort_points(uv).reshape(-1, 1, 2), np.eye(3), None
+    ok, rvec, tvec = cv2.solvePnP(obj, uv, K, dist, flags=cv2.SOLVEPNP_IPPE)
     if not ok:
-        ok, rvec, tvec = cv2.solvePnP(obj, uv, camera.K, camera.dist)
-    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, camera.K, camera.dist, rvec, tvec)
+        ok, rvec, tvec = cv2.solvePnP(obj, uv, K, dist)
+    rvec, tvec = cv2.solvePnPRefineLM(obj, uv, K, dist, rvec, tvec)
     return rotation_from_rvec(rvec.ravel()), tvec.ravel().astype(np.float64)
 
 
@@ -156,6 +159,7 @@ def calibrate_extrinsics(
     floor_view: str | None = None,
     origin_m=(0.0, 0.0, 0.0),
     turn_deg: float = 0.0,
+    check_world: bool = True,
 ) -> ExtrinsicsResult:
     """Calibrate the cameras' poses from board views.
 
@@ -171,8 +175,10 @@ def calibrate_extrinsics(
             for a corner on a seat 0.45 m high.
         turn_deg: the floor board's x axis points this many degrees from +X towards -Z (turned
             counter-clockwise seen from above) instead of along +X.
+        check_world: refuse a world frame no room has (:func:`check_world_frame`).
     Raises:
-        CalibrationError: a camera shares no view with the others, or the floor view is missing.
+        CalibrationError: a camera shares no view with the others, the floor view is missing, or
+            the world frame it gives is not a room's.
     """
     n = len(cameras)
     if n < 2:
@@ -232,6 +238,9 @@ def calibrate_extrinsics(
         Camera.from_rotation(cam.name, cam.size_px, cam.K, cam.dist, *compose(T, T_ref_world), fisheye=cam.fisheye)
         for cam, T in zip(cameras, cam_poses)
     )
+    if floor_view is not None and check_world:
+        centre = floor_board_centre_m(board, origin_m, turn_deg)
+        check_world_frame(out, centre, min(0.0, float(centre[1])))
     for c in range(n):
         if rms[c] > 1.0:
             warnings.append(f"{cameras[c].name}: board corners fit to {rms[c]:.2f} px only: check its intrinsics and blurred images")
@@ -251,7 +260,8 @@ def board_from_world(origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> Pose:
 
 
 def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detection | None], board, *,
-                           origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> tuple[tuple[Camera, ...], float]:
+                           origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0,
+                           check_world: bool = True) -> tuple[tuple[Camera, ...], float]:
     """Move a rig calibrated in any frame into the world frame of a floor board.
 
     The board's pose is fitted to its corners in every camera that found it (the cameras' poses
@@ -283,7 +293,55 @@ def world_from_floor_board(cameras: Sequence[Camera], detections: Sequence[Detec
         Camera.from_rotation(cam.name, cam.size_px, cam.K, cam.dist, *compose(T, T_frame_world), fisheye=cam.fisheye)
         for cam, T in zip(cameras, cam_T)
     )
+    if check_world:
+        centre = floor_board_centre_m(board, origin_m, turn_deg)
+        check_world_frame(out, centre, min(0.0, float(centre[1])))
     return out, _rms(sol.fun.reshape(-1, 2))
+
+
+FACING_MARGIN_DEG = 15.0  # how far outside its picture a camera may aim and still count as facing the board
+MAX_ROLL_DEG = 25.0  # a camera's picture turned further from the world's vertical is taken for a wrong frame
+_NEAR_VERTICAL_DEG = 20.0  # cameras looking this close to straight up or down have no meaningful roll
+_WRONG_FLOOR = ("the floor view is not the board lying face up on the seat or floor (check --floor / --floor-views "
+                "and --origin; a camera mounted on its side: --no-world-check)")
+
+
+def check_world_frame(cameras: Sequence[Camera], board_centre_m, floor_y_m: float = 0.0) -> None:
+    """Refuse a world frame that cannot be a room's.
+
+    Every camera must stand above the floor (Y above ``floor_y_m``), have the floor board's centre
+    within its picture's diagonal field of view plus ``FACING_MARGIN_DEG``, and stand upright:
+    the world's vertical within ``MAX_ROLL_DEG`` of its picture's (cameras looking nearly straight
+    up or down excepted). A board held up by hand taken for the floor board turns the world's
+    vertical sideways and breaks at least one of these on the simulated rigs
+    (tests/calibration/test_calib_extrinsics.py).
+    Raises:
+        CalibrationError: one line naming the camera and what to check.
+    """
+    target = np.asarray(board_centre_m, float)
+    for cam in cameras:
+        if cam.centre_m[1] <= floor_y_m:
+            raise CalibrationError(f"the world frame puts {cam.name} {floor_y_m - cam.centre_m[1]:.2f} m below the floor: "
+                                   + _WRONG_FLOOR)
+        w, h = cam.size_px
+        half_diag = np.degrees(np.arctan(0.5 * np.hypot(w / cam.K[0, 0], h / cam.K[1, 1])))
+        to_board = cam.R @ (target - cam.centre_m)
+        angle = np.degrees(np.arccos(np.clip(to_board[2] / np.linalg.norm(to_board), -1.0, 1.0)))
+        if angle > half_diag + FACING_MARGIN_DEG:
+            raise CalibrationError(f"the world frame turns {cam.name} {angle:.0f} degrees away from the floor board: "
+                                   + _WRONG_FLOOR)
+        up = cam.R[:, 1]  # the world's +Y in camera coordinates (image y points down)
+        if abs(up[2]) < np.cos(np.radians(_NEAR_VERTICAL_DEG)):
+            roll = float(np.degrees(np.arctan2(up[0], -up[1])))
+            if abs(roll) > MAX_ROLL_DEG:
+                raise CalibrationError(f"the world frame tips {cam.name} {abs(roll):.0f} degrees on its side: " + _WRONG_FLOOR)
+
+
+def floor_board_centre_m(board, origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> np.ndarray:
+    """World position of the centre of a floor board's inner corners (corner 0 at ``origin_m``)."""
+    R_bw, t_bw = board_from_world(origin_m, turn_deg)
+    centre_board = board.object_points().mean(axis=0)
+    return R_bw.T @ (centre_board - t_bw)
 
 
 def rig_errors(cameras: Sequence[Camera], truth: Sequence[Camera]) -> tuple[np.ndarray, np.ndarray]:

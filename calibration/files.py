@@ -48,6 +48,10 @@ own calibration sample are read as aliases (``camera_matrix`` for ``K``,
 ``image_height`` for ``image_size``); other keys in a camera map and at the top level are
 ignored, because OpenCV users keep extra results (rms, projection matrices) in these files.
 
+Other tools' files (OpenCV's calibration sample and stereo_calib, Caliscope, Qualisys) are read
+by :mod:`calibration.foreign` through :func:`read_cameras`; :func:`load_calibration` also refuses
+translations that are plainly millimetres.
+
 Every problem raises :class:`calibration.errors.CalibrationError` with a one-line message that
 names the file and says how to fix it.
 """
@@ -89,26 +93,52 @@ _RVEC_AGREEMENT_RAD = 1e-6
 
 
 # ===================================================================== loading
-def load_calibration(path: str | os.PathLike, *, allow_fisheye: bool = False) -> tuple[Camera, ...]:
+def load_calibration(path: str | os.PathLike, *, allow_fisheye: bool = True) -> tuple[Camera, ...]:
     """Read the cameras of a calibration file, in calibration order.
 
     Args:
-        path: a ``.toml`` (Pose2Sim/anipose) or ``.yaml``/``.yml``/``.xml`` (OpenCV FileStorage)
-            file, laid out as in the module docstring.
-        allow_fisheye: accept cameras marked as fisheye. :class:`Camera` projects with the pinhole
-            model only, so tracking with a fisheye calibration would be silently wrong; pass True
-            only to inspect or convert such a file.
+        path: a ``.toml`` (Pose2Sim/anipose, or Caliscope's config.toml) or ``.yaml``/``.yml``/``.xml``
+            (OpenCV FileStorage as in the module docstring, or OpenCV's stereo_calib files) file,
+            or a Qualisys ``.qca``/``.qca.txt`` (calibration/foreign.py).
+        allow_fisheye: kept for callers of older versions; fisheye cameras are projected with
+            their own model now, so they are always accepted.
     Returns:
         The cameras (2 or more, unique names), extrinsics world -> camera in metres.
     Raises:
-        CalibrationError: missing, unreadable or inconsistent file (one line naming the file).
+        CalibrationError: missing, unreadable or inconsistent file, one camera's lens data only,
+            or translations in millimetres (one line naming the file).
     """
     path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in TOML_SUFFIXES + OPENCV_SUFFIXES:
+    cameras, placed = read_cameras(path)
+    if not placed:
+        what = "one camera's lens data" if len(cameras) == 1 else "the cameras' lens data but not where they stand"
         raise CalibrationError(
-            f"{path}: unknown calibration format {suffix or '(no extension)'!r}: "
-            "give a .toml (Pose2Sim/anipose) or an OpenCV .yaml/.yml/.xml file"
+            f"{path}: holds {what}: gather every camera into one rig file with 'rehab calibrate import FILE... "
+            "--out intrinsics.toml', then place them with 'rehab calibrate extrinsics' or 'wand'"
+        )
+    _check_camera_set(path, cameras)
+    from calibration.foreign import check_units
+
+    check_units(path, cameras)
+    return cameras
+
+
+def read_cameras(path: str | os.PathLike, *, size_px=None) -> tuple[tuple[Camera, ...], bool]:
+    """The cameras of any supported calibration file and whether they are placed in a world frame.
+
+    ``placed`` is False for files holding lens data only (OpenCV's single-camera file,
+    stereo_calib's intrinsics.yml alone, a Caliscope config without poses); the project's own
+    files count as placed (lens-only ones hold zeros). ``size_px`` is the image size for formats
+    that do not store it (stereo_calib). No camera-count or units check here.
+    """
+    from calibration import foreign
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if not (suffix in TOML_SUFFIXES + OPENCV_SUFFIXES or foreign.is_qualisys(path)):
+        raise CalibrationError(
+            f"{path}: unknown calibration format {suffix or '(no extension)'!r}: give a .toml (Pose2Sim, anipose, "
+            "Caliscope), an OpenCV .yaml/.yml/.xml or a Qualisys .qca file"
         )
     if not path.exists():
         raise CalibrationError(
@@ -116,19 +146,20 @@ def load_calibration(path: str | os.PathLike, *, allow_fisheye: bool = False) ->
         )
     if not path.is_file():
         raise CalibrationError(f"{path}: is not a file: give --calibration FILE with a calibration file")
+    if foreign.is_qualisys(path):
+        return foreign.qualisys(path), True
     if suffix in TOML_SUFFIXES:
-        cameras = _cameras_from_toml(path)
-    else:
-        cameras = _cameras_from_opencv(path)
-    _check_camera_set(path, cameras)
-    if not allow_fisheye:
-        for cam in cameras:
-            if cam.fisheye:
-                raise CalibrationError(
-                    f"{path}: camera {cam.name!r} uses the fisheye lens model, which this project "
-                    "does not project with: recalibrate it with the pinhole model (fisheye = false)"
-                )
-    return cameras
+        doc = _read_toml(path)
+        if foreign.is_caliscope(doc):
+            return foreign.caliscope(path, doc)
+        return _cameras_from_toml(path, doc), True
+    fs = _open_filestorage(path)
+    try:
+        if fs.getNode("cameras").empty() and foreign.is_opencv_single_or_stereo(fs):
+            return foreign.opencv_single_or_stereo(path, fs, size_px)
+    finally:
+        fs.release()
+    return _cameras_from_opencv(path), True
 
 
 def _check_camera_set(path: Path, cameras: Sequence[Camera]) -> None:
@@ -196,15 +227,18 @@ def _whole_size(arr: np.ndarray, where: str, key: str) -> tuple[int, int]:
 
 
 # --------------------------------------------------------------------- TOML
-def _cameras_from_toml(path: Path) -> tuple[Camera, ...]:
+def _read_toml(path: Path) -> dict:
     try:
-        doc = tomllib.loads(path.read_bytes().decode("utf-8"))
+        return tomllib.loads(path.read_bytes().decode("utf-8"))
     except UnicodeDecodeError:
         raise CalibrationError(f"{path}: is not UTF-8 text: {_FIX_FILE}") from None
     except tomllib.TOMLDecodeError as exc:  # its message ends "(at line L, column C)"
         raise CalibrationError(f"{path}: not valid TOML: {exc}: {_FIX_FILE}") from None
     except OSError as exc:
         raise CalibrationError(f"{path}: cannot be read ({exc.strerror}): check its permissions") from None
+
+
+def _cameras_from_toml(path: Path, doc: dict) -> tuple[Camera, ...]:
     cameras = []
     for key, value in doc.items():
         if key == "metadata":

@@ -72,6 +72,14 @@ def empty_regions(hit: np.ndarray) -> str:
     return ", ".join(empty)
 
 
+def coverage_warning(name: str, coverage: float, hit: np.ndarray) -> str:
+    """The warning for corners covering too little of the picture, naming the empty regions."""
+    empty = empty_regions(hit)
+    where = f" (none in the {empty})" if empty else " (gaps in every part of it)"
+    return (f"{name}: corners cover only {100 * coverage:.0f} % of the image{where}: "
+            "add images with the board near the edges and corners of the picture")
+
+
 def calibrate_intrinsics(
     name: str,
     detections: Sequence[Detection],
@@ -118,10 +126,7 @@ def calibrate_intrinsics(
     coverage, hit = coverage_of(detections, size)
     warnings = []
     if coverage < COVERAGE_WARN:
-        warnings.append(
-            f"{name}: corners cover only {100 * coverage:.0f} % of the image (none in the {empty_regions(hit)}): "
-            "add images with the board near the edges and corners of the picture"
-        )
+        warnings.append(coverage_warning(name, coverage, hit))
     if len(detections) < 10:
         warnings.append(f"{name}: only {len(detections)} usable images: 15-25 give a steadier result")
     worst = int(np.argmax(per_view))

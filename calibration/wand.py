@@ -20,6 +20,12 @@ Steps (:func:`calibrate_wand`):
 
 The result's frame is the first camera of the best pair's (Y not up); set the world frame with
 :func:`calibration.extrinsics.world_from_floor_board` from a board lying on the floor or seat.
+
+Balls of one colour (:func:`match_same_colour_balls`): which blob is which ball is arbitrary in
+each camera and frame; the cameras are made to agree by the rig's own epipolar geometry, found
+from all four possible pairings of two cameras' blobs at once (RANSAC: the right pairings are
+half of them), camera after camera against those already matched. A frame whose two pairings
+fit about equally (the wand in an epipolar plane) is left out for that camera.
 """
 
 from __future__ import annotations
@@ -175,6 +181,89 @@ def calibrate_wand(cameras: Sequence[Camera], uv_px: np.ndarray, length_m: float
         log.info(w)
     n_frames = int(np.sum(np.all(np.isfinite(pts.reshape(T, 2, 3)), axis=(1, 2))))
     return WandResult(out, i, rms, err_mm, n_frames, tuple(warnings))
+
+
+SAME_COLOUR_FIT_PX = 2.0  # a pairing of blobs fits the epipolar geometry within this distance
+SAME_COLOUR_MISFIT_PX = 6.0  # and the other pairing must miss it by this much for the frame to count
+
+
+def match_same_colour_balls(cameras: Sequence[Camera], uv_px: np.ndarray) -> tuple[np.ndarray, int]:
+    """Make the ball order of a same-coloured wand agree between cameras.
+
+    Args:
+        cameras: C cameras with intrinsics.
+        uv_px: (C, T, 2, 2) blob centroids, the two balls in arbitrary order in each camera and
+            frame, NaN where a camera did not see exactly two balls.
+    Returns:
+        (C, T, 2, 2) the centroids with each camera's pair of blobs swapped where needed, NaN
+        where the order could not be decided; and the number of camera-frames left out so.
+    """
+    C, T = uv_px.shape[:2]
+    uv = np.array(uv_px, dtype=np.float64)
+    xn = _undistort(cameras, uv).reshape(C, T, 2, 2)
+    both = np.all(np.isfinite(uv), axis=(2, 3))
+    counts = both.astype(int) @ both.T.astype(int)
+    np.fill_diagonal(counts, 0)
+    done = [int(np.argmax(counts.sum(axis=1)))]
+    dropped = 0
+    while len(done) < C:
+        rest = [c for c in range(C) if c not in done]
+        c = max(rest, key=lambda k: sum(counts[k, d] for d in done))
+        fit_straight = np.zeros(T)
+        fit_crossed = np.zeros(T)
+        votes = np.zeros(T, int)
+        for d in done:
+            shared = both[c] & both[d]
+            if shared.sum() < MIN_PAIR_FRAMES:
+                continue
+            d_s, d_x = _pairing_distances_px(xn[d], xn[c], shared, cameras[c].K[0, 0])
+            if d_s is None:
+                continue
+            ok = np.isfinite(d_s)
+            fit_straight[ok] += d_s[ok]
+            fit_crossed[ok] += d_x[ok]
+            votes[ok] += 1
+        seen = both[c]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s_mean, x_mean = fit_straight / votes, fit_crossed / votes
+        straight = (votes > 0) & (s_mean < SAME_COLOUR_FIT_PX) & (x_mean > SAME_COLOUR_MISFIT_PX)
+        crossed = (votes > 0) & (x_mean < SAME_COLOUR_FIT_PX) & (s_mean > SAME_COLOUR_MISFIT_PX)
+        uv[c, crossed] = uv[c, crossed][:, ::-1]
+        xn[c, crossed] = xn[c, crossed][:, ::-1]
+        undecided = seen & ~straight & ~crossed
+        uv[c, undecided] = np.nan
+        dropped += int(undecided.sum())
+        both[c] = straight | crossed
+        counts[c] = both.astype(int) @ both[c].astype(int)
+        counts[:, c] = counts[c]
+        counts[c, c] = 0
+        done.append(c)
+    return uv, dropped
+
+
+def _pairing_distances_px(xa: np.ndarray, xb: np.ndarray, frames: np.ndarray, f_px: float):
+    """Per frame, the larger epipolar distance (px in camera b) of the straight pairing (a0-b0,
+    a1-b1) and of the crossed one (a0-b1, a1-b0), with the essential matrix found from both
+    pairings of the ``frames`` by RANSAC. (None, None) when no geometry is found."""
+    idx = np.flatnonzero(frames)
+    pa = np.concatenate([xa[idx, 0], xa[idx, 1], xa[idx, 0], xa[idx, 1]])
+    pb = np.concatenate([xb[idx, 0], xb[idx, 1], xb[idx, 1], xb[idx, 0]])
+    E, _ = cv2.findEssentialMat(pa, pb, np.eye(3), method=cv2.RANSAC, prob=0.99999, threshold=1.0 / f_px, maxIters=5000)
+    if E is None or E.shape != (3, 3):
+        return None, None
+    T = xa.shape[0]
+
+    def dist(a, b):
+        ha = np.column_stack([a, np.ones(len(a))])
+        hb = np.column_stack([b, np.ones(len(b))])
+        lines = ha @ E.T  # epipolar lines in b
+        return np.abs(np.sum(lines * hb, axis=1)) / np.hypot(lines[:, 0], lines[:, 1]) * f_px
+
+    d_s = np.full(T, np.nan)
+    d_x = np.full(T, np.nan)
+    d_s[idx] = np.maximum(dist(xa[idx, 0], xb[idx, 0]), dist(xa[idx, 1], xb[idx, 1]))
+    d_x[idx] = np.maximum(dist(xa[idx, 0], xb[idx, 1]), dist(xa[idx, 1], xb[idx, 0]))
+    return d_s, d_x
 
 
 def _pair_pose(xa: np.ndarray, xb: np.ndarray, frames: np.ndarray, cameras, pair, length_m: float):

@@ -217,6 +217,9 @@ class RunSummary:
         cpu_ms: CPU time of this process per frame, all threads (llvmpipe rasterizes on
             threads of its own): what a frame costs on a machine shared with other work.
         screenshot: the PNG written, if any.
+        interval_p99_ms, interval_max_ms: the 99th percentile and the longest time between the
+            starts of two frames (a stall the patient sees).
+        slowest: where the longest frame spent its time (stage: ms, ...).
     """
 
     frames: int
@@ -225,6 +228,9 @@ class RunSummary:
     work_ms: float
     cpu_ms: float = math.nan
     screenshot: Path | None = None
+    interval_p99_ms: float = math.nan
+    interval_max_ms: float = math.nan
+    slowest: str = ""
 
     @property
     def fps(self) -> float:
@@ -233,9 +239,13 @@ class RunSummary:
     def line(self) -> str:
         shot = f"; screenshot {self.screenshot}" if self.screenshot else ""
         capable = 1000.0 / self.work_ms if self.work_ms > 0 else math.nan
+        stalls = ""
+        if math.isfinite(self.interval_max_ms):
+            stalls = (f"; frame interval p99 {self.interval_p99_ms:.0f} ms, longest {self.interval_max_ms:.0f} ms"
+                      + (f" ({self.slowest})" if self.slowest else ""))
         return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
                 f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
-                f"{self.cpu_ms:.1f} ms CPU per frame){shot}")
+                f"{self.cpu_ms:.1f} ms CPU per frame{stalls}){shot}")
 
 
 class App:
@@ -270,6 +280,10 @@ class App:
         self._last_frame_s = clock()
         self._work_total_s = 0.0
         self._pending = False  # a frame drawn and flushed but not presented yet
+        self._loading = ""     # words shown while a scene is being opened (:meth:`open`)
+        self.intervals: deque[float] = deque(maxlen=100_000)   # frame-to-frame times of the run, seconds
+        self._slowest: tuple = (0.0, (), 0.0)   # the longest interval, its stages, the wait before it
+        self._timed_from = 0                     # frames before this one are not searched for the slowest
 
     # ------------------------------------------------------------------ scenes
     @property
@@ -297,6 +311,30 @@ class App:
     def quit(self) -> None:
         self.running = False
 
+    def busy(self, words: str, work: Callable[[], object]):
+        """Run ``work()`` (seconds of it: a scene to build, a report to write) with ``words`` shown
+        over the current scene meanwhile; returns what it returns."""
+        self.present()
+        if self.scene is not None:
+            self._loading = words
+            try:
+                self.render(self.scene)
+            finally:
+                self._loading = ""
+            self.screen.flush()
+            self.screen.present()
+        return work()
+
+    def open(self, make: Callable[[], "BaseScene"], words: str = "Opening...", *, replace: bool = False) -> None:
+        """Push the scene ``make()`` builds (``replace``: in place of the top scene), showing
+        ``words`` over the current scene while it is built: a scene may take seconds to open (a
+        database read, plots, cameras), and a screen that sits unchanged looks broken."""
+        scene = self.busy(words, make)
+        if replace:
+            self.replace(scene)
+        else:
+            self.push(scene)
+
     # ------------------------------------------------------------------ input
     def dispatch(self, event: InputEvent) -> None:
         """Route one input event: quitting and the frame-rate overlay are the app's, the rest the scene's."""
@@ -316,22 +354,28 @@ class App:
             Whether a frame was drawn (not when the events quit the app or left no scene).
         """
         start_s = self.clock()
+        stages = [start_s]
         for event in self.input.map(self._events()):
             self.dispatch(event)
             if not self.running:
                 return False
+        stages.append(self.clock())
         self.services.tick()
+        stages.append(self.clock())
         scene = self.scene
         if scene is None:
             self.running = False
             return False
-        steps = self._step.advance(self.clock())
+        steps = self._step.advance(stages[-1])
         dt_s = self._step.step_s
         for _ in range(steps):
             scene.update(dt_s)
+        stages.append(self.clock())
         frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
         scene.prepare(frame)  # while the previous frame is rasterized
+        stages.append(self.clock())
         self.present()
+        stages.append(self.clock())
         self.render(scene, frame)
         if screenshot is not None:
             # A window's back buffer is undefined after the swap: read it before presenting.
@@ -339,6 +383,11 @@ class App:
         self.screen.flush()
         self._pending = True
         end_s = self.clock()
+        stages.append(end_s)
+        interval_s = end_s - self._last_frame_s
+        self.intervals.append(interval_s)
+        if interval_s > self._slowest[0] and self.frames > self._timed_from:
+            self._slowest = (interval_s, tuple(b - a for a, b in zip(stages, stages[1:])), start_s - self._last_frame_s)
         self.rate.add(end_s - self._last_frame_s, end_s - start_s)
         self._work_total_s += end_s - start_s
         self._last_frame_s = end_s
@@ -362,9 +411,21 @@ class App:
         scene.render_3d(frame)
         self.canvas.begin()
         scene.render_2d(frame)
+        if self._loading:
+            self._draw_loading(self._loading)
         if self.show_fps:
             self._draw_fps()
         self.canvas.end()
+
+    def _draw_loading(self, words: str) -> None:
+        w, h = self.screen.size_px
+        s = min(w / 1280.0, h / 720.0)
+        self.canvas.rect((0, 0, w, h), (0, 0, 0, 110))
+        size = round(theme.MEDIUM * s)
+        tw, th = self.canvas.measure(words, size)
+        box = (w / 2 - tw / 2 - 40 * s, h / 2 - th / 2 - 26 * s, tw + 80 * s, th + 52 * s)
+        self.canvas.rect(box, theme.PANEL, radius=theme.RADIUS * s, border=3 * s, border_colour=theme.ACCENT)
+        self.canvas.text(words, (w / 2, h / 2), size, theme.TEXT, anchor="center")
 
     def _draw_fps(self) -> None:
         fps = self.rate.fps
@@ -387,6 +448,7 @@ class App:
         start_s = self.clock()
         start_cpu_s = time.process_time()
         first_frame = self.frames
+        self._slowest, self._timed_from = (0.0, (), 0.0), self.frames + 1   # the run's first frame: its start-up
         work_before_s = self._work_total_s
         period_s = 1.0 / self.settings.max_fps if self.settings.max_fps > 0 else 0.0
         # Frames are paced to deadlines one period apart, not to a period after each frame's start:
@@ -425,7 +487,14 @@ class App:
         wall_s = self.clock() - start_s
         work_ms = 1000.0 * (self._work_total_s - work_before_s) / n if n else math.nan
         cpu_ms = 1000.0 * (time.process_time() - start_cpu_s) / n if n else math.nan
-        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot)
+        intervals = list(self.intervals)[-n:][1:] if n > 1 else []   # the first counts the start-up
+        p99 = 1000.0 * float(sorted(intervals)[min(len(intervals) - 1, int(0.99 * len(intervals)))]) \
+            if intervals else math.nan
+        worst = 1000.0 * max(intervals) if intervals else math.nan
+        _, parts, wait = self._slowest
+        names = ("events", "tracker link", "updates", "prepare", "present", "draw")
+        slowest = ", ".join(f"{k} {1000 * v:.0f}" for k, v in (("before", wait), *zip(names, parts)) if v > 0.002)
+        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest)
 
     def close(self) -> None:
         """Exit every scene and release the canvas (the screen and services belong to the caller)."""

@@ -112,7 +112,12 @@ def _add_track(sub) -> None:
     p.add_argument("--status", type=Path, default=None,
                    help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
     p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
-    p.add_argument("--c3d", type=Path, default=None, help="labelled markers as a C3D file")
+    p.add_argument("--c3d", type=Path, default=None,
+                   help="labelled markers and joint angles as a C3D file (residual > 0 measured, 0 estimated, -1 lost)")
+    p.add_argument("--mot", type=Path, default=None, help="joint angles as an OpenSim motion file (.mot)")
+    p.add_argument("--bvh", type=Path, default=None, help="the avatar's skeleton driven by the joint angles (.bvh)")
+    p.add_argument("--detections", type=Path, default=None,
+                   help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.set_defaults(func=_cmd_track)
@@ -121,11 +126,12 @@ def _add_track(sub) -> None:
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
 
-    labelled = args.out or args.status or args.angles or args.c3d
+    labelled = args.out or args.status or args.angles or args.c3d or args.mot or args.bvh or args.detections
     if args.points and labelled:
         raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
     if not (args.points or labelled):
-        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --points)")
+        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --mot, --bvh, "
+                         "--detections, --points)")
     # before the work, not after minutes of tracking
     check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
                    "--points": args.points})
@@ -139,6 +145,9 @@ def _cmd_track(args) -> int:
         status_csv=args.status,
         angles_csv=args.angles,
         c3d=args.c3d,
+        mot=args.mot,
+        bvh=args.bvh,
+        detections=args.detections,
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,
@@ -166,14 +175,17 @@ def _add_angles(sub) -> None:
     p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
     p.add_argument("trc", type=Path, help="marker file with the marker set's names (mm)")
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
+    p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",
+                   help="the file's names for the angles' markers, one 'MB: STER' line each (TRCs of other marker sets)")
     p.set_defaults(func=_cmd_angles)
 
 
 def _cmd_angles(args) -> int:
-    from tracking.tables import angles_csv_from_trc
+    from tracking.tables import angles_csv_from_trc, read_marker_map
 
     check_outputs({"--out": args.out})
-    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out)
+    marker_map = read_marker_map(args.map) if args.map is not None else None
+    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 
@@ -224,6 +236,36 @@ def _cmd_validate(args) -> int:
 
 
 # --------------------------------------------------------------------------- play
+def add_tracker_source_options(p) -> None:
+    """What the tracker process measures (``rehab play``, ``rehab stream``): the simulated studio
+    (``--rig --size --fps --body``), ``--devices`` or ``--recording`` (and ``--calibration``), and
+    ``--adapt-colours``; read back by :func:`_play_source`."""
+    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
+    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--body", default="p50_male",
+                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
+    p.add_argument("--adapt-colours", action="store_true",
+                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
+                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
+                            "video files, one per camera of --calibration, in its order")
+    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
+                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
+    p.add_argument("--calibration", type=Path, default=None,
+                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+
+
+def check_motion(motion: str | None) -> None:
+    """A one-line error for a motion that is neither built in nor a file (None passes)."""
+    from tracking.sim.motions import available_motions
+
+    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
+        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
+                         "or give a motion YAML file")
+
+
 def _add_play(sub) -> None:
     p = sub.add_parser(
         "play",
@@ -236,11 +278,6 @@ def _add_play(sub) -> None:
     p.add_argument("--motion", default=None,
                    help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
                    f"patient (headless: {_HEADLESS_MOTION})")
-    p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--body", default="p50_male",
-                   help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
@@ -262,8 +299,6 @@ def _add_play(sub) -> None:
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
     p.add_argument("--standard", choices=("jarm", "aaos"), default="jarm",
                    help="reference standard of the ROM tests and the progress band (default: %(default)s)")
-    p.add_argument("--adapt-colours", action="store_true",
-                   help="the tracker's colour table follows lighting drift (learns from the tracked markers)")
     p.add_argument("--calibrate-cameras", default=None, metavar="DEV,DEV,...",
                    help="the calibration scene shows these cameras (OpenCV indices, URLs or video files) instead of the "
                    "simulated studio")
@@ -274,14 +309,10 @@ def _add_play(sub) -> None:
     p.add_argument("--seconds", type=SECONDS, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
     p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--devices", default=None, metavar="DEV,DEV,...",
-                       help="real cameras instead of the simulated patient: OpenCV device indices, URLs or "
-                            "video files, one per camera of --calibration, in its order")
-    where.add_argument("--recording", type=Path, default=None, metavar="DIR",
-                       help="track a recording folder (rehab record) in real time instead of the simulated patient")
-    p.add_argument("--calibration", type=Path, default=None,
-                   help="calibration file of the cameras (needed with --devices; replaces a recording's own)")
+    add_tracker_source_options(p)
+    from game.cli_stream import add_stream_options
+
+    add_stream_options(p)
     p.set_defaults(func=_cmd_play)
 
 
@@ -320,7 +351,6 @@ def _cmd_play(args) -> int:
     from game.app import Settings
     from game.play import PlayOptions, run_play
     from tracking.live import SourceConfig
-    from tracking.sim.motions import available_motions
 
     motion = args.motion if args.motion is not None or not args.headless else _HEADLESS_MOTION
     if args.game is not None or args.scene == "game":
@@ -336,9 +366,7 @@ def _cmd_play(args) -> int:
 
         # the ROM scene plays the test's own motion (its demo); start the tracker on it
         motion = load_rom_test(args.test or DEFAULT_ROM_TEST).simulated_motion.get(args.side)
-    if motion is not None and motion not in available_motions() and not Path(motion).is_file():
-        raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
-                         "or give a motion YAML file")
+    check_motion(motion)
     if args.devices is not None or args.recording is not None:
         if args.motion is not None:
             raise RehabError("--motion plays on the simulated patient: leave it out with --devices or --recording")
@@ -347,9 +375,11 @@ def _cmd_play(args) -> int:
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
                           adapt_colours=args.adapt_colours, **_play_source(args))
     from game.cli_calibrate import board_from_spec
+    from game.cli_stream import stream_config
 
     options = PlayOptions(
-        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=not args.headless),
+        # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False),
         source=source,
         headless=args.headless,
         seconds=seconds,
@@ -367,6 +397,7 @@ def _cmd_play(args) -> int:
         max_level=args.max_level,
         calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
         calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
+        stream=stream_config(args),
     )
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
@@ -388,6 +419,8 @@ def _add_bench(sub) -> None:
                    help="measuring time of the live-process and application figures (default: %(default)s)")
     p.add_argument("--skip-live", action="store_true",
                    help="only the per-frame pipeline (no tracker process, no application)")
+    p.add_argument("--streaming", action="store_true",
+                   help="also compare the tracker process with LSL + OSC streaming off and on (alternating passes)")
     p.set_defaults(func=_cmd_bench)
 
 
@@ -400,14 +433,21 @@ def _cmd_bench(args) -> int:
     if args.skip_live:
         return 0
     seconds = 2.0 if args.quick else args.seconds
-    _bench_live(seconds)
-    return 0
+    app_measured = _bench_live(seconds)
+    if args.streaming:
+        from tracking.live.bench import compare_streaming
+
+        print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, alternating passes of "
+              f"{seconds:g} s, {1 if args.quick else 3} of each (LSL inlets and an OSC socket receive in this process):",
+              flush=True)
+        for line in compare_streaming(seconds, passes=1 if args.quick else 3):
+            print("  " + line, flush=True)
+    return 0 if app_measured else 1
 
 
-def _bench_live(seconds: float) -> None:
-    """The tracker process (latency, pace) and the application (frame rate) with it running."""
-    from game.app import Settings
-    from game.play import PlayOptions, run_play
+def _bench_live(seconds: float) -> bool:
+    """The tracker process (latency, pace) and the application (frame rate) with it running;
+    False when the application could not be measured."""
     from tracking.live.bench import format_result, measure_latency
 
     print("\nTracker process (simulated patient, 30 frame sets/s): frame ready -> sample seen by the game "
@@ -425,10 +465,47 @@ def _bench_live(seconds: float) -> None:
     where = "in a window" if window else "headless EGL"
     print(f"\nApplication (live avatar scene, 1280x720, {where}, uncapped) while the tracker process "
           "measures the simulated patient at 320x240, 30 frame sets/s:", flush=True)
-    summary = run_play(PlayOptions(settings=Settings(window_px=(1280, 720), max_fps=0.0, show_fps=False),
-                                   headless=not window, seconds=seconds, scene="live", motion="shoulder_abduction"))
+    try:
+        summary = bench_app(seconds, window)
+    except RehabError as exc:
+        print(f"  not measured: {exc}", flush=True)
+        return False
     print(f"  {summary.line()}", flush=True)
     print(f"  target 60 frames/s: {'met' if summary.fps >= 60.0 else 'NOT met'} on this machine", flush=True)
+    return True
+
+
+def bench_app(seconds: float, window: bool):
+    """The application's frame rate (a :class:`game.app.RunSummary`), measured in a process of its own.
+
+    A fresh process, as the application runs: the figures before it render the simulated cameras
+    on EGL contexts in this process, and once a thread has made an EGL context current, GLX
+    refuses it the window's context (X error BadAccess on X_GLXMakeCurrent, which ends the process).
+
+    Raises:
+        RehabError: the application could not run (its one-line reason).
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        try:
+            return pool.submit(_app_figure, seconds, window).result()
+        except BrokenProcessPool:
+            raise RehabError("the application's process ended abruptly (see the messages above)") from None
+        except Exception as exc:  # NoDisplayError, GraphicsUnavailable, RehabError from the child
+            raise RehabError(str(exc).splitlines()[0] if str(exc) else type(exc).__name__) from None
+
+
+def _app_figure(seconds: float, window: bool):
+    """:func:`bench_app`'s child: the live avatar scene uncapped for ``seconds``."""
+    from game.app import Settings
+    from game.play import PlayOptions, run_play
+
+    return run_play(PlayOptions(settings=Settings(window_px=(1280, 720), max_fps=0.0, show_fps=False),
+                                headless=not window, seconds=seconds, scene="live", motion="shoulder_abduction",
+                                wait_for_tracker=True))
 
 
 # --------------------------------------------------------------------------- main
@@ -449,17 +526,21 @@ def build_parser() -> argparse.ArgumentParser:
     from game import cli_clinic  # rom-test, rom-accuracy, patients, export, import, backup, report
     from game import cli_colour  # colour learn|drift-check
     from game import cli_record  # record
+    from game import cli_stream  # stream
 
     cli_calibrate.add_commands(sub)
     cli_clinic.add_commands(sub)
     cli_colour.add_commands(sub)
     cli_record.add_commands(sub)
+    cli_stream.add_commands(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
+    from game.cli_calibrate import join_negative_values  # --origin -0.2,0.45,0
+
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else argv))
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="rehab: %(levelname)s: %(message)s",

@@ -25,6 +25,7 @@ from game.cli_options import COUNT, LENGTH_MM, NOISE, SECONDS, SEED, number
 log = logging.getLogger("rehab")
 
 SIM_CHARUCO_SPEC = ("10x7", 40.0, 30.0, "DICT_4X4_50")  # the simulator's ChArUco board: squares, square mm, marker mm
+SIM_CHARUCO_EXTRINSICS_SPEC = ("7x5", 100.0, 75.0, "DICT_4X4_50")  # large enough to be read from 2 m at 640x480
 
 
 
@@ -66,17 +67,26 @@ def add_commands(sub) -> None:
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
     _board_options(q)
     _floor_options(q)
+    q.add_argument("--floor-views", type=Path, default=None,
+                   help="folder with one sub-folder per camera holding the floor board's image (named as --floor); "
+                   "default: the views folder")
+    q.add_argument("--list-skipped", action="store_true", help="name every image without a usable board")
+    q.add_argument("--floor-board", default=None, metavar="SPEC",
+                   help="another board on the floor or seat than the shared views': 9x6:60 (checkerboard inner "
+                   "corners : square mm) or charuco:10x7:40[:30]; --origin and --board-centre then refer to it")
     _output_options(q)
     q.set_defaults(func=_cmd_extrinsics)
 
     q = cal.add_parser("wand", help="camera positions from a wand (two balls at a known distance) waved through the volume",
                        description="Calibrate the cameras' positions from a recording of a two-ball wand; the world "
                        "frame comes from board images of the board lying on the floor or seat (--floor-views).")
-    q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera, meta.yaml)")
+    q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera; meta.yaml "
+                   "optional: without it the frame rate comes from the videos)")
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
     q.add_argument("--length-mm", type=LENGTH_MM, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
     q.add_argument("--colour", action="append", default=None, metavar="R,G,B",
-                   help="ball colours, twice: ball 0 then ball 1 (default: meta.yaml wand_colours)")
+                   help="ball colours, twice: ball 0 then ball 1; once when both balls have one colour "
+                   "(default: meta.yaml wand_colours)")
     q.add_argument("--ball-mm", type=LENGTH_MM, default=40.0, help="ball diameter (default: %(default)s)")
     q.add_argument("--floor-views", type=Path, default=None, help="folder with one sub-folder of board images per camera")
     _board_options(q, required=False)
@@ -97,6 +107,20 @@ def add_commands(sub) -> None:
     q.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
     q.add_argument("--frames", type=COUNT, default=30, help="frame sets to learn from after identification (default 30)")
     q.set_defaults(func=_cmd_colour)
+
+    q = cal.add_parser("import", help="convert calibration files of other tools (OpenCV, stereo_calib, Caliscope, Qualisys, "
+                       "anipose) into this project's TOML",
+                       description="Read one rig file, or several files of one camera each (OpenCV's calibration "
+                       "sample, stereo_calib's intrinsics.yml), and write them as one TOML calibration. Cameras "
+                       "without a position (lens data only) are written at the origin, to be placed with "
+                       "'rehab calibrate extrinsics --intrinsics OUT' or 'wand'.")
+    q.add_argument("files", nargs="+", type=Path, help="calibration files (.toml, .yaml/.yml/.xml, .qca/.qca.txt)")
+    q.add_argument("--out", type=Path, required=True, help="TOML calibration to write")
+    q.add_argument("--translation-unit", choices=("m", "mm"), default="m",
+                   help="unit of the files' translations (default: %(default)s); mm divides them by 1000")
+    q.add_argument("--size", default=None, help="image size WxH for files that do not store it (stereo_calib)")
+    q.add_argument("--names", default=None, help="camera names, comma-separated, in order (default: from the files)")
+    q.set_defaults(func=_cmd_import)
 
     p = sub.add_parser("simulate-calibration", help="render calibration material of a virtual rig, with ground truth",
                        description="Render board images (intrinsics, extrinsics, seat board) and a wand recording "
@@ -168,14 +192,57 @@ def board_name(board) -> str:
     return f"{board.cols}x{board.rows} board"
 
 
+TRIPLE_OPTIONS = ("--origin", "--board-centre")
+FLOOR_BOARD_HELP = ("Lay the board face up on the seat (or the floor), its rows of corners running left-right across the "
+                    "patient, the black outer corner square at the patient's front left (the corner nearest the front "
+                    "cameras on the patient's left); the first inner corner is the one next to that square.")
+
+
 def _floor_options(p) -> None:
     p.add_argument("--floor", default="seat", type=lambda v: None if v.lower() == "none" else v,
                    help="file name (without extension) of the floor/seat board view; 'none': keep the first "
                    "camera's frame, Y not up (default: %(default)s)")
-    p.add_argument("--origin", default="0,0,0", help="world position X,Y,Z in metres of the floor board's first corner "
-                   "(default: %(default)s; e.g. 0,0.45,0 on a 45 cm seat; write --origin=-0.2,0.45,0 when X is negative)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--origin", default=None, metavar="X,Y,Z",
+                       help="world position in metres of the floor board's first inner corner (default 0,0,0). "
+                       + FLOOR_BOARD_HELP + " Negative numbers are fine: --origin -0.2,0.45,0")
+    where.add_argument("--board-centre", default=None, metavar="X,Y,Z",
+                       help="world position in metres of the centre of the board's corners instead, e.g. 0,0.45,0: "
+                       "the board centred over the origin on a 45 cm seat")
     p.add_argument("--turn-deg", type=number(-360.0, 360.0), default=0.0,
                    help="the board's rows point this many degrees from the patient's right, counter-clockwise from above")
+    p.add_argument("--no-world-check", action="store_true",
+                   help="accept a world frame with a camera below the floor, facing away from the floor board or on its "
+                   "side (refused by default: the usual sign of a wrong floor view)")
+
+
+def origin_from_args(args, board) -> tuple[float, float, float]:
+    """The floor board's corner 0 in the world from --origin or --board-centre."""
+    if getattr(args, "board_centre", None):
+        from calibration.extrinsics import floor_board_centre_m
+
+        target = np.array(_triple(args.board_centre, "--board-centre"))
+        offset = floor_board_centre_m(board, (0.0, 0.0, 0.0), args.turn_deg)
+        return tuple(float(v) for v in target - offset)  # type: ignore[return-value]
+    return _triple(args.origin or "0,0,0", "--origin")
+
+
+def join_negative_values(argv: Sequence[str]) -> list[str]:
+    """``--origin -0.2,0.45,0`` -> ``--origin=-0.2,0.45,0`` (argparse takes a leading '-' for an option)."""
+    out: list[str] = []
+    it = iter(argv)
+    for a in it:
+        if a in TRIPLE_OPTIONS:
+            nxt = next(it, None)
+            if nxt is None:
+                out.append(a)
+            elif nxt.startswith("-") and nxt[1:2].isdigit() or nxt.startswith("-."):
+                out.append(f"{a}={nxt}")
+            else:
+                out += [a, nxt]
+        else:
+            out.append(a)
+    return out
 
 
 def _output_options(p) -> None:
@@ -222,9 +289,23 @@ def _save(args, cameras, error_px: float) -> None:
         save_calibration_opencv(args.opencv, cameras)
 
 
-def _report_skipped(skipped: dict[str, str]) -> None:
-    for name, reason in skipped.items():
-        print(f"  skipped {name}: {reason}")
+SKIPPED_LISTED = 5  # more skipped images than this are summed up in one line
+
+
+def _report_skipped(skipped: dict[str, str], *, head: str = "", every: bool = False) -> None:
+    """Each skipped image with its reason, or past SKIPPED_LISTED one summary line by reason."""
+    if every or len(skipped) <= SKIPPED_LISTED:
+        if head:
+            print(f"{head}:")
+        for name, reason in skipped.items():
+            print(f"  skipped {name}: {reason}")
+        return
+    from collections import Counter
+
+    common = Counter(skipped.values()).most_common()
+    first, n = common[0]
+    rest = f"; {len(skipped) - n} for other reasons" if len(common) > 1 else ""
+    print(f"{head or f'  skipped {len(skipped)} images'}: {n} \"{first}\"{rest} (--list-skipped names them)")
 
 
 # --------------------------------------------------------------------------- intrinsics
@@ -370,8 +451,9 @@ def run_live_intrinsics(captures, board, *, fit_k3: bool = False, min_views: int
 
 
 # --------------------------------------------------------------------------- extrinsics
-def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[str, str]]:
-    """Board detections of every view: {view name: [Detection | None per camera]}, and skipped reasons."""
+def detect_views(folder: Path, cameras, board, *, only: str | None = None) -> tuple[dict[str, list], dict[str, str]]:
+    """Board detections of every view (or of the view named ``only``): {view name: [Detection | None
+    per camera]}, and skipped reasons."""
     from calibration.board import detect_board, read_gray
 
     if not folder.is_dir():
@@ -383,6 +465,8 @@ def detect_views(folder: Path, cameras, board) -> tuple[dict[str, list], dict[st
         raise RehabError(f"{folder}: no image folder for {', '.join(missing)}: give one sub-folder per camera, named as in the intrinsics")
     for c, cam in enumerate(cameras):
         for path in _images_in(folder / cam.name):
+            if only is not None and path.stem != only:
+                continue
             row = views.setdefault(path.stem, [None] * len(cameras))
             gray, reason = read_gray(path)
             if gray is not None:
@@ -406,18 +490,39 @@ def _check_floor_view(folder: Path, cameras, floor: str | None) -> None:
         raise RehabError(f"{folder}: no image named {floor!r} (the board on the floor or seat) in the camera folders: give --floor NAME")
 
 
-def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True):
-    from calibration.extrinsics import calibrate_extrinsics
+def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True,
+                   floor_views: Path | None = None, list_skipped: bool = False, check_world: bool = True,
+                   floor_board=None):
+    """Board extrinsics from shared views; the floor board's view from ``floor_views`` when given
+    (a folder with one sub-folder per camera), else from ``views_dir``. With ``floor_board`` (another
+    board than the shared views', e.g. a checkerboard on the seat after ChArUco views) the rig is
+    solved from the shared views alone and then set in the floor board's world frame."""
+    from dataclasses import replace
 
-    _check_floor_view(views_dir, cameras, floor)
+    from calibration.extrinsics import calibrate_extrinsics, world_from_floor_board
+
+    _check_floor_view(floor_views or views_dir, cameras, floor)
     views, skipped = detect_views(views_dir, cameras, board)
-    res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg)
+    if floor is not None and (floor_views is not None or floor_board is not None):
+        floor_rows, floor_skipped = detect_views(floor_views or views_dir, cameras, floor_board or board, only=floor)
+        views[floor] = floor_rows.get(floor, [None] * len(cameras))
+        where = f"{floor_views.name}/" if floor_views is not None else ""
+        skipped.update({f"{where}{k}": v for k, v in floor_skipped.items()})
+    if floor_board is not None and floor is not None:
+        floor_row = views.pop(floor)
+        res = calibrate_extrinsics(cameras, board, views, floor_view=None)
+        placed, _ = world_from_floor_board(res.cameras, floor_row, floor_board, origin_m=origin_m, turn_deg=turn_deg,
+                                           check_world=check_world)
+        res = replace(res, cameras=placed, world_set=True, warnings=tuple(w for w in res.warnings if "floor" not in w))
+    else:
+        res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg,
+                                   check_world=check_world)
     if verbose:
         for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
             print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
         if skipped:
-            print(f"  {len(skipped)} camera images without a usable board (normal for cameras that do not face it):")
-            _report_skipped(skipped)
+            _report_skipped(skipped, every=list_skipped, head=f"  {len(skipped)} camera images without a usable board "
+                            "(normal for cameras that do not face it)")
         for w in res.warnings:
             print(f"  warning: {w}")
     return res
@@ -427,9 +532,11 @@ def _cmd_extrinsics(args) -> int:
     from calibration.files import load_calibration
 
     board = board_from_args(args)
+    floor_board = board_from_spec(args.floor_board) if args.floor_board else None
     cameras = load_calibration(args.intrinsics)
-    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=_triple(args.origin, "--origin"),
-                         turn_deg=args.turn_deg)
+    res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, floor_board or board),
+                         turn_deg=args.turn_deg, floor_views=args.floor_views, list_skipped=args.list_skipped,
+                         check_world=not args.no_world_check, floor_board=floor_board)
     _save(args, res.cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(res.cameras)} cameras to {args.out}")
     return 0
@@ -437,36 +544,44 @@ def _cmd_extrinsics(args) -> int:
 
 # --------------------------------------------------------------------------- wand
 def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colours, ball_mm: float,
-             floor_views: Path | None, board, floor: str, origin_m, turn_deg: float, verbose: bool = True):
+             floor_views: Path | None, board, floor: str, origin_m, turn_deg: float, verbose: bool = True,
+             check_world: bool = True):
     """Wand calibration, world frame from the floor board if given. Returns (WandResult, cameras)."""
     from calibration.extrinsics import world_from_floor_board
-    from calibration.wand import calibrate_wand
+    from calibration.wand import calibrate_wand, match_same_colour_balls
     from tracking.markerset import parse_rgb
     from tracking.recording import read_meta
     from tracking.wand_capture import wand_centroids
 
     if not recording.is_dir():
         raise RehabError(f"{recording}: no such wand recording folder")
-    extra = read_meta(recording).extra
+    extra = read_meta(recording).extra if (recording / "meta.yaml").is_file() else {}
     if length_mm is None:
         length_mm = extra.get("wand_length_mm")
         if not isinstance(length_mm, (int, float)):
             raise RehabError("give the wand length with --length-mm (distance between the ball centres)")
     if colours:
-        if len(colours) != 2:
-            raise RehabError("give --colour twice: the colour of ball 0, then of ball 1")
+        if len(colours) not in (1, 2):
+            raise RehabError("give --colour twice (ball 0, then ball 1), or once when both balls have one colour")
         rgb = [parse_rgb(c) for c in colours]
+        if len(rgb) == 1:
+            rgb *= 2
     else:
         rgb = extra.get("wand_colours")
         if not (isinstance(rgb, list) and len(rgb) == 2):
             raise RehabError("give the two ball colours with --colour R,G,B --colour R,G,B")
     cameras, uv = wand_centroids(recording, intrinsics, rgb, ball_mm / 2000.0, progress=verbose)
+    if tuple(rgb[0]) == tuple(rgb[1]):
+        uv, dropped = match_same_colour_balls(cameras, uv)
+        if verbose:
+            print(f"balls of one colour told apart by the cameras' geometry ({dropped} camera frames undecided, left out)")
     res = calibrate_wand(cameras, uv, float(length_mm) / 1000.0)
     out = res.cameras
     if floor_views is not None and floor is not None:
         _check_floor_view(floor_views, out, floor)
-        views, _ = detect_views(floor_views, out, board)
-        out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg)
+        views, _ = detect_views(floor_views, out, board, only=floor)
+        out, floor_rms = world_from_floor_board(out, views[floor], board, origin_m=origin_m, turn_deg=turn_deg,
+                                                check_world=check_world)
         if verbose:
             print(f"world frame from the floor board ({sum(d is not None for d in views[floor])} cameras, {floor_rms:.3f} px)")
     elif verbose:
@@ -484,9 +599,60 @@ def _cmd_wand(args) -> int:
     board = board_from_args(args) if args.floor_views else None
     res, cameras = run_wand(args.recording, args.intrinsics, length_mm=args.length_mm, colours=args.colour,
                             ball_mm=args.ball_mm, floor_views=args.floor_views, board=board, floor=args.floor,
-                            origin_m=_triple(args.origin, "--origin"), turn_deg=args.turn_deg)
+                            origin_m=origin_from_args(args, board) if board is not None else (0.0, 0.0, 0.0),
+                            turn_deg=args.turn_deg, check_world=not args.no_world_check)
     _save(args, cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(cameras)} cameras to {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- import
+def _cmd_import(args) -> int:
+    from calibration.camera import Camera
+    from calibration.files import read_cameras, save_calibration_toml
+    from calibration.foreign import check_units, scaled
+
+    size = None
+    if args.size is not None:
+        try:
+            size = tuple(int(v) for v in args.size.lower().split("x"))
+        except ValueError:
+            size = ()
+        if len(size) != 2 or min(size) < 1:
+            raise RehabError(f"--size {args.size!r}: give the image size as WxH, e.g. 1280x720")
+    cameras, placed = [], len(args.files) == 1
+    for path in args.files:
+        cams, ok = read_cameras(path, size_px=size)
+        if args.translation_unit == "mm":
+            cams = scaled(cams, 0.001)
+        elif ok:
+            check_units(path, cams, hint=f"rehab calibrate import {path} --translation-unit mm --out {args.out}")
+        placed &= ok
+        cameras += cams
+    if args.names:
+        names = [n.strip() for n in args.names.split(",")]
+        if len(names) != len(cameras) or not all(names):
+            raise RehabError(f"--names: give {len(cameras)} names for the {len(cameras)} cameras read, comma-separated")
+        cameras = [Camera(n, c.size_px, c.K, c.dist, c.rvec, c.t_m, c.fisheye) for n, c in zip(names, cameras)]
+    seen = [c.name for c in cameras]
+    twice = sorted({n for n in seen if seen.count(n) > 1})
+    if twice:
+        raise RehabError(f"two cameras are named {twice[0]!r}: give --names cam1,cam2,... in the files' order")
+    if len(cameras) < 2:
+        raise RehabError(f"{args.files[0]} holds one camera: give the files of every camera together, e.g. "
+                         f"'rehab calibrate import cam1.yml cam2.yml --out {args.out}'")
+    if not placed:
+        cameras = [Camera(c.name, c.size_px, c.K, c.dist, np.zeros(3), np.zeros(3), c.fisheye) for c in cameras]
+    if args.out.suffix.lower() != ".toml":
+        raise RehabError(f"--out {args.out}: the calibration file must end in .toml")
+    save_calibration_toml(args.out, cameras)
+    lens = ", ".join(f"{c.name} {c.size_px[0]}x{c.size_px[1]} f {c.K[0, 0]:.1f} px{' fisheye' if c.fisheye else ''}"
+                     for c in cameras)
+    if placed:
+        print(f"wrote the calibration of {len(cameras)} cameras to {args.out} ({lens})")
+    else:
+        print(f"wrote the lens data of {len(cameras)} cameras to {args.out} ({lens}); they are not placed yet: "
+              f"next, 'rehab calibrate extrinsics VIEWS --intrinsics {args.out} ...' or 'rehab calibrate wand'")
     return 0
 
 
@@ -526,6 +692,7 @@ def _cmd_simulate_calibration(args) -> int:
     from calibration.charuco import CharucoBoard
 
     charuco = CharucoBoard.parse(*SIM_CHARUCO_SPEC) if args.charuco else None
+    charuco_ext = CharucoBoard.parse(*SIM_CHARUCO_EXTRINSICS_SPEC) if args.charuco else None
     from tracking.sim.calibration_material import write_calibration_material
     from tracking.sim.rigs import load_rig
 
@@ -540,7 +707,7 @@ def _cmd_simulate_calibration(args) -> int:
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
                                      wand_seconds=args.wand_seconds, noise_sigma=args.noise, seed=args.seed,
-                                     charuco=charuco, progress=True))
+                                     charuco=charuco, charuco_extrinsics=charuco_ext, progress=True))
     if args.check:
         for line in check_material(args.out_dir, seed=args.seed):
             print(line, flush=True)
@@ -567,7 +734,7 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(intr, truth)])
     lines.append(f"intrinsics: focal length error max {focal.max():.3f} %, reprojection max {max(r.rms_px for r in intr):.3f} px")
     if "charuco" in material:
-        lines.append(charuco_check(folder, material["charuco"], truth))
+        lines += charuco_check(folder, material, truth)
     cams = [r.camera for r in intr]
     ext = run_extrinsics(folder / "extrinsics", cams, board, floor="seat", origin_m=origin, turn_deg=0.0, verbose=False)
     pos, ang = rig_errors(ext.cameras, truth)
@@ -586,15 +753,43 @@ def check_material(folder: Path, *, seed: int = 0, track_seconds: float = 4.0) -
     return lines
 
 
-def charuco_check(folder: Path, spec: dict, truth) -> str:
-    """ChArUco intrinsics from ``intrinsics_charuco/`` against the truth, as a report line."""
+def charuco_check(folder: Path, material: dict, truth) -> list[str]:
+    """ChArUco intrinsics from ``intrinsics_charuco/`` (and extrinsics from ``extrinsics_charuco/``
+    when the material has them) against the truth: a summary line, then one line per camera."""
     from calibration.charuco import CharucoBoard
+    from calibration.extrinsics import rig_errors
 
+    spec = material["charuco"]
     board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
     res = run_intrinsics([folder / "intrinsics_charuco"], board, verbose=False)
     focal = np.array([100.0 * abs(r.camera.K[0, 0] / t.K[0, 0] - 1.0) for r, t in zip(res, truth)])
-    return (f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
-            f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %")
+    centre = np.array([float(np.linalg.norm(r.camera.K[:2, 2] - t.K[:2, 2])) for r, t in zip(res, truth)])
+    lines = [f"ChArUco intrinsics: focal length error max {focal.max():.3f} %, reprojection max "
+             f"{max(r.rms_px for r in res):.3f} px, coverage min {100 * min(r.coverage for r in res):.0f} %"]
+    pos = ang = None
+    spec = material.get("charuco_extrinsics")
+    if spec is not None and (folder / "extrinsics_charuco").is_dir():
+        board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
+        ext = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
+                             origin_m=tuple(spec["seat_origin_m"]), turn_deg=0.0, verbose=False)
+        pos, ang = rig_errors(ext.cameras, truth)
+        lines.append(f"ChArUco extrinsics: position error max {pos.max():.2f} mm, orientation max {ang.max():.3f} deg, "
+                     f"reprojection max {np.nanmax(ext.rms_px):.3f} px")
+        floor_board = material.get("board")
+        if floor_board is not None and (folder / "extrinsics").is_dir():   # the world frame from the checkerboard instead
+            from calibration.board import Checkerboard
+
+            cb = Checkerboard.parse(floor_board["pattern"], floor_board["square_mm"])
+            mixed = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
+                                   origin_m=tuple(material["seat_board"]["origin_m"]), turn_deg=0.0, verbose=False,
+                                   floor_views=folder / "extrinsics", floor_board=cb)
+            p2, a2 = rig_errors(mixed.cameras, truth)
+            lines.append(f"ChArUco extrinsics, checkerboard on the seat: position error max {p2.max():.2f} mm, "
+                         f"orientation max {a2.max():.3f} deg")
+    for c, t in enumerate(truth):
+        extra = "" if pos is None else f", position {pos[c]:.2f} mm, orientation {ang[c]:.3f} deg"
+        lines.append(f"  ChArUco {t.name}: focal {focal[c]:.3f} %, image centre {centre[c]:.2f} px{extra}")
+    return lines
 
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:

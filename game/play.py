@@ -60,6 +60,10 @@ class PlayOptions:
             shows, named cam1, cam2, ...; () : the simulated studio's.
         calibration_board: the board held up in the calibration scene (a Checkerboard or
             CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
+        wait_for_tracker: the run's ``seconds`` begin once the tracker is ready, in a window too
+            (headless runs always wait; ``rehab bench`` measures the window with the avatar moving).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process also streams
+            over LSL and/or OSC (None: no streaming).
     """
 
     settings: Settings = field(default_factory=Settings)
@@ -82,6 +86,8 @@ class PlayOptions:
     calibration_path: Path | None = None
     calibrate_devices: tuple[str, ...] = ()
     calibration_board: object = None
+    wait_for_tracker: bool = False
+    stream: object = None
 
 
 def make_avatar(ctx, marker_names):
@@ -164,7 +170,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         MenuEntry("ROM test", "Measure a range of motion", open_rom),
         MenuEntry("Progress", "Results over the sessions", open_progress),
         MenuEntry("Camera check", "What each camera sees, and the markers it finds", open_monitor),
-        MenuEntry("Calibrate cameras", "Lens and focal length of each camera from a checkerboard", open_calibrate),
+        MenuEntry("Calibrate cameras", "Lenses, camera positions and the floor, step by step", open_calibrate),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
     app.push(home)
@@ -227,11 +233,11 @@ def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_cou
     source.check()
     screen = open_screen(options.settings.window_px, options.settings.title, headless=options.headless,
                          vsync=options.settings.max_fps > 0)
-    link = LiveLink(lambda: LiveTracker(source), start_timeout_s=options.start_timeout_s)
+    link = LiveLink(lambda: LiveTracker(source, stream=options.stream), start_timeout_s=options.start_timeout_s)
     app = None
     try:
         link.start()
-        if options.headless:
+        if options.headless or options.wait_for_tracker:
             # Offscreen there is nobody to watch "Starting...": the run's seconds begin with the tracker.
             if not link.wait_ready(options.start_timeout_s):
                 raise RehabError(link.error or "the tracker did not start")

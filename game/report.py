@@ -180,33 +180,111 @@ def rom_plot_png(title: str, rows: Sequence[RomRow], order: dict[str, int], norm
     return _png(fig)
 
 
+@dataclass(frozen=True, slots=True)
+class DemoPart:
+    """What the automatic demo played of a stored game result (from its details).
+
+    Attributes:
+        repetitions: targets collected while the demo played.
+        seconds: active play time of the demo.
+        active_s: active play time of the whole session.
+    """
+
+    repetitions: int
+    seconds: float
+    active_s: float
+
+    @property
+    def words(self) -> str:
+        """Who played: ``patient``, ``demo``, or ``patient + demo (40 s)``."""
+        if self.seconds <= 0.0:
+            return "patient"
+        if self.seconds >= self.active_s - 0.05:
+            return "demo"
+        return f"patient + demo ({self.seconds:.0f} s)"
+
+
+def demo_part(row: ExerciseRow) -> DemoPart:
+    """The demo's share of a game result (none for results stored before it was logged)."""
+    import json
+
+    try:
+        d = json.loads(row.details) if row.details else {}
+    except ValueError:
+        d = {}
+    if not isinstance(d, dict):
+        d = {}
+    reps = sum(1 for t in d.get("targets", ()) if isinstance(t, dict) and t.get("demo") and t.get("reached"))
+    return DemoPart(int(min(reps, row.repetitions)), float(d.get("demo_s", 0.0) or 0.0), float(d.get("active_s", 0.0) or 0.0))
+
+
+def score_words(row: ExerciseRow) -> str:
+    """The share of targets collected, in whole percent (empty when none was shown)."""
+    return "" if row.score is None else f"{round(100.0 * row.score):d} %"
+
+
+#: How the demo's part of a bar is drawn: hatched and faded over the patient's own.
+DEMO_HATCH, DEMO_ALPHA = "///", 0.35
+
+
+def plot_games(ax_reps, ax_minutes, rows: Sequence[ExerciseRow], order: dict[str, int], colours: Sequence[str],
+               minutes_rgb: str, demo_edge_rgb: str) -> list:
+    """Repetitions per game and minutes per session as bars, the demo's part of each stacked on
+    the patient's own, hatched and faded; returns the legend handles (one per game, and one for
+    the demo when it played)."""
+    from matplotlib.patches import Patch
+
+    games = sorted({r.game for r in rows})
+    width = 0.8 / max(len(games), 1)
+    handles = []
+    for k, game in enumerate(games):
+        own: dict[int, int] = defaultdict(int)
+        demo: dict[int, int] = defaultdict(int)
+        for r in rows:
+            if r.game == game:
+                part = demo_part(r)
+                own[order[r.session_uid]] += r.repetitions - part.repetitions
+                demo[order[r.session_uid]] += part.repetitions
+        xs = sorted(own)
+        pos = [x - 0.4 + width * (k + 0.5) for x in xs]
+        colour = colours[k % len(colours)]
+        ax_reps.bar(pos, [own[x] for x in xs], width=width, color=colour)
+        if any(demo.values()):
+            ax_reps.bar(pos, [demo[x] for x in xs], width=width, bottom=[own[x] for x in xs], color=colour,
+                        alpha=DEMO_ALPHA, hatch=DEMO_HATCH, edgecolor=demo_edge_rgb, linewidth=0)
+        handles.append(Patch(color=colour, label=game.replace("_", " ")))
+    own_min: dict[int, float] = defaultdict(float)
+    demo_min: dict[int, float] = defaultdict(float)
+    for r in rows:
+        part = demo_part(r)
+        share = min(part.seconds / part.active_s, 1.0) if part.active_s > 0 else 0.0
+        own_min[order[r.session_uid]] += r.duration_s / 60.0 * (1.0 - share)
+        demo_min[order[r.session_uid]] += r.duration_s / 60.0 * share
+    xs = sorted(own_min)
+    ax_minutes.bar(xs, [own_min[x] for x in xs], width=0.6, color=minutes_rgb)
+    if any(demo_min.values()):
+        ax_minutes.bar(xs, [demo_min[x] for x in xs], width=0.6, bottom=[own_min[x] for x in xs], color=minutes_rgb,
+                       alpha=DEMO_ALPHA, hatch=DEMO_HATCH, edgecolor=demo_edge_rgb, linewidth=0)
+    if any(demo_part(r).seconds > 0 for r in rows):
+        handles.append(Patch(facecolor="none", hatch=DEMO_HATCH, edgecolor=demo_edge_rgb, label="played by the demo"))
+    return handles
+
+
 def exercise_plot_png(rows: Sequence[ExerciseRow], order: dict[str, int]) -> str:
-    """Repetitions per game and session, and session durations, as a base64 PNG."""
+    """Repetitions per game and session, and session durations, as a base64 PNG (the demo's part hatched)."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.5, 4.6))
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
-    games = sorted({r.game for r in rows})
-    width = 0.8 / max(len(games), 1)
-    for k, game in enumerate(games):
-        reps: dict[int, int] = defaultdict(int)
-        for r in rows:
-            if r.game == game:
-                reps[order[r.session_uid]] += r.repetitions
-        xs = sorted(reps)
-        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width, label=game)
-    minutes: dict[int, float] = defaultdict(float)
-    for r in rows:
-        minutes[order[r.session_uid]] += r.duration_s / 60.0
-    xs = sorted(minutes)
-    ax2.bar(xs, [minutes[x] for x in xs], width=0.6, color="#7f7f7f")
+    handles = plot_games(ax1, ax2, rows, order, ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728"), "#7f7f7f", "#333333")
+    xs = sorted({order[r.session_uid] for r in rows})
     dates = {order[r.session_uid]: r.session_started_utc[:10] for r in rows}
     for ax in (ax1, ax2):
         ax.set_xticks(xs)
         ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs], fontsize=8)
         ax.grid(True, axis="y", color="#dddddd")
     ax1.set_ylabel("repetitions")
-    ax1.legend(fontsize=8)
+    ax1.legend(handles=handles, fontsize=8)
     ax1.set_title("Games")
     ax2.set_ylabel("minutes played")
     ax2.set_xlabel("session")
@@ -247,7 +325,7 @@ h1 {{ font-size: 22px; margin-bottom: 4px; }} h2 {{ font-size: 18px; margin-top:
 .meta {{ color: #555; font-size: 13px; }}
 table {{ border-collapse: collapse; font-size: 12px; margin-top: 8px; }}
 th, td {{ border: 1px solid #ccc; padding: 3px 6px; text-align: left; }}
-td.num {{ text-align: right; }} tr.flag td {{ background: #fff4e5; }}
+td.num {{ text-align: right; }} tr.flag td {{ background: #fff4e5; }} tr.demo td {{ color: #777777; }}
 img {{ display: block; margin: 8px 0 16px 0; max-width: 100%; }}
 </style></head><body>
 <h1>Range of motion progress: patient {esc(patient_id)}</h1>
@@ -290,14 +368,17 @@ markers.</p>
     if games:
         parts.append(f"<img alt=\"repetitions and durations over the sessions\" "
                      f"src=\"data:image/png;base64,{exercise_plot_png(games, order)}\">")
-        parts.append("<table><tr><th>session</th><th>date (UTC)</th><th>game</th><th>repetitions</th>"
-                     "<th>minutes</th><th>score</th></tr>")
+        parts.append("<table><tr><th>session</th><th>date (UTC)</th><th>game</th><th>played by</th>"
+                     "<th>repetitions</th><th>minutes</th><th>targets collected</th></tr>")
         for g in games:
-            score = "" if g.score is None else f"{g.score:g}"
-            parts.append(f"<tr><td class=\"num\">#{order[g.session_uid]}</td>"
+            part = demo_part(g)
+            reps = f"{g.repetitions}" + (f" ({part.repetitions} by the demo)" if part.repetitions else "")
+            row_class = ' class="demo"' if part.seconds > 0 else ""
+            parts.append(f"<tr{row_class}><td class=\"num\">#{order[g.session_uid]}</td>"
                          f"<td>{esc(g.session_started_utc.replace('T', ' ').rstrip('Z'))}</td><td>{esc(g.game)}</td>"
-                         f"<td class=\"num\">{g.repetitions}</td><td class=\"num\">{g.duration_s / 60:.1f}</td>"
-                         f"<td class=\"num\">{esc(score)}</td></tr>")
+                         f"<td>{esc(part.words)}</td>"
+                         f"<td class=\"num\">{esc(reps)}</td><td class=\"num\">{g.duration_s / 60:.1f}</td>"
+                         f"<td class=\"num\">{esc(score_words(g))}</td></tr>")
         parts.append("</table>")
     else:
         parts.append("<p>No game results yet.</p>")

@@ -314,6 +314,51 @@ def test_the_log_is_stored_and_read_back(tmp_path):
     assert details["limits"]["positive_deg"] == 70.0
 
 
+def test_a_stored_session_spans_its_duration_and_the_demo_is_logged_apart(tmp_path):
+    """The session's ended_utc is its duration after started_utc (they were equal); the demo's
+    play time and the targets it collected are logged, and a session the demo played from start
+    to end is stored with the source "demo"."""
+    from datetime import datetime
+
+    spec = load_game("turn_key")
+    path = tmp_path / "db.sqlite3"
+    with Database(path) as db:
+        db.add_patient("P001")
+    rest = elbow_at_side_hand_m(frame(), 0.0)
+    for demo_from in (2, 0):               # the patient plays, M hands over to the demo after 2 targets; the demo alone
+        s = GameSession(spec, RomLimits(70.0, 60.0), seed=5)
+        t = 0.0
+        for k in range(4):
+            demo = k >= demo_from
+            while s.target is None:        # getting ready, the rest between targets
+                s.update(t, reading(rest), demo=demo)
+                t += DT
+            goal = s.target.target.value_deg
+            n = s.log.reached
+            while s.log.reached == n:
+                s.update(t, reading(elbow_at_side_hand_m(frame(), 0.0), sup=goal), demo=demo)
+                t += DT
+        log = s.finish()
+        store_log(path, "P001", log, source="sim")
+        by_demo = [d["demo"] for d in json.loads(log.details_json())["targets"]]
+        assert by_demo == ([False, False, True, True] if demo_from == 2 else [True] * 4)
+        assert 0.0 < log.demo_s <= log.active_s
+    with Database(path) as db:
+        rows = db.exercise_results("P001")
+        sessions = db.sessions("P001")
+    assert [x.source for x in sessions] == ["sim", "demo"]
+    for row, session in zip(rows, sessions):
+        span = (datetime.fromisoformat(session.ended_utc.rstrip("Z"))
+                - datetime.fromisoformat(session.started_utc.rstrip("Z"))).total_seconds()
+        assert row.duration_s > 5.0 and abs(span - row.duration_s) <= 1.0
+    from game.report import demo_part, score_words
+
+    mixed, alone = demo_part(rows[0]), demo_part(rows[1])
+    assert mixed.repetitions == 2 and mixed.words.startswith("patient + demo")
+    assert alone.repetitions == 4 and alone.words == "demo"
+    assert score_words(rows[0]) == "100 %"
+
+
 def test_play_game_options_are_checked_in_one_line(tmp_path, capsys):
     from game.cli import main
 
@@ -378,7 +423,7 @@ def test_game_menu_passes_side_demo_and_the_therapists_highest_level():
 
 
 def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
-    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit
+    from game.exergames.limits import LIMIT_KEYS, describe, free_value, step_limit, whose
     from game.exergames.spec import TherapistLimits, check_limits, limit_bounds
 
     for name in available_games():
@@ -395,7 +440,7 @@ def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
                     values.append(getattr(lim, key))
             assert None in values and any(v is not None for v in values), (name, key)
             assert all(v is None or lo - 1e-9 <= v <= hi + 1e-9 for v in values)
-            assert "(no limit)" in describe(spec, TherapistLimits(), key)
+            assert whose(TherapistLimits(), key) == "the game's own" and describe(spec, TherapistLimits(), key)
         # one step stricter than the game's own from unset
         rot = load_game("rotation")
         assert step_limit(rot, TherapistLimits(), "min_size", 1).min_size == free_value(rot, "min_size") + 1
@@ -403,6 +448,7 @@ def test_limits_step_within_the_games_bounds_and_unset_past_the_games_own():
     reach = load_game("reach")
     lim = step_limit(reach, TherapistLimits(), "max_range", -1)
     assert lim.max_range == pytest.approx(1.0) and describe(reach, lim, "max_range") == "100 % of the measured range"
+    assert whose(lim, "max_range") == "set for this patient"
 
 
 def _menu_for(db_path):
@@ -454,7 +500,7 @@ def test_the_menu_stores_a_patients_limits_and_the_next_menu_and_the_game_use_th
 
 
 def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_stays_there(tmp_path):
-    from game.exergames.limits import LIMIT_KEYS, describe, load_limits
+    from game.exergames.limits import LIMIT_KEYS, describe, load_limits, whose
     from game.exergames.spec import TherapistLimits
     from game.input import Action, Press
     from game.scenes.game_play import level_shown
@@ -467,7 +513,7 @@ def test_the_lowest_level_is_set_on_the_menu_stored_and_the_session_starts_and_s
     for _ in range(1 + LIMIT_KEYS.index("min_level")):           # down from Play to the lowest level
         menu.handle(Press(Action.DOWN, True))
     spec0 = menu.game
-    assert "(no limit)" in describe(spec0, menu.limits[spec0.name], "min_level")
+    assert whose(menu.limits[spec0.name], "min_level") == "the game's own"
     for _ in range(4):
         menu.handle(Press(Action.RIGHT, True))                   # level 1 -> level 5
     lim = menu.limits[spec0.name]
@@ -577,3 +623,25 @@ def test_limits_out_of_a_games_bounds_are_one_line_naming_the_key(tmp_path):
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(ContentError, match="approach_share"):
         load_game(path)
+
+
+def test_no_sound_card_is_silence_without_messages_on_the_terminal():
+    """Without a sound card the mixer fails once, quietly: ALSA's lines (eight per try, twice for
+    two games) go to the debug log, and a second game does not try again."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "SDL_AUDIODRIVER"}
+    code = ("import logging, sys\n"
+            "logging.basicConfig(level=logging.DEBUG, stream=sys.stdout)\n"
+            "from game.exergames.audio import Sounds\n"
+            "a, b = Sounds(), Sounds()\n"
+            "print('enabled', a.enabled, b.enabled)\n")
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    assert "ALSA" not in run.stderr and run.stderr.strip() == "", run.stderr
+    enabled = run.stdout.split("enabled ")[-1].split()
+    assert enabled[0] == enabled[1]
+    if enabled[0] == "False":
+        assert run.stdout.count("no sound:") == 1          # tried once

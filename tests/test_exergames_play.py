@@ -202,3 +202,25 @@ def test_the_mouse_on_a_target_moves_the_simulated_hand_there_and_collects_it(ri
     finally:
         app.close()
     assert scene.session.log.targets[0]["reached"]
+
+
+@pytest.mark.parametrize("name", ["reach", "rotation", "turn_key"])
+def test_the_mouse_alone_brings_the_arm_into_the_start_position_and_the_game_starts(rig, name):
+    """No demo key: the pointer moved once into the avatar's view, before the tracker has seen the
+    arm, is enough for every game to pass its start check (the rotation games' "elbow at the side,
+    bent like an L") and to start playing."""
+    from game.input import Pointer, PointerKind
+
+    screen, link, db_path = rig
+    app = App(screen, Settings(window_px=SIZE, max_fps=0, show_fps=False), services=Services(link))
+    scene = GameScene(link, load_game(name), "right", db_path, "P001", make_avatar=make_avatar, auto=False,
+                      mute=True, seed=5)
+    app.push(scene)
+    try:
+        v = scene.view
+        scene.handle(Pointer(PointerKind.MOVE, (v.x + 0.4 * v.w) / SIZE[0], (v.y + 0.55 * v.h) / SIZE[1]))
+        assert _play(app, scene, lambda s: s.session.phase is Phase.PLAYING, 40.0), scene.session.pause_reason
+        assert not scene.auto and scene._hand_target is not None
+        assert _play(app, scene, lambda s: s.session.log.active_s > 1.0, 20.0), scene.session.pause_reason
+    finally:
+        app.close()

@@ -94,3 +94,18 @@ def test_a_patient_without_results_gets_a_report_and_an_unknown_one_an_error(db,
     assert "No ROM results yet" in html_path.read_text(encoding="utf-8")
     with pytest.raises(DatabaseError, match="no patient 'P404'"):
         write_report(db, "P404", tmp_path / "x.html")
+
+
+def test_games_say_who_played_and_scores_in_whole_percent(db, tmp_path):
+    """A game the demo played part of says so (the table, the hatched part of the bars); the share
+    of targets collected reads 22 %, not 0.222222."""
+    import json
+
+    g = db.start_session("P001", "exercise", started_utc="2026-03-02T10:00:00Z")
+    details = {"active_s": 90.0, "demo_s": 30.0,
+               "targets": [{"reached": True, "demo": k < 1} for k in range(2)] + [{"reached": False, "demo": False}] * 7}
+    db.add_exercise_result(g, "turn_key", 2, 92.0, 2 / 9, json.dumps(details), recorded_utc="2026-03-02T10:02:00Z")
+    html = write_report(db, "P001", tmp_path / "r.html")[0].read_text(encoding="utf-8")
+    assert "<th>played by</th>" in html and "patient + demo (30 s)" in html and "2 (1 by the demo)" in html
+    assert "22 %" in html and "0.2222" not in html
+    assert html.count('<tr class="demo">') == 1

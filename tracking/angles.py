@@ -23,11 +23,20 @@ Numerical conventions (documented choices where the spec leaves room):
   size of what it was made from (coincident markers, a projection of a vector onto the plane
   normal to it). Lengths may be in any unit.
 - In the planar angles (flexion, abduction, horizontal flexion) a unit-vector component smaller
-  than ``_REL_EPS`` is rounding noise and is taken as exactly 0. So an arm pointing exactly along
-  the plane's normal reads 0 (arm straight sideways: flexion 0; straight forward: abduction 0),
-  and an arm straight up reads +180, not -180 or a random angle. Near the normal these angles are
-  ill-conditioned by nature (the spec gates only horizontal flexion, by elevation).
-- Every signed angle is wrapped into (-180, 180], and -0 is written as 0.
+  than ``_REL_EPS`` is rounding noise and is taken as exactly 0, so an arm straight up reads
+  +180, not -180 or a random angle.
+- Every signed angle is wrapped into (-180, 180], and -0 is written as 0 (the spec's columns, in
+  files and samples).
+- Near its plane's normal a planar angle is ill-conditioned by nature: every value occurs within
+  a few degrees of the normal, and a reading would jump by up to 360 degrees between two frames.
+  What a person reads live asks for ``near_singular="withhold"`` (an option; the spec's
+  columns are the default): flexion withheld (NaN) while the upper arm is within
+  ``MIN_FROM_PLANE_NORMAL_DEG`` of pointing sideways, abduction within it of pointing forward or
+  backward, horizontal flexion within 45 degrees of vertical, up as well as down; flexion and
+  abduction continued past 180 rather than wrapped, read in ``(PLANAR_FROM_DEG, PLANAR_FROM_DEG +
+  360]`` = (-135, 225], so an arm raised overhead and a little behind the trunk (e.g. leaning
+  forward) reads 185, not -175. The cut lies where the arm's projection points 45 degrees behind
+  (across) the vertical, beyond every normal range.
 """
 
 from __future__ import annotations
@@ -77,8 +86,20 @@ AXIS_ANGLES: dict[str, str] = {
 
 #: Horizontal flexion is undefined (NaN) below this shoulder elevation (degrees).
 MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 45.0
+#: ... and, with ``near_singular="withhold"``, above this one (the arm within 45 degrees of
+#: straight up: as ill-conditioned as down).
+MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 135.0
 #: Shoulder external rotation is undefined (NaN) below this elbow flexion (degrees).
 MIN_ELBOW_FLEXION_FOR_ROTATION_DEG = 30.0
+#: With ``near_singular="withhold"``, flexion (abduction) is withheld (NaN) while the upper arm is
+#: within this angle (degrees) of the normal of its plane: pointing sideways (forward or backward). A direction error of the upper
+#: arm is multiplied by 1 / sin(angle from the normal) in the planar angle: 3.9x at 15 degrees,
+#: which keeps the ~0.5 degree direction noise of the tracked arm within the 2 degrees of the
+#: angles' accuracy target.
+MIN_FROM_PLANE_NORMAL_DEG = 15.0
+#: Flexion and abduction are read in (PLANAR_FROM_DEG, PLANAR_FROM_DEG + 360] (see above).
+PLANAR_FROM_DEG = -135.0
+_COS_FROM_NORMAL = math.cos(math.radians(MIN_FROM_PLANE_NORMAL_DEG))
 
 # Relative size under which a vector or a unit-vector component is rounding noise (float64 has
 # ~1e-16 relative precision; real marker noise is many orders above 1e-9).
@@ -100,12 +121,18 @@ def missing_markers(names: Sequence[str]) -> list[str]:
 def require_markers(names: Sequence[str], source: str) -> None:
     """Raise :class:`MissingMarkersError` (one line) if ``names`` lack any required marker.
 
-    ``source`` names where the names came from, e.g. ``"markers.trc"``; the message reads
-    ``markers.trc lacks MRW1, MRW2: the angles need the upper_limb_seated names``.
+    ``source`` names where the names came from, e.g. ``"markers.trc"``; the message lists the
+    names wanted and those found: ``markers.trc lacks MRW1, MRW2 (it has MB, MP, ..., RWRA): the
+    angles need the upper_limb_seated names ...``.
     """
     missing = missing_markers(names)
     if missing:
-        raise MissingMarkersError(f"{source} lacks {', '.join(missing)}: the angles need the {MARKER_SET} names")
+        found = ", ".join(names) if names else "no markers"
+        wanted = "" if len(missing) == len(REQUIRED_MARKERS) else " " + ", ".join(REQUIRED_MARKERS)
+        raise MissingMarkersError(
+            f"{source} lacks {', '.join(missing)} (it has {found}): the angles need the {MARKER_SET} names"
+            f"{wanted}; map your names to them with rehab angles --map FILE.yaml"
+        )
 
 
 def wrap180(angle_deg: np.ndarray) -> np.ndarray:
@@ -114,7 +141,11 @@ def wrap180(angle_deg: np.ndarray) -> np.ndarray:
     return (180.0 - np.mod(180.0 - a, 360.0)) + 0.0
 
 
-def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
+#: What :func:`joint_angles` gives near a planar angle's singular pose (see the module docstring).
+NEAR_SINGULAR = ("spec", "withhold")
+
+
+def joint_angles(positions: np.ndarray, names: Sequence[str], *, near_singular: str = "spec") -> dict[str, np.ndarray]:
     """Joint angles (degrees) of every frame, per ``spec/JOINT_ANGLES.md``.
 
     Args:
@@ -123,18 +154,26 @@ def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.nd
         names: the M marker names, in the order of ``positions``' marker axis. Names not in
             :data:`REQUIRED_MARKERS` are ignored; a required name that is absent counts as a
             marker missing in every frame (use :func:`require_markers` to reject such files).
+        near_singular: ``"spec"``: the spec's definitions exactly (files, samples); ``"withhold"``:
+            for a person reading them live, planar angles withheld near their plane's normal and
+            flexion and abduction continued past 180 (module docstring).
 
     Returns:
         A dict with the keys of :data:`ANGLE_COLUMNS`, in that order, each a float64 array of
         shape ``positions.shape[:-2]`` (0-d for one frame) in degrees. NaN where undefined:
-        a marker it needs is missing or NaN, a vector is degenerate, horizontal flexion below
-        45 degrees of elevation, external rotation below 30 degrees of elbow flexion.
+        a marker it needs is missing or NaN, a vector is degenerate, horizontal flexion below 45
+        degrees of elevation, external rotation below 30 degrees of elbow flexion; with
+        ``"withhold"`` also flexion (abduction) with the upper arm within 15 degrees of pointing
+        sideways (forward or backward) and horizontal flexion above 135 degrees of elevation.
     """
+    if near_singular not in NEAR_SINGULAR:
+        raise ValueError(f"near_singular must be one of {NEAR_SINGULAR}, not {near_singular!r}")
+    guarded = near_singular == "withhold"
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim < 2 or p.shape[-1] != 3 or p.shape[-2] != len(names):
         raise ValueError(f"positions must be (..., {len(names)}, 3) for {len(names)} names, got {p.shape}")
     if p.ndim == 2:
-        return _frame_angles(p, names)
+        return _frame_angles(p, names, guarded)
     batch = p.shape[:-2]
     index = {name: i for i, name in enumerate(names)}
     absent = np.full(batch + (3,), np.nan)
@@ -151,7 +190,7 @@ def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.nd
     # Both arms at once: a leading side axis (left, right), so one frame costs few numpy calls.
     arm = {part: np.stack([marker(f"M{s}{part}") for s in ("L", "R")]) for part in ("S", "E1", "E2", "W1", "W2")}
     sign = np.array([_SIDE_SIGN[side] for side in SIDES]).reshape((len(SIDES),) + (1,) * (len(batch) + 1))
-    arms = _arm_angles(arm, sign, x_t, y_t, z_t)
+    arms = _arm_angles(arm, sign, x_t, y_t, z_t, guarded)
 
     out = {f"{side}_{angle}": arms[angle][i] for i, side in enumerate(SIDES) for angle in ARM_ANGLES}
     # World axes: X = right, Y = up, Z = backwards.
@@ -161,7 +200,8 @@ def joint_angles(positions: np.ndarray, names: Sequence[str]) -> dict[str, np.nd
 
 
 def _arm_angles(
-    arm: dict[str, np.ndarray], sign: np.ndarray, x_t: np.ndarray, y_t: np.ndarray, z_t: np.ndarray
+    arm: dict[str, np.ndarray], sign: np.ndarray, x_t: np.ndarray, y_t: np.ndarray, z_t: np.ndarray,
+    guarded: bool = False,
 ) -> dict[str, np.ndarray]:
     """The angles of :data:`ARM_ANGLES` for both sides.
 
@@ -169,6 +209,7 @@ def _arm_angles(
         arm: ``S, E1, E2, W1, W2`` -> (2, ..., 3) positions of (left, right).
         sign: (2, 1, ..., 1) -1 for the left side, +1 for the right.
         x_t, y_t, z_t: (..., 3) unit trunk axes.
+        guarded: ``near_singular="withhold"`` of :func:`joint_angles`.
 
     Returns:
         angle name -> (2, ...) degrees.
@@ -190,19 +231,29 @@ def _arm_angles(
     # Supination: wrist axis about the forearm, relative to the epicondyle axis; 0 = thumb up.
     supination = wrap180(90.0 + _signed_angle(_reject(e2 - e1, f), _reject(w2 - w1, f), sign * f))
 
+    flexion = _planar_deg(u, down, forward)
+    abduction = _planar_deg(u, down, outward)
+    horizontal_defined = elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG
+    if guarded:
+        flexion = np.where(np.abs(_dot(u, outward)) > _COS_FROM_NORMAL, np.nan, _continued(flexion))
+        abduction = np.where(np.abs(_dot(u, forward)) > _COS_FROM_NORMAL, np.nan, _continued(abduction))
+        horizontal_defined &= elevation <= MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG
     return {
-        "shoulder_flexion": _planar_deg(u, down, forward),
-        "shoulder_abduction": _planar_deg(u, down, outward),
+        "shoulder_flexion": flexion,
+        "shoulder_abduction": abduction,
         "shoulder_elevation": elevation,
-        "shoulder_horizontal_flexion": np.where(
-            elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG, horizontal, np.nan
-        ),
+        "shoulder_horizontal_flexion": np.where(horizontal_defined, horizontal, np.nan),
         "shoulder_external_rotation": np.where(
             elbow_flexion >= MIN_ELBOW_FLEXION_FOR_ROTATION_DEG, external, np.nan
         ),
         "elbow_flexion": elbow_flexion,
         "forearm_supination": supination,
     }
+
+
+def _continued(angle_deg: np.ndarray) -> np.ndarray:
+    """A (-180, 180] planar angle read in (PLANAR_FROM_DEG, PLANAR_FROM_DEG + 360]."""
+    return np.where(angle_deg <= PLANAR_FROM_DEG, angle_deg + 360.0, angle_deg)
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -262,14 +313,14 @@ def _planar_deg(v: np.ndarray, zero_axis: np.ndarray, positive_axis: np.ndarray)
 
 # --------------------------------------------------------------------------- one frame
 # The live tracker asks for one frame at a time, where numpy's per-call cost dominates (~300 calls
-# on 3-vectors). The same formulas in Python floats take a tenth of the time and give the same
-# bits: every step is the same IEEE operation in the same order (numpy's vecdot of 3-vectors sums
-# left to right; atan2, sqrt, degrees and the modulo of wrap180 are the C library's, as numpy's
-# are without AVX-512). tests/tracking/test_angles.py checks both paths agree bit for bit.
+# on 3-vectors). The same formulas in Python floats take a tenth of the time; every step is the
+# same operation in the same order, but numpy's vectorised atan2 and sqrt may round the last bit
+# differently from the C library (and change between releases): tests/tracking/test_angles.py
+# checks both paths agree to 1e-9 degrees, with the same missing values.
 _NAN3 = (math.nan, math.nan, math.nan)
 
 
-def _frame_angles(p: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
+def _frame_angles(p: np.ndarray, names: Sequence[str], guarded: bool = False) -> dict[str, np.ndarray]:
     """:func:`joint_angles` of one (M, 3) frame, in Python floats."""
     rows = p.tolist()
     index = {name: i for i, name in enumerate(names)}
@@ -301,11 +352,17 @@ def _frame_angles(p: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
         external = _f_signed_angle(_f_reject(forward, u), _f_reject(f, u), _f_scale(sign, u))
         supination = _f_wrap180(90.0 + _f_signed_angle(_f_reject(_f_sub(e2, e1), f), _f_reject(_f_sub(w2, w1), f),
                                                        _f_scale(sign, f)))
-        out[f"{side}_shoulder_flexion"] = _f_planar_deg(u, down, forward)
-        out[f"{side}_shoulder_abduction"] = _f_planar_deg(u, down, outward)
+        flexion = _f_planar_deg(u, down, forward)
+        abduction = _f_planar_deg(u, down, outward)
+        horizontal_defined = elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG
+        if guarded:
+            flexion = math.nan if abs(_f_dot(u, outward)) > _COS_FROM_NORMAL else _f_continued(flexion)
+            abduction = math.nan if abs(_f_dot(u, forward)) > _COS_FROM_NORMAL else _f_continued(abduction)
+            horizontal_defined = horizontal_defined and elevation <= MAX_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG
+        out[f"{side}_shoulder_flexion"] = flexion
+        out[f"{side}_shoulder_abduction"] = abduction
         out[f"{side}_shoulder_elevation"] = elevation
-        out[f"{side}_shoulder_horizontal_flexion"] = (
-            horizontal if elevation >= MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG else math.nan)
+        out[f"{side}_shoulder_horizontal_flexion"] = horizontal if horizontal_defined else math.nan
         out[f"{side}_shoulder_external_rotation"] = (
             external if elbow_flexion >= MIN_ELBOW_FLEXION_FOR_ROTATION_DEG else math.nan)
         out[f"{side}_elbow_flexion"] = elbow_flexion
@@ -353,6 +410,10 @@ def _f_reject(v, axis):
 
 def _f_wrap180(a: float) -> float:
     return (180.0 - (180.0 - a) % 360.0) + 0.0
+
+
+def _f_continued(a: float) -> float:
+    return a + 360.0 if a <= PLANAR_FROM_DEG else a
 
 
 def _f_angle_between(a, b) -> float:

@@ -1,30 +1,63 @@
 """Labelled marker trajectories to and from C3D files (with ezc3d).
 
-Writing follows the C3D conventions that biomechanics software expects: floating-point points
-in millimetres (``POINT:UNITS = mm``), a missing point has residual -1 (and zero coordinates), a
-present point a residual >= 0, and ``POINT:X_SCREEN = +X``, ``POINT:Y_SCREEN = +Y`` tell viewers
-that +Y is up (the project's world frame: +Y up, the patient faces -Z).
+Writing follows the C3D conventions that biomechanics software (ezc3d, the ``c3d`` package,
+kineticstoolkit, pyomeca, Vicon/Qualisys tools) expects:
 
-Residuals are stored in one byte scaled by ``POINT:SCALE``; with the scale written here (-0.1)
-they are kept to 0.1 mm and at most 25.5 mm (larger values are clipped).
+- floating-point points in millimetres (``POINT:UNITS = mm``); ``POINT:X_SCREEN = +X``,
+  ``POINT:Y_SCREEN = +Y`` tell viewers that +Y is up (the project's world frame: +Y up, the
+  patient faces -Z);
+- the header's scale factor equals ``POINT:SCALE`` (-0.1: floating point, residuals in steps of
+  0.1 mm, at most 25.5 mm; larger values are clipped);
+- the **residual** says what a sample rests on: **> 0** measured (triangulated from this frame's
+  images: the mean reprojection distance in mm, at least 0.1), **0** estimated (a hidden marker's
+  position modelled from its neighbours: the C3D convention for filled or interpolated samples),
+  **-1** lost (no position; coordinates 0);
+- the **camera mask** has bit k set when camera k+1 (calibration order) saw the marker in the
+  views it was triangulated from; only cameras 1-7 fit in the mask's seven bits;
+- joint angles are extra points listed in ``POINT:ANGLES`` (``POINT:ANGLE_UNITS = deg``), one
+  point per angle named as in the angles CSV, the angle in X (Y = Z = 0), residual -1 where the
+  angle is undefined, as gait labs store model outputs beside the markers;
+- ``SUBJECTS`` (name, marker set) and ``EVENT`` (label, context, description, time) groups
+  where they are known.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import logging
+import struct
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from calibration.errors import RehabError
+from tracking.status import MarkerStatus
+
+log = logging.getLogger(__name__)
 
 _RESIDUAL_STEP_MM = 0.1
 _RESIDUAL_MAX_MM = 255 * _RESIDUAL_STEP_MM
 _MM_PER_UNIT = {"mm": 1.0, "cm": 10.0, "m": 1000.0}
+#: Bits of a C3D camera mask (the eighth is the residual word's sign).
+MASK_CAMERAS = 7
+#: ``POINT`` parameters listing points that are model outputs, not markers.
+_MODEL_OUTPUT_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS")
+_HEADER_SCALE_OFFSET = 12  # bytes 13-16 of the header: the points' scale factor (float32)
 
 
 class C3dError(RehabError):
     """A C3D file cannot be read, or lacks the markers asked for."""
+
+
+@dataclass(frozen=True, slots=True)
+class C3dEvent:
+    """One entry of the ``EVENT`` group: what happened when (seconds from the first frame)."""
+
+    label: str
+    time_s: float
+    context: str = "General"
+    description: str = ""
 
 
 def write_c3d(
@@ -33,8 +66,15 @@ def write_c3d(
     positions_mm: np.ndarray,
     rate_hz: float,
     residuals: np.ndarray | None = None,
+    *,
+    status: np.ndarray | None = None,
+    camera_masks: np.ndarray | None = None,
+    angles_deg: Mapping[str, np.ndarray] | None = None,
+    subject: str | None = None,
+    markerset: str | None = None,
+    events: Sequence[C3dEvent] = (),
 ) -> None:
-    """Write labelled marker trajectories as a C3D file.
+    """Write labelled marker trajectories (and joint angles) as a C3D file.
 
     Args:
         path: file to write.
@@ -42,8 +82,19 @@ def write_c3d(
         positions_mm: (T, M, 3) float millimetres, world frame; NaN = no position (a marker with
             any NaN coordinate is missing in that frame: residual -1).
         rate_hz: frame rate (``POINT:RATE``).
-        residuals: optional (T, M) residuals in mm (e.g. mean reprojection distance) for the
-            present points; default 0. NaN counts as 0. Ignored where the point is missing.
+        residuals: optional (T, M) residuals in mm (e.g. mean reprojection distance) of the
+            measured points; NaN or below 0.1 mm is written as 0.1 mm (a measured point's
+            residual is positive). Ignored where the point is estimated or missing.
+        status: optional (T, M) :class:`~tracking.status.MarkerStatus` codes: ESTIMATED points get
+            residual 0 and no camera, LOST points residual -1. Default: every point with a
+            position was measured.
+        camera_masks: optional (T, M, C) bool, the cameras (calibration order) that saw each
+            marker; cameras beyond the seventh are left out of the file's masks.
+        angles_deg: optional angle name -> (T,) degrees (NaN = undefined), written as
+            ``POINT:ANGLES`` points after the markers.
+        subject: the subject's (pseudonymous) name for ``SUBJECTS:NAMES``; markerset: the marker
+            set's name for ``SUBJECTS:MARKER_SETS``. Neither: no ``SUBJECTS`` group.
+        events: entries of the ``EVENT`` group.
     """
     import ezc3d  # heavy import, only where C3D files are written
 
@@ -51,15 +102,24 @@ def write_c3d(
     p = np.asarray(positions_mm, dtype=np.float64)
     if p.ndim != 3 or p.shape[1:] != (len(names), 3):
         raise ValueError(f"positions_mm must be (T, {len(names)}, 3) for {len(names)} names, got {p.shape}")
-    dupes = sorted({n for n in names if names.count(n) > 1})
-    if dupes or any(not n.strip() for n in names):
-        raise ValueError(f"marker names must be non-empty and unique (duplicates: {dupes})")
+    n_frames, n_markers = p.shape[:2]
+    angles = {str(k): np.broadcast_to(np.asarray(v, dtype=np.float64), (n_frames,)) for k, v in (angles_deg or {}).items()}
+    labels = names + list(angles)
+    dupes = sorted({n for n in labels if labels.count(n) > 1})
+    if dupes or any(not n.strip() for n in labels):
+        raise ValueError(f"marker and angle names must be non-empty and unique (duplicates: {dupes})")
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be positive, got {rate_hz}")
     if np.isinf(p).any():
         raise ValueError("positions_mm must be finite or NaN")
-    n_frames, n_markers = p.shape[:2]
     missing = np.isnan(p).any(axis=2)  # (T, M)
+    estimated = np.zeros_like(missing)
+    if status is not None:
+        s = np.asarray(status)
+        if s.shape != (n_frames, n_markers):
+            raise ValueError(f"status must be ({n_frames}, {n_markers}), got {s.shape}")
+        missing |= s == MarkerStatus.LOST
+        estimated = (s == MarkerStatus.ESTIMATED) & ~missing
     if residuals is None:
         res = np.zeros((n_frames, n_markers))
     else:
@@ -68,27 +128,91 @@ def write_c3d(
             raise ValueError(f"residuals must be ({n_frames}, {n_markers}), got {res.shape}")
         if (res < 0).any():
             raise ValueError("residuals must be >= 0 (missing points are marked by NaN positions)")
-        res = np.clip(np.nan_to_num(res, nan=0.0), 0.0, _RESIDUAL_MAX_MM)
-    # Quantize to the stored step ourselves, nudged up so that the writer's truncation keeps it.
-    res = (np.round(res / _RESIDUAL_STEP_MM) + 0.01) * _RESIDUAL_STEP_MM
-    res[missing] = -1.0
+    steps = np.round(np.clip(np.nan_to_num(res, nan=0.0), _RESIDUAL_STEP_MM, _RESIDUAL_MAX_MM) / _RESIDUAL_STEP_MM)
+    masks = np.zeros((n_frames, n_markers), dtype=np.int64)
+    if camera_masks is not None:
+        seen = np.asarray(camera_masks, dtype=bool)
+        if seen.ndim != 3 or seen.shape[:2] != (n_frames, n_markers):
+            raise ValueError(f"camera_masks must be ({n_frames}, {n_markers}, C), got {seen.shape}")
+        if seen.shape[2] > MASK_CAMERAS:
+            log.info("C3D camera masks hold %d cameras: cameras %d-%d are left out", MASK_CAMERAS,
+                     MASK_CAMERAS + 1, seen.shape[2])
+        k = min(seen.shape[2], MASK_CAMERAS)
+        masks = seen[:, :, :k].astype(np.int64) @ (1 << np.arange(k))
+    # the fourth word of each point (C3D: camera mask in the high byte, residual / |SCALE| in the
+    # low byte, -1 = invalid); estimated: 0 (no camera, no residual)
+    words = np.where(estimated, 0, (masks << 8) | steps.astype(np.int64))
+    words = np.where(missing, -1, words)
 
     c3d = ezc3d.c3d()
     point = c3d["parameters"]["POINT"]
     point["RATE"]["value"] = [float(rate_hz)]
-    point["LABELS"]["value"] = tuple(names)
+    point["LABELS"]["value"] = tuple(labels)
+    point["DESCRIPTIONS"]["value"] = tuple(["marker"] * n_markers + ["joint angle, degrees"] * len(angles))
     point["UNITS"]["value"] = ["mm"]
     point["SCALE"]["value"] = [-_RESIDUAL_STEP_MM]  # negative scale: floating-point points
     c3d.add_parameter("POINT", "X_SCREEN", "+X")
     c3d.add_parameter("POINT", "Y_SCREEN", "+Y")
-    points = np.ones((4, n_markers, n_frames))
-    points[:3] = np.where(missing[..., None], 0.0, p).transpose(2, 1, 0)
+    points = np.ones((4, len(labels), n_frames))
+    points[:3, :n_markers] = np.where(missing[..., None], 0.0, p).transpose(2, 1, 0)
+    all_words = np.empty((n_frames, len(labels)), dtype=np.int64)
+    all_words[:, :n_markers] = words
+    if angles:
+        c3d.add_parameter("POINT", "ANGLES", list(angles))
+        c3d.add_parameter("POINT", "ANGLE_UNITS", "deg")
+        values = np.stack(list(angles.values()))  # (A, T)
+        undefined = ~np.isfinite(values)
+        points[0, n_markers:] = np.where(undefined, 0.0, values)
+        points[1:3, n_markers:] = 0.0
+        all_words[:, n_markers:] = np.where(undefined, -1, 0).T  # a model output: residual 0, or -1
+    if subject is not None or markerset is not None:
+        c3d.add_parameter("SUBJECTS", "USED", 1)
+        c3d.add_parameter("SUBJECTS", "NAMES", [subject or ""])
+        c3d.add_parameter("SUBJECTS", "MARKER_SETS", [markerset or ""])
+        c3d.add_parameter("SUBJECTS", "IS_STATIC", 0)
+        c3d.add_parameter("SUBJECTS", "USES_PREFIXES", 0)
+        c3d.add_parameter("SUBJECTS", "LABEL_PREFIXES", [""])
+    if events:
+        c3d.add_parameter("EVENT", "USED", len(events))
+        c3d.add_parameter("EVENT", "LABELS", [e.label for e in events])
+        c3d.add_parameter("EVENT", "CONTEXTS", [e.context for e in events])
+        c3d.add_parameter("EVENT", "DESCRIPTIONS", [e.description or e.label for e in events])
+        # TIMES is (2, n): minutes and seconds of each event; all in the seconds here
+        c3d.add_parameter("EVENT", "TIMES", np.array([[0.0] * len(events), [float(e.time_s) for e in events]]))
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"] = {
-        "residuals": res.T[None, :, :],
-        "camera_masks": np.zeros((7, n_markers, n_frames), dtype=bool),
+        "residuals": np.where(all_words < 0, -1.0, 0.0).T[None, :, :],
+        "camera_masks": np.zeros((MASK_CAMERAS, len(labels), n_frames), dtype=bool),
     }
     c3d.write(str(path))
+    _finish(Path(path), -_RESIDUAL_STEP_MM, all_words)
+
+
+def _finish(path: Path, scale: float, words: np.ndarray) -> None:
+    """Fix what ezc3d (1.7) writes differently from the C3D standard, in place.
+
+    - the header's scale factor: ezc3d leaves -1 there whatever ``POINT:SCALE`` says, and readers
+      such as the ``c3d`` package refuse a file whose header and parameter disagree;
+    - the fourth word of each floating-point sample: the standard puts the camera mask in the
+      high byte and the residual in the low byte; ezc3d swaps them (its issue 386).
+
+    ``words``: (T, P) signed integers of the fourth words, in frame and point order.
+    """
+    with open(path, "r+b") as fh:
+        head = fh.read(512 + 4)
+        if len(head) < 516 or head[515] != 84:  # parameter block's processor type: 84 = Intel
+            raise C3dError(f"{path}: the C3D writer did not write an Intel-format file; cannot fix its header")
+        fh.seek(_HEADER_SCALE_OFFSET)
+        fh.write(struct.pack("<f", scale))
+        data_start = struct.unpack_from("<H", head, 16)[0]  # header word 9: first block of the data
+        n_frames, n_points = words.shape
+        fh.seek((data_start - 1) * 512)
+        block = np.frombuffer(fh.read(n_frames * n_points * 16), dtype="<f4").reshape(n_frames, n_points, 4).copy()
+        if block.shape != (n_frames, n_points, 4):  # pragma: no cover - ezc3d wrote fewer bytes
+            raise C3dError(f"{path}: the C3D writer wrote a short data block")
+        block[:, :, 3] = words
+        fh.seek((data_start - 1) * 512)
+        fh.write(block.tobytes())
 
 
 def read_c3d_points(
@@ -102,7 +226,8 @@ def read_c3d_points(
             label exactly or, failing that, the part after a ``Subject:`` prefix (Vicon style).
 
     Returns:
-        names: the M labels (as asked for, or all of the file's, stripped).
+        names: the M labels (as asked for, or all of the file's markers, stripped: points listed
+            in ``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS`` or ``SCALARS`` are left out).
         positions_mm: (T, M, 3) float64 millimetres in the file's own axes; NaN where the point
             is missing (residual < 0).
         rate_hz: ``POINT:RATE``.
@@ -146,8 +271,10 @@ def read_c3d_points(
     if residuals.shape == (1, n_points, positions.shape[0]):
         positions[residuals[0].T < 0] = np.nan
     positions[np.isnan(positions).any(axis=2)] = np.nan
-    if labels is None:
-        return tuple(all_names), positions, rate_hz
+    if labels is None:  # the markers: not the model outputs (POINT:ANGLES ...)
+        outputs = {n for group in _MODEL_OUTPUT_GROUPS for n in _param_list(point, group)}
+        keep = [i for i, n in enumerate(all_names) if n not in outputs]
+        return tuple(all_names[i] for i in keep), positions[:, keep, :], rate_hz
     index = [_find_label(all_names, label) for label in labels]
     absent = [label for label, i in zip(labels, index) if i is None]
     if absent:
@@ -274,6 +401,10 @@ def _walk_parameters(path: Path, params: bytes, endian: str) -> dict[tuple[bytes
 def _param_text(group: dict, name: str) -> str:
     value = group.get(name, {}).get("value", [])
     return str(value[0]).strip() if len(value) else ""
+
+
+def _param_list(group: dict, name: str) -> list[str]:
+    return [str(v).strip() for v in group.get(name, {}).get("value", [])]
 
 
 def _point_labels(point: dict) -> list[str]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -44,23 +45,29 @@ def track_recording(
     status_csv: Path | None = None,
     angles_csv: Path | None = None,
     c3d: Path | None = None,
+    mot: Path | None = None,
+    bvh: Path | None = None,
+    detections: Path | None = None,
     colours: Path | None = None,
     adapt_colours: bool = False,
     progress: bool = False,
 ) -> str:
     """Track a recording frame by frame and write what was asked. Returns a summary line.
 
-    ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``
-    and ``c3d`` the labelled markers from the tracker (the online algorithm, no look-ahead).
+    ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``,
+    ``c3d``, ``mot`` (OpenSim joint angles), ``bvh`` (the avatar's skeleton) and ``detections``
+    (2D centroids per camera) the labelled markers from the tracker (the online algorithm, no
+    look-ahead).
     ``colours`` is a learned colour file (``rehab colour learn``) used instead of the nominal
     table; without it, the colours learnt into the calibration file (``rehab calibrate colour``)
     are used when it holds them; ``adapt_colours`` lets the tracker's table follow the lighting
     (docs/COLOUR.md).
     """
-    if trc or status_csv or angles_csv or c3d:
+    if trc or status_csv or angles_csv or c3d or mot or bvh or detections:
         return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                                points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
-                               c3d=c3d, colours=colours, adapt_colours=adapt_colours, progress=progress)
+                               c3d=c3d, mot=mot, bvh=bvh, detections=detections, colours=colours,
+                               adapt_colours=adapt_colours, progress=progress)
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
@@ -114,14 +121,62 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
     return table_from_colours(*learnt)
 
 
+@dataclass(frozen=True, slots=True, eq=False)  # arrays: no elementwise __eq__
+class TrackedRecording:
+    """What the tracker made of a recording, frame by frame (T frame sets, M markers, C cameras).
+
+    Attributes:
+        names: the M marker names; markerset: the marker set's name.
+        cameras: the C cameras.
+        frames: (T,) recording frame indices (0 = first image); times_s: (T,) seconds.
+        rate_hz: the recording's frame rate.
+        positions_mm: (T, M, 3) world millimetres, NaN where lost.
+        status: (T, M) :class:`~tracking.status.MarkerStatus` codes.
+        angles_deg: angle name -> (T,) degrees (the tracker's, NaN where undefined).
+        uv_px: (T, M, C, 2) centroids each position was triangulated from, NaN where unused.
+        identified: (T,) bool, the frame sets where the tracker identified the markers (the first
+            TRACKING frame set after WAITING).
+        subject: meta.yaml's ``subject`` (a pseudonymous ID), or None.
+    """
+
+    names: tuple[str, ...]
+    markerset: str
+    cameras: tuple
+    frames: np.ndarray
+    times_s: np.ndarray
+    rate_hz: float
+    positions_mm: np.ndarray
+    status: np.ndarray
+    angles_deg: dict[str, np.ndarray]
+    uv_px: np.ndarray
+    identified: np.ndarray
+    subject: str | None = None
+
+
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
-                    c3d, colours=None, adapt_colours=False, progress=False) -> str:
-    from tracking.angles import ANGLE_COLUMNS
-    from tracking.c3d_io import write_c3d
+                    c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
+                    progress=False) -> str:
     from tracking.status import MarkerStatus
-    from tracking.tables import write_angles_csv, write_status_csv
+
+    run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
+                          colours=colours, adapt_colours=adapt_colours, progress=progress)
+    write_results(run, trc=trc, status_csv=status_csv, angles_csv=angles_csv, c3d=c3d, mot=mot, bvh=bvh,
+                  detections=detections)
+    st = run.status
+    share = {s.name.lower(): float(np.mean(st == s)) for s in MarkerStatus}
+    return (
+        f"{len(run.frames)} frame sets: {100 * share['measured']:.1f} % of marker positions measured, "
+        f"{100 * share['estimated']:.1f} % estimated, {100 * share['lost']:.1f} % lost"
+    )
+
+
+def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=None, colours=None,
+                    adapt_colours=False, progress=False) -> TrackedRecording:
+    """Run the tracker over a recording folder; :class:`RecordingError` (one line) if it never
+    identified the markers."""
+    from tracking.angles import ANGLE_COLUMNS
+    from tracking.status import MarkerStatus
     from tracking.tracker import Tracker, TrackingState
-    from tracking.trc import write_trc
 
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
@@ -134,46 +189,91 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
         else:
             tracker = Tracker(rec.cameras, ms, table=_colour_table(ms, learnt), fps=rec.fps)
-        positions, status, frames, times, angles = [], [], [], [], []
+        no_uv = np.full((ms.n_markers, len(rec.cameras), 2), np.nan)
+        positions, status, frames, times, angles, uv, identified = [], [], [], [], [], [], []
         waiting_message = ""
+        was_tracking = False
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
         for fs in frame_iter:
             sample = tracker.step(fs.images, fs.time_s)
-            if sample.state == TrackingState.WAITING:
+            tracking = sample.state == TrackingState.TRACKING
+            if not tracking:
                 waiting_message = sample.message
             elif adapter is not None:
                 adapter.observe(fs.images, sample.positions_m, sample.status)
+            identified.append(tracking and not was_tracking)
+            was_tracking = tracking
             positions.append(np.where(sample.status[:, None] == MarkerStatus.LOST, np.nan, sample.positions_m))
             status.append(sample.status)
             angles.append(sample.angles_deg)
+            uv.append(no_uv if sample.uv_px is None else sample.uv_px)
             frames.append(fs.index)
             times.append(fs.time_s)
+        cameras = tuple(rec.cameras)
+        subject = rec.meta.extra.get("subject")
+        rate = rec.fps
     if not frames:
         raise RecordingError(f"{folder}: the recording has no frames")
-    pos_mm = np.stack(positions) * 1000.0
     st = np.stack(status)
-    frames_a, times_a = np.asarray(frames), np.asarray(times)
     if not (st != MarkerStatus.LOST).any():
         raise RecordingError(
             f"{folder}: the markers were never identified ({waiting_message or 'no reference pose'}); "
             "the recording must start with the patient in the reference pose"
         )
-    for path in (trc, status_csv, angles_csv, c3d):
+    return TrackedRecording(
+        names=tuple(ms.names), markerset=ms.name, cameras=cameras, frames=np.asarray(frames),
+        times_s=np.asarray(times, dtype=np.float64), rate_hz=float(rate), positions_mm=np.stack(positions) * 1000.0,
+        status=st, angles_deg={c: np.array([a.get(c, np.nan) for a in angles]) for c in ANGLE_COLUMNS},
+        uv_px=np.stack(uv), identified=np.asarray(identified), subject=None if subject is None else str(subject),
+    )
+
+
+def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_csv=None, c3d=None, mot=None,
+                  bvh=None, detections=None) -> None:
+    """Write the asked result files of a tracked recording (docs/FILES.md)."""
+    from tracking.tables import write_angles_csv, write_status_csv
+    from tracking.trc import write_trc
+
+    for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
     if trc:
-        write_trc(trc, ms.names, pos_mm, rec.fps, frame_numbers=frames_a, times_s=times_a)
+        # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
+        write_trc(trc, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1, times_s=run.times_s)
     if status_csv:
-        write_status_csv(status_csv, frames_a, times_a, ms.names, pos_mm, st)
+        write_status_csv(status_csv, run.frames, run.times_s, run.names, run.positions_mm, run.status)
     if angles_csv:
         # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
         # without a supination whose elbow axis is a guess
-        write_angles_csv(angles_csv, frames_a, times_a,
-                         {c: np.array([a.get(c, np.nan) for a in angles]) for c in ANGLE_COLUMNS})
+        write_angles_csv(angles_csv, run.frames, run.times_s, run.angles_deg)
     if c3d:
-        write_c3d(c3d, ms.names, pos_mm, rec.fps)
-    share = {s.name.lower(): float(np.mean(st == s)) for s in MarkerStatus}
-    return (
-        f"{len(frames)} frame sets: {100 * share['measured']:.1f} % of marker positions measured, "
-        f"{100 * share['estimated']:.1f} % estimated, {100 * share['lost']:.1f} % lost"
-    )
+        _write_c3d(c3d, run)
+    if mot:
+        from tracking.opensim_mot import write_mot
+
+        write_mot(mot, run.times_s, run.angles_deg, name=Path(mot).stem)
+    if bvh:
+        from tracking.bvh import BvhSkeleton, write_bvh
+        from tracking.status import MarkerStatus
+
+        # segment lengths from the measured positions only (an estimate must not teach them)
+        measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
+        write_bvh(bvh, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
+    if detections:
+        from tracking.detections import write_detections_csv
+
+        write_detections_csv(detections, run.frames, run.times_s, [c.name for c in run.cameras], run.names,
+                             run.uv_px)
+
+
+def _write_c3d(path, run: TrackedRecording) -> None:
+    from tracking.c3d_io import C3dEvent, write_c3d
+    from tracking.detections import reprojection_residuals_mm, seen_by
+
+    residuals = reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
+    events = [C3dEvent("Identified", float(t - run.times_s[0]), "General",
+                       "markers identified in the reference pose; tracking starts")
+              for t in run.times_s[run.identified]]
+    write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
+              camera_masks=seen_by(run.uv_px), angles_deg=run.angles_deg, subject=run.subject,
+              markerset=run.markerset, events=events)

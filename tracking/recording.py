@@ -109,6 +109,27 @@ def _meta_colours(path: Path, colours) -> tuple[tuple[int, int, int], ...] | Non
     return tuple(tuple(c) for c in colours)
 
 
+def frame_rate_from_files(folder: Path) -> float | None:
+    """The frame rate of a recording folder without meta.yaml: its first video's own (the
+    container's), else the median interval between the modification times of a camera folder's
+    images (cameras that save frame by frame), or None when neither gives 1-1000 frames/s."""
+    for p in sorted(folder.iterdir()):
+        if p.is_file() and p.suffix.lower() in VIDEO_SUFFIXES:
+            cap = cv2.VideoCapture(str(p))
+            fps = float(cap.get(cv2.CAP_PROP_FPS)) if cap.isOpened() else 0.0
+            cap.release()
+            if 1.0 <= fps <= 1000.0:
+                return fps
+    for p in sorted(folder.iterdir()):
+        if p.is_dir():
+            times = np.sort([f.stat().st_mtime for f in p.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES])
+            if times.size >= 3:
+                dt = float(np.median(np.diff(times)))
+                if 1e-3 <= dt <= 1.0:
+                    return 1.0 / dt
+    return None
+
+
 class _VideoReader:
     def __init__(self, path: Path):
         self.path = path
@@ -177,11 +198,18 @@ class Recording:
     ends before the others, reading stops there with a warning (nothing read so far is lost).
     """
 
-    def __init__(self, folder: str | Path, calibration: str | Path | None = None):
+    def __init__(self, folder: str | Path, calibration: str | Path | None = None, *, meta_optional: bool = False):
         self.folder = Path(folder)
         if not self.folder.is_dir():
             raise RecordingError(f"{self.folder}: no such recording folder")
-        self.meta = read_meta(self.folder)
+        if meta_optional and not (self.folder / "meta.yaml").is_file():  # e.g. a wand, whose solver needs no time
+            fps = frame_rate_from_files(self.folder)
+            if fps is None:
+                raise RecordingError(f"{self.folder}: no meta.yaml and no frame rate in its videos or image times: "
+                                     "add meta.yaml with 'fps: 30'")
+            self.meta = RecordingMeta(fps=fps)
+        else:
+            self.meta = read_meta(self.folder)
         calib_path = Path(calibration) if calibration else self.folder / "calibration.toml"
         self.calibration_path = calib_path
         self.cameras: tuple[Camera, ...] = tuple(load_calibration(calib_path))

@@ -26,12 +26,13 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RehabError
-from tracking.angles import ANGLE_COLUMNS
+from tracking.angles import ANGLE_COLUMNS, MissingMarkersError
 from tracking.status import MarkerStatus
 
 __all__ = [
     "ANGLES_HEADER", "STATUS_HEADER", "AnglesTable", "MarkerStatus", "StatusTable", "TableError",
-    "angles_csv_from_trc", "read_angles_csv", "read_status_csv", "write_angles_csv", "write_status_csv",
+    "angles_csv_from_trc", "read_angles_csv", "read_marker_map", "read_status_csv", "write_angles_csv",
+    "write_status_csv",
 ]
 
 ANGLES_HEADER: tuple[str, ...] = ("frame", "time") + ANGLE_COLUMNS
@@ -122,11 +123,13 @@ def read_angles_csv(path: str | Path) -> AnglesTable:
     return AnglesTable(frames=frames, times_s=times, angles=angles)
 
 
-def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path) -> int:
+def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: Mapping[str, str] | None = None) -> int:
     """``rehab angles``: joint angles of every frame of a TRC file, written as an angles CSV.
 
-    Raises :class:`~tracking.angles.MissingMarkersError` (one line) if the TRC lacks a marker
-    name the angles need. Returns the number of frames written.
+    ``marker_map`` (from :func:`read_marker_map`) names the file's marker for each name the
+    angles need (the rest keep their own names). Raises
+    :class:`~tracking.angles.MissingMarkersError` (one line, naming the markers wanted and those
+    found) if the TRC lacks a marker the angles need. Returns the number of frames written.
     """
     from tracking.angles import joint_angles, require_markers
     from tracking.trc import read_trc
@@ -134,9 +137,57 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path) -> int:
     trc = read_trc(trc_path)
     if trc.n_frames == 0:
         raise TableError(f"{trc_path}: the file has no frames: nothing to compute angles from")
-    require_markers(trc.names, Path(trc_path).name)
-    write_angles_csv(out_csv, trc.frame_numbers, trc.times_s, joint_angles(trc.positions_mm, trc.names))
+    names = list(trc.names)
+    source = Path(trc_path).name
+    if marker_map:
+        absent = {ours: theirs for ours, theirs in marker_map.items() if theirs not in names}
+        if absent:
+            shown = ", ".join(f"{theirs} (for {ours})" for ours, theirs in absent.items())
+            raise MissingMarkersError(f"{source} lacks {shown} named in the --map file (it has {', '.join(names)})")
+        renamed = {theirs: ours for ours, theirs in marker_map.items()}
+        names = [renamed.get(n, n if n not in marker_map else f"{n} (unmapped)") for n in names]
+    require_markers(names, source)
+    write_angles_csv(out_csv, trc.frame_indices, trc.times_s, joint_angles(trc.positions_mm, names))
     return trc.n_frames
+
+
+def read_marker_map(path: str | Path) -> dict[str, str]:
+    """A ``rehab angles --map`` file: the angles' marker names -> the names in a TRC file.
+
+    YAML, one line per marker whose name differs (the others keep theirs)::
+
+        MB: STER        # upper_limb_seated name: the file's name
+        MP: XIPH
+        MRS: RSHO
+
+    One-line :class:`TableError` if the file is missing, not such a mapping, names a marker the
+    angles do not use, or maps two markers to one name.
+    """
+    import yaml
+
+    from tracking.angles import REQUIRED_MARKERS
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise TableError(f"{path}: no such file; give a YAML file of lines such as 'MB: STER'") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TableError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})") from None
+    except yaml.YAMLError as exc:
+        raise TableError(f"{path}: invalid YAML ({getattr(exc, 'problem', exc)}); write lines such as 'MB: STER'") from None
+    if not isinstance(data, dict) or not data or not all(isinstance(v, (str, int)) for v in data.values()):
+        raise TableError(f"{path}: expected lines 'angle marker: file marker', such as 'MB: STER'")
+    mapping = {str(k).strip(): str(v).strip() for k, v in data.items()}
+    unknown = [k for k in mapping if k not in REQUIRED_MARKERS]
+    if unknown:
+        raise TableError(f"{path}: {', '.join(unknown)} not used by the angles: the keys are the names "
+                         f"{', '.join(REQUIRED_MARKERS)}")
+    values = list(mapping.values())
+    twice = sorted({v for v in values if values.count(v) > 1})
+    if twice:
+        raise TableError(f"{path}: {', '.join(twice)} mapped to more than one marker")
+    return mapping
 
 
 # ------------------------------------------------------------------------------------ status

@@ -4,17 +4,20 @@ Layout (tab-separated; OpenSim's ``TRCFileAdapter`` writes exactly this, trailin
 
     PathFileType<TAB>4<TAB>(X/Y/Z)<TAB>markers.trc
     DataRate<TAB>CameraRate<TAB>NumFrames<TAB>NumMarkers<TAB>Units<TAB>OrigDataRate<TAB>OrigDataStartFrame<TAB>OrigNumFrames
-    30<TAB>30<TAB>2<TAB>14<TAB>mm<TAB>30<TAB>0<TAB>2
+    30<TAB>30<TAB>2<TAB>14<TAB>mm<TAB>30<TAB>1<TAB>2
     Frame#<TAB>Time<TAB>MB<TAB><TAB><TAB>MP<TAB><TAB><TAB>...
     <TAB><TAB>X1<TAB>Y1<TAB>Z1<TAB>X2<TAB>Y2<TAB>Z2<TAB>...
     (blank line)
-    0<TAB>0.000000<TAB>1.0000<TAB>2.0000<TAB>3.0000<TAB><TAB><TAB><TAB>...   (empty cells: no position)
+    1<TAB>0.000000<TAB>1.0000<TAB>2.0000<TAB>3.0000<TAB><TAB><TAB><TAB>...   (empty cells: no position)
 
 Every cell of a data row, the last included, is followed by a tab, so that a row whose last
 marker is missing still has its full number of cells for OpenSim's reader.
 
-Positions are millimetres in the world frame (+Y up, the patient faces -Z). Frame numbers are the
-recording's frame indices (0 = first image, as in the status and angles CSV files) unless given.
+Positions are millimetres in the world frame (+Y up, the patient faces -Z). ``Frame#`` counts
+from 1 as OpenSim numbers frames (and ``OrigDataStartFrame`` is the first row's number): the
+recording's frame index (0 = first image, as in the status and angles CSV files) plus one.
+Files this project wrote before counted from 0 (``OrigDataStartFrame`` 0); they still read, and
+:attr:`TrcData.frame_indices` gives the frame indices of either.
 """
 
 from __future__ import annotations
@@ -54,6 +57,9 @@ class TrcData:
         positions_mm: (T, M, 3) float64 positions in millimetres (converted from the file's
             Units), NaN where the file has no position.
         rate_hz: the file's ``DataRate``.
+        frame_base: the number of the first image: 1 (OpenSim, and this project's files), or 0
+            for files whose ``OrigDataStartFrame`` is 0 (this project's files before Frame#
+            counted from 1).
     """
 
     names: tuple[str, ...]
@@ -61,6 +67,12 @@ class TrcData:
     times_s: np.ndarray
     positions_mm: np.ndarray
     rate_hz: float
+    frame_base: int = 1
+
+    @property
+    def frame_indices(self) -> np.ndarray:
+        """(T,) int64 frame indices counted from 0 (the status and angles CSV files' ``frame``)."""
+        return self.frame_numbers - self.frame_base
 
     @property
     def n_frames(self) -> int:
@@ -88,7 +100,8 @@ def write_trc(
         positions_mm: (T, M, 3) float positions in millimetres, world frame; NaN = no position
             (a marker with any NaN coordinate is written as three empty cells).
         rate_hz: frame rate (DataRate, CameraRate, OrigDataRate).
-        frame_numbers: (T,) integer frame numbers; default ``0 .. T-1``.
+        frame_numbers: (T,) integer ``Frame#`` values; default ``1 .. T`` (OpenSim counts from 1:
+            give a recording's frame indices plus one).
         times_s: (T,) times in seconds; default ``(frame_numbers - frame_numbers[0]) / rate_hz``.
     """
     path = Path(path)
@@ -102,7 +115,7 @@ def write_trc(
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise ValueError(f"rate_hz must be positive, got {rate_hz}")
     n_frames, n_markers = p.shape[0], p.shape[1]
-    frames = np.arange(n_frames) if frame_numbers is None else np.asarray(frame_numbers)
+    frames = np.arange(1, n_frames + 1) if frame_numbers is None else np.asarray(frame_numbers)
     if frames.shape != (n_frames,) or (frames.size and not np.array_equal(frames, np.round(frames))):
         raise ValueError(f"frame_numbers must be ({n_frames},) integers")
     frames = frames.astype(np.int64)
@@ -114,7 +127,7 @@ def write_trc(
             raise ValueError(f"times_s must be ({n_frames},) finite seconds")
 
     rate = _format_rate(rate_hz)
-    first = int(frames[0]) if n_frames else 0
+    first = int(frames[0]) if n_frames else 1
     header = [
         f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
         "\t".join(_METADATA_KEYS),
@@ -210,7 +223,9 @@ def read_trc(path: str | Path) -> TrcData:
     frames = frame_col.astype(np.int64)
     for array in (frames, times, positions):
         array.setflags(write=False)
-    return TrcData(names=names, frame_numbers=frames, times_s=times, positions_mm=positions, rate_hz=rate_hz)
+    base = 0 if meta.get("OrigDataStartFrame") == "0" else 1
+    return TrcData(names=names, frame_numbers=frames, times_s=times, positions_mm=positions, rate_hz=rate_hz,
+                   frame_base=base)
 
 
 def _check_frame_count(path: Path, meta: dict[str, str], n_rows: int) -> None:

@@ -2,13 +2,18 @@
 
 Silence is always an option: :class:`Sounds` is muted when asked, when SDL has no audio device
 (``SDL_AUDIODRIVER=dummy``, a server without sound) or when the mixer cannot start; it never
-raises. Nothing is opened at import.
+raises. The mixer is tried once per process, and what the sound libraries print while it starts
+(ALSA's eight lines per try on a machine without a sound card) goes to the debug log, not the
+terminal. Nothing is opened at import.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import sys
+import tempfile
 
 import numpy as np
 
@@ -31,6 +36,33 @@ NOTES: dict[Cue, tuple[tuple[float, float], ...]] = {
     Cue.READY: ((523.3, 0.1), (784.0, 0.16)),
     Cue.DONE: ((523.3, 0.12), (659.3, 0.12), (784.0, 0.12), (1046.5, 0.3)),
 }
+
+
+#: Why the mixer could not start in this process ("" : not tried yet, or it started).
+_mixer_failed = ""
+
+
+@contextlib.contextmanager
+def _stderr_to_log():
+    """Send what C libraries write to the process's stderr (file descriptor 2) to the debug log."""
+    try:
+        saved = os.dup(2)
+    except OSError:   # no stderr to redirect
+        yield
+        return
+    with tempfile.TemporaryFile() as sink:
+        sys.stderr.flush()
+        os.dup2(sink.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            sink.seek(0)
+            text = sink.read().decode("utf-8", "replace").strip()
+            if text:
+                log.debug("the sound libraries said: %s", " | ".join(text.splitlines()))
 
 
 def tone(notes, rate_hz: int = RATE_HZ, volume: float = 0.35) -> np.ndarray:
@@ -56,13 +88,15 @@ class Sounds:
     def __init__(self, mute: bool = False) -> None:
         self.enabled = False
         self._sounds = {}
-        if mute or os.environ.get("SDL_AUDIODRIVER", "") == "dummy":
+        global _mixer_failed
+        if mute or os.environ.get("SDL_AUDIODRIVER", "") == "dummy" or _mixer_failed:
             return
         try:
             import pygame
 
             if not pygame.mixer.get_init():
-                pygame.mixer.init(frequency=RATE_HZ, size=-16, channels=2)
+                with _stderr_to_log():
+                    pygame.mixer.init(frequency=RATE_HZ, size=-16, channels=2)
             freq, _, channels = pygame.mixer.get_init()
             for cue, notes in NOTES.items():
                 samples = tone(notes, freq)
@@ -71,7 +105,8 @@ class Sounds:
                 self._sounds[cue] = pygame.sndarray.make_sound(samples)
             self.enabled = True
         except Exception as exc:  # noqa: BLE001 - any mixer failure means silence, never a crash
-            log.info("no sound: %s", exc)
+            _mixer_failed = str(exc) or type(exc).__name__
+            log.info("no sound: %s", _mixer_failed)
             self._sounds = {}
 
     def play(self, cue: Cue) -> None:

@@ -58,7 +58,8 @@ def step_limit(spec: GameSpec, limits: TherapistLimits, key: str, direction: int
 
 
 def describe(spec: GameSpec, limits: TherapistLimits, key: str) -> str:
-    """The limit's value in words for the menu ("95 % of the measured range", "the game's own: 6 cm")."""
+    """The limit's value in words for the menu ("95 % of the measured range", "6 cm"); an unset
+    limit shows the game's own value (:func:`whose` says which)."""
     value = getattr(limits, key)
     shown = free_value(spec, key) if value is None else value
     if key in ("min_level", "max_level"):
@@ -71,7 +72,13 @@ def describe(spec: GameSpec, limits: TherapistLimits, key: str) -> str:
         text = f"{shown:.1f} s"
     else:
         text = f"at least {shown:.0f} s"
-    return f"{text} (no limit)" if value is None else text
+    return text
+
+
+def whose(limits: TherapistLimits, key: str) -> str:
+    """Whose the limit's value is: ``the game's own`` (unset: what the game's difficulty reaches;
+    the menu said "no limit", read as if nothing bounded the game) or ``set for this patient``."""
+    return "the game's own" if getattr(limits, key) is None else "set for this patient"
 
 
 def parse_limits(spec: GameSpec, text: str) -> TherapistLimits:

@@ -252,6 +252,7 @@ class GameLog:
     started_s: float = math.nan
     ended_s: float = math.nan
     active_s: float = 0.0
+    demo_s: float = 0.0
     paused_s: float = 0.0
     compensation_s: float = 0.0
     level_start: float = math.nan
@@ -312,6 +313,7 @@ class GameSession:
         self._baseline: dict[str, float] = {}
         self._direction = 1
         self._now_s = math.nan
+        self._demo = False
         self.log = GameLog(spec.name, side, level_start=self.adapter.level,
                            limits={"positive_deg": limits.positive_deg, "negative_deg": limits.negative_deg,
                                    "elbow_deg": limits.elbow_deg, "sources": dict(limits.sources)},
@@ -345,14 +347,18 @@ class GameSession:
         return r.angles["shoulder_external_rotation" if self.spec.kind == "rotation" else "forearm_supination"]
 
     # ------------------------------------------------------------------ feeding
-    def update(self, now_s: float, reading: Reading | None, reason: str = "") -> None:
+    def update(self, now_s: float, reading: Reading | None, reason: str = "", *, demo: bool = False) -> None:
         """Advance to ``now_s`` (the game clock, seconds) with this frame's reading.
 
         Args:
             now_s: monotonic seconds.
             reading: the newest reading, or None when there is none (then ``reason`` says why).
             reason: why there is no reading ("The tracker stopped: restarting...").
+            demo: the automatic demo plays now, not the patient: its play time (``demo_s``) and
+                the targets it ends (``"demo": true``) are logged apart, so that the progress
+                review and the report never count them as the patient's.
         """
+        self._demo = bool(demo)
         dt = 0.0 if not math.isfinite(self._now_s) else max(0.0, now_s - self._now_s)
         self._now_s = now_s
         if not math.isfinite(self.log.started_s):
@@ -381,6 +387,8 @@ class GameSession:
         if was_paused:
             self.cues.append(Cue.RESUMED)
         self.log.active_s += dt
+        if self._demo:
+            self.log.demo_s += dt
         self._use_range(reading)
         self._play(dt, reading)
         if self.log.active_s >= self.spec.duration_s:
@@ -505,7 +513,7 @@ class GameSession:
             "elbow_deg": round(t.target.elbow_deg, 1), "hand_m": [round(float(x), 4) for x in t.hand_m],
             "level": round(t.level, 3), "size": round(t.size, 4), "hold_s": round(t.hold_s, 2),
             "time_limit_s": round(t.time_limit_s, 2), "approach_s": round(t.approach_s, 2), "reached": success,
-            "time_s": round(t.age_s, 2),
+            "time_s": round(t.age_s, 2), "demo": self._demo,
         })
         if success:
             self.log.reached += 1
@@ -524,10 +532,12 @@ class GameSession:
 def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wait_s: float = 3.0) -> str | None:
     """Store a session's log as an exercise result of a new ``exercise`` session; returns its uid.
 
-    The session and its result are one transaction. A database locked by another program is
-    waited for ``wait_s``, then the result is kept in a pending file that the next open stores
-    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost.
-    Nothing is stored for a session that never started playing (no active time).
+    The session and its result are one transaction, its span on the wall clock: it ends now and
+    starts the log's duration earlier; a session the automatic demo played throughout is stored
+    with the source ``demo``. A database locked by another program is waited for ``wait_s``, then
+    the result is kept in a pending file that the next open stores
+    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost. Nothing
+    is stored for a session that never started playing (no active time).
     """
     from game.db import exercise_record
     from game.db.database import utc_now
@@ -535,6 +545,8 @@ def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wa
 
     if log.active_s <= 0.0:
         return None
+    if log.demo_s >= log.active_s - 1e-9:
+        source = "demo"   # played by the automatic demo from start to end: not the patient's
     record = exercise_record(patient_id, log.game, log.reached, log.duration_s, log.score, log.details_json(),
                              source=source, started_utc=utc_now(ago_s=log.duration_s))
     return store_durably(db_path, record, wait_s=wait_s).uid

@@ -420,6 +420,26 @@ class Canvas:
             lines.append(line)
         return lines
 
+    def fit(self, text: str, size: int, width: float, *, min_size: int | None = None) -> tuple[str, int]:
+        """``text`` and the largest text size up to ``size`` at which it is no wider than ``width``
+        (down to ``min_size``, by default 70 % of ``size``); still too wide there, the text is cut
+        at a word (or a letter) and ends with an ellipsis. For titles and names of any length in a
+        fixed place (a long motion title, a test's name beside its value)."""
+        lo = max(1, round(size * 0.7) if min_size is None else int(min_size))
+        size = int(size)
+        while size > lo and self.measure(text, size)[0] > width:
+            size -= 1
+        if self.measure(text, size)[0] <= width:
+            return text, size
+        ellipsis = "\N{HORIZONTAL ELLIPSIS}"
+        words = text.split(" ")
+        while len(words) > 1 and self.measure(" ".join(words) + ellipsis, size)[0] > width:
+            words.pop()
+        cut = " ".join(words).rstrip(" ,;:(")
+        while cut and self.measure(cut + ellipsis, size)[0] > width:
+            cut = cut[:-1]
+        return cut.rstrip(" ,;:(") + ellipsis, size
+
     # ------------------------------------------------------------------ images
     def banner(self, text: str, pos: tuple[float, float], width: float, size: int, fill: Colour, border: Colour,
                text_colour: Colour, *, scale: float = 1.0, max_lines: int = 3) -> float:

@@ -91,6 +91,8 @@ class RomProgress:
         hold_fraction: 0..1 of the start-position hold done (CHECKING_START).
         compensations: the compensations seen so far, plain words.
         estimated: the current value rests on estimated (hidden) markers.
+        start_problems: CHECKING_START: what keeps the patient from the start position, each
+            in plain words with its current value ("elbow flexion 12 (needs 65 to 115)").
     """
 
     state: RomState
@@ -101,6 +103,7 @@ class RomProgress:
     hold_fraction: float
     compensations: tuple[str, ...]
     estimated: bool
+    start_problems: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -371,9 +374,11 @@ class RomTestSession:
         needed = [k for k in ch if not k.startswith("start:")]
         if wrong or not all(math.isfinite(ch[k]) for k in needed):
             self._hold.clear()
-            why = "; ".join(wrong) if wrong else "the test's markers are not all measured"
-            self._last = RomProgress(self.state, f"take the start position: {self.test.position_words.rstrip('.')} ({why})",
-                                     ch["value"], math.nan, math.nan, 0.0, (), bool(self._estimated_now(sample)))
+            problems = tuple(wrong) or ("the test's markers are not all measured",)
+            self._last = RomProgress(self.state,
+                                     f"take the start position: {self.test.position_words.rstrip('.')} ({'; '.join(problems)})",
+                                     ch["value"], math.nan, math.nan, 0.0, (), bool(self._estimated_now(sample)),
+                                     problems)
             return self._last
         if self._hold and abs(ch["value"] - self._hold[0]["value"]) > START_STILL_DEG:
             self._hold.clear()  # still moving (e.g. coming down from the last attempt): hold again

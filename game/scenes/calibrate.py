@@ -268,7 +268,7 @@ class CameraProgress:
 
 
 def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequence[Detection],
-                  board) -> np.ndarray:
+                  board, *, grid: bool = True) -> np.ndarray:
     """The camera image with the coverage cells tinted and the corners found drawn (a new image)."""
     out = image.copy()
     h, w = out.shape[:2]
@@ -282,9 +282,9 @@ def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequenc
             tint[y0:y1, x0:x1] = (190, 200, 94)  # teal (BGR of theme.ACCENT)
         covered = tint.any(axis=2)
         out[covered] = (0.72 * out[covered] + 0.28 * tint[covered]).astype(np.uint8)
-    for i in range(1, gx):
+    for i in range(1, gx if grid else 0):
         cv2.line(out, (round(i * w / gx), 0), (round(i * w / gx), h - 1), (80, 80, 80), 1)
-    for j in range(1, gy):
+    for j in range(1, gy if grid else 0):
         cv2.line(out, (0, round(j * h / gy)), (w - 1, round(j * h / gy)), (80, 80, 80), 1)
     if detection is not None:
         thick = max(1, round(w / 320))
@@ -299,7 +299,22 @@ def draw_feedback(image: np.ndarray, detection: Detection | None, views: Sequenc
     return out
 
 
-BUTTONS = (("Capture", "Space"), ("Auto", "A"), ("Calibrate", "C"), ("Next camera", "Tab"), ("Save", "S"), ("Back", "Esc"))
+BUTTONS = (("Capture", "Space"), ("Auto", "A"), ("Calibrate", "C"), ("Next camera", "Tab"), ("Save lens", "S"),
+           ("Next step", "D"), ("Back", "Esc"))
+STAGE_BUTTONS = {
+    "lens": BUTTONS,
+    "positions": (("Capture", "Space"), ("Auto", "A"), ("Next step", "D"), ("Back", "Esc")),
+    "floor": (("Capture", "Space"), ("Auto", "A"), ("Redo positions", "Tab"), ("Back", "Esc")),
+    "report": (("Redo positions", "Tab"), ("Back", "Esc")),
+}
+STAGE_TITLES = {"lens": "Step 1 of 4, lenses", "positions": "Step 2 of 4, where the cameras stand",
+                "floor": "Step 3 of 4, the floor", "report": "Step 4 of 4, how well it measures"}
+_KEYS = {Action.SELECT: "Space", Action.LEFT: "A", Action.MONITOR: "C", Action.SWITCH_ARM: "Tab", Action.DOWN: "S",
+         Action.RIGHT: "D", Action.BACK: "Esc"}
+#: A board counts as held still when no corner moved more than this between two images, pixels.
+STILL_PX = 2.0
+#: Where the floor board's centre lies when the screen cannot know better: centred over the origin on a 45 cm seat.
+SEAT_BOARD_CENTRE_M = (0.0, 0.45, 0.0)
 
 
 class CalibrateScene(BaseScene):
@@ -316,7 +331,8 @@ class CalibrateScene(BaseScene):
     """
 
     def __init__(self, feeds: Sequence[BoardFeed], board, *, out_path: Path | None = None,
-                 auto: bool = False, need_views: int = NEED_VIEWS, threaded: bool = True) -> None:
+                 auto: bool = False, need_views: int = NEED_VIEWS, threaded: bool = True, rig_feed=None,
+                 board_centre_m=SEAT_BOARD_CENTRE_M) -> None:
         if not feeds:
             raise RehabError("no camera to calibrate: connect a camera or use the simulated studio")
         self.feeds = list(feeds)
@@ -342,6 +358,18 @@ class CalibrateScene(BaseScene):
         self._lock = threading.Lock()
         self._latest = None
         self._failed = ""
+        # the rig steps (positions, floor, report): calibration/guided.py
+        self.stage = "lens"
+        self.rig_feed = rig_feed
+        self.board_centre_m = tuple(float(v) for v in board_centre_m)
+        self.rig_views = None
+        self.rig_images: list[np.ndarray] | None = None
+        self.rig_detections: list[Detection | None] = []
+        self._previous: list[Detection | None] = []
+        self.rig_still = False
+        self.rig_result = None
+        self.report = None
+        self.lens_path: Path | None = None
 
     # ----------------------------------------------------------------- state
     @property
@@ -355,7 +383,13 @@ class CalibrateScene(BaseScene):
     def _say(self, text: str, colour=theme.TEXT_DIM) -> None:
         self.message, self.message_colour = text, colour
 
-    def _grab(self, index: int) -> tuple[int, np.ndarray, Detection | None, str]:
+    def _grab(self, index: int) -> tuple:
+        stage = self.stage
+        if stage in ("positions", "floor"):   # every camera at once
+            images = self.rig_feed.next_frames()
+            return stage, images, [detect_board(img, self.board)[0] for img in images]
+        if stage == "report":
+            return ("report",)
         image = self.feeds[index].next_frame()
         detection, reason = detect_board(image, self.board)
         return index, image, detection, reason
@@ -379,8 +413,13 @@ class CalibrateScene(BaseScene):
                 self._latest = got
             self._stop.wait(max(0.0, period - (time.perf_counter() - t0)))
 
-    def _show(self, index: int, image: np.ndarray, detection: Detection | None, reason: str) -> None:
-        if index != self.index:   # grabbed just before the switch to another camera
+    def _show(self, *got) -> None:
+        if isinstance(got[0], str):
+            if got[0] == self.stage and got[0] != "report":
+                self._show_rig(*got[1:])
+            return
+        index, image, detection, reason = got
+        if index != self.index or self.stage != "lens":   # grabbed just before a switch
             return
         self.image, self.detection, self.reason = image, detection, reason
         if self.auto and self.detection is not None and self._moved_enough():
@@ -422,8 +461,14 @@ class CalibrateScene(BaseScene):
         self._say(f"{self.feed.name} calibrated", theme.ACCENT)
         return self.current.result
 
+    def lens_data_path(self) -> Path:
+        """Where the lens data go: ``intrinsics.toml`` beside the calibration file, never the
+        calibration file itself (tracking with cameras all at the origin would be silently wrong)."""
+        return Path(self.out_path or default_calibration_path()).with_name("intrinsics.toml")
+
     def save(self) -> Path | None:
-        """Write every calibrated camera (2 or more) as TOML; returns the path written."""
+        """Write the lens data of every calibrated camera (2 or more) to :meth:`lens_data_path`;
+        returns the path written. The positions and the floor follow (Next step)."""
         from calibration.files import save_calibration_toml
 
         done = [p.result for p in self.progress if p.result is not None]
@@ -431,15 +476,18 @@ class CalibrateScene(BaseScene):
             self._say(f"Calibrate at least 2 cameras before saving ({len(done)} done; Tab: next camera)",
                       theme.ATTENTION)
             return None
-        path = Path(self.out_path or default_calibration_path())
+        path = self.lens_data_path()
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             save_calibration_toml(path, [r.camera for r in done], error=float(np.mean([r.rms_px for r in done])))
         except (RehabError, OSError) as exc:
             self._say(f"Not saved: {exc}", theme.FAILURE)
             return None
-        self.saved_path = path
-        self._say(f"Saved {len(done)} cameras to {path}", theme.ACCENT)
+        self.lens_path = path
+        todo = [f.name for f, p in zip(self.feeds, self.progress) if p.result is None]
+        more = f" ({', '.join(todo)} still to do: Tab)" if todo else ""
+        self._say(f"Saved the lens data of {len(done)} cameras{more} to {path}. Still missing: where the cameras "
+                  "stand and the floor: Next step (D)", theme.ACCENT)
         return path
 
     def next_camera(self) -> None:
@@ -450,22 +498,27 @@ class CalibrateScene(BaseScene):
         self.detection = None
 
     # ----------------------------------------------------------------- scene
+    @property
+    def buttons(self) -> tuple[tuple[str, str], ...]:
+        return STAGE_BUTTONS[self.stage]
+
     def handle(self, event: InputEvent) -> None:
         if isinstance(event, Press) and event.down:
-            action = {Action.SELECT: "Capture", Action.LEFT: "Auto", Action.MONITOR: "Calibrate",
-                      Action.SWITCH_ARM: "Next camera", Action.DOWN: "Save", Action.BACK: "Back"}.get(event.action)
-            if action:
-                self.do(action)
+            key = _KEYS.get(event.action)
+            for label, k in self.buttons:
+                if k == key:
+                    self.do(label)
+                    break
         elif isinstance(event, Pointer) and event.kind == PointerKind.PRESS and event.button == 1 and self._buttons:
             w, h = self.app.screen.size_px
-            for (label, _), (x, y, bw, bh) in zip(BUTTONS, self._buttons):
+            for (label, _), (x, y, bw, bh) in zip(self.buttons, self._buttons):
                 if x <= event.x * w < x + bw and y <= event.y * h < y + bh:
                     self.do(label)
 
     def do(self, what: str) -> None:
         """Run a button's action by its label."""
         if what == "Capture":
-            self.capture()
+            {"lens": self.capture, "positions": self.capture_view, "floor": self.capture_floor}[self.stage]()
         elif what == "Auto":
             self.auto = not self.auto
             self._say(f"Auto-capture {'on' if self.auto else 'off'}")
@@ -473,10 +526,119 @@ class CalibrateScene(BaseScene):
             self.calibrate()
         elif what == "Next camera":
             self.next_camera()
-        elif what == "Save":
+        elif what == "Save lens":
             self.save()
+        elif what == "Next step":
+            self.next_step()
+        elif what == "Redo positions":
+            self.to_positions(keep=False)
         elif what == "Back":
             self.app.pop()
+
+    # ----------------------------------------------------------------- the rig steps
+    def next_step(self) -> None:
+        """Lenses -> positions (every camera needs its lens data) -> floor (every camera linked)."""
+        if self.stage == "lens":
+            todo = [f.name for f, p in zip(self.feeds, self.progress) if p.result is None]
+            if todo:
+                self._say(f"Calibrate the lens of {', '.join(todo)} first (Tab: next camera)", theme.ATTENTION)
+                return
+            if self.save() is not None:
+                self.to_positions(keep=False)
+        elif self.stage == "positions":
+            if not self.rig_views.linked():
+                self._say(self.rig_views.advice(), theme.ATTENTION)
+                return
+            self.stage = "floor"
+            self.rig_feed.lay_on_seat()
+            self._previous = []
+            self._say("Lay the board face up on the seat as in the picture", theme.TEXT)
+
+    def to_positions(self, *, keep: bool) -> None:
+        from calibration.guided import RigViews
+
+        from game.scenes.calibrate_rig import CameraRigFeed, SimRigFeed
+
+        if self.rig_feed is None:
+            sim = all(isinstance(f, SimBoardFeed) for f in self.feeds)
+            self.rig_feed = SimRigFeed.from_feeds(self.feeds, self.board) if sim else CameraRigFeed(self.feeds)
+        if not keep or self.rig_views is None:
+            self.rig_views = RigViews([f.name for f in self.feeds])
+        self.rig_feed.hold_up()
+        self.stage = "positions"
+        self.rig_images, self.rig_detections, self._previous = None, [], []
+        self.rig_result = self.report = None
+        self._since = 1.0 / FEED_RATE_HZ
+
+    def _show_rig(self, images: list[np.ndarray], detections: list[Detection | None]) -> None:
+        prev = self._previous
+        moved = [float(np.max(np.linalg.norm(d.uv_px - p.uv_px, axis=1)))
+                 for d, p in zip(detections, prev) if d is not None and p is not None and d.uv_px.shape == p.uv_px.shape]
+        found = sum(d is not None for d in detections)
+        self.rig_still = bool(prev) and found > 0 and len(moved) == found and max(moved) < STILL_PX
+        self._previous = detections
+        self.rig_images, self.rig_detections = images, detections
+        if self.auto and self.rig_still:
+            if self.stage == "positions" and found >= 2 and self._new_view():
+                self.capture_view()
+            elif self.stage == "floor":
+                self.capture_floor()
+
+    def _new_view(self) -> bool:
+        if not self.rig_views.views:
+            return True
+        last = list(self.rig_views.views.values())[-1]
+        if [d is None for d in last] != [d is None for d in self.rig_detections]:
+            return True
+        w, h = self.feeds[0].size_px
+        return any(float(np.mean(np.linalg.norm(d.uv_px - p.uv_px, axis=1))) > AUTO_MIN_MOVE * float(np.hypot(w, h))
+                   for d, p in zip(self.rig_detections, last) if d is not None and d.uv_px.shape == p.uv_px.shape)
+
+    def capture_view(self) -> bool:
+        """Keep the board view of the cameras that see it now (two or more)."""
+        if self.rig_images is None or self.rig_views.add(self.rig_detections) is None:
+            self._say("The board must be seen by two cameras or more to link them", theme.FAILURE)
+            return False
+        seen = [n for n, d in zip(self.rig_views.names, self.rig_detections) if d is not None]
+        self._say(f"View {len(self.rig_views.views)}: {', '.join(seen)}. {self.rig_views.advice()}", theme.ACCENT)
+        return True
+
+    def floor_origin_m(self) -> tuple[float, float, float]:
+        """The floor board's first corner in the world, its centre where the helper lays it."""
+        from calibration.extrinsics import floor_board_centre_m
+
+        known = getattr(self.rig_feed, "seat_board_centre_m", None)
+        target = np.asarray(self.board_centre_m if known is None else known, float)
+        return tuple(float(v) for v in target - floor_board_centre_m(self.board))
+
+    def capture_floor(self) -> bool:
+        """Solve the rig with the board on the seat, report its quality and save the calibration."""
+        from calibration.files import save_calibration_toml
+        from calibration.guided import quality_report, solve_rig
+
+        if self.rig_images is None or not any(d is not None for d in self.rig_detections):
+            self._say("No camera sees the board on the seat yet", theme.FAILURE)
+            return False
+        cams = [p.result.camera for p in self.progress]
+        try:
+            res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m())
+        except RehabError as exc:
+            self.auto = False   # a wrong floor board is said once, not at every frame
+            self._say(f"{exc}", theme.FAILURE)
+            return False
+        self.report = quality_report(res.cameras, self.board, self.rig_views.views, res.rms_px)
+        self.rig_result = res
+        path = Path(self.out_path or default_calibration_path())
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            save_calibration_toml(path, res.cameras, adjusted=False, error=float(np.nanmax(res.rms_px)))
+        except (RehabError, OSError) as exc:
+            self._say(f"Not saved: {exc}", theme.FAILURE)
+            return False
+        self.saved_path = path
+        self.stage = "report"
+        self._say(f"Saved the calibration of {len(cams)} cameras to {path}", theme.ACCENT)
+        return True
 
     def enter(self, app) -> None:
         super().enter(app)
@@ -513,9 +675,15 @@ class CalibrateScene(BaseScene):
         c = frame.canvas
         w, h = frame.size_px
         s = min(w / 1280.0, h / 720.0)
+        if self.stage != "lens":
+            title = STAGE_TITLES[self.stage]
+            c.text(f"Calibrate cameras: {title}", (theme.MARGIN * s, 18 * s), round(theme.MEDIUM * s), theme.TEXT)
+            {"positions": self._render_positions, "floor": self._render_floor, "report": self._render_report}[self.stage](c, w, h, s)
+            self._draw_buttons(c, w, h, s)
+            return
         m = theme.MARGIN * s
-        c.text(f"Calibrate cameras: {self.feed.name} ({self.index + 1} of {len(self.feeds)})", (m, 18 * s),
-               round(theme.MEDIUM * s), theme.TEXT)
+        c.text(f"Calibrate cameras: {STAGE_TITLES['lens']}, {self.feed.name} ({self.index + 1} of {len(self.feeds)})",
+               (m, 18 * s), round(theme.MEDIUM * s), theme.TEXT)
         if self.image is None:
             c.text("Waiting for the camera...", (w / 2, h / 2), round(theme.BODY * s), theme.ATTENTION, anchor="center")
             return
@@ -575,14 +743,104 @@ class CalibrateScene(BaseScene):
                 y += 26 * s
         return y + 8 * s
 
+    # ----------------------------------------------------------------- drawing the rig steps
+    def _thumbnails(self, c, s: float, area: Rect) -> None:
+        """Every camera's image, the board found drawn over it, in a grid filling ``area``."""
+        x0, y0, aw, ah = area
+        if self.rig_images is None:
+            c.text("Waiting for the cameras...", (x0 + aw / 2, y0 + ah / 2), round(theme.BODY * s), theme.ATTENTION,
+                   anchor="center")
+            return
+        n = len(self.rig_images)
+        cols = 1 if n == 1 else 2
+        rows = -(-n // cols)
+        iw, ih = self.feeds[0].size_px
+        cell_w = min(aw / cols, (ah / rows - 26 * s) * iw / ih)
+        cell_h = cell_w * ih / iw
+        for k, (img, det) in enumerate(zip(self.rig_images, self.rig_detections)):
+            x = x0 + (k % cols) * (cell_w + 8 * s)
+            y = y0 + (k // cols) * (cell_h + 30 * s)
+            c.image(f"calibrate-rig-{k}", draw_feedback(img, det, [], self.board, grid=False), (x, y, cell_w, cell_h))
+            label = f"{self.feeds[k].name}: " + ("board found" if det is not None else "no board")
+            c.text(label, (x, y + cell_h + 2 * s), round(theme.SMALL * 0.9 * s), theme.ACCENT if det is not None else theme.TEXT_DIM)
+
+    def _side_text(self, c, lines, x: float, y: float, s: float, col_w: float, size=theme.BODY, colour=theme.TEXT) -> float:
+        for text in lines:
+            for line in c.wrap(text, round(size * s), col_w):
+                c.text(line, (x, y), round(size * s), colour)
+                y += (size + 8) * s
+        return y
+
+    def _rig_layout(self, c, w: float, h: float, s: float, instruction: str, colour) -> tuple[float, float, float]:
+        """The cameras' pictures on the left, the instruction at the top right; returns (x, y, width) below it."""
+        m = theme.MARGIN * s
+        left_w = 0.58 * w
+        self._thumbnails(c, s, (m, 70 * s, left_w, h - 170 * s))
+        x = m + left_w + 24 * s
+        col_w = w - x - m
+        return x, self._side_text(c, [instruction], x, 72 * s, s, col_w, theme.SMALL, colour), col_w
+
+    def _render_positions(self, c, w: float, h: float, s: float) -> None:
+        from game.scenes.calibrate_rig import link_diagram
+
+        x, y, col_w = self._rig_layout(c, w, h, s, "Hold the board still where two or more cameras see all of it; go round the "
+                                "cameras so that every neighbouring pair shares 3 views.", theme.TEXT_DIM)
+        side = min(col_w, 0.36 * h)
+        c.image("calibrate-links", link_diagram(self.rig_views.names, self.rig_views.pair_counts()),
+                (x, y + 4 * s, side * 1.2, side))
+        y += side + 14 * s
+        n = len(self.rig_views.views)
+        c.text(f"{n} views" + ("   auto-capture on" if self.auto else ""), (x, y), round(theme.BODY * s), theme.TEXT)
+        y += 40 * s
+        linked = self.rig_views.linked()
+        y = self._side_text(c, [self.rig_views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if linked else theme.ATTENTION)
+        self._side_text(c, [self.message], x, y + 6 * s, s, col_w, theme.SMALL * 0.9, self.message_colour)
+
+    def _render_floor(self, c, w: float, h: float, s: float) -> None:
+        from game.scenes.calibrate_rig import floor_board_picture
+
+        x, y, col_w = self._rig_layout(c, w, h, s, "Lay the board face up on the seat, its rows across the patient, "
+                                       "the black corner square at the patient's front left.", theme.TEXT)
+        side = min(col_w / 1.2, 0.42 * h)
+        c.image("calibrate-floor", floor_board_picture(self.board), (x, y + 4 * s, side * 1.2, side))
+        y += side + 16 * s
+        state = "Hold on..." if not self.rig_still else "Board still: capturing" if self.auto else "Board still: Capture (Space)"
+        c.text(state, (x, y), round(theme.SMALL * s), theme.ACCENT if self.rig_still else theme.TEXT_DIM)
+        self._side_text(c, [self.message], x, y + 36 * s, s, col_w, theme.SMALL * 0.9, self.message_colour)
+
+    def _render_report(self, c, w: float, h: float, s: float) -> None:
+        from calibration.extrinsics import rig_errors
+
+        m = theme.MARGIN * s
+        rep, res = self.report, self.rig_result
+        colour = {"good": theme.ACCENT, "usable": theme.ATTENTION, "redo": theme.FAILURE}[rep.verdict]
+        lines = rep.lines()
+        c.text(lines[0], (m, 76 * s), round(theme.LARGE * s), colour)
+        y = 150 * s
+        y = self._side_text(c, [lines[1]], m, y, s, w - 2 * m, theme.BODY, theme.TEXT)
+        y += 10 * s
+        truth = getattr(self.rig_feed, "truth", None)
+        pos = ang = None
+        if truth is not None:
+            pos, ang = rig_errors(res.cameras, truth)
+        for k, cam in enumerate(res.cameras):
+            at = ", ".join(f"{v:.2f}" for v in cam.centre_m)
+            extra = "" if pos is None else f"   (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg from the truth)"
+            c.text(f"{cam.name}: reprojection {rep.rms_px[k]:.2f} px, at ({at}) m{extra}", (m, y),
+                   round(theme.SMALL * s), theme.TEXT if rep.rms_px[k] < 0.5 else theme.ATTENTION)
+            y += 34 * s
+        y += 8 * s
+        y = self._side_text(c, list(rep.advice), m, y, s, w - 2 * m, theme.SMALL, theme.ATTENTION)
+        self._side_text(c, [self.message], m, y + 6 * s, s, w - 2 * m, theme.SMALL, self.message_colour)
+
     def _draw_buttons(self, c, w: float, h: float, s: float) -> None:
-        n = len(BUTTONS)
+        n = len(self.buttons)
         gap = 14 * s
         bw = (w - 2 * theme.MARGIN * s - (n - 1) * gap) / n
         bh = 64 * s
         y = h - bh - 18 * s
         self._buttons = [(theme.MARGIN * s + i * (bw + gap), y, bw, bh) for i in range(n)]
-        for (label, key), rect in zip(BUTTONS, self._buttons):
+        for (label, key), rect in zip(self.buttons, self._buttons):
             on = label == "Auto" and self.auto
             c.rect(rect, theme.ACCENT_DARK if on else theme.PANEL, radius=12 * s, border=2 * s, border_colour=theme.PANEL_EDGE)
             c.text(f"{label} ({key})", (rect[0] + rect[2] / 2, rect[1] + rect[3] / 2), round(theme.SMALL * s),

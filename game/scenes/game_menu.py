@@ -22,7 +22,7 @@ from typing import Callable, Sequence
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
-from game.exergames.limits import LABELS, LIMIT_KEYS, describe, load_limits, save_limits, step_limit
+from game.exergames.limits import LABELS, LIMIT_KEYS, describe, load_limits, save_limits, step_limit, whose
 from game.exergames.spec import GameSpec, TherapistLimits, load_all_games
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -206,8 +206,11 @@ class ChooseGameScene(BaseScene):
                 focus = self.column == j + 1
                 c.rect(rect, theme.PANEL, radius=14 * s, border=3 * s,
                        border_colour=theme.ACCENT if focus else theme.PANEL_EDGE)
-                c.text(LABELS[key], (rect[0] + 18 * s, rect[1] + 5 * s), round(theme.SMALL * s), theme.TEXT_DIM)
-                c.text(describe(g, lim, key), (rect[0] + 18 * s, rect[1] + 30 * s), round(theme.BODY * s),
+                room = min(minus[0], plus[0]) - r - 10 * s - (rect[0] + 18 * s)   # left of the - and +
+                label, label_size = c.fit(f"{LABELS[key]}: {whose(lim, key)}", round(theme.SMALL * s), room)
+                c.text(label, (rect[0] + 18 * s, rect[1] + 5 * s), label_size, theme.TEXT_DIM)
+                value, value_size = c.fit(describe(g, lim, key), round(theme.BODY * s), room)
+                c.text(value, (rect[0] + 18 * s, rect[1] + 30 * s), value_size,
                        theme.TEXT if getattr(lim, key) is not None else theme.TEXT_FAINT)
                 for centre, sign in ((minus, "-"), (plus, "+")):
                     c.circle(centre, r, (*theme.ACCENT_DARK, 255), border=2 * s, border_colour=theme.ACCENT)

@@ -33,7 +33,7 @@ from game.exergames.spec import GameSpec
 from game.exergames.river import river_for
 from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
 from game.gfx import theme
-from game.gfx.view3d import Viewport, pointer_ray, project_px
+from game.gfx.view3d import Viewport, intersect_plane, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.scenes.live import MIN_KNOWN_MARKERS
 from game.scenes.river_view import RiverView
@@ -51,6 +51,8 @@ FLASH_S = 0.8
 GOOD = (120, 220, 120)
 #: The camera is re-aimed when the pelvis moved this far.
 CAMERA_REAIM_M = 0.08
+#: The forearm's rotation the keys and the mouse ask for stays within this (degrees either way).
+FOREARM_LIMIT_DEG = 85.0
 
 
 def level_shown(level: float) -> int:
@@ -209,6 +211,7 @@ class GameScene(BaseScene):
         self._forearm_deg = 0.0
         self._turn = 0
         self._hand_target = None
+        self._pointer_px: tuple[float, float] | None = None
         self.view_m = self.proj_m = None
         self._camera_pelvis = None
         self._prepared = None  # the avatar and targets of this frame (prepare -> render_3d)
@@ -276,29 +279,65 @@ class GameScene(BaseScene):
         elif event.action is Action.NEXT_MOTION:
             self.auto = not self.auto
 
+    def _arm_frame(self):
+        """The arm's geometry the mouse aims with: the session's baseline, or before it (getting
+        ready) the last reading's, so that the mouse can bring the arm into the start position."""
+        s = self.session
+        if s.frame is not None:
+            return s.frame
+        return s.last.frame if s.last is not None else None
+
     def _aim(self, x_px: float, y_px: float) -> None:
-        """The mouse moves the simulated hand on a vertical plane through the target (or the rest position)."""
+        """The mouse moves the simulated hand.
+
+        Reach: on a vertical plane through the target (or the rest position). The games with a
+        posture (the elbow at the side, bent like an L) keep the arm in it wherever the pointer is:
+        in the rotation game the hand goes where the pointer is across the view, its forearm swinging
+        within the river's banks (the measured range and a little beyond, as the boat goes where
+        the pointer is on the river); in the key game
+        the pointer's position across the view turns the forearm (as Q/E do).
+        """
+        self._pointer_px = (x_px, y_px)
         v = self.view
         s = self.session
-        if self.river_view is not None and s.frame is not None:
+        frame = self._arm_frame()
+        if frame is None:
+            return
+        if self.river_view is not None:
             rx, ry, rw, rh = self.river_view.rect
             if rx <= x_px < rx + rw and ry <= y_px < ry + rh:   # on the river: the boat goes where the mouse is
                 rotation = self.river_view.rotation_at_px(self.river, x_px)
-                self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(s.frame, rotation))
+                self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(frame, rotation))
                 return
-        if self.proj_m is None or s.frame is None or not (v.x <= x_px < v.x + v.w):
+        if self.proj_m is None or not (v.x <= x_px < v.x + v.w):
+            return
+        if self.spec.kind == "forearm":
+            across = (x_px - v.x) / v.w * 2.0 - 1.0          # -1 at the view's left edge .. +1 at its right
+            mirror = 1.0 if self.side == "right" else -1.0   # as the gauge: the right arm's palm up to the right
+            self._forearm_deg = float(np.clip(mirror * across * 90.0, -FOREARM_LIMIT_DEG, FOREARM_LIMIT_DEG))
+            self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(frame, 0.0))
+            return
+        if self.spec.kind == "rotation":
+            # the rotation (within the river's banks) whose hand is drawn nearest the pointer, across
+            rotations = np.arange(self.river.in_deg, self.river.out_deg + 0.5, 1.0)
+            hands = np.array([elbow_at_side_hand_m(frame, r) for r in rotations])
+            xs = project_px(hands, self.proj_m @ self.view_m, v)[:, 0]
+            if not np.isfinite(xs).any():
+                return
+            rotation = float(rotations[np.nanargmin(np.abs(xs - x_px))])
+            self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(frame, rotation))
             return
         origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
-        anchor = s.target.hand_m if s.target is not None else elbow_at_side_hand_m(s.frame, 0.0)
-        normal = s.frame.trunk[:, 2]
-        denom = float(direction @ normal)
-        if abs(denom) < 1e-9:
-            return
-        hit = origin + float((anchor - origin) @ normal) / denom * direction
-        self._hand_target = tuple(float(x) for x in hit)
+        anchor = s.target.hand_m if s.target is not None else elbow_at_side_hand_m(frame, 0.0)
+        hit = intersect_plane(origin, direction, anchor, frame.trunk[:, 2])
+        if hit is not None:
+            self._hand_target = tuple(float(x) for x in hit)
 
     def update(self, dt_s: float) -> None:
-        self._forearm_deg = float(np.clip(self._forearm_deg + self._turn * 90.0 * dt_s, -85.0, 85.0))
+        self._forearm_deg = float(np.clip(self._forearm_deg + self._turn * 90.0 * dt_s, -FOREARM_LIMIT_DEG,
+                                          FOREARM_LIMIT_DEG))
+        if self._hand_target is None and self._pointer_px is not None and not self.auto:
+            self._aim(*self._pointer_px)   # the pointer moved before the arm was seen: aim now
         self._since_sent_s += dt_s
         if self._since_sent_s < INPUT_PERIOD_S - 1e-9:
             return
@@ -346,7 +385,7 @@ class GameScene(BaseScene):
             if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
                 self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))
             reading, reason = self._read[1]
-        self.session.update(now, reading, reason)
+        self.session.update(now, reading, reason, demo=self.auto)
         for cue in self.session.take_cues():
             self._cue(cue, now)
         if self.river_view is not None:
@@ -452,7 +491,8 @@ class GameScene(BaseScene):
         x = self.panel_x + 30 * s
         right = w - theme.MARGIN * s
         y = theme.MARGIN * s
-        c.text(self.spec.title, (x, y), round(theme.MEDIUM * s), theme.TEXT)
+        title, title_size = c.fit(self.spec.title, round(theme.MEDIUM * s), right - x)
+        c.text(title, (x, y), title_size, theme.TEXT)
         y += 48 * s
         c.text(f"Patient {self.patient_id}, {self.side} arm" + ("   (demo: plays by itself)" if self.auto else ""),
                (x, y), round(theme.SMALL * 0.85 * s), theme.TEXT_DIM)
@@ -486,8 +526,12 @@ class GameScene(BaseScene):
         for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
             c.text(line, (x, y), size, theme.TEXT_DIM)
             y += 30 * s
-        c.text("Esc: end and save   Q/E: turn forearm   M: demo on/off", (x, h - 20 * s), round(theme.SMALL * 0.75 * s),
-               theme.TEXT_FAINT, anchor="bottomleft")
+        keys_size = round(theme.SMALL * 0.75 * s)   # on two lines where one does not fit (not smaller)
+        lines = c.wrap("Mouse: move the arm   Q/E: turn forearm   M: demo on/off   Esc: end and save", keys_size,
+                       right - x)[:2]
+        for k, line in enumerate(reversed(lines)):
+            c.text(line.strip(), (x, h - 20 * s - k * (keys_size + 6 * s)), keys_size, theme.TEXT_FAINT,
+                   anchor="bottomleft")
 
     def _draw_gauge(self, c, x: float, y: float, right: float) -> float:
         """The rotation range as a half dial: the measured range, the target, the arm now."""
@@ -513,13 +557,16 @@ class GameScene(BaseScene):
                 c.circle(at(t.target.value_deg + dv, r), 9 * s, (*sess.spec.colour, 235))
         v = sess.value_now()
         if math.isfinite(v):
+            needle = min(max(v, lo), hi)   # beyond the dial's ends it would point down, over the text below
             for k in range(1, 9):
-                c.circle(at(v, r * k / 9), 5 * s, theme.TEXT)
-            c.circle(at(v, r), 12 * s, GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
+                c.circle(at(needle, r * k / 9), 5 * s, theme.TEXT)
+            c.circle(at(needle, r), 12 * s,
+                     GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
             c.text(f"{round(v):d}\N{DEGREE SIGN}", (cx, cy + 6 * s), round(theme.BODY * s), theme.TEXT, anchor="midtop")
         words = ("in", "out") if sess.spec.kind == "rotation" else ("palm down", "palm up")
-        c.text(words[0], at(lo, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
-        c.text(words[1], at(hi, r + 22 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="center")
+        for v_end, word in ((lo, words[0]), (hi, words[1])):   # under the dial's ends, clear of its dots
+            ex, ey = at(v_end, r)
+            c.text(word, (ex, max(ey, cy) + 14 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="midtop")
         return cy + 50 * s
 
     def _draw_banner(self, c) -> None:

@@ -2,8 +2,9 @@
 
 Entries are handed in (:class:`MenuEntry`), so that a mode added later (ROM test, games,
 progress) plugs in with one line where the application is assembled
-(:func:`game.scenes.build_home`). Keyboard: Up/Down (or W/S) choose, Enter/Space open, Esc quits.
-Mouse: hovering chooses, a click opens.
+(:func:`game.scenes.build_home`). Keyboard: Up/Down (or W/S) choose, Enter/Space open, Esc twice
+quits (one Esc too many coming back from a mode only asks). Mouse: hovering chooses, a click
+opens. A mode says "Opening ..." while it is built (:meth:`game.app.App.open`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,9 @@ class MenuEntry:
     hint: str
     open: Callable[[], BaseScene] | None
 
+
+#: A second Esc within this many seconds quits; the first only asks.
+QUIT_CONFIRM_S = 3.0
 
 BUTTON_W = 700
 BUTTON_H = 104
@@ -81,16 +85,30 @@ class HomeScene(BaseScene):
         self.selected = 0
         self._status = status
         self._glow = 0.0  # eases the highlight of the selected button in
+        self._quit_asked_s: float | None = None   # when Esc asked to quit (the app's clock)
 
     def _rects(self) -> list[Rect]:
         return menu_rects(self.app.screen.size_px, len(self.entries))
 
     def activate(self, index: int) -> None:
         entry = self.entries[index]
+        self._quit_asked_s = None
         if entry.open is None:
             self.app.quit()
         else:
-            self.app.push(entry.open())
+            self.app.open(entry.open, f"Opening {entry.label}...")
+
+    def ask_quit(self) -> None:
+        """Esc: the first asks, a second within ``QUIT_CONFIRM_S`` quits."""
+        now = self.app.clock()
+        if self._quit_asked_s is not None and now - self._quit_asked_s <= QUIT_CONFIRM_S:
+            self.app.quit()
+        else:
+            self._quit_asked_s = now
+
+    @property
+    def quit_asked(self) -> bool:
+        return self._quit_asked_s is not None and self.app.clock() - self._quit_asked_s <= QUIT_CONFIRM_S
 
     def _select(self, index: int) -> None:
         if index != self.selected:
@@ -108,7 +126,7 @@ class HomeScene(BaseScene):
             elif event.action is Action.SELECT:
                 self.activate(self.selected)
             elif event.action is Action.BACK:
-                self.app.quit()
+                self.ask_quit()
         elif isinstance(event, Pointer) and event.kind in (PointerKind.MOVE, PointerKind.PRESS):
             w, h = self.app.screen.size_px
             index = hit(self._rects(), event.x * w, event.y * h)
@@ -147,8 +165,12 @@ class HomeScene(BaseScene):
             c.text(entry.hint, (x + 36 * scale, y + bh - 16 * k), round(theme.SMALL * k),
                    theme.TEXT_DIM if chosen else theme.TEXT_FAINT, anchor="bottomleft")
         footer_y = h - 24 * scale
-        c.text("Up / Down to choose, Enter to open, Esc to quit; or use the mouse", (w / 2, footer_y),
-               round(theme.SMALL * scale), theme.TEXT_FAINT, anchor="midbottom")
+        if self.quit_asked:
+            c.text("Press Esc again to quit", (w / 2, footer_y), round(theme.BODY * scale), theme.ATTENTION,
+                   anchor="midbottom")
+        else:
+            c.text("Up / Down to choose, Enter to open, Esc twice to quit; or use the mouse", (w / 2, footer_y),
+                   round(theme.SMALL * scale), theme.TEXT_FAINT, anchor="midbottom")
         if self._status is not None:
             line = self._status()
             if line:

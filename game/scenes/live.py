@@ -31,6 +31,7 @@ from game.gfx import theme
 from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspective, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
+from tracking.angles import joint_angles
 
 log = logging.getLogger(__name__)
 
@@ -238,6 +239,8 @@ class LiveScene(BaseScene):
         self.control = PatientControl()
         self.avatar = None
         self._sent_input = None
+        self._shown_for = None  # the sample whose angles _shown holds
+        self._shown: dict[str, float] = {}
         self._sample_clock_s = math.nan   # app clock when the newest sample arrived
         self._since_sent_s = 0.0
         self._last_shoulder_m: dict[str, np.ndarray] = {}   # per side
@@ -390,10 +393,18 @@ class LiveScene(BaseScene):
                 c.circle((x, y), 5.5 * s, colour, border=1.5 * s, border_colour=(20, 24, 30))
 
     def _angle(self, sample, name: str) -> float:
-        names = self.link.angle_names
-        if sample is None or name not in names:
+        """The sample's angle as a person reads it: where the tracker gives a value, the same
+        angle withheld near its plane's normal and continued past 180 (``near_singular=
+        "withhold"``): the spec's wrapped value jumped by up to 360 degrees there."""
+        if sample is None or name not in self.link.angle_names:
             return math.nan
-        return float(sample.angles_deg[names.index(name)])
+        if self._shown_for is not sample:
+            self._shown_for = sample
+            names = self.link.angle_names
+            live = joint_angles(sample.positions_m, self.link.markerset.names, near_singular="withhold")
+            self._shown = {n: float(live[n]) if n in live and math.isfinite(sample.angles_deg[i])
+                           else float(sample.angles_deg[i]) for i, n in enumerate(names)}
+        return self._shown[name]
 
     def _draw_panel(self, frame: Frame, sample) -> None:
         c, s = frame.canvas, self.layout.scale
@@ -408,7 +419,8 @@ class LiveScene(BaseScene):
         else:
             title = "Live"
             mode = "From the cameras" if self.source_kind == "cameras" else "From a recording"
-        c.text(title, (x, y), round(theme.LARGE * s), theme.TEXT)
+        title, title_size = c.fit(title, round(theme.LARGE * s), right - x)
+        c.text(title, (x, y), title_size, theme.TEXT)
         y += 58 * s
         c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
@@ -451,8 +463,9 @@ class LiveScene(BaseScene):
             x += w + 44 * s
         error_mm = truth_error_mm(sample.positions_m, sample.truth_m, status)
         if math.isfinite(error_mm):
-            c.text(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
-                   (pos[0], pos[1] + 34 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT)
+            text, size = c.fit(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
+                               round(theme.SMALL * 0.8 * s), right - pos[0])
+            c.text(text, (pos[0], pos[1] + 34 * s), size, theme.TEXT_FAINT)
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""

@@ -4,7 +4,8 @@ Shared by the ROM test and the progress review: the scene lists the patients of 
 (``P001``, their sessions and last session date; no names exist anywhere) and hands the chosen ID
 to ``then(patient_id)``, which makes the next scene (it replaces the picker, so Esc there comes
 back to the home screen). "New patient" adds the next free ID (:func:`next_patient_id`) and
-chooses it. Keyboard: Up/Down choose, Enter opens, Esc goes back; mouse: hover and click.
+chooses it; the first existing patient is chosen when the picker opens, so that Enter never adds
+one by mistake. Keyboard: Up/Down choose, Enter opens, Esc goes back; mouse: hover and click.
 
 The database is opened for each read or write (:class:`game.db.Database`, path handed in), so the
 picker holds no connection while other scenes run.
@@ -73,6 +74,7 @@ class PatientsScene(BaseScene):
         self.selected = 0
         self.first = 0
         self.error = ""
+        self._chosen = False   # the user moved the selection (a reload keeps it)
 
     # ------------------------------------------------------------------ data
     def enter(self, app) -> None:
@@ -89,6 +91,8 @@ class PatientsScene(BaseScene):
             self.error = ""
         except RehabError as exc:
             self.patients, self.error = [], str(exc)
+        if not self._chosen and self.allow_new and self.patients:
+            self.selected = 1   # the first patient, not "New patient": Enter must not add one by mistake
         self.selected = min(self.selected, max(len(self.entries) - 1, 0))
 
     @property
@@ -112,7 +116,7 @@ class PatientsScene(BaseScene):
             return
         label = entries[index]
         patient_id = self.add_patient() if label == NEW_PATIENT and self.allow_new else label
-        self.app.replace(self.then(patient_id))
+        self.app.open(lambda: self.then(patient_id), f"Opening patient {patient_id}...", replace=True)
 
     # ------------------------------------------------------------------ input
     def _rects(self) -> list[Rect]:
@@ -125,6 +129,7 @@ class PatientsScene(BaseScene):
         n = len(self.entries)
         if n == 0:
             return
+        self._chosen = True
         self.selected = index % n
         if self.selected < self.first:
             self.first = self.selected
@@ -154,6 +159,7 @@ class PatientsScene(BaseScene):
             if k is None:
                 return
             self.selected = self.first + k
+            self._chosen = True
             if event.kind is PointerKind.PRESS and event.button == 1:
                 self.choose(self.selected)
 

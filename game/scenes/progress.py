@@ -8,12 +8,13 @@ crosses maxima that rested on estimated markers. Below, the games' repetitions a
 session, or "No games yet".
 
 Plots are drawn by matplotlib (Agg, no pyplot state) into an RGB array once per choice and
-uploaded as one texture; the scene's colours match the application's theme.
+uploaded as one texture; the scene's colours match the application's theme. **Export report**
+(the button, or Enter) writes what ``rehab report`` writes (HTML with the plots and the table, CSV
+beside it) into ``reports/`` beside the database, readable by the user only, and says where.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -24,7 +25,7 @@ from calibration.errors import RehabError
 from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.report import HistoryLook, plot_rom_history, session_order
+from game.report import HistoryLook, plot_games, plot_rom_history, session_order
 from game.rom.session import round_to_5
 
 #: Plot colours (sRGB hex) on the application's dark background.
@@ -91,39 +92,36 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
 
 
 def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, int]) -> np.ndarray:
-    """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image."""
+    """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image; what
+    the automatic demo played is stacked on the patient's own, hatched and faded."""
     from matplotlib.figure import Figure
 
     dpi = 100
     fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
     ax1, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
-    games = sorted({r.game for r in rows})
-    width = 0.8 / max(len(games), 1)
-    palette = ("#5ec8be", "#f2be5c", "#8fb4ff", "#e87068")
-    for k, game in enumerate(games):
-        reps: dict[int, int] = defaultdict(int)
-        for r in rows:
-            if r.game == game:
-                reps[order[r.session_uid]] += r.repetitions
-        xs = sorted(reps)
-        ax1.bar([x - 0.4 + width * (k + 0.5) for x in xs], [reps[x] for x in xs], width=width, label=game,
-                color=palette[k % len(palette)])
-    minutes: dict[int, float] = defaultdict(float)
-    for r in rows:
-        minutes[order[r.session_uid]] += r.duration_s / 60.0
-    xs = sorted(minutes)
-    ax2.bar(xs, [minutes[x] for x in xs], width=0.6, color="#a3aebe")
+    handles = plot_games(ax1, ax2, rows, order, ("#5ec8be", "#f2be5c", "#8fb4ff", "#e87068"), "#a3aebe", _DIM)
+    xs = sorted({order[r.session_uid] for r in rows})
     for ax, label in ((ax1, "repetitions"), (ax2, "minutes played")):
         _style(ax)
         ax.set_xticks(xs)
         ax.set_xticklabels([f"#{x}" for x in xs])
         ax.set_title(label, color=_TEXT, fontsize=13, loc="left")
         ax.grid(True, axis="y", color=_GRID)
-    legend = ax1.legend(fontsize=11, facecolor=_BG, edgecolor=_GRID)
+    # the legend right of both plots: inside one it covered the bars
+    legend = fig.legend(handles=handles, fontsize=11, loc="center right", facecolor=_BG, edgecolor=_GRID)
     for text in legend.get_texts():
         text.set_color(_TEXT)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0.0, 0.0, _legend_share(fig, legend), 1.0))
     return _figure_rgb(fig)
+
+
+def _legend_share(fig, legend) -> float:
+    """The share of the figure's width left of a legend placed at its right edge."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    width = legend.get_window_extent(renderer).width
+    return max(0.5, 1.0 - (width + 8.0) / (fig.get_figwidth() * fig.dpi))
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,6 +130,10 @@ class TestInfo:
 
     title: str
     normal_deg: float | None
+
+
+def _inside(rect, x: float, y: float) -> bool:
+    return rect[0] <= x < rect[0] + rect[2] and rect[1] <= y < rect[1] + rect[3]
 
 
 def test_info(test: str, standard: str) -> TestInfo:
@@ -168,11 +170,15 @@ class ProgressScene(BaseScene):
         self.error = ""
         self._textures: dict[str, object] = {}
         self._shown: tuple | None = None
+        self.notice: tuple[str, tuple] = ("", theme.TEXT_DIM)   # what the export did
 
     # ------------------------------------------------------------------ data
     def enter(self, app) -> None:
         super().enter(app)
         self.load()
+        if not self.error:   # the first plots now, while "Opening ..." is on the screen (matplotlib takes seconds)
+            _, _, plot, games = self._layout()
+            self._ensure_plots(plot, games)
 
     def load(self) -> None:
         from game.db import Database
@@ -205,11 +211,40 @@ class ProgressScene(BaseScene):
         m = theme.MARGIN * s
         list_w = 330 * s
         top = 120 * s
-        rows = [(m, top + i * 58 * s, list_w, 50 * s) for i in range(len(self.tests))]
+        # every test's row fits above the key line at the bottom
+        pitch = min(58 * s, (h - 60 * s - top) / max(len(self.tests), 1))
+        rows = [(m, top + i * pitch, list_w, pitch - 8 * s) for i in range(len(self.tests))]
         plot_x = m + list_w + 24 * s
         plot = (plot_x, top, w - plot_x - m, (h - top - 60 * s) * 0.66)
         games = (plot_x, plot[1] + plot[3] + 14 * s, plot[2], h - 60 * s - plot[1] - plot[3] - 14 * s)
         return s, rows, plot, games
+
+    def export_rect(self) -> tuple[float, float, float, float]:
+        """The Export report button, top right under the standard's line."""
+        w, h = self.app.screen.size_px
+        s = min(w / 1280.0, h / 720.0)
+        bw, bh = 230 * s, 44 * s
+        return (w - theme.MARGIN * s - bw, 66 * s, bw, bh)
+
+    def export(self) -> Path | None:
+        """Write the report (HTML and CSV) into ``reports/`` beside the database; says where."""
+        from game.db import Database
+        from game.report import write_report
+        from game.db.database import utc_now
+
+        folder = self.db_path.parent / "reports"
+        out = folder / f"{self.patient_id}_{utc_now()[:10]}.html"
+        try:
+            folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+            with Database(self.db_path) as db:
+                html_path, csv_path = write_report(db, self.patient_id, out, standard=self.standard)
+            for path in (html_path, csv_path):   # patient data: readable by the user only
+                path.chmod(0o600)
+        except (RehabError, OSError) as exc:
+            self.notice = (f"Not exported: {exc}", theme.FAILURE)
+            return None
+        self.notice = (f"Exported: {html_path} (and the CSV beside it)", theme.ACCENT)
+        return html_path
 
     def _texture(self, key: str, rgb: np.ndarray):
         old = self._textures.pop(key, None)
@@ -245,8 +280,13 @@ class ProgressScene(BaseScene):
                 self.selected = (self.selected - 1) % n
             elif event.action is Action.DOWN and n:
                 self.selected = (self.selected + 1) % n
+            elif event.action is Action.SELECT and not self.error:
+                self.app.busy("Writing the report...", self.export)
             elif event.action is Action.BACK:
                 self.app.pop()
+        elif isinstance(event, Pointer) and event.kind is PointerKind.PRESS and event.button == 1 and not self.error \
+                and _inside(self.export_rect(), event.x * self.app.screen.size_px[0], event.y * self.app.screen.size_px[1]):
+            self.app.busy("Writing the report...", self.export)
         elif isinstance(event, Pointer) and event.kind in (PointerKind.MOVE, PointerKind.PRESS) and n:
             w, h = self.app.screen.size_px
             _, rows, _, _ = self._layout()
@@ -264,6 +304,29 @@ class ProgressScene(BaseScene):
         return "  ".join(parts)
 
     # ------------------------------------------------------------------ drawing
+    def row_texts(self, c, rect: tuple, test: str) -> list[tuple[str, int, tuple[float, float], str]]:
+        """A test's row of the list: (text, size, position, anchor) of its title, made to fit
+        beside the latest values (on two lines when long), and of the values."""
+        s = min(self.app.screen.size_px[0] / 1280.0, self.app.screen.size_px[1] / 720.0)
+        size = round(theme.SMALL * s)
+        values = self.latest_words(test)
+        values_w = c.measure(values, size)[0]
+        room = rect[2] - 16 * s - 14 * s - values_w - 14 * s
+        mid = rect[1] + rect[3] / 2
+        out = [(values, size, (rect[0] + rect[2] - 14 * s, mid), "midright")]
+        title = self.infos[test].title
+        if c.measure(title, size)[0] <= room:
+            return [(title, size, (rect[0] + 16 * s, mid), "midleft")] + out
+        # a long title: two lines, a little smaller (cut with an ellipsis only beyond that)
+        small = round(size * 0.85)
+        lines = c.wrap(title, small, room)
+        if len(lines) > 2:
+            lines = [lines[0], c.fit(" ".join(lines[1:]), small, room, min_size=small)[0]]
+        lines = [c.fit(line, small, room, min_size=small)[0] for line in lines]
+        step = c.measure("Ag", small)[1] * 0.95
+        top = mid - step * (len(lines) - 1) / 2
+        return [(line, small, (rect[0] + 16 * s, top + k * step), "midleft") for k, line in enumerate(lines)] + out
+
     def render_2d(self, frame: Frame) -> None:
         c = frame.canvas
         w, h = frame.size_px
@@ -283,10 +346,9 @@ class ProgressScene(BaseScene):
             chosen = i == self.selected
             if chosen:
                 c.rect(rect, (*theme.ACCENT_DARK, 255), radius=12 * s, border=3 * s, border_colour=theme.ACCENT)
-            c.text(self.infos[test].title, (rect[0] + 16 * s, rect[1] + rect[3] / 2), round(theme.SMALL * s),
-                   theme.TEXT if chosen else theme.TEXT_DIM, anchor="midleft")
-            c.text(self.latest_words(test), (rect[0] + rect[2] - 14 * s, rect[1] + rect[3] / 2),
-                   round(theme.SMALL * s), theme.TEXT if chosen else theme.TEXT_DIM, anchor="midright")
+            colour = theme.TEXT if chosen else theme.TEXT_DIM
+            for text, size, pos, anchor in self.row_texts(c, rect, test):
+                c.text(text, pos, size, colour, anchor=anchor)
         self._ensure_plots(plot, games)
         if self.tests:
             c.texture(self._textures["rom"], plot)
@@ -294,5 +356,14 @@ class ProgressScene(BaseScene):
             c.texture(self._textures["games"], games)
         else:
             c.text("No games yet.", (games[0] + 20 * s, games[1] + 20 * s), round(theme.BODY * s), theme.TEXT_DIM)
-        c.text("Up / Down: test   Esc: back   (rehab report writes this as a file)", (w / 2, h - 16 * s),
-               round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")
+        if not self.error:
+            bx, by, bw, bh = self.export_rect()
+            c.rect((bx, by, bw, bh), (*theme.ACCENT_DARK, 255), radius=12 * s, border=2 * s, border_colour=theme.ACCENT)
+            c.text("Export report", (bx + bw / 2, by + bh / 2), round(theme.BODY * s), theme.TEXT, anchor="center")
+        notice, colour = self.notice
+        if notice:
+            text, size = c.fit(notice, round(theme.SMALL * s), w - 2 * m)
+            c.text(text, (w / 2, h - 16 * s), size, colour, anchor="midbottom")
+        else:
+            c.text("Up / Down: test   Enter or the button: export the report (HTML and CSV)   Esc: back",
+                   (w / 2, h - 16 * s), round(theme.SMALL * s), theme.TEXT_FAINT, anchor="midbottom")

@@ -132,6 +132,14 @@ class RomVisit:
             self.session_started_utc = None
 
 
+def range_words(result) -> tuple[str, str]:
+    """The range moved beside the raw maximum, with the start it is counted from: "moved 157° from
+    the start" / "(the start position read -12°)" (a lone "active ROM, from start 157" beside a 145
+    result was not understood)."""
+    return (f"moved {result.range_deg:.0f}\N{DEGREE SIGN} from the start",
+            f"(the start position read {result.start_deg:.0f}\N{DEGREE SIGN})")
+
+
 def reference_line(test: RomTest, standard: str) -> str:
     """The normal value of ``standard`` in words, never another standard's: e.g. ``JARM normal 180``."""
     ref = test.reference(standard)
@@ -503,10 +511,16 @@ class RomTestScene(BaseScene):
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT
-            return f"Get into the start position: {p.message.split('(')[-1].rstrip(')')}", theme.ATTENTION
+            return f"Get into the start position: {'; '.join(p.start_problems)}", theme.ATTENTION
         if p.state == RomState.RECORDING:
             return "Move as far as you can, then come back.", theme.ACCENT
         return p.message[:1].upper() + p.message[1:], theme.ATTENTION
+
+    def status_lines(self, c, width: float) -> tuple[list[str], int, tuple]:
+        """The status line wrapped to ``width`` (at most 3 lines), its text size and colour."""
+        text, colour = self.status_line()
+        size = round(theme.BODY * self.scale)
+        return c.wrap(text, size, width)[:3], size, colour
 
     def render_2d(self, frame: Frame) -> None:
         self.consume()
@@ -514,16 +528,17 @@ class RomTestScene(BaseScene):
         x, right, bottom = self._panel()
         width = right - x
         y = theme.MARGIN * s
-        c.text(f"{self.test.title}, {self.side}", (x, y), round(theme.MEDIUM * s), theme.TEXT)
-        c.text(f"Patient {self.visit.patient_id}", (right, y + 6 * s), round(theme.SMALL * s), theme.TEXT_DIM,
-               anchor="topright")
+        patient = f"Patient {self.visit.patient_id}"
+        patient_w = c.measure(patient, round(theme.SMALL * s))[0]
+        title, title_size = c.fit(f"{self.test.title}, {self.side}", round(theme.MEDIUM * s), width - patient_w - 24 * s)
+        c.text(title, (x, y), title_size, theme.TEXT)
+        c.text(patient, (right, y + 6 * s), round(theme.SMALL * s), theme.TEXT_DIM, anchor="topright")
         y += 50 * s
         self._draw_steps(c, x, y, width)
         y += 48 * s
         y = self._draw_readout(c, x, y, right)
-        text, colour = self.status_line()
-        size = round(theme.BODY * s)
-        for line in c.wrap(text, size, width)[:3]:
+        lines, size, colour = self.status_lines(c, width)
+        for line in lines:
             c.text(line, (x, y), size, colour)
             y += 34 * s
         y += 6 * s
@@ -572,8 +587,10 @@ class RomTestScene(BaseScene):
         c.text("Maximum", (mx, y), round(theme.SMALL * s), theme.TEXT_DIM)
         if result is not None:
             c.text(f"raw {result.max_deg:.1f}\N{DEGREE SIGN}", (mx, y + 30 * s), round(theme.MEDIUM * s), theme.TEXT)
-            c.text(f"active ROM, from start {result.range_deg:.0f}\N{DEGREE SIGN}", (mx, y + 74 * s),
-                   round(theme.SMALL * s), theme.TEXT_DIM)
+            # the range moved differs from the raw maximum by the start position's own angle: say so
+            for k, line in enumerate(range_words(result)):
+                line, size = c.fit(line, round(theme.SMALL * s), right - mx)
+                c.text(line, (mx, y + (74 + 26 * k) * s), size, theme.TEXT_DIM)
         elif math.isfinite(best):
             # whole degrees while moving (never below "now"); the result is rounded to 5
             c.text(f"{round(best):d}\N{DEGREE SIGN}", (mx, y + 24 * s), round(theme.TITLE * s), theme.ACCENT)

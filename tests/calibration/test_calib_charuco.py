@@ -141,3 +141,28 @@ def test_extrinsics_from_partial_charuco_views_give_the_exact_rig():
     res = calibrate_extrinsics(intr, board, views, floor_view="seat", origin_m=seat.t_m)
     pos, ang = rig_errors(res.cameras, ring4)
     assert pos.max() < 1e-3 and ang.max() < 1e-4 and res.rms_px.max() < 1e-4
+
+
+def test_corners_of_a_distant_tilted_board_are_as_exact_as_stock_opencv():
+    """A board seen from the cameras' distance, tilted, through a barrel lens: every corner must be
+    interpolated from both its neighbouring markers (OpenCV's default); with one marker allowed, a
+    few corners came out 1.5-2.5 px off (docs/CALIBRATION.md). The plain background is harder than
+    the room's."""
+    from tracking.sim.calibration_material import extrinsics_poses, render_views, seat_board_pose
+    from tracking.sim.rigs import load_rig
+
+    board = CharucoBoard.parse("7x5", 100.0, 75.0)
+    cams = tuple(Camera(c.name, c.size_px, c.K, LENS, c.rvec, c.t_m) for c in load_rig("corners4", (640, 480))[:2])
+    poses = [*extrinsics_poses(cams, board, 4, np.random.default_rng(0)), seat_board_pose(board)]
+    backgrounds = [np.full((480, 640, 3), 110, np.uint8)] * 2
+    errors = []
+    for pose, images in zip(poses, render_views(cams, backgrounds, board, poses, seed=5)):
+        for cam, image in zip(cams, images):
+            det, why = detect_charuco(image, board)
+            assert det is not None, why
+            true = cam.project(board.object_points()[det.ids] @ pose.R.T + pose.t_m)
+            errors.append(np.linalg.norm(det.uv_px - true, axis=1))
+    e = np.concatenate(errors)
+    assert len(errors) == 2 * len(poses) and e.size >= 0.8 * board.n_corners * len(errors)
+    # seeds 0-2: minMarkers 1 gave 0.32-0.37 px RMS and worst corners 1.6-2.3 px; 2 gives 0.19-0.23 and 1.00-1.08
+    assert np.sqrt(np.mean(e ** 2)) < 0.27 and e.max() < 1.3

@@ -80,3 +80,62 @@ def test_bad_board_and_output_names_give_one_line_errors(material, tmp_path, cap
                  str(material / "truth_calibration.toml"), "--board", "9x6", "--square-mm", "60", "--floor", "nope",
                  "--out", str(tmp_path / "x.toml")]) == 1
     assert "no image named 'nope'" in capsys.readouterr().err
+
+
+def _extrinsics(material, tmp_path, *extra):
+    out = tmp_path / "c.toml"
+    code = main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics", str(material / "truth_calibration.toml"),
+                 "--board", "9x6", "--square-mm", "60", *extra, "--out", str(out)])
+    return code, out
+
+
+def test_world_frame_options_and_a_separate_floor_folder(material, tmp_path, capsys):
+    """--origin (first inner corner, negative without '='), --board-centre, --floor-views: one world frame."""
+    import shutil
+
+    truth = load_calibration(material / "truth_calibration.toml")
+    meta = yaml.safe_load((material / "material.yaml").read_text())
+    origin = np.array(meta["seat_board"]["origin_m"])
+    assert origin[0] < 0  # the simulator's board is centred on the seat: corner 0 at negative X
+    code, out = _extrinsics(material, tmp_path, "--origin", ",".join(map(str, origin)))
+    assert code == 0
+    text = capsys.readouterr().out
+    pos, ang = rig_errors(load_calibration(out), truth)
+    assert pos.max() < 10.0 and ang.max() < 0.3
+    # quiet: the images of cameras that do not face a view are summed up in one line
+    assert "(--list-skipped names them)" in text or text.count("  skipped ") <= 5
+    assert len(text.strip().splitlines()) <= 4 + 1 + 5 + 1
+    centre = origin + np.array([4 * 0.06, 0.0, 2.5 * 0.06])  # 9x6 corners of 60 mm: centre 4 and 2.5 squares in
+    assert np.allclose(centre[[0, 2]], 0.0, atol=1e-9)
+    views = tmp_path / "views"
+    floor = tmp_path / "floor"
+    for cam in truth:
+        shutil.copytree(material / "extrinsics" / cam.name, views / cam.name, ignore=shutil.ignore_patterns("seat.png"))
+        (floor / cam.name).mkdir(parents=True)
+        shutil.copy(material / "extrinsics" / cam.name / "seat.png", floor / cam.name / "seat.png")
+    out2 = tmp_path / "c2.toml"
+    assert main(["calibrate", "extrinsics", str(views), "--intrinsics", str(material / "truth_calibration.toml"), "--board",
+                 "9x6", "--square-mm", "60", "--board-centre", ",".join(map(str, centre)), "--floor-views", str(floor),
+                 "--out", str(out2)]) == 0
+    for a, b in zip(load_calibration(out), load_calibration(out2)):
+        assert np.allclose(a.centre_m, b.centre_m, atol=1e-9) and np.allclose(a.R, b.R, atol=1e-9)
+    assert main(["calibrate", "extrinsics", str(views), "--intrinsics", str(material / "truth_calibration.toml"), "--board",
+                 "9x6", "--square-mm", "60", "--out", str(out2)]) == 1
+    assert "no image named 'seat'" in capsys.readouterr().err
+    # the floor board named on its own (as after ChArUco views): the rig solved first, then placed by it
+    out3 = tmp_path / "c3.toml"
+    assert main(["calibrate", "extrinsics", str(views), "--intrinsics", str(material / "truth_calibration.toml"), "--board",
+                 "9x6", "--square-mm", "60", "--floor-views", str(floor), "--floor-board", "9x6:60",
+                 "--board-centre", ",".join(map(str, centre)), "--out", str(out3)]) == 0
+    pos, ang = rig_errors(load_calibration(out3), truth)
+    assert pos.max() < 10.0 and ang.max() < 0.3
+
+
+def test_a_held_board_taken_for_the_floor_board_is_refused(material, tmp_path, capsys):
+    """The first shared view (a board held up between two cameras) named as the floor view: the
+    world frame it gives puts cameras below the floor or facing away, and nothing is written."""
+    code, out = _extrinsics(material, tmp_path, "--floor", "000")
+    err = capsys.readouterr().err
+    assert code == 1 and not out.exists()
+    assert len(err.strip().splitlines()) == 1 and any(w in err for w in ("below the floor", "away from the floor board", "on its side"))
+    assert "--floor" in err

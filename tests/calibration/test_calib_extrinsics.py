@@ -69,6 +69,22 @@ def test_origin_and_turn_move_the_world_frame(ring4):
         assert np.linalg.norm(cam.centre_m - expected) < 2e-3
 
 
+@pytest.mark.parametrize("rig", ["ring4", "tri3", "corners4"])
+def test_every_held_board_taken_for_the_floor_board_is_refused(rig):
+    """Each shared view (a board held up between two cameras) given as the floor view: the world
+    frame it gives puts a camera below the floor or facing away, refused in one line."""
+    cams = load_rig(rig, (480, 360))
+    poses = extrinsics_poses(cams, BOARD, 2, np.random.default_rng(1))
+    seat = seat_board_pose(BOARD)
+    names = [f"{k}" for k in range(len(poses))] + ["seat"]
+    views = _projected_views(cams, [*poses, seat], names, 0.05)
+    calibrate_extrinsics(_intrinsics_only(cams), BOARD, views, floor_view="seat", origin_m=seat.t_m)  # accepted
+    for name in names[:-1]:
+        with pytest.raises(CalibrationError, match="below the floor|away from the floor board|on its side") as exc:
+            calibrate_extrinsics(_intrinsics_only(cams), BOARD, views, floor_view=name, origin_m=seat.t_m)
+        assert "\n" not in str(exc.value)
+
+
 def test_a_camera_sharing_no_view_is_named(ring4):
     poses = extrinsics_poses(ring4, BOARD, 2, np.random.default_rng(1))
     views = _projected_views(ring4, poses, [f"{k}" for k in range(len(poses))], 0.05)

@@ -58,6 +58,19 @@ def test_corners_only_in_the_middle_give_a_coverage_warning(truth_and_detections
     assert "top-left" in warning and "bottom-right" in warning and "corners of the picture" in warning
 
 
+def test_sparse_corners_everywhere_give_a_coverage_warning_that_reads_well():
+    """Every ninth of the picture holds a corner but most cells none: no empty list of regions."""
+    from calibration.intrinsics import coverage_warning
+
+    dots = np.array([[x, y] for x in (20, 240, 460) for y in (15, 180, 345)], float)
+    frac, hit = coverage_of([Detection(dots, (480, 360))], (480, 360))
+    assert frac < 0.3
+    text = coverage_warning("cam1", frac, hit)
+    assert "(gaps in every part of it)" in text and "none in the" not in text
+    hit[:2, :3] = False
+    assert "(none in the top-left)" in coverage_warning("cam1", frac, hit)
+
+
 def test_too_few_views_or_mixed_sizes_are_refused(truth_and_detections):
     _, detections = truth_and_detections
     with pytest.raises(CalibrationError, match="found in 3 images"):

@@ -82,3 +82,57 @@ def test_rendered_wand_calibrates_a_4_camera_rig_to_under_1_mm_of_wand_length():
     truth = _in_reference_frame(cams, res.reference)
     for a, b in zip(res.cameras, truth):
         assert np.linalg.norm(a.centre_m - b.centre_m) < 10e-3
+
+
+@pytest.mark.parametrize("rig", ["ring4", "tri3", "corners4"])
+def test_balls_of_one_colour_are_told_apart_by_the_rigs_geometry(rig):
+    """Exact projections (0.2 px noise), the two balls in random order in every camera and frame:
+    the cameras come to agree frame by frame, and the rig calibrates as with two colours."""
+    from calibration.wand import match_same_colour_balls
+
+    cams = load_rig(rig, (640, 480))
+    balls = wand_path(150, 10.0, seed=3)
+    uv = _projected(cams, balls, 0.2, seed=4)
+    swap = np.random.default_rng(5).random(uv.shape[:2]) < 0.5
+    shuffled = uv.copy()
+    shuffled[swap] = uv[swap][:, ::-1]
+    matched, dropped = match_same_colour_balls(_intrinsics_only(cams), shuffled)
+    kept = np.all(np.isfinite(matched), axis=(2, 3))
+    assert dropped == int((~kept).sum()) and kept.mean() > 0.8
+    for t in range(uv.shape[1]):
+        cs = np.flatnonzero(kept[:, t])
+        if len(cs) < 2:
+            continue
+        same = [np.allclose(matched[c, t], uv[c, t]) for c in cs]
+        crossed = [np.allclose(matched[c, t], uv[c, t, ::-1]) for c in cs]
+        assert all(same) or all(crossed), (t, same, crossed)
+    res = calibrate_wand(_intrinsics_only(cams), matched, 0.5)
+    truth = _in_reference_frame(cams, res.reference)
+    for a, b in zip(res.cameras, truth):
+        assert np.linalg.norm(a.centre_m - b.centre_m) < 5e-3
+        assert np.degrees(np.arccos(np.clip((np.trace(a.R @ b.R.T) - 1) / 2, -1, 1))) < 0.2
+    assert res.length_rmse_mm < 1.0
+
+
+def test_rendered_wand_of_one_colour_without_meta_file_through_the_command(tmp_path, capsys):
+    """Two yellow balls, no meta.yaml (the frame rate from the videos): rehab calibrate wand."""
+    from calibration.files import load_calibration, save_calibration_toml
+    from game.cli import main
+    from tracking.sim.calibration_material import write_wand_sequence
+
+    cams = load_rig("ring4", (480, 360))
+    yellow = (WAND_COLOURS_RGB255[0], WAND_COLOURS_RGB255[0])
+    write_wand_sequence(tmp_path / "wand", cams, wand_path(80, 4.0, seed=1), 12.0, colours_rgb255=yellow)
+    (tmp_path / "wand" / "meta.yaml").unlink()
+    intr = tmp_path / "intrinsics.toml"
+    save_calibration_toml(intr, _intrinsics_only(cams))
+    out = tmp_path / "wand.toml"
+    assert main(["calibrate", "wand", str(tmp_path / "wand"), "--intrinsics", str(intr), "--length-mm", "500",
+                 "--colour", ",".join(map(str, yellow[0])), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "balls of one colour told apart" in text
+    assert float(text.split("wand length error ")[1].split(" mm")[0]) < 1.0
+    got = load_calibration(out)
+    ref = next(k for k, c in enumerate(got) if np.allclose(c.R, np.eye(3)) and not np.any(c.t_m))
+    for a, b in zip(got, _in_reference_frame(cams, ref)):
+        assert np.linalg.norm(a.centre_m - b.centre_m) < 10e-3

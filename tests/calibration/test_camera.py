@@ -396,7 +396,8 @@ def test_from_rotation_keeps_a_tiny_tilt():
 @settings(max_examples=25, deadline=None)
 @given(st.data())
 def test_camera_stack_projects_and_undistorts_like_each_camera(data):
-    """CameraStack (the tracker's fast path) gives each camera's own numbers, bit for bit."""
+    """CameraStack (the tracker's fast path) gives each camera's own numbers (to 1e-9 px and m: the
+    batched and the per-camera arithmetic may round the last bit differently)."""
     cams = [data.draw(cameras(distorted=d, skew=k)) for d, k in ((False, False), (True, False), (True, True),
                                                                   (False, True))]
     cams.append(simple_camera(dist=np.array([0.1, -0.05, 0.001, -0.002, 0.01, 0.02, 0.0, 0.001])))  # rational
@@ -406,9 +407,9 @@ def test_camera_stack_projects_and_undistorts_like_each_camera(data):
     uv, depth = stack.project(p)
     assert uv.shape == (len(p), len(cams), 2) and depth.shape == (len(p), len(cams))
     for c, cam in enumerate(cams):
-        np.testing.assert_array_equal(uv[:, c], cam.project(p))
-        np.testing.assert_array_equal(depth[:, c], cam.world_to_camera(p)[:, 2])
-        np.testing.assert_array_equal(stack.world_to_cameras(p)[:, c], cam.world_to_camera(p))
+        np.testing.assert_allclose(uv[:, c], cam.project(p), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(depth[:, c], cam.world_to_camera(p)[:, 2], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(stack.world_to_cameras(p)[:, c], cam.world_to_camera(p), rtol=0, atol=1e-9)
     xn = stack.undistort_points(uv)
     for c, cam in enumerate(cams):
         seen = np.isfinite(uv[:, c]).all(axis=1)

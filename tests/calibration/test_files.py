@@ -171,14 +171,14 @@ def test_toml_names_are_escaped(tmp_path):
     assert load_calibration(tmp_path / "c.toml")[0].name == 'left "A" \\ é'
 
 
-def test_fisheye_cameras_round_trip_only_when_allowed(tmp_path):
+def test_fisheye_cameras_round_trip(tmp_path):
+    """Fisheye cameras are projected with their own model (tests/calibration/test_foreign.py)."""
     cams = random_cameras(np.random.default_rng(2), 2, dist_len=4)
     cams[1] = Camera("cam2", cams[1].size_px, cams[1].K, cams[1].dist, cams[1].rvec, cams[1].t_m, fisheye=True)
     for name in ("c.toml", "c.yaml"):
         path = tmp_path / name
         (save_calibration_toml if name.endswith("toml") else save_calibration_opencv)(path, cams)
-        load_error(path, "'cam2'", "fisheye", "pinhole")
-        assert [c.fisheye for c in load_calibration(path, allow_fisheye=True)] == [False, True]
+        assert [c.fisheye for c in load_calibration(path)] == [False, True]
 
 
 @pytest.mark.parametrize("suffix", [".yaml", ".yml", ".xml"])
@@ -432,7 +432,9 @@ def test_opencv_layout_errors(tmp_path):
     one = HAND_YAML.split("   - image_width")[0]
     load_error(write(tmp_path, "one.yaml", one), "holds 1 camera", "2 or more")
     single = "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ncamera_matrix: [ 600., 0., 320., 0., 600., 240., 0., 0., 1. ]\n"
-    load_error(write(tmp_path, "single.yaml", single), "single camera", "'cameras' sequence")
+    load_error(write(tmp_path, "single.yaml", single), "lacks 'distortion_coefficients'")
+    load_error(write(tmp_path, "single2.yaml", single + "distortion_coefficients: [ 0.1, 0., 0., 0. ]\n"),
+               "one camera's lens data", "rehab calibrate import")
     load_error(write(tmp_path, "other.yaml", "%YAML:1.0\n---\nfoo: 1\n"), "no 'cameras' sequence")
     load_error(write(tmp_path, "map.yaml", "%YAML:1.0\n---\ncameras:\n  a: 1\n"), "'cameras' must be a sequence")
     load_error(write(tmp_path, "item.yaml", "%YAML:1.0\n---\ncameras: [ 1, 2 ]\n"), "cameras[0]", "map")

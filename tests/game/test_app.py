@@ -129,6 +129,27 @@ def test_run_holds_max_fps_on_average_when_sleeps_wake_late_and_some_frames_are_
     assert summary.frames == pytest.approx(120, abs=2)
 
 
+def test_the_run_reports_its_frame_intervals_and_where_the_longest_went(screen):
+    """One frame of 60 spends 250 ms in the scene's prepare: the summary's longest interval is it,
+    named by its stage, and the 99th percentile sees it too."""
+    clock = FakeClock()
+
+    class Stalling(BaseScene):
+        n = 0
+
+        def prepare(self, frame: Frame):
+            Stalling.n += 1
+            clock.now_s += 0.25 if Stalling.n == 30 else 0.005
+
+    app = App(screen, Settings(max_fps=0, show_fps=False), clock=clock, sleep=clock.sleep, events=lambda: [])
+    app.push(Stalling())
+    summary = app.run(frames=60)
+    assert summary.interval_max_ms == pytest.approx(250.0, abs=1.0)
+    assert summary.slowest.startswith("prepare 250")
+    assert summary.interval_p99_ms == pytest.approx(250.0, abs=1.0)   # 1 of 59 intervals: above the 98th
+    assert "longest 250 ms (prepare 250)" in summary.line()
+
+
 def test_scene_stack_push_pop_replace_and_quit(screen):
     clock = FakeClock()
     app = App(screen, Settings(), clock=clock, events=lambda: [])

@@ -80,8 +80,8 @@ def test_the_scene_calibrates_cameras_read_through_opencv(open_headless, videos,
         assert result is not None and result.rms_px < 0.5
         assert abs(result.camera.K[0, 0] / TRUTH.K[0, 0] - 1) < 0.015
         app.dispatch(Press(Action.SWITCH_ARM))
-    app.dispatch(Press(Action.DOWN))
-    assert len(load_calibration(scene.saved_path)) == 2
+    app.dispatch(Press(Action.DOWN))   # S: the lens data, under their own name
+    assert len(load_calibration(scene.lens_path)) == 2 and scene.lens_path.name == "intrinsics.toml"
     released = [f._capture for f in feeds]
     app.dispatch(Press(Action.BACK))
     assert not any(cap.isOpened() for cap in released)  # the cameras are free for the tracker again

@@ -157,3 +157,36 @@ def test_play_command_opens_the_progress_scene_and_refuses_an_unknown_patient(sc
     background = np.array([27, 33, 43])
     expected = background + 0.3 * (band_rgb() - background)
     assert ((np.abs(rgb - expected).sum(axis=2) < 14).sum(axis=1) > 200).sum() >= 5   # the normal band
+
+
+def test_the_export_button_writes_the_report_beside_the_database(screen, tmp_path):
+    """A click on Export report writes the HTML report and its CSV into reports/ beside the
+    database, readable by the user only, and the screen says where (the review once pointed to
+    the command line)."""
+    import os
+    import stat
+
+    from game.input import Pointer, PointerKind
+
+    path = tmp_path / "db.sqlite3"
+    fill(path, games=True)
+    app = App(screen, Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    scene = ProgressScene(path, "P001")
+    app.push(scene)
+    try:
+        app.frame()
+        x, y, w, h = scene.export_rect()
+        app.dispatch(Pointer(PointerKind.PRESS, (x + w / 2) / SIZE[0], (y + h / 2) / SIZE[1], button=1))
+        (html,) = (tmp_path / "reports").glob("P001_*.html")
+        (csv_file,) = (tmp_path / "reports").glob("P001_*.csv")
+        assert "Shoulder flexion" in html.read_text(encoding="utf-8") and csv_file.stat().st_size > 100
+        for f in (html, csv_file):
+            assert stat.S_IMODE(os.stat(f).st_mode) == 0o600
+        assert stat.S_IMODE(os.stat(tmp_path / "reports").st_mode) == 0o700
+        assert scene.notice[0] == f"Exported: {html} (and the CSV beside it)"
+        app.dispatch(Press(Action.SELECT))                     # Enter exports too (the same file again)
+        assert scene.notice[0].startswith("Exported:")
+        app.frame()
+    finally:
+        app.close()

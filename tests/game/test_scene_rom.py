@@ -144,9 +144,11 @@ def test_patient_picker_lists_ids_adds_a_new_one_and_opens_the_next_scene(screen
     picker = PatientsScene(db_path, Next, title="ROM test: choose the patient")
     app.push(picker)
     assert picker.entries == [NEW_PATIENT, "P001"]
-    app.dispatch(Press(Action.DOWN))
+    assert picker.selected == 1                            # the patient, not "New patient": Enter adds none
     app.dispatch(Press(Action.SELECT))
     assert opened == ["P001"] and isinstance(app.scene, Next)
+    with Database(db_path) as db:
+        assert [p.id for p in db.patients()] == ["P001"]
     # new patient: the next ID is added to the database and chosen (mouse click on the first row)
     picker = PatientsScene(db_path, Next, title="again")
     app.push(picker)
@@ -335,3 +337,28 @@ def test_a_maximum_on_estimated_markers_is_marked_and_stored_so(screen, db_path)
         (row,) = db.rom_results("P001")
     assert row.estimated_markers == "MRE2" and row.test == "shoulder_extension"
     assert "estimated markers" in previous_line(row)
+
+
+@pytest.mark.parametrize("size", [(1280, 720), (1600, 1000)])
+def test_the_start_message_names_each_angle_with_its_value_and_range(open_headless, db_path, size):
+    """Shoulder external rotation with the arm hanging: the message says which angles are off, with
+    their values and ranges, in full (it once lost the first angle's name and value where it was
+    split at the first parenthesis) and fits the panel at the window's size."""
+    screen = open_headless(size)
+    link = MotionLink()
+    app = make_app(screen, link)
+    scene = RomTestScene(link, RomVisit(db_path, "P001"), load_rom_test("shoulder_external_rotation"), "right")
+    app.push(scene)
+    link.set_motion(None)                                   # the reference pose: the elbow straight
+    for _ in range(4):
+        link.queue(2)
+        app.frame()
+    assert scene.state == RomState.CHECKING_START
+    elbow = joint_angles(link.latest.truth_m, link.markerset.names)["right_elbow_flexion"]
+    text, _ = scene.status_line()
+    assert text == (f"Get into the start position: elbow flexion {elbow:.0f} (needs 65 to 115); "
+                    "shoulder external rotation not measured")
+    x, right, _ = scene._panel()
+    lines, text_size, _ = scene.status_lines(app.canvas, right - x)
+    assert " ".join(lines) == text                         # nothing cut off
+    assert all(app.canvas.measure(line, text_size)[0] <= right - x for line in lines)

@@ -63,10 +63,52 @@ def test_keyboard_navigation_opens_modes_and_comes_back(app):
     assert not app.running
 
 
-def test_escape_on_home_quits(app):
-    home_for(app)
-    app.dispatch(Press(Action.BACK))
-    assert not app.running
+def test_escape_on_home_asks_first_and_a_second_escape_quits(monkeypatch):
+    """One Esc too many (coming back from a mode) only asks; a second within 3 s quits, a second
+    later than that asks again."""
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    try:
+        screen = open_screen(SIZE, "test", headless=True)
+    except GraphicsUnavailable as exc:  # pragma: no cover - depends on the machine
+        pytest.skip(str(exc))
+    now = [0.0]
+    app = App(screen, Settings(show_fps=False), clock=lambda: now[0], events=lambda: [])
+    try:
+        home = home_for(app)
+        app.dispatch(Press(Action.BACK))
+        assert app.running and home.quit_asked
+        app.frame()
+        words = screen.read_rgb().astype(int)[SIZE[1] - 40:, :]
+        assert (np.abs(words - theme.ATTENTION).max(axis=2) < 40).sum() > 50   # "Press Esc again to quit"
+        now[0] = 5.0                                          # too late: asks again
+        app.dispatch(Press(Action.BACK))
+        assert app.running and home.quit_asked
+        now[0] = 6.0
+        app.dispatch(Press(Action.BACK))
+        assert not app.running
+    finally:
+        app.close()
+        screen.close()
+
+
+def test_opening_a_mode_says_so_while_it_is_built(app):
+    """A mode that takes a while to build: the screen shows "Opening ..." over the home screen
+    while it is built, then the mode is on top."""
+    seen = []
+
+    def slow():
+        rgb = app.screen.read_rgb().astype(int)
+        h, w = rgb.shape[:2]
+        middle = rgb[h // 2 - 20:h // 2 + 20, w // 2 - 150:w // 2 + 150]
+        seen.append(int((middle.min(axis=2) > 200).sum()))   # light text of the words in the middle
+        return Mode("slow")
+
+    home = HomeScene([MenuEntry("Slow mode", "takes seconds", slow), MenuEntry("Quit", "", None)])
+    app.push(home)
+    app.frame()
+    app.dispatch(Press(Action.SELECT))
+    assert isinstance(app.scene, Mode) and app.scene.name == "slow"
+    assert seen and seen[0] > 50
 
 
 def test_mouse_hover_selects_and_click_opens(app):

@@ -19,7 +19,7 @@ from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
 from tracking.angles import ANGLE_COLUMNS, joint_angles
 from tracking.live import LiveSample
 from tracking.markerset import load_markerset
-from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, reference_pose
+from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 
 SIZE = (640, 360)
 
@@ -278,6 +278,27 @@ def test_marker_counts_and_estimated_markers_are_drawn(screen):
     assert near(amber, *xy[6]) > 5 and near(teal, *xy[0]) > 5
     lost = project_px(link.latest.truth_m[[12]], scene.proj_m @ scene.view_m, live_layout(SIZE).view)[0]
     assert near(teal, *lost, r=2) == 0 and near(amber, *lost, r=2) == 0
+
+
+def test_a_planar_angle_near_its_singular_pose_reads_continued_not_wrapped(screen):
+    """The left arm raised high and out, the trunk leaning 24 degrees forward: relative to the
+    trunk the arm points up, out and a little back. The spec's wrapped flexion (the sample's) is
+    about -140; the live view shows it continued past 180, and withholds flexion of an arm
+    pointing sideways (where every value occurs within a few degrees), as `rehab play` showed
+    "-138" before."""
+    app, scene, link, clock = make_app(screen)
+    up_out = np.array([np.sin(np.radians(160.0)), -np.cos(np.radians(160.0)), 0.0])
+    arm = ArmPose.from_direction(np.array([up_out[0], up_out[1], 0.45]) / np.linalg.norm([up_out[0], up_out[1], 0.45]))
+    sample = link.feed(Pose(trunk_forward_lean_deg=24.0, left=arm))
+    run_frames(app, clock)
+    wrapped = float(sample.angles_deg[link.angle_names.index("left_shoulder_flexion")])
+    shown = scene._angle(link.latest, "left_shoulder_flexion")
+    assert wrapped < -90.0 and 180.0 < shown <= 225.0 and shown == pytest.approx(wrapped + 360.0)
+    sideways = link.feed(Pose(right=ArmPose.from_direction(np.array([1.0, 0.0, 0.0]))))
+    run_frames(app, clock)
+    assert np.isfinite(sideways.angles_deg[link.angle_names.index("right_shoulder_flexion")])
+    assert math.isnan(scene._angle(link.latest, "right_shoulder_flexion"))
+    assert 60.0 < scene._angle(link.latest, "right_shoulder_abduction") < 100.0  # (skin markers: ~80)
 
 
 def test_format_angle():

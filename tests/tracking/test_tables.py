@@ -155,8 +155,58 @@ def test_angles_csv_from_trc_names_missing_markers(tmp_path):
     write_trc(trc, names, np.zeros((2, len(names), 3)), 30.0)
     with pytest.raises(MissingMarkersError) as info:
         angles_csv_from_trc(trc, tmp_path / "angles.csv")
-    assert str(info.value) == "markers.trc lacks MLW2, MRW2: the angles need the upper_limb_seated names"
+    assert str(info.value).startswith("markers.trc lacks MLW2, MRW2 (it has MB, MP, ")
     assert not (tmp_path / "angles.csv").exists()
+
+
+VICON_NAMES = {"MB": "STER", "MP": "XIPH", "MRS": "RSHO", "MLS": "LSHO", "MRE1": "RELB", "MRE2": "RMEL",
+               "MLE1": "LELB", "MLE2": "LMEL", "MRW1": "RWRA", "MRW2": "RWRB", "MLW1": "LWRA", "MLW2": "LWRB",
+               "MRH": "RASI", "MLH": "LASI"}
+
+
+def test_rehab_angles_map_renames_other_marker_sets(tmp_path, capsys):
+    from game.cli import main
+
+    rng = np.random.default_rng(3)
+    p = rng.uniform(-500, 500, size=(4, 14, 3))
+    theirs = [VICON_NAMES[n] for n in REQUIRED_MARKERS]
+    trc = tmp_path / "vicon.trc"
+    write_trc(trc, ["EXTRA", *theirs[::-1]], np.concatenate([p[:, :1], p[:, ::-1]], axis=1), 100.0)
+    mapping = tmp_path / "map.yaml"
+    mapping.write_text("".join(f"{ours}: {name}  # the file's name\n" for ours, name in VICON_NAMES.items()))
+    assert main(["angles", str(trc), "--out", str(tmp_path / "a.csv"), "--map", str(mapping)]) == 0
+    table = read_angles_csv(tmp_path / "a.csv")
+    expected = joint_angles(p, REQUIRED_MARKERS)
+    for c in ANGLE_COLUMNS:
+        np.testing.assert_allclose(table.angles[c], expected[c], atol=2e-3, equal_nan=True)
+    # without the map: wanted and found names in one line
+    assert main(["angles", str(trc), "--out", str(tmp_path / "b.csv")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "lacks MB, MP," in err and "(it has EXTRA, RASI, LASI," in err and "--map" in err
+    # a map naming a marker the file lacks
+    mapping.write_text("MB: STERNUM\nMP: XIPH\n")
+    assert main(["angles", str(trc), "--out", str(tmp_path / "c.csv"), "--map", str(mapping)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "lacks STERNUM (for MB) named in the --map file (it has EXTRA, RASI" in err
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("MB: [1, 2]\n", "expected lines"),
+    ("- MB\n", "expected lines"),
+    ("HEAD: STER\n", "HEAD not used by the angles: the keys are the names MB, MP"),
+    ("MB: STER\nMP: STER\n", "STER mapped to more than one marker"),
+    ("MB: [\n", "invalid YAML"),
+    (None, "no such file"),
+])
+def test_marker_map_errors_are_one_line(tmp_path, text, needle):
+    from tracking.tables import read_marker_map
+
+    path = tmp_path / "map.yaml"
+    if text is not None:
+        path.write_text(text)
+    with pytest.raises(TableError) as info:
+        read_marker_map(path)
+    assert_one_line_error(info, path, needle)
 
 
 def test_rehab_angles_command_writes_csv_and_reports_missing_markers(tmp_path, capsys):
@@ -280,11 +330,16 @@ def test_c3d_round_trip_with_nans_and_residuals(tmp_path):
     import ezc3d
 
     c3d = ezc3d.c3d(str(path))
-    stored = c3d["data"]["meta_points"]["residuals"][0].T  # (T, M)
-    assert (stored[np.isnan(expected).any(axis=2)] == -1).all()
-    present = ~np.isnan(expected).any(axis=2)
-    np.testing.assert_allclose(stored[present], np.round(residuals[present], 1), atol=1e-3)
     point = c3d["parameters"]["POINT"]
+    # the fourth word as the C3D standard reads it: float -> signed integer, residual / 0.1 in the
+    # low byte, -1 = missing (ezc3d 1.7 swaps the bytes; tests/tracking/test_c3d_readers.py)
+    start = (int(point["DATA_START"]["value"][0]) - 1) * 512
+    words = np.frombuffer(path.read_bytes()[start:start + 25 * 14 * 16], "<f4").reshape(25, 14, 4)[:, :, 3]
+    words = words.astype(np.int32)
+    assert (words[np.isnan(expected).any(axis=2)] == -1).all()
+    present = ~np.isnan(expected).any(axis=2)
+    np.testing.assert_allclose((words[present] & 0xFF) * 0.1, np.maximum(np.round(residuals[present], 1), 0.1),
+                               atol=1e-3)
     assert point["UNITS"]["value"] == ["mm"]
     assert point["Y_SCREEN"]["value"] == ["+Y"] and point["X_SCREEN"]["value"] == ["+X"]
     # Missing points carry zero coordinates and residual -1 in the file, as C3D readers expect

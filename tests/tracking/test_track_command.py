@@ -40,6 +40,51 @@ def test_labelled_outputs(tmp_path):
     assert (out / "m.c3d").stat().st_size > 0
 
 
+def test_field_formats_read_by_independent_readers(tmp_path):
+    """C3D (the `c3d` package), .mot, BVH (the `bvh` package) and the detections CSV of one run."""
+    import csv
+    import warnings
+
+    c3d = pytest.importorskip("c3d")
+    bvh = pytest.importorskip("bvh")
+    write_recording(tmp_path / "rec", [reference_pose()] * 5)
+    out = tmp_path / "out"
+    assert main(["track", str(tmp_path / "rec"), "--out", str(out / "m.trc"), "--c3d", str(out / "m.c3d"),
+                 "--mot", str(out / "a.mot"), "--bvh", str(out / "s.bvh"), "--detections", str(out / "d.csv"),
+                 "--angles", str(out / "a.csv")]) == 0
+    trc = read_trc(out / "m.trc")
+    np.testing.assert_array_equal(trc.frame_numbers, np.arange(1, 6))  # OpenSim counts from 1
+    angles = read_angles_csv(out / "a.csv")
+    with open(out / "m.c3d", "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reader = c3d.Reader(fh)
+        frames = np.stack([p.copy() for _, p, _ in reader.read_frames()])
+        assert [s.strip() for s in reader.get("EVENT:LABELS").string_array] == ["Identified"]
+        angle_labels = [s.strip() for s in reader.get("POINT:ANGLES").string_array]
+    m = len(trc.names)
+    np.testing.assert_allclose(frames[:, :m, :3], trc.positions_mm, atol=1e-3)
+    assert (frames[:, :m, 3] > 0).all()  # all measured in the still reference pose: residual > 0
+    assert (frames[:, :m, 3] < 2.0).all()  # mean reprojection distance, mm: small on the simulator
+    # the cameras whose window centroids made each position (the identifying frame set is measured
+    # in the full frame: no window, no mask)
+    assert (frames[1:, :m, 4] > 0).all() and (frames[:, :m, 4] < 16).all() and (frames[0, :m, 4] == 0).all()
+    k = angle_labels.index("right_elbow_flexion")
+    np.testing.assert_allclose(frames[:, m + k, 0], angles.angles["right_elbow_flexion"], atol=1e-3)
+    mot_lines = (out / "a.mot").read_text().splitlines()
+    assert mot_lines[1:6] == ["version=1", "nRows=5", f"nColumns={1 + len(angle_labels)}", "inDegrees=yes",
+                              "endheader"]
+    skeleton = bvh.Bvh((out / "s.bvh").read_text())
+    assert skeleton.nframes == 5 and skeleton.frame_time == pytest.approx(1 / 15.0)
+    # the upper arm as long as the tracked acromion-to-elbow-centre distances (mean of the sides, cm)
+    upper_cm = np.mean([np.median(np.linalg.norm((trc.marker(f"M{s}E1") + trc.marker(f"M{s}E2")) / 2
+                                                 - trc.marker(f"M{s}S"), axis=1)) for s in "RL"]) / 10.0
+    assert skeleton.joint_offset("RightForeArm") == pytest.approx([0.0, -upper_cm, 0.0], abs=0.05)
+    with open(out / "d.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["camera"] for r in rows} <= {"cam1", "cam2", "cam3", "cam4"} and len(rows) >= 4 * m * 2
+    assert {int(r["frame"]) for r in rows} == set(range(1, 5))
+
+
 def test_recording_without_reference_pose_is_one_clear_line(tmp_path, capsys):
     raised = reference_pose().with_arm("right", ArmPose.clinical(flexion_deg=170)).with_arm(
         "left", ArmPose.clinical(flexion_deg=170))

@@ -46,10 +46,12 @@ def test_supination_is_withheld_where_the_straight_elbow_leaves_its_axis_free(ru
     withheld_rmse = _rmse(np.where(withheld, from_positions[SUPINATION], np.nan), truth[SUPINATION])
     reported_rmse = _rmse(reported[SUPINATION], truth[SUPINATION])
     assert withheld_rmse > 3.0 and reported_rmse < 2.0 and withheld_rmse > 2.0 * reported_rmse
-    # only that angle: the others are the positions' (the estimate still gives the elbow centre)
+    # only that angle: the others are the positions' (the estimate still gives the elbow centre);
+    # the tracker computes one frame in Python floats and joint_angles the array in numpy, which
+    # may round the last bit differently: 1e-9 degrees is far below any real difference
     for name, values in reported.items():
         if name != SUPINATION:
-            np.testing.assert_array_equal(values, from_positions[name])
+            np.testing.assert_allclose(values, from_positions[name], rtol=0, atol=1e-9, equal_nan=True)
     assert np.isfinite(reported["right_shoulder_flexion"][withheld]).all()
     # scored as lost frames of that angle (with those where a marker is lost), not in its RMSE
     score = run.score().angles[SUPINATION]

@@ -25,7 +25,7 @@ def test_header_lines_exactly_as_opensim(tmp_path):
     lines = path.read_text().split("\n")
     assert lines[0] == "PathFileType\t4\t(X/Y/Z)\tmarkers.trc"
     assert lines[1] == "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames"
-    assert lines[2] == "30\t30\t4\t3\tmm\t30\t0\t4"
+    assert lines[2] == "30\t30\t4\t3\tmm\t30\t1\t4"  # OpenSim counts frames from 1
     assert lines[3] == "Frame#\tTime\tMB\t\t\tMP\t\t\tMRW2\t\t\t"
     assert lines[4] == "\t\tX1\tY1\tZ1\tX2\tY2\tZ2\tX3\tY3\tZ3\t"
     assert lines[5] == ""
@@ -41,7 +41,7 @@ def test_rows_have_empty_cells_for_missing_markers(tmp_path):
     assert all(len(c) == 2 + 9 + 1 and c[-1] == "" for c in cells)  # every cell followed by a tab
     assert cells[1][8:11] == ["", "", ""]
     assert cells[2][2:5] == ["", "", ""]
-    assert cells[0][0] == "0" and cells[0][1] == "0.000000"
+    assert cells[0][0] == "1" and cells[0][1] == "0.000000"
     assert cells[3][1] == "0.100000"
     assert float(cells[0][2]) == pytest.approx(p[0, 0, 0], abs=1e-4)
 
@@ -54,7 +54,8 @@ def test_round_trip_with_nans(tmp_path):
     assert isinstance(data, TrcData)
     assert data.names == NAMES
     assert data.rate_hz == 60.0
-    np.testing.assert_array_equal(data.frame_numbers, np.arange(50))
+    np.testing.assert_array_equal(data.frame_numbers, np.arange(1, 51))
+    np.testing.assert_array_equal(data.frame_indices, np.arange(50))
     np.testing.assert_allclose(data.times_s, np.arange(50) / 60.0, atol=1e-6)
     np.testing.assert_array_equal(np.isnan(data.positions_mm), np.isnan(p))
     np.testing.assert_allclose(data.positions_mm, p, atol=1e-4, equal_nan=True)
@@ -83,6 +84,38 @@ def test_explicit_frames_and_times(tmp_path):
     assert data.rate_hz == pytest.approx(29.97)
     write_trc(path, NAMES, positions(), 20.0, frame_numbers=[5, 6, 7, 8])
     np.testing.assert_allclose(read_trc(path).times_s, [0.0, 0.05, 0.1, 0.15])
+
+
+def test_files_written_from_frame_0_still_read(tmp_path):
+    """Files of this project's earlier versions count Frame# from 0 (OrigDataStartFrame 0)."""
+    path = tmp_path / "old.trc"
+    write_trc(path, NAMES, positions(), 30.0)
+    text = path.read_text().split("\n")
+    text[2] = text[2].replace("\t30\t1\t4", "\t30\t0\t4")
+    text[6:10] = [str(int(r.split("\t", 1)[0]) - 1) + "\t" + r.split("\t", 1)[1] for r in text[6:10]]
+    path.write_text("\n".join(text))
+    data = read_trc(path)
+    np.testing.assert_array_equal(data.frame_numbers, np.arange(4))
+    np.testing.assert_array_equal(data.frame_indices, np.arange(4))
+    assert data.frame_base == 0
+
+
+def test_opensim_reads_the_file_with_frames_from_1(tmp_path):
+    """OpenSim's own TRC reader (where the opensim package is installed): labels, rate, frames, gaps."""
+    opensim = pytest.importorskip("opensim")
+    path = tmp_path / "m.trc"
+    p = positions()
+    write_trc(path, NAMES, p, 30.0)
+    table = opensim.TimeSeriesTableVec3(str(path))
+    assert tuple(table.getColumnLabels()) == NAMES
+    assert table.getNumRows() == 4 and table.getTableMetaDataAsString("DataRate") == "30"
+    assert table.getTableMetaDataAsString("OrigDataStartFrame") == "1"
+    for j in range(3):
+        column = table.getDependentColumnAtIndex(j)
+        for i in range(4):
+            v = column[i]
+            got = np.array([v.get(0), v.get(1), v.get(2)])
+            np.testing.assert_allclose(got, p[i, j], atol=1e-4, equal_nan=True)
 
 
 def test_zero_frames(tmp_path):

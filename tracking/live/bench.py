@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from tracking.live.client import LiveTracker
+from tracking.live.client import LiveTracker, process_cpu_s
 from tracking.live.protocol import SourceConfig
 
 log = logging.getLogger(__name__)
@@ -41,17 +41,64 @@ def _percentiles(values_ms: np.ndarray) -> dict[str, float]:
             "max": float(values_ms.max())}
 
 
-def process_cpu_s(pid: int) -> float:
-    """CPU seconds (user + system, all threads) a process has used so far; NaN if unknown (not Linux)."""
-    try:
-        fields = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
-    except OSError:
-        return float("nan")
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+class StreamConsumers:
+    """What a lab's receivers do with the streams while the tracker process sends them: an LSL
+    inlet per stream pulling, and a UDP socket draining the OSC datagrams."""
+
+    def __init__(self, stream) -> None:
+        import socket
+
+        self.inlets = []
+        self.sock = None
+        self.received = 0
+        if stream.osc is not None:
+            self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self.sock.bind(stream.osc)
+            self.sock.setblocking(False)
+        self.stream = stream
+
+    def connect(self, timeout_s: float = 10.0) -> None:
+        if self.stream.lsl:
+            import pylsl
+
+            from tracking.live.stream import quiet_lsl
+
+            quiet_lsl()
+            for kind in ("markers", "angles", "status"):
+                found = pylsl.resolve_byprop("source_id", f"{self.stream.name}-{kind}", timeout=timeout_s)
+                if found:
+                    self.inlets.append(pylsl.StreamInlet(found[0]))
+
+    def drain(self) -> None:
+        for inlet in self.inlets:
+            samples, _ = inlet.pull_chunk(timeout=0.0, max_samples=4096)
+            self.received += len(samples)
+        while self.sock is not None:
+            try:
+                self.sock.recv(65536)
+                self.received += 1
+            except (BlockingIOError, InterruptedError):
+                break
+
+    def close(self) -> None:
+        for inlet in self.inlets:
+            inlet.close_stream()
+        self.inlets = []
+        if self.sock is not None:
+            self.sock.close()
+
+
+def free_udp_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
 
 
 def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *, fps: float = 30.0,
-                    motion: str | None = "shoulder_flexion", rig: str = "ring4", reader: str = "wait") -> dict:
+                    motion: str | None = "shoulder_flexion", rig: str = "ring4", reader: str = "wait",
+                    stream=None) -> dict:
     """Run the tracker process for ``seconds`` and measure latency and pace.
 
     Args:
@@ -65,6 +112,8 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
             yielding the CPU between polls (on a loaded machine the scheduler then makes the
             reader wait for its turn); ``"frame"`` polls every 5 ms as a game loop might (the
             latency then includes up to that wait).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process also streams,
+            and this process receives (:class:`StreamConsumers`); None: no streaming.
 
     Returns:
         dict with ``size``, ``fps_asked``, ``fps_kept`` (samples per wall second), ``samples``,
@@ -78,7 +127,10 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
         raise ValueError(f"reader {reader!r}: use 'wait', 'spin' or 'frame'")
     config = SourceConfig(size=tuple(size), fps=fps, motion=motion, rig=rig)
     latency, publish, transport, step, render = [], [], [], [], []
-    with LiveTracker(config, auto_restart=False, warm_standby=False) as live:
+    consumers = StreamConsumers(stream) if stream is not None else None
+    with LiveTracker(config, auto_restart=False, warm_standby=False, stream=stream) as live:
+        if consumers is not None:
+            consumers.connect()
         t_start = time.perf_counter()
         t_measure = t_start + SETTLE_S
         t_end = t_measure + seconds
@@ -103,6 +155,8 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
                 transport.append(t_seen - published)
                 step.append(step_s)
                 render.append(float(rec["source_ms"]) / 1000.0)
+            if consumers is not None:
+                consumers.drain()
             if t_seen >= t_end:
                 cpu_end = process_cpu_s(live.pid)
                 break
@@ -110,6 +164,8 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
                 live.wait(0.1)
             else:
                 time.sleep(0 if reader == "spin" else 0.005)
+        if consumers is not None:
+            consumers.close()  # before the process stops: no "transmission broke off" from the inlets
         status = live.status()
     try:
         load = os.getloadavg()[0]
@@ -132,7 +188,31 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
         "render_ms_mean": float(ms(render).mean()) if render else float("nan"),
         "cpu_ms_per_frame": (cpu_end - cpu_start) * 1000.0 / max(count - 1, 1),
         "load_avg": load,
+        "stream_received": consumers.received if consumers is not None else 0,
     }
+
+
+def compare_streaming(seconds: float, passes: int = 3, size: tuple[int, int] = (320, 240)) -> list[str]:
+    """The tracker process with streaming off and on (LSL and OSC, received in this process), in
+    alternating passes of ``seconds``: its step time and CPU time per frame set. Lines to print."""
+    from tracking.live.stream import StreamConfig
+
+    stream = StreamConfig(lsl=True, osc=("127.0.0.1", free_udp_port()), name="rehab-bench")
+    rows = {"off": [], "on": []}
+    for _ in range(passes):
+        for key in ("off", "on"):
+            rows[key].append(measure_latency(seconds, size, stream=stream if key == "on" else None))
+    lines = []
+    for key, results in rows.items():
+        step = [r["tracker_ms_mean"] for r in results]
+        cpu = [r["cpu_ms_per_frame"] for r in results]
+        kept = [r["fps_kept"] for r in results]
+        received = sum(r["stream_received"] for r in results)
+        lines.append(f"streaming {key:3s}: tracker step {' / '.join(f'{v:.2f}' for v in step)} ms (median "
+                     f"{np.median(step):.2f}), CPU {' / '.join(f'{v:.1f}' for v in cpu)} ms per frame set (median "
+                     f"{np.median(cpu):.1f}), kept {' / '.join(f'{v:.1f}' for v in kept)} frame sets/s"
+                     + (f", {received} samples and datagrams received" if key == "on" else ""))
+    return lines
 
 
 def format_result(r: dict) -> str:

@@ -3,8 +3,8 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or stopped beating (heartbeat older than ``STALE_HEARTBEAT_S``) and replaces it
-without waiting: a warm standby process (source and tracker already built) takes over, or a new
+that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it uses no CPU time: a
+process that a loaded machine merely slows down is not replaced) and replaces it without waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
 
@@ -41,14 +41,23 @@ log = logging.getLogger(__name__)
 
 #: Prefix of every shared-memory block of the live tracker.
 BLOCK_PREFIX = "rehab_live_"
-#: A running process whose heartbeat is older than this is taken as hung and restarted.
+#: A running process whose heartbeat is older than this, and which has used no CPU time for as
+#: long, is taken as hung and restarted.
 STALE_HEARTBEAT_S = 1.0
+#: A process whose heartbeat is older than this is taken as hung even if it uses CPU time (a loop
+#: that never returns to the heartbeat); a loaded machine slows a loop turn by a second or two,
+#: not by this much.
+SLOW_HEARTBEAT_S = 10.0
 #: A starting process has this long to report ready (imports, GL context, rig), or, after it
 #: reports the progress of a long stage (the first compilation of the tracker's loops), this long
 #: again from then.
 START_TIMEOUT_S = 30.0
 #: Time a process gets to stop on request before it is killed.
 STOP_TIMEOUT_S = 2.0
+#: How long :meth:`LiveTracker.close` waits for killed processes to be gone, so that none outlives
+#: the tracker (a killed process dies within milliseconds on an idle machine; a loaded one may
+#: take a second or more to schedule it).
+REAP_TIMEOUT_S = 10.0
 #: A process that reports it cannot start is tried again this many times (the cause may pass).
 MAX_START_RETRIES = 3
 #: A new standby process is started this long after the running one became ready, so that its
@@ -110,6 +119,16 @@ def _exit_reason(exitcode: int | None) -> str:
     return f"exited with code {exitcode}"
 
 
+def process_cpu_s(pid: int) -> float:
+    """CPU seconds (user + system, all threads) a process has used so far; NaN if unknown (not Linux)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return float("nan")
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _check_motion(name: str | None) -> None:
     """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
     if name is None:
@@ -133,10 +152,23 @@ class _Child:
         self.progress_at = self.started_at  # last sign of a start going on (its start, a progress message)
         self.ready = False  # reported ready (a standby: prepared and waiting)
         self.failed = ""  # why it could not start
+        self.released = False  # joined and closed: the process is gone
+        self._cpu_seen_s = math.nan  # its CPU time at the last look, and when that last grew
+        self._cpu_grew_at = self.started_at
 
     @property
     def pid(self) -> int:
         return self.proc.pid
+
+    def idle_for_s(self, now: float) -> float:
+        """Seconds since this process last used CPU time, as far as these calls saw (call it often);
+        infinite where the system does not tell (the heartbeat then decides alone)."""
+        cpu_s = process_cpu_s(self.proc.pid)
+        if math.isnan(cpu_s):
+            return math.inf
+        if cpu_s != self._cpu_seen_s:
+            self._cpu_seen_s, self._cpu_grew_at = cpu_s, now
+        return now - self._cpu_grew_at
 
     def receive(self) -> None:
         """Read its messages: ("ready" | "standby", pid), ("progress", what) or ("failed", line)."""
@@ -162,9 +194,13 @@ class _Child:
         except (OSError, ValueError):
             return False
 
-    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> None:
-        """Ask it to stop, then terminate, then kill; always join it. ``timeout_s`` 0: kill at
-        once (a hung process; the game must not wait for it)."""
+    def stop(self, timeout_s: float = STOP_TIMEOUT_S) -> bool:
+        """Ask it to stop, then terminate, then kill; join it. ``timeout_s`` 0: kill at once (a hung
+        process; the game must not wait for it). True once the process is gone; False if it was
+        killed but not yet reaped (stuck in the kernel, or a loaded machine has not scheduled its
+        death yet): :meth:`reap` it later."""
+        if self.released:
+            return True
         proc = self.proc
         if proc.is_alive() and timeout_s > 0:
             self.send(Stop())
@@ -174,12 +210,25 @@ class _Child:
                 proc.join(0.5)
         if proc.is_alive():
             proc.kill()
-            # a killed process is gone within milliseconds, unless stuck in the kernel (a driver):
-            # then it is left to multiprocessing to reap later rather than freezing the game
-            proc.join(1.0 if timeout_s > 0 else 0.2)
+            # a killed process is gone within milliseconds, unless stuck in the kernel (a driver)
+            # or the machine is loaded: then it is reaped later rather than freezing the game
+            proc.join(1.0 if timeout_s > 0 else 0.0)
         self.conn.close()
-        if proc.exitcode is not None:
-            proc.close()
+        return self.reap()
+
+    def reap(self, timeout_s: float = 0.0) -> bool:
+        """Wait up to ``timeout_s`` for a stopped process to be gone; True once it is (and its
+        handle is released)."""
+        if self.released:
+            return True
+        self.proc.join(timeout_s)
+        if self.proc.exitcode is None:
+            if self.proc.is_alive():
+                self.proc.kill()  # again: harmless for a process already dying
+            return False
+        self.proc.close()
+        self.released = True
+        return True
 
 
 class LiveTracker:
@@ -194,13 +243,16 @@ class LiveTracker:
             idle machine, several seconds on a loaded one). Costs the memory of a second process
             and its start-up CPU shortly after :meth:`start`. Never for live cameras (a device
             opens in one process at a time).
+        stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process streams every
+            sample over LSL and/or OSC (a standby opens its streams when it takes over).
 
     After :meth:`start`: ``cameras``, ``markerset`` and ``angle_names`` describe the samples.
     """
 
     def __init__(self, source: SourceConfig = SourceConfig(), *, ring_size: int = 256, auto_restart: bool = True,
-                 warm_standby: bool = True) -> None:
+                 warm_standby: bool = True, stream=None) -> None:
         self.source = source
+        self.stream = stream
         self.ring_size = int(ring_size)
         self.auto_restart = auto_restart
         self.warm_standby = warm_standby and auto_restart
@@ -211,6 +263,7 @@ class LiveTracker:
         self._ctx = multiprocessing.get_context("spawn")
         self._child: _Child | None = None
         self._spare: _Child | None = None
+        self._stopping: list[_Child] = []  # killed, not yet reaped
         self._retry_at = 0.0
         self._spare_due: float | None = None
         self._failed_starts = 0   # starts the process itself reported impossible (counted to give up)
@@ -269,7 +322,7 @@ class LiveTracker:
             self._notify_r, notify_w = self._ctx.Pipe(duplex=False)
             os.set_blocking(self._notify_r.fileno(), False)
             self._args = ProcessArgs(self.source, sample_shm.name, image_shm.name, ring, images, os.getpid(),
-                                     notify=notify_w)
+                                     notify=notify_w, stream=self.stream)
             self._child = self._spawn(standby=False)
             if wait:
                 self._wait_ready(timeout_s)
@@ -316,11 +369,13 @@ class LiveTracker:
         atexit.unregister(self.close)
         try:
             if self._spare is not None:
-                self._spare.stop(0.0)  # it publishes nothing: no need to wait for it
+                self._drop(self._spare)  # it publishes nothing: no need to wait for it
             if self._child is not None:
-                self._child.stop()
+                if not self._child.stop():
+                    self._stopping.append(self._child)
         finally:
             self._child = self._spare = None
+            self._reap_stopped(REAP_TIMEOUT_S)
             for part in (self._reader, self._images):
                 if part is not None:
                     part.release()
@@ -353,6 +408,7 @@ class LiveTracker:
     def _check(self) -> None:
         """Notice a dead or hung process; restart it when ``auto_restart``."""
         now = time.perf_counter()
+        self._reap_stopped(0.0)
         self._tend_spare(now)
         child = self._child
         if child is None:  # an earlier start failed: try again later, a few times
@@ -363,7 +419,7 @@ class LiveTracker:
             child.receive()
             if child.failed:
                 self._last_error = f"the tracker process cannot start: {child.failed}"
-                child.stop(0.0)
+                self._drop(child)
                 self._child = None
                 self._failed_starts += 1
                 self._retry_at = now + self._backoff_s()
@@ -372,9 +428,7 @@ class LiveTracker:
                 self._failed_starts = self._lost_starts = 0
         alive = child.proc.is_alive()
         if alive and child.ready:
-            state = int(self._reader.header["state"])
-            hung = state in (ProcessState.RUNNING, ProcessState.PAUSED) and self._heartbeat_age_s() > STALE_HEARTBEAT_S
-            if not hung:
+            if not self._hung(child, now):
                 return
         elif alive and now - child.progress_at < START_TIMEOUT_S:
             return  # still starting
@@ -383,7 +437,7 @@ class LiveTracker:
             reason += " while starting"
         log.error("%s", reason)
         self._last_error = reason
-        child.stop(0.0)
+        self._drop(child)
         self._child = None
         if not child.ready:
             # it died or hung before it ran (killed, out of memory): retry later with a growing wait,
@@ -398,6 +452,32 @@ class LiveTracker:
         n = self._failed_starts + self._lost_starts
         return min(RETRY_MAX_S, RETRY_AFTER_S * 2.0 ** max(0, n - 1))
 
+    def _hung(self, child: _Child, now: float) -> bool:
+        """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and no CPU time
+        used for as long (stopped, or blocked), or no heartbeat for ``SLOW_HEARTBEAT_S``."""
+        idle_s = child.idle_for_s(now)
+        if int(self._reader.header["state"]) not in (ProcessState.RUNNING, ProcessState.PAUSED):
+            return False
+        age_s = self._heartbeat_age_s()
+        return age_s > SLOW_HEARTBEAT_S or (age_s > STALE_HEARTBEAT_S and idle_s > STALE_HEARTBEAT_S)
+
+    def _drop(self, child: _Child) -> None:
+        """Kill a process without waiting for it (a hung or unneeded one); it is reaped later."""
+        if not child.stop(0.0):
+            self._stopping.append(child)
+
+    def _reap_stopped(self, timeout_s: float) -> None:
+        """Join the killed processes, waiting up to ``timeout_s`` in all for them to be gone."""
+        deadline = time.perf_counter() + timeout_s
+        left = []
+        for child in self._stopping:
+            if not child.reap(max(0.0, deadline - time.perf_counter())):
+                left.append(child)
+        self._stopping = left
+        if left and timeout_s > 0:
+            log.warning("tracker processes %s did not end within %g s after being killed",
+                        ", ".join(str(c.proc.pid) for c in left), timeout_s)
+
     def _tend_spare(self, now: float) -> None:
         """Keep one standby process (spawned once the running one is ready)."""
         spare = self._spare
@@ -406,7 +486,7 @@ class LiveTracker:
             if spare.failed or not spare.proc.is_alive():
                 log.warning("the standby tracker process %d ended: %s", spare.pid,
                             spare.failed or _exit_reason(spare.proc.exitcode))
-                spare.stop(0.0)
+                self._drop(spare)
                 self._spare = None
         elif self._standby_allowed() and self._child is not None and self._child.ready:
             if self._spare_due is None:
@@ -463,7 +543,8 @@ class LiveTracker:
         h = self._reader.header
         age = self._heartbeat_age_s()
         child = self._child
-        alive = child is not None and child.ready and child.proc.is_alive() and age <= STALE_HEARTBEAT_S
+        alive = (child is not None and child.ready and child.proc.is_alive()
+                 and not self._hung(child, time.perf_counter()))
         errors = int(h["errors"])
         if errors > self._errors_seen:
             self._errors_seen = errors

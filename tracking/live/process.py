@@ -73,6 +73,8 @@ class ProcessArgs:
         notify: write end of a pipe (a ``multiprocessing`` Connection used only for its file
             descriptor) that gets one byte per published sample, so a reader can block until the
             next sample instead of polling; None: no notification.
+        stream: a :class:`tracking.live.stream.StreamConfig`: LSL and OSC output of every sample
+            from a sender thread of this process (None or all off: no streaming).
         die_with_parent: ask Linux to kill this process when the thread that spawned it ends
             (``PR_SET_PDEATHSIG`` follows the spawning *thread*, so the game sets it only when
             spawning from its main thread; the parent-pid check and the pipe's end-of-file cover
@@ -90,6 +92,7 @@ class ProcessArgs:
     standby: bool = False
     die_with_parent: bool = True
     notify: object = None
+    stream: object = None
 
 
 def one_line(where: str, frame_index: int, exc: BaseException) -> str:
@@ -111,11 +114,13 @@ class TrackerLoop:
         notify_fd: non-blocking pipe end that gets one byte per published sample (or None).
         adapter: a :class:`tracking.colour_adapt.ColourAdapter` whose table the tracker reads; it
             learns from every tracked frame set (None: the colour table stays fixed).
+        streamer: a :class:`tracking.live.stream.StreamSender` offered every tracked frame set
+            (it queues or drops, never blocks); None: no streaming.
     """
 
     def __init__(self, source: FrameSource, writer: RingWriter, images: ImageSlot | None, *, fps: float,
                  tracker=None, clock: Callable[[], float] = time.perf_counter, notify_fd: int | None = None,
-                 adapter=None) -> None:
+                 adapter=None, streamer=None) -> None:
         from tracking.tracker import Tracker
 
         self.source = source
@@ -127,6 +132,7 @@ class TrackerLoop:
         self.clock = clock
         self.notify_fd = notify_fd
         self.adapter = adapter
+        self.streamer = streamer
         self.paused = False
         self._fps_ema = math.nan
         self._step_ema = math.nan
@@ -221,6 +227,8 @@ class TrackerLoop:
                 self._report("colour adaptation", exc, index)
         step_ms = (self.clock() - t0) * 1000.0
         self._publish(index, time_s, frame, sample, step_ms)
+        if self.streamer is not None:
+            self._stream(index, time_s, frame, sample)
         if self.images is not None:
             self.images.write(frame.images, index)
         self._rates(frame.t_ready_s, step_ms)
@@ -268,6 +276,15 @@ class TrackerLoop:
                 os.write(self.notify_fd, b"\1")
             except (BlockingIOError, BrokenPipeError):
                 pass  # the reader is far behind (the pipe is full) or gone: the ring has the sample
+
+    def _stream(self, index: int, time_s: float, frame, sample) -> None:
+        from tracking.live.stream import StreamFrame
+
+        angles = sample.angles_deg
+        self.streamer.offer(StreamFrame(
+            frame_index=index, time_s=time_s, t_ready_s=frame.t_ready_s, state=int(sample.state),
+            positions_m=np.array(sample.positions_m, dtype=np.float64), status=np.array(sample.status),
+            angles_deg=np.array([angles.get(n, math.nan) for n in self.angle_names], dtype=np.float64)))
 
     def _rates(self, t_ready_s: float, step_ms: float) -> None:
         h = self.writer.header
@@ -372,7 +389,7 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     # resource tracker that spawn shares with the game, which is harmless (a set of names).
     sample_shm = shared_memory.SharedMemory(args.sample_block)
     image_shm = shared_memory.SharedMemory(args.image_block)
-    writer = images = source = None
+    writer = images = source = streamer = None
     try:
         writer = RingWriter(sample_shm.buf, args.ring)
         h = writer.header
@@ -412,8 +429,9 @@ def tracker_main(args: ProcessArgs, conn) -> None:
         if args.notify is not None:
             notify_fd = args.notify.fileno()
             os.set_blocking(notify_fd, False)
+        streamer = _open_streamer(args, source, writer)
         loop = TrackerLoop(source, writer, images, fps=args.config.fps, tracker=tracker, notify_fd=notify_fd,
-                           adapter=adapter)
+                           adapter=adapter, streamer=streamer)
         if motion != args.config.motion:
             loop.handle(SetMotion(motion))
         loop.handle(SetPatientInput(patient_input))
@@ -423,6 +441,8 @@ def tracker_main(args: ProcessArgs, conn) -> None:
     except (EOFError, BrokenPipeError, ConnectionResetError):
         log.warning("the control pipe closed: the tracker process exits")
     finally:
+        if streamer is not None:
+            streamer.close()
         if source is not None:
             source.close()
         for part in (writer, images):
@@ -430,6 +450,23 @@ def tracker_main(args: ProcessArgs, conn) -> None:
                 part.release()
         sample_shm.close()
         image_shm.close()
+
+
+def _open_streamer(args: ProcessArgs, source: FrameSource, writer: RingWriter):
+    """The stream sender that ``args.stream`` asks for, or None. A failure to open the streams
+    (a missing library, a bad address) becomes the error line; tracking goes on without them."""
+    if args.stream is None or not args.stream.enabled:
+        return None
+    from tracking.live.stream import StreamSender
+
+    ms = source.markerset
+    try:
+        return StreamSender(args.stream, ms.names, ms.name, angle_names_for(ms), args.config.fps)
+    except Exception as exc:
+        line = one_line("streaming", 0, exc)
+        log.error("%s; tracking goes on without streaming", line)
+        writer.set_error(line)
+        return None
 
 
 def make_tracker(config: SourceConfig, source: FrameSource):

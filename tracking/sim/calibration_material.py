@@ -17,6 +17,7 @@ What is made (:func:`write_calibration_material`)::
       material.yaml                 board, seat-board origin, wand length and colours
       intrinsics/cam1/000.png ...   the board close to each camera, in many places and tilts
       intrinsics_charuco/cam1/...   on request: a ChArUco board likewise, some views partly out of the picture
+      extrinsics_charuco/cam1/...   on request: a larger ChArUco board seen by neighbouring cameras, and on the seat
       extrinsics/cam1/000.png ...   the board seen by neighbouring cameras at once (same name = same instant)
       extrinsics/cam1/seat.png ...  the board lying on the seat: sets the world frame
       wand/cam1.avi ... meta.yaml   the wand waved through the volume (lossless FFV1)
@@ -383,25 +384,28 @@ def wand_scene(balls_m: np.ndarray, radius_m: float = WAND_BALL_RADIUS_M,
     )
 
 
-def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: float = 1.5, seed: int = 0) -> Iterator[tuple[np.ndarray, ...]]:
+def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: float = 1.5, seed: int = 0,
+                colours_rgb255=WAND_COLOURS_RGB255) -> Iterator[tuple[np.ndarray, ...]]:
     """Images of every camera, frame by frame, of the wand at ``balls_m`` (T, 2, 3)."""
     from tracking.sim.renderer import StudioRenderer
 
     with StudioRenderer(cams) as renderer:
         for k, balls in enumerate(balls_m):
-            yield renderer.render(wand_scene(balls), noise_sigma=noise_sigma, seed=seed * 1_000_003 + k, with_visibility=False).images
+            yield renderer.render(wand_scene(balls, colours_rgb255=colours_rgb255), noise_sigma=noise_sigma,
+                                  seed=seed * 1_000_003 + k, with_visibility=False).images
 
 
 # ----------------------------------------------------------------------------- all of it
 def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: Checkerboard = DEFAULT_BOARD,
                                n_intrinsics: int = 15, per_pair: int = 4, wand_seconds: float = 20.0,
                                wand_fps: float = 15.0, noise_sigma: float = 1.5, seed: int = 0,
-                               charuco=None, n_partial: int = 5, progress: bool = False) -> str:
+                               charuco=None, charuco_extrinsics=None, n_partial: int = 5, progress: bool = False) -> str:
     """Write board images, a wand sequence and the truth (module docstring). Returns a summary line.
 
     With ``charuco`` (a :class:`calibration.charuco.CharucoBoard`), also ``intrinsics_charuco/``:
     ``n_intrinsics`` images of the whole ChArUco board per camera and ``n_partial`` with the board
-    partly out of the picture.
+    partly out of the picture. With ``charuco_extrinsics`` (a ChArUco board large enough to be
+    seen from the cameras' distance), also ``extrinsics_charuco/``: its shared views and the seat.
     """
     from tqdm import tqdm
 
@@ -426,16 +430,12 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
             for i, img in enumerate(images):
                 cv2.imwrite(str(folder / f"{i:03d}.png"), img)
             n_images += len(images)
-    poses = extrinsics_poses(cams, board, per_pair, rng)
-    seat = seat_board_pose(board)
-    views = render_views(cams, backgrounds, board, [*poses, seat], seed=seed + 7, noise_sigma=noise_sigma)
-    for c, cam in enumerate(cams):
-        folder = out_dir / "extrinsics" / cam.name
-        folder.mkdir(parents=True, exist_ok=True)
-        for v, per_cam in enumerate(views):
-            name = "seat" if v == len(poses) else f"{v:03d}"
-            cv2.imwrite(str(folder / f"{name}.png"), per_cam[c])
-    n_images += len(views) * len(cams)
+    n, seat = _write_shared_views(out_dir / "extrinsics", cams, backgrounds, board, per_pair, rng, seed=seed + 7,
+                                  noise_sigma=noise_sigma)
+    n_images += n
+    if charuco_extrinsics is not None:
+        n_images += _write_shared_views(out_dir / "extrinsics_charuco", cams, backgrounds, charuco_extrinsics, per_pair,
+                                        np.random.default_rng(seed + 11), seed=seed + 13, noise_sigma=noise_sigma)[0]
     n_wand = int(round(wand_seconds * wand_fps))
     balls = wand_path(n_wand, wand_fps, seed=seed)
     write_wand_sequence(out_dir / "wand", cams, balls, wand_fps, noise_sigma=noise_sigma, seed=seed, progress=progress)
@@ -451,13 +451,35 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
         material["charuco"] = {"squares": f"{charuco.squares_x}x{charuco.squares_y}", "square_mm": charuco.square_m * 1000.0,
                                "marker_mm": charuco.marker_m * 1000.0, "dictionary": charuco.dictionary,
                                "images": "intrinsics_charuco/<camera>/", "partial_views": n_partial}
+    if charuco_extrinsics is not None:
+        b = charuco_extrinsics
+        material["charuco_extrinsics"] = {
+            "squares": f"{b.squares_x}x{b.squares_y}", "square_mm": b.square_m * 1000.0, "marker_mm": b.marker_m * 1000.0,
+            "dictionary": b.dictionary, "images": "extrinsics_charuco/<camera>/",
+            "seat_origin_m": [float(v) for v in seat_board_pose(b).t_m]}
     (out_dir / "material.yaml").write_text(yaml.safe_dump(material, sort_keys=False), encoding="utf-8")
     return (f"wrote {n_images} board images and a {n_wand}-frame wand sequence from {len(cams)} cameras "
             f"to {out_dir} (truth in truth_calibration.toml)")
 
 
+def _write_shared_views(folder: Path, cams: Sequence[Camera], backgrounds, board, per_pair: int,
+                        rng: np.random.Generator, *, seed: int, noise_sigma: float) -> tuple[int, BoardPose]:
+    """The extrinsics views and the seat board as ``folder/<camera>/000.png ... seat.png``.
+    Returns the number of images and the seat board's pose."""
+    poses = extrinsics_poses(cams, board, per_pair, rng)
+    seat = seat_board_pose(board)
+    views = render_views(cams, backgrounds, board, [*poses, seat], seed=seed, noise_sigma=noise_sigma)
+    for c, cam in enumerate(cams):
+        (folder / cam.name).mkdir(parents=True, exist_ok=True)
+        for v, per_cam in enumerate(views):
+            name = "seat" if v == len(poses) else f"{v:03d}"
+            cv2.imwrite(str(folder / cam.name / f"{name}.png"), per_cam[c])
+    return len(views) * len(cams), seat
+
+
 def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarray, fps: float, *,
-                        noise_sigma: float = 1.5, seed: int = 0, progress: bool = False) -> None:
+                        noise_sigma: float = 1.5, seed: int = 0, progress: bool = False,
+                        colours_rgb255=WAND_COLOURS_RGB255) -> None:
     """A wand recording: one lossless FFV1 video per camera, meta.yaml, truth_wand.csv (mm)."""
     from tqdm import tqdm
 
@@ -468,7 +490,8 @@ def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarra
     try:
         if not all(w.isOpened() for w in writers):
             raise RecordingError(f"{folder}: cannot write FFV1 videos here")
-        for images in tqdm(render_wand(cams, balls_m, noise_sigma=noise_sigma, seed=seed), total=len(balls_m),
+        for images in tqdm(render_wand(cams, balls_m, noise_sigma=noise_sigma, seed=seed, colours_rgb255=colours_rgb255),
+                           total=len(balls_m),
                            desc="wand", unit="frame", disable=not progress):
             for w, img in zip(writers, images):
                 w.write(img)
@@ -476,7 +499,7 @@ def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarra
         for w in writers:
             w.release()
     meta = {"fps": float(fps), "n_frames": int(len(balls_m)), "source": "simulator: calibration wand",
-            "wand_length_mm": WAND_LENGTH_M * 1000.0, "wand_colours": [list(c) for c in WAND_COLOURS_RGB255]}
+            "wand_length_mm": WAND_LENGTH_M * 1000.0, "wand_colours": [list(c) for c in colours_rgb255]}
     (folder / "meta.yaml").write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
     np.savetxt(folder / "truth_wand.csv", balls_m.reshape(len(balls_m), 6) * 1000.0, delimiter=",", fmt="%.3f",
                header="ball0_x_mm,ball0_y_mm,ball0_z_mm,ball1_x_mm,ball1_y_mm,ball1_z_mm", comments="")

@@ -25,8 +25,8 @@ import logging
 import threading
 import time
 from collections import deque
+from contextlib import contextmanager
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
 import cv2
@@ -46,57 +46,74 @@ WARN_WINDOW_S = 2.0
 FAILED_READS_TO_END = 25
 
 
+#: OpenCV's log level for errors only (its LogLevel enum: SILENT 0, FATAL 1, ERROR 2, WARNING 3).
+_OPENCV_LOG_ERROR = 2
+
+
+@contextmanager
+def _opencv_errors_only():
+    """OpenCV logs only errors inside the block (``cv2.utils.logging`` from OpenCV 5,
+    ``cv2.setLogLevel`` before it)."""
+    api = getattr(cv2.utils, "logging", None) or cv2
+    level = api.getLogLevel()
+    api.setLogLevel(_OPENCV_LOG_ERROR)
+    try:
+        yield
+    finally:
+        api.setLogLevel(level)
+
+
+def is_file_device(device: str) -> bool:
+    """A video file or image sequence (``cam1.avi``, ``cam1/%06d.png``), not a device index or URL."""
+    return not device.isdigit() and "://" not in device
+
+
+class PacedCapture:
+    """A capture that delivers at most ``fps`` frames per second, as a camera does.
+
+    OpenCV reads a video file or an image sequence as fast as it decodes: given as a camera, it
+    would run through the file in a fraction of its length (and on a loaded machine the cameras
+    would end before the tracker started). Behind by more than a frame (a slow reader), it catches
+    up one frame at a time rather than in a burst.
+    """
+
+    def __init__(self, capture, fps: float, *, clock=time.perf_counter, sleep=time.sleep) -> None:
+        self.capture = capture
+        self.period_s = 1.0 / float(fps)
+        self._clock, self._sleep = clock, sleep
+        self._due_s: float | None = None
+
+    def read(self):
+        now = self._clock()
+        if self._due_s is not None and self._due_s > now:
+            self._sleep(self._due_s - now)
+            now = self._due_s
+        self._due_s = max(self._due_s if self._due_s is not None else now, now - self.period_s) + self.period_s
+        return self.capture.read()
+
+    def __getattr__(self, name):  # isOpened, set, get, release: the capture's own
+        return getattr(self.capture, name)
+
+
 def open_capture(device: str, size_px: tuple[int, int] | None, fps: float | None):
-    """An OpenCV ``VideoCapture`` for a device index (``"0"``), a URL or a video file path.
+    """An OpenCV ``VideoCapture`` for a device index (``"0"``), a URL or a video file path (or an
+    image sequence, ``cam1/%06d.png``); a file is delivered at ``fps``, as a camera would.
 
     The size and frame rate are requests; the driver may ignore them (the first frame's size is
     checked against the calibration).
     """
     # OpenCV prints its own warnings when a device is absent; the caller reports it in one line
-    level = cv2.utils.logging.getLogLevel()
-    cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
-    try:
+    with _opencv_errors_only():
         cap = cv2.VideoCapture(int(device) if device.isdigit() else device)
-    finally:
-        cv2.utils.logging.setLogLevel(level)
     if cap.isOpened():
         if size_px is not None:
             cap.set(cv2.CAP_PROP_FRAME_WIDTH, float(size_px[0]))
             cap.set(cv2.CAP_PROP_FRAME_HEIGHT, float(size_px[1]))
         if fps is not None:
             cap.set(cv2.CAP_PROP_FPS, float(fps))
-        if not device.isdigit() and Path(device).is_file():
-            file_fps = cap.get(cv2.CAP_PROP_FPS)
-            rate = file_fps if file_fps and 0 < file_fps <= 1000 else fps
-            if rate:
-                return PacedCapture(cap, rate)
+            if is_file_device(device):
+                return PacedCapture(cap, fps)
     return cap
-
-
-class PacedCapture:
-    """A video file read as a camera: frames at the file's own rate, not as fast as they decode.
-
-    A camera delivers a frame per period; a file read flat out delivered 85 of 301 frame sets to
-    the tracker and the rest counted as dropped. A reader that falls behind starts again from
-    now rather than bursting to catch up.
-    """
-
-    def __init__(self, capture, fps: float, clock: Callable[[], float] = time.perf_counter,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
-        self.capture, self.period_s, self.clock, self.sleep = capture, 1.0 / float(fps), clock, sleep
-        self._due: float | None = None
-
-    def read(self):
-        now = self.clock()
-        if self._due is None or now - self._due > self.period_s:
-            self._due = now
-        elif self._due > now:
-            self.sleep(self._due - now)
-        self._due += self.period_s
-        return self.capture.read()
-
-    def __getattr__(self, name):   # isOpened, get, set, release: the capture's own
-        return getattr(self.capture, name)
 
 
 @dataclass(slots=True)
