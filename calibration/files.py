@@ -69,7 +69,7 @@ import cv2
 import numpy as np
 
 from calibration.camera import Camera, check_rotation
-from calibration.errors import CalibrationError
+from calibration.errors import CalibrationError, utf8_text
 
 __all__ = [
     "load_calibration",
@@ -171,6 +171,11 @@ def _check_camera_set(path: Path, cameras: Sequence[Camera]) -> None:
         )
     seen: set[str] = set()
     for cam in cameras:
+        with np.errstate(over="ignore", invalid="ignore"):
+            finite = bool(np.isfinite(cam.P).all())
+        if not finite:   # each value finite, but so large that the projection overflows
+            raise CalibrationError(f"{path}: camera {cam.name!r} has values too large to project with (e.g. a "
+                                   f"position of 1e300 m): {_FIX_FILE}")
         if cam.name in seen:
             raise CalibrationError(
                 f"{path}: two cameras are named {cam.name!r}: give every camera a unique name"
@@ -295,6 +300,10 @@ def _camera_from_toml_table(path: Path, key: str, table: dict) -> Camera:
 # --------------------------------------------------------------------- OpenCV FileStorage
 def _open_filestorage(path: Path):
     """cv2.FileStorage opened for reading, or a one-line CalibrationError with the parser's line."""
+    try:   # OpenCV's strings are UTF-8: a stray Latin-1 byte would end in a UnicodeDecodeError later
+        utf8_text(path, path.read_bytes(), CalibrationError)
+    except OSError as exc:
+        raise CalibrationError(f"{path}: cannot be read ({exc.strerror}): check its permissions") from None
     fs = cv2.FileStorage()
     try:
         opened = fs.open(str(path), cv2.FILE_STORAGE_READ)
@@ -325,16 +334,13 @@ def _parse_error_text(exc: BaseException, path: Path) -> str:
 def _node_numbers(node, where: str, key: str) -> np.ndarray:
     """A FileStorage number, (nested) sequence of numbers or !!opencv-matrix -> float64 array."""
     if node.isMap():
-        try:
-            mat = node.mat()
-        except cv2.error:
-            mat = None
+        mat = _opencv_matrix(node)
         if mat is None:
             raise CalibrationError(
                 f"{where}: {key!r} is neither numbers nor a valid !!opencv-matrix "
                 f"(rows x cols must match data): {_FIX_FILE}"
             )
-        return np.asarray(mat, dtype=np.float64)
+        return mat
     if node.isSeq():
         rows = [_node_numbers(node.at(i), where, key) for i in range(node.size())]
         try:
@@ -344,6 +350,24 @@ def _node_numbers(node, where: str, key: str) -> np.ndarray:
     if node.isInt() or node.isReal():
         return np.array(node.real(), dtype=np.float64)
     raise CalibrationError(f"{where}: {key!r} must hold numbers: {_FIX_FILE}")
+
+
+def _opencv_matrix(node) -> np.ndarray | None:
+    """An ``!!opencv-matrix`` map read field by field, or None when rows, cols and data disagree.
+
+    ``FileNode.mat()`` is not used: on a matrix without ``cols`` it corrupted the heap and the
+    process crashed later (found by tests/test_fuzz_inputs.py).
+    """
+    rows, cols, data = node.getNode("rows"), node.getNode("cols"), node.getNode("data")
+    if not (rows.isInt() and cols.isInt() and data.isSeq()):
+        return None
+    n_rows, n_cols = int(rows.real()), int(cols.real())
+    if not (0 < n_rows <= 1000 and 0 < n_cols <= 1000) or data.size() != n_rows * n_cols:
+        return None
+    items = [data.at(i) for i in range(data.size())]
+    if not all(item.isInt() or item.isReal() for item in items):
+        return None
+    return np.array([item.real() for item in items], dtype=np.float64).reshape(n_rows, n_cols)
 
 
 def _node_sized(node, n: Sequence[int], where: str, key: str, what: str) -> np.ndarray:

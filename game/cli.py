@@ -13,6 +13,8 @@ import sys
 from pathlib import Path
 
 from calibration.errors import RehabError
+from game.cli_options import (COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, check_outputs, handle_broken_pipe,
+                              number)
 
 log = logging.getLogger("rehab")
 
@@ -28,26 +30,16 @@ def _size(text: str) -> tuple[int, int]:
     return size
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} must be positive")
-    return value
-
-
 def _add_studio_options(p, *, size=(640, 480), fps=30.0) -> None:
     """Options shared by the commands that run the simulated studio."""
     p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
-    p.add_argument("--cameras", type=int, default=None, help="use the first N cameras of the rig")
+    p.add_argument("--cameras", type=number(1, 64, integer=True), default=None, help="use the first N cameras of the rig")
     p.add_argument("--size", type=_size, default=size, help=f"image size WxH (default: {size[0]}x{size[1]})")
-    p.add_argument("--fps", type=_positive_float, default=fps, help="frame rate (default: %(default)s)")
-    p.add_argument("--seconds", type=_positive_float, default=None, help="cut the motion(s) to this length")
-    p.add_argument("--percentile", type=float, default=50.0, help="body size percentile 5..95 (default: %(default)s)")
+    p.add_argument("--fps", type=FPS, default=fps, help="frame rate (default: %(default)s)")
+    p.add_argument("--seconds", type=SECONDS, default=None, help="cut the motion(s) to this length")
+    p.add_argument("--percentile", type=number(5.0, 95.0), default=50.0, help="body size percentile 5..95 (default: %(default)s)")
     p.add_argument("--sex", choices=("female", "male"), default="female")
-    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma in 8-bit units (default: %(default)s)")
+    p.add_argument("--noise", type=NOISE, default=1.5, help="sensor noise sigma in 8-bit units (default: %(default)s)")
 
 
 # --------------------------------------------------------------------------- simulate
@@ -62,12 +54,12 @@ def _add_simulate(sub) -> None:
     p.add_argument("--motion", default="right_external_rotation",
                    help="built-in motion name, or a motion YAML file (default: %(default)s)")
     _add_studio_options(p)
-    p.add_argument("--drift", type=float, default=0.0,
+    p.add_argument("--drift", type=number(0.0, 0.95), default=0.0,
                    help="brightness drop over the recording as a fraction, e.g. 0.4 (default: none)")
     p.add_argument("--cast", default=None, help="colour cast as R,G,B gains reached at the end, e.g. 1.1,1.0,0.85")
     p.add_argument("--images", action="store_true", help="write PNG folders instead of lossless AVI videos")
     p.add_argument("--markerset", default="upper_limb_seated", help="marker set name or YAML file")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the sensor noise")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed of the sensor noise")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -140,7 +132,10 @@ def _cmd_track(args) -> int:
     if not (args.points or labelled):
         raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --mot, --bvh, "
                          "--detections, --points)")
-    report = track_recording(
+    # before the work, not after minutes of tracking
+    check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
+                   "--points": args.points})
+    report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,
         markerset=args.markerset,
@@ -161,6 +156,20 @@ def _cmd_track(args) -> int:
     return 0
 
 
+def _writing(work, what: str):
+    """``work`` with an OSError while writing its outputs (full disk, a folder gone) as one line."""
+
+    def run(*args, **kwargs):
+        try:
+            return work(*args, **kwargs)
+        except OSError as exc:
+            where = f" {exc.filename}" if getattr(exc, "filename", None) else ""
+            raise RehabError(f"cannot write {what}{where} ({exc.strerror or exc}): check the folder and the free "
+                             f"space") from None
+
+    return run
+
+
 # --------------------------------------------------------------------------- angles
 def _add_angles(sub) -> None:
     p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
@@ -174,8 +183,9 @@ def _add_angles(sub) -> None:
 def _cmd_angles(args) -> int:
     from tracking.tables import angles_csv_from_trc, read_marker_map
 
+    check_outputs({"--out": args.out})
     marker_map = read_marker_map(args.map) if args.map is not None else None
-    n = angles_csv_from_trc(args.trc, args.out, marker_map)
+    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map)
     print(f"wrote {n} frames of joint angles to {args.out}")
     return 0
 
@@ -192,7 +202,7 @@ def _add_validate(sub) -> None:
     p.add_argument("--tracker", action="store_true",
                    help="run the tracker (labels, windows, hidden markers) instead of full-frame measurement")
     _add_studio_options(p, fps=15.0)
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=SEED, default=0,
                    help="random seed of the sensor noise (the figures in docs/ are for 0; other seeds show the spread)")
     p.set_defaults(func=_cmd_validate)
 
@@ -232,7 +242,7 @@ def add_tracker_source_options(p) -> None:
     ``--adapt-colours``; read back by :func:`_play_source`."""
     p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
     p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=_positive_float, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
     p.add_argument("--body", default="p50_male",
                    help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
     p.add_argument("--adapt-colours", action="store_true",
@@ -269,7 +279,7 @@ def _add_play(sub) -> None:
                    help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
                    f"patient (headless: {_HEADLESS_MOTION})")
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
-    p.add_argument("--max-fps", type=float, default=60.0,
+    p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
     p.add_argument("--game", default=None,
                    help="open this exercise game (content/games name or YAML) for --patient on --side")
@@ -296,7 +306,7 @@ def _add_play(sub) -> None:
                    help="board of the calibration scene: COLSxROWS:SQUARE_MM (inner corners), or "
                    "charuco:COLSxROWS:SQUARE_MM[:MARKER_MM] (squares); default 9x6:60")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
-    p.add_argument("--seconds", type=_positive_float, default=None,
+    p.add_argument("--seconds", type=SECONDS, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
     p.add_argument("--screenshot", type=Path, default=None, help="save the last frame as a PNG")
     add_tracker_source_options(p)
@@ -361,8 +371,6 @@ def _cmd_play(args) -> int:
         if args.motion is not None:
             raise RehabError("--motion plays on the simulated patient: leave it out with --devices or --recording")
         motion = None  # the cameras or the recording show the patient
-    if args.max_fps < 0:
-        raise RehabError(f"--max-fps {args.max_fps:g}: give 0 (no cap) or a positive rate")
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
                           adapt_colours=args.adapt_colours, **_play_source(args))
@@ -403,11 +411,11 @@ def _cmd_play(args) -> int:
 # --------------------------------------------------------------------------- bench
 def _add_bench(sub) -> None:
     p = sub.add_parser("bench", help="measure speed: colour table, centroids, triangulation, simulator")
-    p.add_argument("--frames", type=int, default=60, help="frame sets per measurement (default: %(default)s)")
+    p.add_argument("--frames", type=COUNT, default=60, help="frame sets per measurement (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="fewer frames and one pass, for a smoke run")
-    p.add_argument("--passes", type=int, default=5,
+    p.add_argument("--passes", type=number(1, 1000, integer=True), default=5,
                    help="alternating passes of full-frame measurement and tracking (default: %(default)s)")
-    p.add_argument("--seconds", type=float, default=10.0,
+    p.add_argument("--seconds", type=number(0.0, 3600.0, above=True), default=10.0,
                    help="measuring time of the live-process and application figures (default: %(default)s)")
     p.add_argument("--skip-live", action="store_true",
                    help="only the per-frame pipeline (no tracker process, no application)")
@@ -502,7 +510,7 @@ def _app_figure(seconds: float, window: bool):
 
 # --------------------------------------------------------------------------- main
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="rehab",
         description="Colour-marker motion capture for rehabilitation: tracking, ROM tests and games.",
     )
@@ -539,10 +547,14 @@ def main(argv: list[str] | None = None) -> int:
         stream=sys.stderr,
     )
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()   # a closed pipe shows here, inside the handler, not at exit
+        return code
     except RehabError as exc:
         print(f"rehab: error: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:   # rehab ... | head
+        return handle_broken_pipe()
     except KeyboardInterrupt:
         print("rehab: interrupted", file=sys.stderr)
         return 130

@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 
 from calibration.errors import RehabError
+from game.cli_options import COUNT, LENGTH_MM, NOISE, SECONDS, SEED, number
 
 log = logging.getLogger("rehab")
 
@@ -47,11 +48,11 @@ def add_commands(sub) -> None:
     live.add_argument("--live", action="append", default=None, metavar="DEVICE",
                       help="capture board views from a camera (index like 0, URL or video file), once per camera in "
                       "rig order (cam1, cam2, ...); a view is kept when the board is held still in a new place")
-    live.add_argument("--views", type=int, default=12, help="live: views to keep at least (default: %(default)s)")
-    live.add_argument("--coverage", type=float, default=85.0,
+    live.add_argument("--views", type=number(1, 1000, integer=True), default=12, help="live: views to keep at least (default: %(default)s)")
+    live.add_argument("--coverage", type=number(0.0, 100.0, above=True), default=85.0,
                       help="live: stop when the views cover this %% of the picture (default: %(default)s)")
-    live.add_argument("--max-views", type=int, default=30, help="live: stop after this many views (default: %(default)s)")
-    live.add_argument("--max-seconds", type=float, default=180.0,
+    live.add_argument("--max-views", type=number(1, 10000, integer=True), default=30, help="live: stop after this many views (default: %(default)s)")
+    live.add_argument("--max-seconds", type=SECONDS, default=180.0,
                       help="live: give up on a camera after this long (default: %(default)s)")
     live.add_argument("--save-views", type=Path, default=None,
                       help="live: also save the kept images as DIR/cam1/000.png ... (a folder to calibrate again from)")
@@ -82,11 +83,11 @@ def add_commands(sub) -> None:
     q.add_argument("recording", type=Path, help="wand recording folder (one video or image folder per camera; meta.yaml "
                    "optional: without it the frame rate comes from the videos)")
     q.add_argument("--intrinsics", type=Path, required=True, help="calibration file with every camera's intrinsics")
-    q.add_argument("--length-mm", type=float, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
+    q.add_argument("--length-mm", type=LENGTH_MM, default=None, help="distance between the ball centres (default: meta.yaml wand_length_mm)")
     q.add_argument("--colour", action="append", default=None, metavar="R,G,B",
                    help="ball colours, twice: ball 0 then ball 1; once when both balls have one colour "
                    "(default: meta.yaml wand_colours)")
-    q.add_argument("--ball-mm", type=float, default=40.0, help="ball diameter (default: %(default)s)")
+    q.add_argument("--ball-mm", type=LENGTH_MM, default=40.0, help="ball diameter (default: %(default)s)")
     q.add_argument("--floor-views", type=Path, default=None, help="folder with one sub-folder of board images per camera")
     _board_options(q, required=False)
     _floor_options(q)
@@ -104,7 +105,7 @@ def add_commands(sub) -> None:
     q.add_argument("--out", type=Path, default=None,
                    help="write the calibration with the colours here instead of into --calibration")
     q.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
-    q.add_argument("--frames", type=int, default=30, help="frame sets to learn from after identification (default 30)")
+    q.add_argument("--frames", type=COUNT, default=30, help="frame sets to learn from after identification (default 30)")
     q.set_defaults(func=_cmd_colour)
 
     q = cal.add_parser("import", help="convert calibration files of other tools (OpenCV, stereo_calib, Caliscope, Qualisys, "
@@ -129,11 +130,11 @@ def add_commands(sub) -> None:
     p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
     p.add_argument("--size", default="640x480", help="image size WxH (default: %(default)s)")
     p.add_argument("--lens", action="store_true", help="give the cameras a moderate barrel distortion")
-    p.add_argument("--images", type=int, default=15, help="intrinsics images per camera (default: %(default)s)")
-    p.add_argument("--per-pair", type=int, default=4, help="extrinsics views per neighbouring camera pair (default: %(default)s)")
-    p.add_argument("--wand-seconds", type=float, default=20.0, help="length of the wand recording (default: %(default)s)")
-    p.add_argument("--noise", type=float, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--images", type=number(1, 1000, integer=True), default=15, help="intrinsics images per camera (default: %(default)s)")
+    p.add_argument("--per-pair", type=number(1, 1000, integer=True), default=4, help="extrinsics views per neighbouring camera pair (default: %(default)s)")
+    p.add_argument("--wand-seconds", type=number(0.0, 3600.0, above=True), default=20.0, help="length of the wand recording (default: %(default)s)")
+    p.add_argument("--noise", type=NOISE, default=1.5, help="sensor noise sigma, 8-bit units (default: %(default)s)")
+    p.add_argument("--seed", type=SEED, default=0)
     p.add_argument("--charuco", action="store_true",
                    help="also render ChArUco intrinsics images (10x7 squares of 40 mm), some with the board partly out of view")
     p.add_argument("--check", action="store_true",
@@ -146,10 +147,10 @@ def _board_options(p, *, required: bool = True) -> None:
     p.add_argument("--board", default="9x6" if not required else None, required=required,
                    help="checkerboard inner corners COLSxROWS, one count even and one odd, e.g. 9x6; "
                    "or 'charuco' for a ChArUco board")
-    p.add_argument("--square-mm", type=float, default=None if required else 60.0, required=required,
+    p.add_argument("--square-mm", type=LENGTH_MM, default=None if required else 60.0, required=required,
                    help="printed square side in mm")
     p.add_argument("--squares", default="10x7", help="ChArUco board: squares COLSxROWS (default: %(default)s)")
-    p.add_argument("--marker-mm", type=float, default=None,
+    p.add_argument("--marker-mm", type=LENGTH_MM, default=None,
                    help="ChArUco board: printed marker side in mm (default: 0.75 of the square)")
     p.add_argument("--dictionary", default="DICT_4X4_50", help="ChArUco board: OpenCV ArUco dictionary (default: %(default)s)")
 
@@ -208,7 +209,7 @@ def _floor_options(p) -> None:
     where.add_argument("--board-centre", default=None, metavar="X,Y,Z",
                        help="world position in metres of the centre of the board's corners instead, e.g. 0,0.45,0: "
                        "the board centred over the origin on a 45 cm seat")
-    p.add_argument("--turn-deg", type=float, default=0.0,
+    p.add_argument("--turn-deg", type=number(-360.0, 360.0), default=0.0,
                    help="the board's rows point this many degrees from the patient's right, counter-clockwise from above")
     p.add_argument("--no-world-check", action="store_true",
                    help="accept a world frame with a camera below the floor, facing away from the floor board or on its "

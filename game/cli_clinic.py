@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from calibration.errors import RehabError
+from game.cli_options import FPS, number
 
 
 def add_commands(sub) -> None:
@@ -29,10 +30,18 @@ def _add_db(p) -> None:
                    help="database file (default: the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
 
 
-def _open_db(args):
+def _open_db(args, *, check_integrity: bool = True):
+    """The command's database, checked in full at the command's start (``PRAGMA integrity_check``)."""
     from game.db import Database, default_db_path
 
-    return Database(args.db or default_db_path())
+    return Database(args.db or default_db_path(), check_integrity=check_integrity)
+
+
+def _tell(message: str) -> None:
+    """A progress line for the user (waiting for a locked database, a result kept aside)."""
+    import sys
+
+    print(f"rehab: {message}", file=sys.stderr, flush=True)
 
 
 def _size(text: str) -> tuple[int, int]:
@@ -60,8 +69,8 @@ def _add_rom_test(sub) -> None:
     p.add_argument("--motion", default=None, help="simulated motion (default: the test's own motion for that side)")
     p.add_argument("--rig", default="ring4", help="camera layout of the simulator (default: %(default)s)")
     p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
-    p.add_argument("--fps", type=float, default=30.0, help="camera frame rate (default: %(default)s)")
-    p.add_argument("--attempts", type=int, default=1,
+    p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
+    p.add_argument("--attempts", type=number(1, 100, integer=True), default=1,
                    help="attempts: a compensated attempt is discarded and repeated up to this many (default: %(default)s)")
     p.add_argument("--keep-compensated", action="store_true",
                    help="accept and store a compensated attempt (flagged) instead of discarding it")
@@ -102,8 +111,8 @@ def _cmd_rom_test(args) -> int:
         run = run_simulated_test(test, args.side, args.standard, motion=args.motion, rig=args.rig, size_px=args.size,
                                  fps=args.fps, max_attempts=args.attempts, decide=decide)
         for i, attempt in enumerate(run.attempts, 1):
-            verdict = "accepted" if attempt.accepted else "discarded (compensation: repeat)"
-            print(f"attempt {i}: {attempt.result.line()} -> {verdict}")
+            if not attempt.accepted:
+                print(f"attempt {i}: {attempt.result.line()} -> discarded (compensation: repeat)")
         print(f"{run.frames} frame sets ({run.motion_s:.1f} s of motion {run.motion}) in {run.wall_s:.1f} s")
         accepted = run.accepted
         if accepted is None:
@@ -117,11 +126,18 @@ def _cmd_rom_test(args) -> int:
         if previous:
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
-        if db is not None:
-            session = db.start_session(args.patient, "rom", source=f"sim:{run.motion}")
-            uid = db.add_rom_result(session, r)
-            db.end_session(session)
-            print(f"stored result {uid} for patient {args.patient} in {db.path}")
+        number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
+        if db is None:
+            print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
+            return 0
+        from game.db import pending, rom_record
+
+        db.close()   # storing opens its own connection, waiting out another program's lock
+        outcome = pending.store_durably(db.path, rom_record(args.patient, r, source=f"sim:{run.motion}"),
+                                        wait_s=pending.WAIT_S, notify=_tell)
+        # "accepted" only once the result is on disk (in the database, or in its pending file)
+        print(f"attempt {number}: {r.line()} -> accepted")
+        print(f"{outcome.line(db.path)} for patient {args.patient}")
         return 0
     finally:
         if db is not None:
@@ -140,7 +156,7 @@ def _add_rom_accuracy(sub) -> None:
     p.add_argument("--test", action="append", default=None, help="test name (repeat; default: all)")
     p.add_argument("--rig", default="ring4")
     p.add_argument("--size", type=_size, default=(320, 240))
-    p.add_argument("--fps", type=float, default=30.0)
+    p.add_argument("--fps", type=FPS, default=30.0)
     p.set_defaults(func=_cmd_rom_accuracy)
 
 
@@ -184,7 +200,8 @@ def _add_patients(sub) -> None:
     p = sub.add_parser("patients", help="list the patients (pseudonymous IDs), or add one",
                        description="List the patients with their sessions and results, or add one with --add.")
     p.add_argument("--add", metavar="ID", default=None, help="add a patient under this pseudonymous ID (no names)")
-    p.add_argument("--note", default="", help="a note for --add (never identifying)")
+    p.add_argument("--note", default="",
+                   help="a note for --add; it must not identify the patient (no names, birth dates or addresses)")
     _add_db(p)
     p.set_defaults(func=_cmd_patients)
 
@@ -192,8 +209,14 @@ def _add_patients(sub) -> None:
 def _cmd_patients(args) -> int:
     with _open_db(args) as db:
         if args.add:
+            from game.db.database import identifying_hint
+
             db.add_patient(args.add, args.note)
             print(f"added patient {args.add} to {db.path}")
+            hint = identifying_hint(args.note)
+            if hint:
+                _tell(f"warning: the note looks like it holds {hint}: notes must not identify the patient (no "
+                      f"names, birth dates or addresses); the note is stored as given")
             return 0
         rows = db.patients()
         if not rows:
@@ -209,7 +232,7 @@ def _cmd_patients(args) -> int:
 def _add_export(sub) -> None:
     p = sub.add_parser("export", help="export the database (or one patient) to CSV files")
     p.add_argument("--out", type=Path, required=True, help="folder for patients.csv, sessions.csv, rom_results.csv, exercise_results.csv, game_limits.csv")
-    p.add_argument("--patient", default=None, help="only this patient")
+    p.add_argument("--patient", default=None, help="only this patient (an empty ID is an error, not everyone)")
     _add_db(p)
     p.set_defaults(func=_cmd_export)
 

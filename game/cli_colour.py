@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from calibration.errors import RehabError
+from game.cli_options import COUNT, SEED, number
 
 
 def add_commands(sub) -> None:
@@ -21,7 +22,7 @@ def add_commands(sub) -> None:
     q.add_argument("--out", type=Path, required=True, help="learned colour file to write, e.g. colours.toml")
     q.add_argument("--calibration", type=Path, default=None, help="calibration file (default: RECORDING/calibration.toml)")
     q.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
-    q.add_argument("--frames", type=int, default=30, help="frame sets to learn from after identification (default 30)")
+    q.add_argument("--frames", type=COUNT, default=30, help="frame sets to learn from after identification (default 30)")
     q.set_defaults(func=_cmd_learn)
 
     q = csub.add_parser("drift-check", help="simulate a lighting drift and compare the fixed and the adapted table",
@@ -30,13 +31,13 @@ def add_commands(sub) -> None:
     q.add_argument("--motion", default="shoulder_abduction", help="simulated motion (default shoulder_abduction)")
     q.add_argument("--rig", default="ring4", help="camera rig (default ring4)")
     q.add_argument("--size", default="320x240", help="image size WxH (default 320x240)")
-    q.add_argument("--seconds", type=float, default=10.0, help="length of the recording (default 10)")
-    q.add_argument("--drop", type=float, default=0.4, help="brightness drop reached (default 0.4 = 40 %% darker)")
+    q.add_argument("--seconds", type=number(0.0, 3600.0, above=True), default=10.0, help="length of the recording (default 10)")
+    q.add_argument("--drop", type=number(0.0, 0.95), default=0.4, help="brightness drop reached (default 0.4 = 40 %% darker)")
     q.add_argument("--cast", default="1.3,1.0,0.7", help="R,G,B gains reached (default 1.3,1.0,0.7: warm)")
-    q.add_argument("--drift-start", type=float, default=1.0, help="drift starts at this time, s (default 1)")
-    q.add_argument("--drift-seconds", type=float, default=6.0, help="drift lasts this long, s (default 6)")
-    q.add_argument("--every", type=int, default=60, help="learn from every this many frame sets (default 60)")
-    q.add_argument("--seed", type=int, default=0, help="noise seed")
+    q.add_argument("--drift-start", type=number(0.0, 3600.0), default=1.0, help="drift starts at this time, s (default 1)")
+    q.add_argument("--drift-seconds", type=number(0.0, 3600.0, above=True), default=6.0, help="drift lasts this long, s (default 6)")
+    q.add_argument("--every", type=COUNT, default=60, help="learn from every this many frame sets (default 60)")
+    q.add_argument("--seed", type=SEED, default=0, help="noise seed")
     q.set_defaults(func=_cmd_drift_check)
 
 

@@ -12,7 +12,7 @@ import math
 from pathlib import Path
 
 from calibration.errors import RehabError
-from game.cli import _positive_float as _positive
+from game.cli_options import FPS, NOISE, SECONDS, SEED
 from game.cli import _size
 
 
@@ -33,16 +33,16 @@ def add_commands(sub) -> None:
     p.add_argument("--cameras", default=None, metavar="DEV,DEV,...",
                    help="camera devices in calibration order: indices (0,1,2), URLs or video files")
     p.add_argument("--calibration", type=Path, default=None, help="calibration file of the cameras (TOML or OpenCV YAML)")
-    p.add_argument("--seconds", type=_positive, default=10.0, help="length of the recording (default: %(default)s)")
-    p.add_argument("--fps", type=_positive, default=30.0, help="frame rate (default: %(default)s)")
+    p.add_argument("--seconds", type=SECONDS, default=10.0, help="length of the recording (default: %(default)s)")
+    p.add_argument("--fps", type=FPS, default=30.0, help="frame rate (default: %(default)s)")
     p.add_argument("--size", type=_size, default=None,
                    help="image size WxH (cameras: must match the calibration; sim: default 640x480)")
     p.add_argument("--images", action="store_true", help="write PNG folders instead of lossless AVI videos")
     p.add_argument("--markerset", default="upper_limb_seated", help="marker set worn: name or YAML file")
     p.add_argument("--motion", default="right_external_rotation", help="sim: built-in motion name or motion file")
     p.add_argument("--rig", default="ring4", help="sim: camera layout (default: %(default)s)")
-    p.add_argument("--noise", type=float, default=1.5, help="sim: sensor noise sigma, 8-bit units (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="sim: sensor-noise seed")
+    p.add_argument("--noise", type=NOISE, default=1.5, help="sim: sensor noise sigma, 8-bit units (default: %(default)s)")
+    p.add_argument("--seed", type=SEED, default=0, help="sim: sensor-noise seed")
     p.set_defaults(func=_cmd_record)
 
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import time
 
 from calibration.errors import RehabError
-from game.cli import _positive_float, add_tracker_source_options
+from game.cli import add_tracker_source_options
+from game.cli_options import SECONDS
 
 #: Seconds between the progress lines of ``rehab stream``.
 REPORT_EVERY_S = 5.0
@@ -53,7 +54,7 @@ def add_commands(sub) -> None:
     add_stream_options(p)
     p.add_argument("--motion", default="shoulder_flexion",
                    help="scripted motion of the simulated patient (built-in name or motion YAML; default: %(default)s)")
-    p.add_argument("--seconds", type=_positive_float, default=None, help="stop after this many seconds")
+    p.add_argument("--seconds", type=SECONDS, default=None, help="stop after this many seconds")
     add_tracker_source_options(p)
     p.set_defaults(func=_cmd_stream)
 

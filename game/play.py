@@ -215,7 +215,7 @@ def check_scene_options(options: PlayOptions) -> None:
         from game.rom.spec import check_side, load_rom_test
 
         check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
-    with Database(options.db_path or default_db_path()) as db:
+    with Database(options.db_path or default_db_path(), check_integrity=True) as db:   # the full check: at start-up
         db.require_patient(options.patient)
 
 

@@ -383,10 +383,13 @@ markers.</p>
     else:
         parts.append("<p>No game results yet.</p>")
     parts.append("</body></html>\n")
-    try:
-        out_html.parent.mkdir(parents=True, exist_ok=True)
-        out_html.write_text("".join(parts), encoding="utf-8")
-        with open(csv_path, "w", newline="", encoding="utf-8") as fh:
+    from game.db.private import make_private_dir, open_private
+
+    try:   # patient data: the user's only (0600), each file whole or not at all
+        make_private_dir(out_html.parent)
+        with open_private(out_html, "w", encoding="utf-8") as fh:
+            fh.write("".join(parts))
+        with open_private(csv_path, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(_CSV_COLUMNS)
             for r in roms:

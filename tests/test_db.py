@@ -180,7 +180,7 @@ def test_a_bad_csv_imports_nothing(tmp_path):
     lines[-1] = lines[-1].replace("150.0", "lots", 1)
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
     with Database(tmp_path / "b.sqlite3") as db:
-        with pytest.raises(DatabaseError, match=r"rom_results.csv line 3: 'lots' is not a number"):
+        with pytest.raises(DatabaseError, match=r"rom_results.csv line 3: value_deg 'lots' is not a number"):
             db.import_csv(tmp_path / "csv")
         assert db.patients() == [] and db.rom_results() == []
     (tmp_path / "csv" / "sessions.csv").write_text("uid,patient_id\n", encoding="utf-8")

@@ -282,3 +282,27 @@ def test_a_start_that_reports_progress_gets_a_new_start_timeout():
     child.receive()
     assert time.perf_counter() - child.progress_at < 1.0
     assert not child.ready and not child.failed
+
+
+def test_a_replacement_killed_again_and_again_before_it_is_ready_is_started_again(monkeypatch):
+    """It gave up for good after the 4th kill; now it retries with a growing wait until one runs."""
+    from tracking.live import client
+
+    monkeypatch.setattr(client, "RETRY_AFTER_S", 0.05)
+    monkeypatch.setattr(client, "RETRY_MAX_S", 0.4, raising=False)
+    tracker = LiveTracker(SourceConfig(size=SIZE, fps=15.0, motion=None), ring_size=16, warm_standby=False)
+    tracker.start(wait=False)
+    try:
+        killed = []
+        while len(killed) < 6:
+            pid = _wait(lambda: tracker.status() and not tracker.ready and tracker.pid, 10.0)
+            assert pid and pid not in killed, f"no new start after {len(killed)} kills: {tracker.status()}"
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+            assert _wait(lambda: tracker.status() and tracker.pid != pid, 10.0)
+            assert not tracker.gave_up
+        assert "killed (SIGKILL) while starting" in tracker.status().last_error
+        assert _wait(lambda: tracker.status() and tracker.ready, 60.0, 0.05), tracker.status()
+        assert _wait(lambda: tracker.status() and tracker.poll(), 10.0, 0.05)   # samples flow again
+    finally:
+        tracker.close()

@@ -187,3 +187,4 @@ def test_opencv_reads_video_files_as_cameras(tmp_path):
     for fs in complete:
         a, b = (int(img[0, 0, 0]) for img in fs.images)
         assert b - a == 1 and a % 10 == 0  # frame k of both files (FFV1 is lossless)
+

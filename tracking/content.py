@@ -13,6 +13,7 @@ from typing import TypeVar
 import pydantic
 import yaml
 
+from calibration.errors import utf8_text
 from content import content_path
 from tracking.errors import ContentError
 
@@ -20,9 +21,9 @@ M = TypeVar("M", bound=pydantic.BaseModel)
 
 
 class StrictModel(pydantic.BaseModel):
-    """Base of every content schema: unknown keys are errors, instances are immutable."""
+    """Base of every content schema: unknown keys are errors, instances are immutable, numbers finite."""
 
-    model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
+    model_config = pydantic.ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 def available(kind: str) -> list[str]:
@@ -48,10 +49,12 @@ def resolve(kind: str, name_or_path: str | Path) -> Path:
 def load_yaml(path: Path) -> object:
     """Parse a YAML file; a syntax error becomes a ContentError naming the file and line."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            return yaml.safe_load(fh)
+        text = utf8_text(path, Path(path).read_bytes(), ContentError)
+        return yaml.safe_load(text)
     except OSError as exc:
         raise ContentError(f"{path}: cannot read ({exc.strerror})") from None
+    except RecursionError:
+        raise ContentError(f"{path}: nested too deeply; fix the YAML structure") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}" if mark is not None else ""

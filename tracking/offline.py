@@ -25,7 +25,11 @@ def markerset_for(recording: Recording, markerset: str | None, marker_colours: S
     ms = load_markerset(markerset or recording.meta.markerset)
     if marker_colours:
         return ms.with_colours([parse_rgb(c) for c in marker_colours])
-    if recording.meta.marker_colours and len(recording.meta.marker_colours) == ms.n_markers:
+    if recording.meta.marker_colours:
+        if len(recording.meta.marker_colours) != ms.n_markers:
+            raise RecordingError(f"{recording.folder / 'meta.yaml'} gives {len(recording.meta.marker_colours)} "
+                                 f"marker_colours but the marker set {ms.name} has {ms.n_markers} markers: give one "
+                                 f"per marker ({', '.join(ms.names)}) or none")
         return ms.with_colours(list(recording.meta.marker_colours))
     return ms
 

@@ -23,7 +23,7 @@ import numpy as np
 import yaml
 
 from calibration.camera import Camera
-from calibration.errors import CalibrationError
+from calibration.errors import CalibrationError, utf8_text
 from calibration.files import check_camera_count, check_frame_sizes, load_calibration, save_calibration_toml
 from tracking.errors import RecordingError
 
@@ -60,27 +60,53 @@ class RecordingMeta:
 
 
 def read_meta(folder: Path) -> RecordingMeta:
+    """Read and check a recording's meta.yaml (every value is checked here, once)."""
     path = folder / "meta.yaml"
     if not path.is_file():
         raise RecordingError(f"{path} not found: a recording folder needs meta.yaml with at least 'fps: 30'")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+        data = yaml.safe_load(utf8_text(path, path.read_bytes(), RecordingError)) or {}
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
+    except RecursionError:
+        raise RecordingError(f"{path}: nested too deeply; fix the file") from None
     except yaml.YAMLError as exc:
-        raise RecordingError(f"{path}: invalid YAML ({getattr(exc, 'problem', exc)}); fix the file") from None
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}" if mark is not None else ""
+        raise RecordingError(f"{path}:{where}: invalid YAML ({getattr(exc, 'problem', None) or 'syntax'}); fix the "
+                             f"file") from None
     if not isinstance(data, dict):
         raise RecordingError(f"{path}: expected keys such as 'fps: 30'")
     fps = data.get("fps")
-    if not isinstance(fps, (int, float)) or fps <= 0:
-        raise RecordingError(f"{path}: 'fps' must be a positive number of frames per second")
-    colours = data.get("marker_colours")
+    if isinstance(fps, bool) or not isinstance(fps, (int, float)) or not 0 < fps <= 10_000:
+        raise RecordingError(f"{path}: 'fps' must be a positive number of frames per second (got {fps!r})")
+    n_frames = data.get("n_frames")
+    if n_frames is not None and (isinstance(n_frames, bool) or not isinstance(n_frames, int) or n_frames < 0):
+        raise RecordingError(f"{path}: 'n_frames' must be a whole number of frames (got {n_frames!r})")
+    markerset = data.get("markerset", "upper_limb_seated")
+    if not isinstance(markerset, str) or not markerset.strip():
+        raise RecordingError(f"{path}: 'markerset' must be a marker set name such as upper_limb_seated")
     known = {"fps", "markerset", "marker_colours", "n_frames"}
     return RecordingMeta(
         fps=float(fps),
-        markerset=str(data.get("markerset", "upper_limb_seated")),
-        marker_colours=tuple(tuple(int(v) for v in c) for c in colours) if colours else None,
-        n_frames=int(data["n_frames"]) if data.get("n_frames") is not None else None,
+        markerset=markerset,
+        marker_colours=_meta_colours(path, data.get("marker_colours")),
+        n_frames=n_frames,
         extra={k: v for k, v in data.items() if k not in known},
     )
+
+
+def _meta_colours(path: Path, colours) -> tuple[tuple[int, int, int], ...] | None:
+    """meta.yaml's ``marker_colours``: a list of [R, G, B] of whole numbers 0-255 (or none)."""
+    if colours is None or colours == []:
+        return None
+    ok = isinstance(colours, list) and all(
+        isinstance(c, list) and len(c) == 3 and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255
+                                                    for v in c) for c in colours)
+    if not ok:
+        raise RecordingError(f"{path}: 'marker_colours' must be a list of [R, G, B] colours of whole numbers "
+                             f"0-255, one per marker")
+    return tuple(tuple(c) for c in colours)
 
 
 def frame_rate_from_files(folder: Path) -> float | None:
@@ -142,8 +168,12 @@ class _ImageFolderReader:
     def read(self) -> np.ndarray | None:
         if self._next >= len(self.files):
             return None
-        img = self._load(self.files[self._next])
+        file = self.files[self._next]
+        img = self._load(file)
         self._next += 1
+        if (img.shape[1], img.shape[0]) != self.size:
+            raise RecordingError(f"{file}: {img.shape[1]}x{img.shape[0]} pixels but the other images of "
+                                 f"{self.path.name} are {self.size[0]}x{self.size[1]}: replace or delete it")
         return img
 
     def close(self) -> None:
@@ -190,6 +220,16 @@ class Recording:
         )
         readers = [_camera_source(self.folder, c.name) for c in self.cameras]
         n_sources = sum(r is not None for r in readers)
+        used = {r.path.stem if r.path.is_file() else r.path.name for r in readers if r is not None}
+        unused = [name for name in found if name not in used]
+        if n_sources == len(self.cameras) and unused:
+            for r in readers:
+                r.close()
+            # a calibration of 3 cameras with a recording of 4 would silently drop a quarter of the views
+            raise RecordingError(
+                f"{calib_path.name} has {len(self.cameras)} cameras ({', '.join(c.name for c in self.cameras)}) but "
+                f"the recording {self.folder} also has {', '.join(unused)}: give the calibration of all "
+                f"{len(found)} cameras with --calibration FILE, or move the extra videos out of the folder")
         if n_sources != len(self.cameras):
             for r in readers:
                 if r is not None:

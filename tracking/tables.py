@@ -135,6 +135,8 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: M
     from tracking.trc import read_trc
 
     trc = read_trc(trc_path)
+    if trc.n_frames == 0:
+        raise TableError(f"{trc_path}: the file has no frames: nothing to compute angles from")
     names = list(trc.names)
     source = Path(trc_path).name
     if marker_map:
@@ -343,9 +345,14 @@ def _to_float(path: Path, header: list[str], rows: list[list[str]], lines: list[
         return out
     try:
         out[:, columns] = np.array([[row[j] or "nan" for j in columns] for row in rows]).astype(np.float64)
-        return out
     except ValueError:
         pass
+    else:   # empty = NaN (no value); infinity is never a measurement
+        bad = np.argwhere(np.isinf(out))
+        if bad.size:
+            i, j = bad[0]
+            raise TableError(f"{path}: line {lines[i]}: {header[j]} {rows[i][j][:40]!r} is not a finite number")
+        return out
     for row, number in zip(rows, lines):  # slow path only to name the culprit
         for j in columns:
             try:

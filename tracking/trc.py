@@ -186,10 +186,14 @@ def read_trc(path: str | Path) -> TrcData:
         body_start += 1  # the X1 Y1 Z1 ... line
     n_cells = 2 + 3 * len(names)
     rows, line_numbers = [], []
+    cut = not text.endswith(("\n", "\r"))   # the last line has no line end: maybe cut short
     for number, line in enumerate(lines[body_start:], start=body_start + 1):
         if not line.strip():
             continue
         cells = [c.strip() for c in line.split("\t")]
+        if cut and number == len(lines) and len(cells) < n_cells:
+            raise TrcError(f"{path}: line {number} stops after {len(cells)} of {n_cells} values without a line end: "
+                           f"the file is truncated (an interrupted write?); write it again")
         if len(cells) > n_cells:
             if any(cells[n_cells:]):
                 raise TrcError(f"{path}: line {number} has {sum(1 for c in cells if c)} values, more than "
@@ -200,16 +204,21 @@ def read_trc(path: str | Path) -> TrcData:
         rows.append(cells)
         line_numbers.append(number)
 
+    _check_frame_count(path, meta, len(rows))
     table = _to_float(path, rows, line_numbers, n_cells)
     frame_col, times = table[:, 0], table[:, 1]
     for column, label in ((frame_col, "Frame#"), (times, "Time")):
         bad = np.flatnonzero(~np.isfinite(column))
         if bad.size:
             raise TrcError(f"{path}: line {line_numbers[bad[0]]}: the {label} cell is empty or not a number")
-    if not np.array_equal(frame_col, np.round(frame_col)):
-        bad = np.flatnonzero(frame_col != np.round(frame_col))[0]
-        raise TrcError(f"{path}: line {line_numbers[bad]}: Frame# {frame_col[bad]:g} is not a whole number")
+    if not np.array_equal(frame_col, np.round(frame_col)) or (np.abs(frame_col) > 2**53).any():
+        bad = np.flatnonzero((frame_col != np.round(frame_col)) | (np.abs(frame_col) > 2**53))[0]
+        raise TrcError(f"{path}: line {line_numbers[bad]}: Frame# {frame_col[bad]:g} is not a whole frame number")
     positions = table[:, 2:].reshape(len(rows), len(names), 3) * scale
+    if np.isinf(positions).any():
+        bad = int(np.argwhere(np.isinf(positions))[0][0])
+        raise TrcError(f"{path}: line {line_numbers[bad]}: a coordinate is infinite or too large: fix or export "
+                       f"the file again")
     positions[np.isnan(positions).any(axis=2)] = np.nan
     frames = frame_col.astype(np.int64)
     for array in (frames, times, positions):
@@ -217,6 +226,23 @@ def read_trc(path: str | Path) -> TrcData:
     base = 0 if meta.get("OrigDataStartFrame") == "0" else 1
     return TrcData(names=names, frame_numbers=frames, times_s=times, positions_mm=positions, rate_hz=rate_hz,
                    frame_base=base)
+
+
+def _check_frame_count(path: Path, meta: dict[str, str], n_rows: int) -> None:
+    """Fewer frames than the header's NumFrames, or none it did not declare: a truncated file."""
+    try:
+        declared = int(meta.get("NumFrames", ""))
+    except ValueError:
+        declared = None   # no usable NumFrames: the rows are the frames
+    if n_rows == 0 and declared != 0:
+        raise TrcError(f"{path}: the file has a header but no frames: write it again")
+    if declared is None:
+        return
+    if n_rows < declared:
+        raise TrcError(f"{path}: NumFrames says {declared} but the file holds {n_rows} frames: the file is truncated "
+                       f"(an interrupted write?); write it again")
+    if n_rows > declared:
+        log.warning("%s: NumFrames says %d but the file holds %d frames; reading them all", path, declared, n_rows)
 
 
 def _check_names(names: list[str]) -> None:

@@ -6,13 +6,18 @@ See :mod:`game.db.database` and docs/DATABASE.md.
 from game.db.database import (
     Database,
     DatabaseError,
+    DatabaseLocked,
     ExerciseRow,
     PatientRow,
+    ResultRecord,
+    ResultRejected,
     RomRow,
     SessionRow,
     default_db_path,
+    exercise_record,
+    rom_record,
 )
 from game.db.migrations import LATEST_VERSION
 
-__all__ = ["Database", "DatabaseError", "ExerciseRow", "PatientRow", "RomRow", "SessionRow", "default_db_path",
-           "LATEST_VERSION"]
+__all__ = ["Database", "DatabaseError", "DatabaseLocked", "ExerciseRow", "PatientRow", "ResultRecord", "ResultRejected",
+           "RomRow", "SessionRow", "default_db_path", "exercise_record", "rom_record", "LATEST_VERSION"]

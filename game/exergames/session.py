@@ -529,28 +529,24 @@ class GameSession:
 
 
 # ============================================================================ storing
-def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "") -> str | None:
+def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wait_s: float = 3.0) -> str | None:
     """Store a session's log as an exercise result of a new ``exercise`` session; returns its uid.
 
-    The session ends now and starts the log's duration earlier (its wall-clock span); a session
-    the automatic demo played throughout is stored with the source ``demo``. Nothing is stored
-    for a session that never started playing (no active time).
+    The session and its result are one transaction, its span on the wall clock: it ends now and
+    starts the log's duration earlier; a session the automatic demo played throughout is stored
+    with the source ``demo``. A database locked by another program is waited for ``wait_s``, then
+    the result is kept in a pending file that the next open stores
+    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost. Nothing
+    is stored for a session that never started playing (no active time).
     """
-    from datetime import datetime, timedelta, timezone
-
-    from game.db import Database
+    from game.db import exercise_record
+    from game.db.database import utc_now
+    from game.db.pending import store_durably
 
     if log.active_s <= 0.0:
         return None
-    # the session's span on the wall clock: it ends now and lasted the log's duration
-    ended = datetime.now(timezone.utc)
-    started = ended - timedelta(seconds=log.duration_s)
-    stamp = "%Y-%m-%dT%H:%M:%SZ"
     if log.demo_s >= log.active_s - 1e-9:
         source = "demo"   # played by the automatic demo from start to end: not the patient's
-    with Database(db_path) as db:
-        session = db.start_session(patient_id, "exercise", source=source, started_utc=started.strftime(stamp))
-        uid = db.add_exercise_result(session, log.game, log.reached, log.duration_s, log.score, log.details_json(),
-                                     recorded_utc=ended.strftime(stamp))
-        db.end_session(session, ended_utc=ended.strftime(stamp))
-    return uid
+    record = exercise_record(patient_id, log.game, log.reached, log.duration_s, log.score, log.details_json(),
+                             source=source, started_utc=utc_now(ago_s=log.duration_s))
+    return store_durably(db_path, record, wait_s=wait_s).uid

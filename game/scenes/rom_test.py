@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import math
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
@@ -69,23 +70,30 @@ def is_simulated(link) -> bool:
 class RomVisit:
     """One patient's ROM tests in this sitting: the database, the standard, one database session.
 
-    The database session (kind ``rom``) is opened with the first accepted result and ended by
-    :meth:`close`; each result is its own durable transaction.
+    The database session (kind ``rom``) is stored with the first accepted result, in the same
+    transaction, and its end time follows each result; :meth:`close` sets the visit's end. A
+    database locked by another program does not lose a result: it waits briefly and then keeps it
+    in a pending file that the next open stores (:func:`game.db.pending.store_durably`).
 
     Args:
         db_path: the database file.
         patient_id: a patient that exists in it.
         standard: ``jarm`` or ``aaos``: every result of the visit is labelled with it.
         source: what measured the results (stored with the session), e.g. ``sim`` or ``cameras``.
+        wait_s: how long a locked database is waited for before a result is kept aside.
     """
 
-    def __init__(self, db_path: Path, patient_id: str, standard: str = "jarm", source: str = "sim") -> None:
+    def __init__(self, db_path: Path, patient_id: str, standard: str = "jarm", source: str = "sim",
+                 wait_s: float = 3.0) -> None:
         self.db_path = Path(db_path)
         self.patient_id = patient_id
         self.standard = standard
         self.source = source
-        self.session_id: int | None = None
+        self.wait_s = wait_s
+        self.session_uid = uuid.uuid4().hex
+        self.session_started_utc: str | None = None
         self.stored: list[str] = []
+        self.last_outcome = None
 
     def previous(self, test: str, side: str) -> list:
         """Stored results of this patient for ``test`` on ``side``, oldest first (:class:`game.db.RomRow`)."""
@@ -95,26 +103,33 @@ class RomVisit:
             return [r for r in db.rom_results(self.patient_id) if r.test == test and r.side == side]
 
     def store(self, result: RomResult, source: str | None = None) -> str:
-        """Store an accepted result; returns its uid once it is on disk."""
-        from game.db import Database
+        """Store an accepted result; returns its uid once it is on disk (in the database or its pending file).
 
-        with Database(self.db_path) as db:
-            if self.session_id is None:
-                self.session_id = db.start_session(self.patient_id, "rom", source=source or self.source)
-            uid = db.add_rom_result(self.session_id, result)
-        self.stored.append(uid)
-        log.info("stored ROM result %s (%s %s %.1f deg) for %s", uid, result.test, result.side, result.max_deg,
-                 self.patient_id)
-        return uid
+        :attr:`last_outcome` says which (:class:`game.db.pending.StoreOutcome`).
+        """
+        from game.db import rom_record
+        from game.db.pending import store_durably
+
+        record = rom_record(self.patient_id, result, session_uid=self.session_uid, source=source or self.source,
+                            started_utc=self.session_started_utc)
+        self.session_started_utc = record.session_started_utc
+        self.last_outcome = store_durably(self.db_path, record, wait_s=self.wait_s)
+        self.stored.append(record.uid)
+        log.info("%s (%s %s %.1f deg) for %s", self.last_outcome.line(self.db_path), result.test, result.side,
+                 result.max_deg, self.patient_id)
+        return record.uid
 
     def close(self) -> None:
-        """End the database session (if a result was stored)."""
+        """Set the session's end to now (if a result was stored; it already ends at its last result)."""
         from game.db import Database
 
-        if self.session_id is not None:
-            with Database(self.db_path) as db:
-                db.end_session(self.session_id)
-            self.session_id = None
+        if self.session_started_utc is not None:
+            try:
+                with Database(self.db_path, busy_timeout_s=self.wait_s) as db:
+                    db.end_session_uid(self.session_uid)
+            except RehabError as exc:
+                log.warning("the ROM session's end time stays at its last result: %s", exc)
+            self.session_started_utc = None
 
 
 def range_words(result) -> tuple[str, str]:
@@ -390,6 +405,9 @@ class RomTestScene(BaseScene):
             session.accept()
             self.notice = (f"Stored: {result.rounded_deg}\N{DEGREE SIGN} for patient {self.visit.patient_id}",
                            theme.ACCENT)
+            if not self.visit.last_outcome.stored:   # another program holds the database
+                self.notice = (f"Kept safe: {result.rounded_deg}\N{DEGREE SIGN} is stored when the database is free "
+                               f"(another program is using it)", theme.ACCENT)
             self._load_previous()
             self.selected = 0
         elif key in ("repeat", "again", "restart") and session is not None:

@@ -63,8 +63,10 @@ MAX_START_RETRIES = 3
 #: A new standby process is started this long after the running one became ready, so that its
 #: start-up does not compete with a process that is just taking over.
 STANDBY_DELAY_S = 2.0
-#: After a restart whose process could not start, wait this long before trying again.
+#: After a restart whose process could not start, wait this long before trying again; each
+#: further failure in a row doubles the wait, up to RETRY_MAX_S.
 RETRY_AFTER_S = 2.0
+RETRY_MAX_S = 30.0
 _SHM_DIR = Path("/dev/shm")
 
 
@@ -264,7 +266,8 @@ class LiveTracker:
         self._stopping: list[_Child] = []  # killed, not yet reaped
         self._retry_at = 0.0
         self._spare_due: float | None = None
-        self._failed_starts = 0
+        self._failed_starts = 0   # starts the process itself reported impossible (counted to give up)
+        self._lost_starts = 0   # starts whose process died before it was ready (killed: never give up)
         self._shm: list[shared_memory.SharedMemory] = []
         self._reader: RingReader | None = None
         self._images: ImageSlot | None = None
@@ -302,7 +305,7 @@ class LiveTracker:
         ring = RingLayout(markerset.n_markers, len(cameras), len(self.angle_names), self.ring_size)
         images = ImageLayout(len(cameras), tuple(self.source.size))
         stem = f"{BLOCK_PREFIX}{os.getpid()}_{secrets.token_hex(4)}"
-        self._errors_seen = self._failed_starts = 0
+        self._errors_seen = self._failed_starts = self._lost_starts = 0
         self._last_error = ""
         self._spare_due = None
         self._closed = False
@@ -419,10 +422,10 @@ class LiveTracker:
                 self._drop(child)
                 self._child = None
                 self._failed_starts += 1
-                self._retry_at = now + RETRY_AFTER_S
+                self._retry_at = now + self._backoff_s()
                 return
             if child.ready:
-                self._failed_starts = 0
+                self._failed_starts = self._lost_starts = 0
         alive = child.proc.is_alive()
         if alive and child.ready:
             if not self._hung(child, now):
@@ -436,11 +439,18 @@ class LiveTracker:
         self._last_error = reason
         self._drop(child)
         self._child = None
-        if not child.ready:  # it never ran: retry later, a few times, not once per frame
-            self._failed_starts += 1
-            self._retry_at = now + RETRY_AFTER_S
+        if not child.ready:
+            # it died or hung before it ran (killed, out of memory): retry later with a growing wait,
+            # for as long as it takes; only a process that reports it cannot start is given up on
+            self._lost_starts += 1
+            self._retry_at = now + self._backoff_s()
         elif self.auto_restart:
             self._restart(reason)
+
+    def _backoff_s(self) -> float:
+        """The wait before the next start: doubles with each failed or lost start in a row."""
+        n = self._failed_starts + self._lost_starts
+        return min(RETRY_MAX_S, RETRY_AFTER_S * 2.0 ** max(0, n - 1))
 
     def _hung(self, child: _Child, now: float) -> bool:
         """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and no CPU time

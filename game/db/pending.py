@@ -1,0 +1,161 @@
+"""Never lose an accepted result: wait for a locked database, else keep the result in a pending file.
+
+Another program (a database browser, a second ``rehab`` importing) may hold the database locked
+for longer than a statement waits. :func:`store_durably` then tells the user (``notify``), keeps
+trying for ``wait_s`` seconds, and finally writes the result to a pending file beside the database
+(``rehab.sqlite3.pending/<uid>.json``, 0600 in a 0700 folder, written through a temporary file and
+fsync). Every later open of the database (:class:`game.db.Database`) stores the pending results
+and removes their files; storing is keyed by uids, so a kill between storing and removing the file
+adds nothing twice. A result is only reported stored once it is in the database or in its file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from calibration.errors import RehabError
+from game.db.database import BUSY_TIMEOUT_S, Database, DatabaseError, DatabaseLocked, ResultRecord, ResultRejected
+from game.db.private import make_private_dir, open_private
+
+log = logging.getLogger(__name__)
+
+#: How long :func:`store_durably` keeps trying a locked database before keeping the result aside.
+WAIT_S = 30.0
+
+
+@dataclass(frozen=True, slots=True)
+class StoreOutcome:
+    """Where an accepted result went.
+
+    Attributes:
+        uid: the result's uid.
+        pending_file: None when it is in the database; else the file that holds it until the
+            database can be written (the next open stores it).
+        reason: why it is pending (one line), "" when stored.
+    """
+
+    uid: str
+    pending_file: Path | None = None
+    reason: str = ""
+
+    @property
+    def stored(self) -> bool:
+        return self.pending_file is None
+
+    def line(self, db_path: Path) -> str:
+        """One line for the user: stored, or kept and when it will be stored."""
+        if self.stored:
+            return f"stored result {self.uid} in {db_path}"
+        return (f"kept result {self.uid} in {self.pending_file} ({self.reason}); it is stored in {db_path} the next "
+                f"time rehab opens it")
+
+
+def pending_dir(db_path: str | Path) -> Path:
+    """The folder of results waiting for the database ``db_path``."""
+    db_path = Path(db_path)
+    return db_path.with_name(db_path.name + ".pending")
+
+
+def keep_pending(db_path: str | Path, record: ResultRecord) -> Path:
+    """Write ``record`` to its pending file (whole, flushed to disk, 0600); returns the file.
+
+    Raises:
+        RehabError: the file cannot be written either (the message holds the result's values).
+    """
+    folder = pending_dir(db_path)
+    path = folder / f"{record.uid}.json"
+    try:
+        make_private_dir(folder)
+        with open_private(path, "w", encoding="utf-8") as fh:
+            fh.write(record.to_json())
+    except (OSError, RehabError) as exc:
+        raise RehabError(f"the result could neither be stored in {db_path} nor kept in {folder} ({exc}): note it "
+                         f"down: {record.table} {record.values}") from None
+    return path
+
+
+def store_pending_results(db: Database) -> int:
+    """Store every pending result of ``db`` and remove its file; returns how many were stored.
+
+    A file that cannot be stored now stays (logged); one that is not a pending result is renamed
+    ``.bad`` and logged, never deleted.
+    """
+    folder = pending_dir(db.path)
+    if not folder.is_dir():
+        return 0
+    n = 0
+    for path in sorted(folder.glob("*.json")):
+        try:
+            record = ResultRecord.from_json(path.read_text(encoding="utf-8"), str(path))
+        except (OSError, UnicodeDecodeError, DatabaseError) as exc:
+            log.warning("pending result %s cannot be read (%s): kept as %s.bad", path, exc, path.name)
+            with contextlib.suppress(OSError):
+                path.rename(path.with_suffix(".json.bad"))
+            continue
+        try:
+            db.store_result(record)
+        except DatabaseError as exc:
+            log.warning("pending result %s not stored yet: %s", path.name, exc)
+            if isinstance(exc, DatabaseLocked):
+                break
+            continue
+        path.unlink()
+        n += 1
+        log.info("stored pending result %s in %s", record.uid, db.path)
+    return n
+
+
+def store_durably(db_path: str | Path, record: ResultRecord, *, wait_s: float = WAIT_S,
+                  notify: Callable[[str], None] | None = None,
+                  clock: Callable[[], float] = time.monotonic) -> StoreOutcome:
+    """Store ``record`` in the database, waiting out a lock for ``wait_s``, else keep it in a pending file.
+
+    Args:
+        db_path: the database file.
+        record: the result (:func:`game.db.database.rom_record`, :func:`~game.db.database.exercise_record`).
+        wait_s: how long to keep trying a locked database.
+        notify: called with one line when the wait begins (e.g. print it, or show it on screen).
+        clock: seconds (tests).
+
+    Returns:
+        Where the result is: in the database, or in its pending file (never lost).
+
+    Raises:
+        RehabError: a bad result (unknown patient, a value out of range), or neither the database
+            nor the pending folder can be written.
+    """
+    db_path = Path(db_path)
+    start = clock()
+    told = False
+    while True:
+        left = wait_s - (clock() - start)
+        # the first try waits a second at most, so that a long wait is announced before it begins
+        timeout_s = max(0.05, min(1.0 if not told else BUSY_TIMEOUT_S, left))
+        try:
+            with Database(db_path, busy_timeout_s=timeout_s) as db:
+                db.store_result(record)
+            return StoreOutcome(record.uid)
+        except ResultRejected:
+            raise   # the result itself is wrong: keeping it would not help
+        except DatabaseLocked as exc:
+            reason = "the database is locked by another program"
+            if not told and notify is not None:
+                notify(f"{db_path} is in use by another program: waiting up to {wait_s:.0f} s to store the result")
+            told = True
+            log.info("waiting for %s: %s", db_path, exc)
+            if clock() - start >= wait_s:
+                break
+        except DatabaseError as exc:
+            reason = str(exc)
+            break
+    path = keep_pending(db_path, record)
+    outcome = StoreOutcome(record.uid, path, reason)
+    log.warning("%s", outcome.line(db_path))
+    if notify is not None:
+        notify(outcome.line(db_path))
+    return outcome
