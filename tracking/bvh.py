@@ -239,7 +239,8 @@ def write_bvh(path: str | Path, times_s: np.ndarray, angles_deg: Mapping[str, np
     if n:
         rotations = local_rotations({c: np.broadcast_to(np.asarray(angles_deg[c], np.float64), (n,)) for c in ANGLE_COLUMNS})
         for joint in _JOINTS:
-            columns.append(Rotation.from_matrix(rotations[joint]).as_euler("ZXY", degrees=True))
+            # a copy: older SciPy (1.11) refuses a read-only matrix (a broadcast view)
+            columns.append(Rotation.from_matrix(np.array(rotations[joint])).as_euler("ZXY", degrees=True))
     body = np.hstack(columns) if n else np.empty((0, 3 + 3 * len(_JOINTS)))
     body[np.abs(body) < 5e-7] = 0.0  # no "-0.000000"
     with open(path, "w", encoding="utf-8", newline="\n") as fh:
