@@ -109,11 +109,13 @@ def _add_track(sub) -> None:
         help="track a recording folder offline with the online algorithm",
         description="Track a recording folder frame by frame (no look-ahead) and write the results.",
     )
-    p.add_argument("recording", type=Path, help="recording folder (spec/INTERFACES.md)")
+    # (optional for argparse only: a recording written after --marker-color's colours is taken back below)
+    p.add_argument("recording", type=Path, nargs="?", default=None, help="recording folder (spec/INTERFACES.md)")
     p.add_argument("--calibration", type=Path, default=None, help="calibration file (default: RECORDING/calibration.toml)")
     p.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
-    p.add_argument("--marker-color", action="append", default=None, metavar="R,G,B",
-                   help="override marker colours: once for all markers, or once per marker in marker-set order")
+    p.add_argument("--marker-color", action="extend", nargs="+", default=None, metavar="R,G,B",
+                   help="override marker colours: one for all markers, or one per marker in marker-set order "
+                        "(--marker-color R,G,B R,G,B ... or the flag repeated)")
     p.add_argument("--points", type=Path, default=None,
                    help="write unlabelled 3D points: frame,time,x_mm,y_mm,z_mm,n_cameras,reproj_px")
     p.add_argument("--out", type=Path, default=None, help="labelled markers as an OpenSim TRC file (mm)")
@@ -126,8 +128,22 @@ def _add_track(sub) -> None:
     p.set_defaults(func=_cmd_track)
 
 
+def _track_folder(args) -> Path:
+    """The recording folder; a folder written right after --marker-color's colours (which take
+    every value up to the next option) is the last of those values that is not a colour."""
+    if args.recording is not None:
+        return args.recording
+    colours = args.marker_color or []
+    if colours and "," not in colours[-1]:
+        args.marker_color = colours[:-1] or None
+        return Path(colours[-1])
+    raise RehabError("give the recording folder: rehab track RECORDING --out markers.trc")
+
+
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
+
+    args.recording = _track_folder(args)
 
     labelled = args.out or args.status or args.angles or args.c3d
     if args.points and labelled:
