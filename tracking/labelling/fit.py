@@ -57,6 +57,7 @@ class Labelling:
         yaw_deg: the patient frame's yaw (as :class:`tracking.identify.Identification`).
         worst: (term, marker side or "", value) of the best labelling's largest cost, or None.
         terms: term name (with the side, e.g. "right humeral_rotation") -> value, of the best.
+        ambiguous: markers that the labellings within the margin of the best name differently.
     """
 
     index: np.ndarray | None
@@ -66,6 +67,7 @@ class Labelling:
     yaw_deg: float
     worst: tuple[str, float] | None = None
     terms: dict[str, float] = field(default_factory=dict)
+    ambiguous: tuple[int, ...] = ()
 
 
 @dataclass(slots=True)
@@ -82,6 +84,20 @@ class _Part:
 
     def sorted(self) -> "_Part":
         return self.keep(np.argsort(self.score, kind="stable"))
+
+
+#: what the patient does about a term out of its range
+_ADVICE = {
+    "abduction": "hold the {side} arm 5-40 degrees away from the body",
+    "arm_flexion": "let the {side} arm hang at the side, neither forward nor back",
+    "humeral_rotation": "let the {side} arm hang relaxed with the elbow crease forward or slightly inward",
+    "elbow_flexion": "straighten the {side} elbow",
+    "forearm_down": "let the {side} forearm hang down",
+    "thumb": "turn the {side} hand so that the thumb points forward",
+    "trunk_lean": "sit upright",
+    "hips_tilt": "sit level on the chair",
+    "hips_turn": "turn the chair to face the front",
+}
 
 
 class _TooMany(Exception):
@@ -177,7 +193,8 @@ class Labeller:
         yaw = float(np.clip(math.degrees(yaw_from_points(pts)), -limit, limit))
         result = None
         for _ in range(_MAX_REFINE + 1):
-            result = self._label_in(pts, col, short, yaw)
+            with np.errstate(invalid="ignore", divide="ignore"):  # unseen markers: NaN terms cost 0
+                result = self._label_in(pts, col, short, yaw)
             if result.index is None:
                 break
             new = self._yaw_of(pts, result.index)
@@ -186,7 +203,8 @@ class Labeller:
             yaw = new
         if result.index is not None:
             result = Labelling(np.where(result.index >= 0, keep[np.maximum(result.index, 0)], -1), result.score,
-                               result.margin, result.confident, result.yaw_deg, result.worst, result.terms)
+                               result.margin, result.confident, result.yaw_deg, result.worst, result.terms,
+                               result.ambiguous)
         return result
 
     def terms_of(self, p_pat_m: np.ndarray) -> dict[str, float]:
@@ -211,6 +229,40 @@ class Labeller:
             out[f"{side} upper_arm_ratio"] = out[f"{side} upper_arm"] / out["shoulders"]
             out[f"{side} reach_ratio"] = out[f"{side} reach"] / out["shoulders"]
         return out
+
+    def score_of(self, p_world_m: np.ndarray, index: np.ndarray, yaw_deg: float = 0.0) -> float:
+        """The body model's score of a given labelling (index -1: unseen) in the frame of ``yaw_deg``."""
+        from tracking.identify import patient_axes
+
+        index = np.asarray(index)
+        p = np.where((index >= 0)[:, None], np.asarray(p_world_m, dtype=np.float64)[np.maximum(index, 0)], np.nan)
+        q = (p - np.nanmean(p, axis=0)) @ patient_axes(math.radians(yaw_deg))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            terms = self.terms_of(q)
+            return float(sum(self.cost_of(k, v) for k, v in terms.items() if np.isfinite(v)))
+
+    def advice(self, lab: Labelling, names: tuple[str, ...]) -> str:
+        """One line for the therapist on a labelling that is not confident (the fit's own words;
+        the marker set's ordering rules say it in theirs first, see the tracker)."""
+        if lab.index is None:
+            return "the markers do not fit the reference pose"
+        if lab.ambiguous and lab.score <= self.max_score:
+            which = ", ".join(names[m] for m in lab.ambiguous)
+            return (f"the markers {which} fit the reference pose in more than one way: hold the arms a little "
+                    "further from the body, elbows nearly straight, thumbs forward, and hold still")
+        if lab.worst is not None:
+            name, value = lab.worst
+            side, _, term = name.rpartition(" ")
+            rng, _ = self.table["symmetry" if side == "symmetry" else term]
+            text = _ADVICE.get(term, "")
+            unit = "degrees" if term.endswith(("rotation", "abduction", "flexion", "axis", "thumb", "lean", "tilt",
+                                              "turn", "down")) else "mm"
+            shown = value if unit == "degrees" else 1000 * value
+            lo, hi = (rng if unit == "degrees" else (1000 * rng[0], 1000 * rng[1]))
+            where = f"{side} " if side and side != "symmetry" else ""
+            return (f"the {where}{term.replace('_', ' ')} is {shown:.0f} {unit} (expected {lo:.0f} to {hi:.0f})"
+                    + (f": {text.format(side=side or 'either')}" if text else ""))
+        return "the markers do not fit the reference pose"
 
     def cost_of(self, name: str, value: float) -> float:
         """The cost of a value of :meth:`terms_of`."""
@@ -276,7 +328,8 @@ class Labeller:
         # differently is not certain, and would be left to a re-acquisition that knows less
         confident = bool(s0 <= self.max_score and margin >= self.min_margin - 1e-9
                          and np.sum(index < 0) == int(short.sum()))
-        return Labelling(index, float(s0), float(margin), confident, yaw_deg, worst, terms)
+        return Labelling(index, float(s0), float(margin), confident, yaw_deg, worst, terms,
+                         tuple(np.flatnonzero(~agree).tolist()))
 
     def _arm(self, q: np.ndarray, cand: list[np.ndarray], arm: ArmRoles, unseen: int) -> _Part:
         """Candidates (shoulder, E1, E2, W1, W2) of one arm within reach."""

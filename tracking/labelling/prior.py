@@ -229,8 +229,7 @@ def coupling_terms(prior: BodyPrior, sign: float, upper: np.ndarray, lower: np.n
         "shoulder_over_lower": s[..., 1] - lower[..., 1],
         "shoulder_over_upper": s[..., 1] - upper[..., 1],
         "shoulder_out": sign * (s[..., 0] - upper[..., 0]),
-        "arm_out": np.nanmin(sign * (limbs[..., 0] - upper[..., None, 0]), axis=-1)
-        if not np.all(np.isnan(limbs[..., 0])) else np.full(limbs.shape[:-2], np.nan),
+        "arm_out": np.fmin.reduce(sign * (limbs[..., 0] - upper[..., None, 0]), axis=-1),
     }
 
 
