@@ -68,7 +68,8 @@ class TrackerSample:
         angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined, and forearm
             supination NaN while an estimated elbow or wrist marker's axis is a guess
             (:attr:`tracking.hidden.Estimator.axis_guessed`).
-        message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
+        message: a one-line explanation while WAITING (e.g. which reference-pose rule fails); while
+            TRACKING, what the self-checks found ("" when nothing).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
         windows_px: (M, C, 3) float64 search window of each marker in each camera this frame:
             predicted image position (u, v) and half size, pixels (the pixels within the half size
@@ -77,6 +78,8 @@ class TrackerSample:
         uv_px: (M, C, 2) float64 window centroid from which each marker's position was
             triangulated in each camera this frame; NaN where none (not measured, view not used,
             or the marker found again by full-frame measurement); None when no windows were searched.
+        suspect: (M,) bool markers whose names the self-checks doubt this frame (the angles that
+            need them are NaN); None while WAITING.
     """
 
     frame_index: int
@@ -89,6 +92,7 @@ class TrackerSample:
     n_points: int = 0
     windows_px: np.ndarray | None = None
     uv_px: np.ndarray | None = None
+    suspect: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -286,6 +290,7 @@ class Tracker:
         from tracking.hidden import Estimator, estimator_config
         from tracking.identify import Identifier
         from tracking.labelling import BodyRoles, Labeller
+        from tracking.labelling.checks import SelfChecks
         from tracking.labelling.still import Stillness
 
         self.cameras = tuple(cameras)
@@ -307,7 +312,9 @@ class Tracker:
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
         self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
-        self.labeller = Labeller.for_markerset(markerset) if BodyRoles.of(markerset) is not None else None
+        roles = BodyRoles.of(markerset)
+        self.labeller = Labeller.for_markerset(markerset) if roles is not None else None
+        self.checks = SelfChecks(roles) if roles is not None else None
         self._stillness = Stillness(self.fps, params.identify_hold_s) if params.identify_hold_s > 0 else None
         self._last_message = ""
         self.times = StageTimes(STEP_STAGES)
@@ -339,6 +346,7 @@ class Tracker:
         self.estimator = self._estimator_factory()
         self.frame_count = 0
         self._lost_streak = 0
+        self._exchanged_streak = 0
         if getattr(self, "_stillness", None) is not None:
             self._stillness.reset()
 
@@ -402,8 +410,11 @@ class Tracker:
             n_points = self._track(images)
         t0 = time.perf_counter()
         angles = {}
+        suspect = None
         if self.state == TrackingState.TRACKING:
-            angles = joint_angles(self.positions, self.markerset.names)
+            suspect, message = self._self_check()
+            # angles that need a suspect marker are withheld (NaN), the reason in the message
+            angles = joint_angles(np.where(suspect[:, None], np.nan, self.positions), self.markerset.names)
             for k in np.flatnonzero(self.estimator.axis_guessed).tolist():
                 # an elbow or wrist axis that no measurement pins: no supination rather than a guess
                 name = AXIS_ANGLES.get(self.markerset.names[k])
@@ -422,7 +433,43 @@ class Tracker:
             n_points=n_points,
             windows_px=self._windows_px,
             uv_px=self._used_uv,
+            suspect=suspect,
         )
+
+    # ------------------------------------------------------------------ self-checks
+    def _self_check(self) -> tuple[np.ndarray, str]:
+        """The labelling's per-frame checks (:mod:`tracking.labelling.checks`): a pair of markers
+        found exchanged two frame sets running is named back; until then, and where the checks
+        cannot tell which pair, the markers are suspect. Returns (suspect (M,), reason or "")."""
+        m = self.markerset.n_markers
+        if self.checks is None:
+            return np.zeros(m, bool), ""
+        res = self.checks.check(self.positions, self.markerset.names)
+        suspect = res.suspect.copy()
+        if not res.relabel:
+            self._exchanged_streak = 0
+            return suspect, res.reason
+        self._exchanged_streak += 1
+        if self._exchanged_streak < 2:
+            for i, j in res.relabel:
+                suspect[[i, j]] = True
+            return suspect, res.reason.replace("named back", "suspect, angles that need them withheld")
+        for i, j in res.relabel:
+            self._exchange(i, j)
+        self._exchanged_streak = 0
+        log.warning("self-check at frame %d: %s", self.frame_count - 1, res.reason)
+        return suspect, res.reason
+
+    def _exchange(self, i: int, j: int) -> None:
+        """Exchange the names of markers i and j (everything the tracker holds about them); the
+        hidden-marker estimator starts afresh from the measured markers."""
+        for a in (self.positions, self.velocity, self.status, self.frames_unmeasured, self._last_seen):
+            a[[i, j]] = a[[j, i]]
+        self.seg_length[[i, j]] = self.seg_length[[j, i]]
+        self.seg_length[:, [i, j]] = self.seg_length[:, [j, i]]
+        measured = self.status == MarkerStatus.MEASURED
+        self.estimator.reset()
+        self.estimator.update(np.where(measured[:, None], self.positions, np.nan), measured)
 
     # ------------------------------------------------------------------ identification
     def _try_identify(self, points: Points3D, views: Sequence[CameraObservations]) -> str:
