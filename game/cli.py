@@ -198,6 +198,12 @@ def _add_validate(sub) -> None:
     _add_studio_options(p, fps=15.0)
     p.add_argument("--seed", type=int, default=0,
                    help="random seed of the sensor noise (the figures in docs/ are for 0; other seeds show the spread)")
+    p.add_argument("--population", type=int, default=None, metavar="N",
+                   help="the labelling on N simulated patients (body size, marker placement, reference-pose "
+                        "variation, one or four colours), and a fifth of them rendered and tracked in layouts "
+                        "of 2-4 cameras; reported seeds only (docs/TRACKING.md)")
+    p.add_argument("--rendered", type=int, default=None, metavar="M",
+                   help="with --population: how many draws are rendered and tracked (default N/5)")
     p.set_defaults(func=_cmd_validate)
 
 
@@ -207,6 +213,8 @@ def _cmd_validate(args) -> int:
     from tracking.sim.studio import SimulationSettings
     from tracking.sim.validate import combine, validate
 
+    if args.population is not None:
+        return _validate_population(args)
     base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex, seed=args.seed)
@@ -226,6 +234,20 @@ def _cmd_validate(args) -> int:
     if len(results) > 1:
         print(f"{'all':26s} {combine(results).summary()}; whole-ball views: "
               f"{100 * combine(whole).completeness:.2f} %")
+    return 0
+
+
+def _validate_population(args) -> int:
+    from tracking.sim.population import REPORTED_SEEDS_FROM, label_draws, population_report, track_draws
+
+    n = args.population
+    rendered = n // 5 if args.rendered is None else args.rendered
+    if n < 1 or rendered < 0:
+        raise RehabError("--population needs a number of draws >= 1 (and --rendered >= 0)")
+    first = REPORTED_SEEDS_FROM + 1000 * args.seed  # (--seed: another set of reported seeds)
+    labelled = label_draws(range(first, first + n))
+    tracked = track_draws(range(first, first + rendered), size_px=args.size, fps=args.fps, progress=True)
+    print(population_report(labelled, tracked))
     return 0
 
 

@@ -60,8 +60,11 @@ def test_wrong_poses_are_explained_never_named(small_sweep):
     explained = [r for r in bad if r.rule_message]
     assert len(explained) >= 0.75 * len(bad), table_markdown(bad)
     against = [r for r in explained if r.pose.startswith("arms against the body")]
+    # (the frame judged is the first after the 0.2 s hold; where the inner elbow marker is hidden in
+    # it, the rules' nearest naming breaks the elbow pair's width first)
     assert against and all("wrist is not outside the" in r.message or "elbow is not above" in r.message
-                           for r in against), [r.message for r in against]
+                           or "elbow markers are not an elbow's width apart" in r.message
+                           for r in against), "\n".join(r.message for r in against)
 
 
 # --------------------------------------------------------------------------- unseen, re-identified

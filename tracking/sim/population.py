@@ -167,3 +167,151 @@ def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bo
         out.append(LabelResult(seed, d.one_colour, len(d.unseen), lab.confident, wrong, lab.score, lab.margin, dt,
                                worst))
     return out
+
+
+#: camera layouts of the rendered draws: the rigs of content/rigs, two cameras of front4, and
+#: random placements of 3 or 4 cameras
+LAYOUTS = ("tri3", "front3", "wall3", "ring4", "front4", "corners4", "front4:2", "random3", "random4")
+
+
+def layout_cameras(name: str, rng: np.random.Generator, size_px: tuple[int, int]):
+    """The cameras of a layout of :data:`LAYOUTS` (a random one drawn from ``rng``)."""
+    from calibration.camera import Camera
+    from tracking.sim.rigs import load_rig
+
+    if name.startswith("random"):
+        n = int(name[len("random"):])
+        w, h = size_px
+        f_px = (w / 2.0) / math.tan(math.radians(55.0) / 2.0)
+        # spread around the patient: one camera in each of n equal sectors, front sectors first
+        base = rng.uniform(-180.0, 180.0)
+        cams = []
+        for k in range(n):
+            az = math.radians(base + 360.0 * k / n + rng.uniform(-25.0, 25.0))
+            dist, height = rng.uniform(1.7, 2.6), rng.uniform(1.3, 2.6)
+            eye = (dist * math.sin(az), height, -dist * math.cos(az))
+            cams.append(Camera.look_at(f"cam{k + 1}", (w, h), f_px, eye, (0.0, 0.95, 0.0)))
+        return tuple(cams)
+    rig, _, count = name.partition(":")
+    cams = load_rig(rig, size_px)
+    return cams[:int(count)] if count else cams
+
+
+@dataclass(frozen=True, slots=True)
+class TrackResult:
+    """One draw rendered and tracked in one camera layout.
+
+    Attributes:
+        identified_s: time from the start of the still reference pose to the names (NaN: never).
+        wrong: markers named on another marker's ball (a swap), over every frame after the names.
+        named: markers named at identification (the others join later).
+        rmse_mm: RMSE of the measured markers against their balls after the names.
+        worst_ms, median_ms: per frame-set time of the tracker's step.
+        message: the tracker's last message while waiting ("" when named).
+    """
+
+    seed: int
+    layout: str
+    one_colour: bool
+    identified_s: float
+    wrong: int
+    named: int
+    rmse_mm: float
+    worst_ms: float
+    median_ms: float
+    message: str
+
+
+def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), fps: float = 30.0,
+                seconds: float = 1.0, noise_sigma: float = 1.5, markerset: MarkerSet | None = None,
+                progress: bool = False) -> list[TrackResult]:
+    """Render each draw's reference pose (still, ``seconds`` long, sensor noise) in a layout of
+    :data:`LAYOUTS` drawn from the seed, and track it from the first frame set."""
+    from tqdm import tqdm
+
+    from tracking.sim.studio import Studio
+    from tracking.status import MarkerStatus
+    from tracking.tracker import Tracker, TrackingState
+
+    base = markerset or load_markerset()
+    seeds = list(seeds)
+    out = []
+    for seed in tqdm(seeds, unit="draw", desc="rendered draws", leave=False, disable=not progress):
+        d = draw(seed, base, max_unseen=0)
+        ms = draw_markerset(d, base)
+        rng = np.random.default_rng(seed + 104_729)
+        layout = LAYOUTS[int(rng.integers(len(LAYOUTS)))]
+        cams = layout_cameras(layout, rng, size_px)
+        with Studio(cams, ms, d.dims) as studio:
+            studio.body = BodyModel(d.dims, ms, d.offsets_m)
+            tracker = Tracker(cams, ms, fps=fps)
+            n = max(int(round(seconds * fps)), tracker.hold_frames + 2)
+            times, sq, wrong = [], [], 0
+            named_at, named, message = -1, 0, ""
+            for k in range(n):
+                sf = studio.render(d.pose, k, k / fps, noise_sigma=noise_sigma, seed=seed * 7 + k, with_visibility=False)
+                t0 = time.perf_counter()
+                s = tracker.step(sf.frames.images, k / fps)
+                times.append(time.perf_counter() - t0)
+                if s.state != TrackingState.TRACKING:
+                    message = s.message
+                    continue
+                if named_at < 0:
+                    named_at, named, message = k, int(np.sum(s.status != MarkerStatus.LOST)), ""
+                truth = sf.markers_m
+                has = np.isfinite(s.positions_m).all(axis=1)
+                d_all = np.linalg.norm(s.positions_m[has][:, None] - truth[None], axis=-1)
+                own = d_all[np.arange(has.sum()), np.flatnonzero(has)]
+                wrong += int(np.sum((own > 0.015) & (d_all.argmin(axis=1) != np.flatnonzero(has))))
+                meas = s.status == MarkerStatus.MEASURED
+                sq.extend((np.linalg.norm(s.positions_m[meas] - truth[meas], axis=1) ** 2).tolist())
+        out.append(TrackResult(seed, layout, d.one_colour, named_at / fps if named_at >= 0 else math.nan, wrong,
+                               named, 1000 * math.sqrt(np.mean(sq)) if sq else math.nan, 1000 * max(times),
+                               1000 * float(np.median(times)), message))
+    return out
+
+
+def _spread(values: list[float], unit: str, digits: int = 0) -> str:
+    v = np.asarray([x for x in values if np.isfinite(x)], dtype=np.float64)
+    if not len(v):
+        return "-"
+    q = np.percentile(v, [5, 50, 95])
+    return f"median {q[1]:.{digits}f} {unit} (5-95 %: {q[0]:.{digits}f}-{q[2]:.{digits}f}, worst {v.max():.{digits}f})"
+
+
+def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -> str:
+    """The figures of ``rehab validate --population``: per colour scheme, spread across the draws."""
+    lines = []
+    if labelled:
+        lines.append(f"labelling of the points ({len(labelled)} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
+                     "1.5 mm noise, 0-2 markers without a point):")
+        for one in (True, False):
+            for unseen in (0, 1, 2):
+                r = [x for x in labelled if x.one_colour == one and x.n_unseen == unseen]
+                if not r:
+                    continue
+                conf = sum(x.confident for x in r)
+                lines.append(f"  {'one colour ' if one else 'four colours'}, {unseen} without a point: labelled "
+                             f"{conf}/{len(r)} ({100 * conf / len(r):.1f} %), swaps {sum(x.wrong for x in r)}, time "
+                             + _spread([1000 * x.time_s for x in r], "ms"))
+    if tracked:
+        lines.append(f"rendered and tracked ({len(tracked)} draws, still reference pose, layouts of 2-4 cameras "
+                     "incl. random placements):")
+        for one in (True, False):
+            r = [x for x in tracked if x.one_colour == one]
+            if not r:
+                continue
+            ok = [x for x in r if np.isfinite(x.identified_s)]
+            lines.append(f"  {'one colour ' if one else 'four colours'}: identified {len(ok)}/{len(r)} "
+                         f"({100 * len(ok) / len(r):.1f} %), within 1 s {sum(x.identified_s <= 1.0 for x in ok)}; "
+                         f"swaps {sum(x.wrong for x in r)}; time to identify "
+                         + _spread([x.identified_s for x in ok], "s", 2))
+            lines.append("    measured RMSE " + _spread([x.rmse_mm for x in ok], "mm", 2)
+                         + "; per frame set " + _spread([x.worst_ms for x in r], "ms") + " (worst of each draw)")
+        for layout in LAYOUTS:
+            r = [x for x in tracked if x.layout == layout]
+            if r:
+                ok = sum(np.isfinite(x.identified_s) for x in r)
+                waiting = "; ".join(sorted({x.message[:80] for x in r if not np.isfinite(x.identified_s)}))
+                lines.append(f"    {layout}: {ok}/{len(r)}" + (f" (waiting: {waiting})" if waiting else ""))
+    return "\n".join(lines)
