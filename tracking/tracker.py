@@ -487,7 +487,13 @@ class Tracker:
                 return self._last_message  # (still and not confident: judged again every third frame set)
         if self.labeller is None or self._unseen(points) > self.labeller.max_unseen:
             # more markers unseen than the fit takes: the rules with the single-camera rays
-            # name them, and the body model must find the names within its ranges
+            # name them, and the body model must find the names within its ranges; not with one
+            # colour for all markers (there the rules' search with many stand-ins takes seconds
+            # and is what named elbow pairs exchanged): the counts are reported
+            if self.labeller is not None and len(self.identifier.words) == 1:
+                self._last_message = self.identifier.count_problem(np.asarray(points.colour)) or \
+                    "waiting for the reference pose"
+                return self._last_message
             try:
                 rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
                 ident = try_identify(points, self.identifier, rays)
