@@ -121,7 +121,8 @@ class TrackerParams:
             ``reacquire_stale_every`` frames.
         reidentify_after: identify again when more than half the markers are lost this many frames.
         identify_hold_s: the markers are named only once the patient has held still this long
-            (:class:`tracking.labelling.still.Stillness`); 0: on any frame set, moving or not.
+            (:class:`tracking.labelling.still.Stillness`; 0.2 s in ``rehab validate
+            --population``); 0 (the default for now): on any frame set, moving or not.
         max_reproj_px: largest RMS reprojection error of a candidate.
         max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
             show a ball of the right size in both).
@@ -173,7 +174,7 @@ class TrackerParams:
     stale_after: int = 3
     reacquire_stale_every: int = 6
     reidentify_after: int = 30
-    identify_hold_s: float = 0.2
+    identify_hold_s: float = 0.0
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
     max_loo_px: float = 3.0

@@ -60,11 +60,8 @@ def test_wrong_poses_are_explained_never_named(small_sweep):
     explained = [r for r in bad if r.rule_message]
     assert len(explained) >= 0.75 * len(bad), table_markdown(bad)
     against = [r for r in explained if r.pose.startswith("arms against the body")]
-    # (the frame judged is the first after the 0.2 s hold; where the inner elbow marker is hidden in
-    # it, the rules' nearest naming breaks the elbow pair's width first)
     assert against and all("wrist is not outside the" in r.message or "elbow is not above" in r.message
-                           or "elbow markers are not an elbow's width apart" in r.message
-                           for r in against), "\n".join(r.message for r in against)
+                           for r in against), [r.message for r in against]
 
 
 # --------------------------------------------------------------------------- unseen, re-identified
@@ -98,21 +95,19 @@ def _frames(studio, n, seed=0):
 
 
 def test_a_marker_unseen_at_identification_is_found_later(ring4_studio, table):
-    """MRE2 seen by one camera only: the others are named once the pose is held, MRE2 as soon as it shows."""
+    """MRE2 seen by one camera only: the others are named at once, MRE2 as soon as it shows."""
     studio = ring4_studio
     tracker = Tracker(studio.cameras, MS, table=table, fps=15.0)
-    hold = tracker.hold_frames
     m = MS.index("MRE2")
-    frames = _frames(studio, 8 + hold)
+    frames = _frames(studio, 8)
     truth = frames[0].markers_m
     samples = []
     for k, sf in enumerate(frames):
         images = sf.frames.images
-        if k < 3 + hold:
+        if k < 3:
             images = _paint_out(images, studio.cameras, truth[m], MS.radius_m, keep_camera=0)
         samples.append(tracker.step(images))
-    assert all(s.state == TrackingState.WAITING for s in samples[:hold])
-    first = samples[hold]
+    first = samples[0]
     assert first.state == TrackingState.TRACKING
     assert first.status[m] == MarkerStatus.LOST and np.isnan(first.positions_m[m]).all()
     others = np.arange(MS.n_markers) != m
@@ -125,16 +120,14 @@ def test_a_marker_unseen_at_identification_is_found_later(ring4_studio, table):
 def test_reidentification_on_request(ring4_studio, table):
     studio = ring4_studio
     tracker = Tracker(studio.cameras, MS, table=table, fps=15.0)
-    hold = tracker.hold_frames
-    frames = _frames(studio, 2 * hold + 3, seed=10)
-    states = [tracker.step(f.frames.images).state for f in frames[:hold + 1]]
-    assert states[-1] == TrackingState.TRACKING and TrackingState.TRACKING not in states[:-1]
-    tracker.step(frames[hold + 1].frames.images)
+    frames = _frames(studio, 3, seed=10)
+    assert tracker.step(frames[0].frames.images).state == TrackingState.TRACKING
+    tracker.step(frames[1].frames.images)
     tracker.reidentify()
     assert tracker.state == TrackingState.WAITING
-    again = [tracker.step(f.frames.images) for f in frames[hold + 2:]]  # the pose held again
-    assert again[-1].state == TrackingState.TRACKING and again[-2].state == TrackingState.WAITING
-    assert np.linalg.norm(again[-1].positions_m - frames[-1].markers_m, axis=1).max() < 0.01
+    again = tracker.step(frames[2].frames.images)
+    assert again.state == TrackingState.TRACKING
+    assert np.linalg.norm(again.positions_m - frames[2].markers_m, axis=1).max() < 0.01
 
 
 def test_reidentification_after_a_long_loss(ring4_studio, table):
@@ -143,14 +136,13 @@ def test_reidentification_after_a_long_loss(ring4_studio, table):
     studio = ring4_studio
     params = TrackerParams(reidentify_after=4)
     tracker = Tracker(studio.cameras, MS, table=table, params=params, fps=15.0)
-    hold = tracker.hold_frames
-    frames = _frames(studio, 2 * hold + 2, seed=20)
-    assert [tracker.step(f.frames.images) for f in frames[:hold + 1]][-1].state == TrackingState.TRACKING
+    frames = _frames(studio, 2, seed=20)
+    assert tracker.step(frames[0].frames.images).state == TrackingState.TRACKING
     blank = [np.zeros_like(img) for img in frames[0].frames.images]
     states = [tracker.step(blank).state for _ in range(60)]
     assert states[-1] == TrackingState.WAITING  # gave up and waits for the reference pose
     waiting_from = states.index(TrackingState.WAITING)
     assert waiting_from < 59
-    back = [tracker.step(f.frames.images) for f in frames[hold + 1:]][-1]
+    back = tracker.step(frames[1].frames.images)
     assert back.state == TrackingState.TRACKING
-    assert np.linalg.norm(back.positions_m - frames[-1].markers_m, axis=1).max() < 0.01
+    assert np.linalg.norm(back.positions_m - frames[1].markers_m, axis=1).max() < 0.01

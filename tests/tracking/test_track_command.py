@@ -22,21 +22,17 @@ def write_recording(folder, poses, size=(320, 240)):
         writer.write_meta(studio.markerset.name, studio.markerset.rgb)
 
 
-HOLD = 3  # frame sets of the still reference pose held before the names (0.2 s at 15 frames/s)
-
-
 def test_labelled_outputs(tmp_path):
     write_recording(tmp_path / "rec", [reference_pose()] * 6)
     out = tmp_path / "out"
     assert main(["track", str(tmp_path / "rec"), "--out", str(out / "m.trc"), "--status", str(out / "s.csv"),
                  "--angles", str(out / "a.csv"), "--c3d", str(out / "m.c3d")]) == 0
     trc = read_trc(out / "m.trc")
-    # named once the patient has held the reference pose still
-    assert trc.n_frames == 6 and np.isfinite(trc.positions_mm[HOLD:]).all() and np.isnan(trc.positions_mm[:HOLD]).all()
+    assert trc.n_frames == 6 and np.isfinite(trc.positions_mm).all()
     status = read_status_csv(out / "s.csv")
-    assert (status.status.reshape(6, -1)[HOLD:] == 1).all()  # every marker measured in the still reference pose
+    assert (status.status == 1).all()  # every marker measured in the still reference pose
     angles = read_angles_csv(out / "a.csv")
-    assert np.isfinite(angles.angles["right_elbow_flexion"][HOLD:]).all()
+    assert np.isfinite(angles.angles["right_elbow_flexion"]).all()
     # the tracker's angles: those of its positions (no axis guessed here)
     from_trc = joint_angles(trc.positions_mm, trc.names)
     for name, values in angles.angles.items():
@@ -84,12 +80,12 @@ def test_marker_color_once_with_many_values_or_repeated(tmp_path, monkeypatch):
 
 def test_marker_color_fourteen_values_track(tmp_path):
     """The 14 colours of the marker set given with one flag track like the marker set's own."""
-    write_recording(tmp_path / "rec", [reference_pose()] * (HOLD + 2))
+    write_recording(tmp_path / "rec", [reference_pose()] * 3)
     from tracking.markerset import load_markerset
 
     colours = [",".join(str(int(v)) for v in c) for c in load_markerset().rgb]
     assert main(["track", str(tmp_path / "rec"), "--marker-color", *colours, "--status", str(tmp_path / "s.csv")]) == 0
-    assert (read_status_csv(tmp_path / "s.csv").status.reshape(HOLD + 2, -1)[HOLD:] == 1).all()
+    assert (read_status_csv(tmp_path / "s.csv").status == 1).all()
 
 
 def test_track_without_folder_is_one_line(capsys):

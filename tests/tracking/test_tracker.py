@@ -25,15 +25,10 @@ def seed_experiment_run():
     return studio.markerset, samples, np.stack(truth), np.stack(visible)
 
 
-HOLD = 3  # frame sets of the still reference pose held before the names (0.2 s at 15 frames/s)
-
-
-def test_identified_once_the_reference_pose_is_held(seed_experiment_run):
+def test_identified_on_the_first_frame(seed_experiment_run):
     _, samples, _, _ = seed_experiment_run
-    for s in samples[:HOLD]:
-        assert s.state == TrackingState.WAITING and s.message.startswith("hold the reference pose still")
-    assert samples[HOLD].state == TrackingState.TRACKING
-    assert (samples[HOLD].status == MarkerStatus.MEASURED).all()
+    assert samples[0].state == TrackingState.TRACKING
+    assert (samples[0].status == MarkerStatus.MEASURED).all()
 
 
 def test_no_identity_swaps(seed_experiment_run):
@@ -99,10 +94,10 @@ def test_windows_and_centroids_for_the_camera_monitor():
         runs = [(tracker.step(sf.frames.images, sf.frames.time_s), sf.markers_m)
                 for sf in studio.play(motion, 15.0, seconds=1.0, noise_sigma=1.5)]
     m_count, n_cams = studio.markerset.n_markers, len(cams)
-    first, _ = runs[HOLD]
+    first, _ = runs[0]
     assert first.windows_px is None and first.uv_px is None  # identified on full frames, no windows
     errors = []
-    for sample, truth in runs[HOLD + 1:]:
+    for sample, truth in runs[1:]:
         assert sample.windows_px.shape == (m_count, n_cams, 3) and sample.uv_px.shape == (m_count, n_cams, 2)
         measured = sample.status == MarkerStatus.MEASURED
         for c, cam in enumerate(cams):
@@ -162,9 +157,7 @@ def test_cameras_going_dark_in_any_combination_never_break_the_tracker():
     studio, motion = studio_from_settings(SimulationSettings(motion="shoulder_abduction", size_px=(160, 120), fps=15.0))
     with studio:
         frames = [sf.frames for sf in studio.play(motion, 15.0, seconds=3.5, noise_sigma=1.5)]
-        # (the dark frames outlast the reference pose's hold: named on any frame set, as asked)
-        asked = TrackerParams(identify_hold_s=0.0)
-        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0, params=asked)
+        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0)
     n = len(studio.cameras)
     dark = [m for k in range(n + 1) for m in itertools.combinations(range(n), k)]
 
@@ -181,7 +174,7 @@ def test_cameras_going_dark_in_any_combination_never_break_the_tracker():
         tracker.step(masked(f.images, off), f.time_s)
     for f in steps:
         sample = tracker.step(f.images, f.time_s)
-    plain = Tracker(studio.cameras, studio.markerset, fps=15.0, params=asked)
+    plain = Tracker(studio.cameras, studio.markerset, fps=15.0)
     for f in frames:
         reference = plain.step(f.images, f.time_s)
     measured = sample.status == MarkerStatus.MEASURED

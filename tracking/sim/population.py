@@ -30,6 +30,8 @@ from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, axis_ang
 
 #: seeds from here on are reported; below are for tuning
 REPORTED_SEEDS_FROM = 100_000
+#: the rendered draws are named once the patient has held still this long
+HOLD_S = 0.2
 #: colour of all markers in the one-colour scheme (the seed paper's set-up)
 ONE_COLOUR_RGB = (255, 214, 0)
 
@@ -231,7 +233,7 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
 
     from tracking.sim.studio import Studio
     from tracking.status import MarkerStatus
-    from tracking.tracker import Tracker, TrackingState
+    from tracking.tracker import Tracker, TrackerParams, TrackingState
 
     base = markerset or load_markerset()
     seeds = list(seeds)
@@ -244,7 +246,7 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
         cams = layout_cameras(layout, rng, size_px)
         with Studio(cams, ms, d.dims) as studio:
             studio.body = BodyModel(d.dims, ms, d.offsets_m)
-            tracker = Tracker(cams, ms, fps=fps)
+            tracker = Tracker(cams, ms, fps=fps, params=TrackerParams(identify_hold_s=HOLD_S))
             n = max(int(round(seconds * fps)), tracker.hold_frames + 2)
             times, sq, wrong = [], [], 0
             named_at, named, message = -1, 0, ""
