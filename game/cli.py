@@ -101,11 +101,13 @@ def _add_track(sub) -> None:
         help="track a recording folder offline with the online algorithm",
         description="Track a recording folder frame by frame (no look-ahead) and write the results.",
     )
-    p.add_argument("recording", type=Path, help="recording folder (spec/INTERFACES.md)")
+    # (optional for argparse only: a recording written after --marker-color's colours is taken back below)
+    p.add_argument("recording", type=Path, nargs="?", default=None, help="recording folder (spec/INTERFACES.md)")
     p.add_argument("--calibration", type=Path, default=None, help="calibration file (default: RECORDING/calibration.toml)")
     p.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
-    p.add_argument("--marker-color", action="append", default=None, metavar="R,G,B",
-                   help="override marker colours: once for all markers, or once per marker in marker-set order")
+    p.add_argument("--marker-color", action="extend", nargs="+", default=None, metavar="R,G,B",
+                   help="override marker colours: one for all markers, or one per marker in marker-set order "
+                        "(--marker-color R,G,B R,G,B ... or the flag repeated)")
     p.add_argument("--points", type=Path, default=None,
                    help="write unlabelled 3D points: frame,time,x_mm,y_mm,z_mm,n_cameras,reproj_px")
     p.add_argument("--out", type=Path, default=None, help="labelled markers as an OpenSim TRC file (mm)")
@@ -123,8 +125,22 @@ def _add_track(sub) -> None:
     p.set_defaults(func=_cmd_track)
 
 
+def _track_folder(args) -> Path:
+    """The recording folder; a folder written right after --marker-color's colours (which take
+    every value up to the next option) is the last of those values that is not a colour."""
+    if args.recording is not None:
+        return args.recording
+    colours = args.marker_color or []
+    if colours and "," not in colours[-1]:
+        args.marker_color = colours[:-1] or None
+        return Path(colours[-1])
+    raise RehabError("give the recording folder: rehab track RECORDING --out markers.trc")
+
+
 def _cmd_track(args) -> int:
     from tracking.offline import track_recording
+
+    args.recording = _track_folder(args)
 
     labelled = args.out or args.status or args.angles or args.c3d or args.mot or args.bvh or args.detections
     if args.points and labelled:
@@ -204,6 +220,12 @@ def _add_validate(sub) -> None:
     _add_studio_options(p, fps=15.0)
     p.add_argument("--seed", type=SEED, default=0,
                    help="random seed of the sensor noise (the figures in docs/ are for 0; other seeds show the spread)")
+    p.add_argument("--population", type=COUNT, default=None, metavar="N",
+                   help="the labelling on N simulated patients (body size, marker placement, reference-pose "
+                        "variation, one or four colours), and a fifth of them rendered and tracked in layouts "
+                        "of 2-4 cameras; reported seeds only (docs/TRACKING.md)")
+    p.add_argument("--rendered", type=number(0, 1_000_000, integer=True), default=None, metavar="M",
+                   help="with --population: how many draws are rendered and tracked (default N/5)")
     p.set_defaults(func=_cmd_validate)
 
 
@@ -213,6 +235,8 @@ def _cmd_validate(args) -> int:
     from tracking.sim.studio import SimulationSettings
     from tracking.sim.validate import combine, validate
 
+    if args.population is not None:
+        return _validate_population(args)
     base = SimulationSettings(rig=args.rig, n_cameras=args.cameras, size_px=args.size, fps=args.fps,
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex, seed=args.seed)
@@ -232,6 +256,20 @@ def _cmd_validate(args) -> int:
     if len(results) > 1:
         print(f"{'all':26s} {combine(results).summary()}; whole-ball views: "
               f"{100 * combine(whole).completeness:.2f} %")
+    return 0
+
+
+def _validate_population(args) -> int:
+    from tracking.sim.population import REPORTED_SEEDS_FROM, label_draws, population_report, track_draws
+
+    n = args.population
+    rendered = n // 5 if args.rendered is None else args.rendered
+    if n < 1 or rendered < 0:
+        raise RehabError("--population needs a number of draws >= 1 (and --rendered >= 0)")
+    first = REPORTED_SEEDS_FROM + 1000 * args.seed  # (--seed: another set of reported seeds)
+    labelled = label_draws(range(first, first + n))
+    tracked = track_draws(range(first, first + rendered), size_px=args.size, fps=args.fps, progress=True)
+    print(population_report(labelled, tracked))
     return 0
 
 

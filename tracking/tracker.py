@@ -68,7 +68,8 @@ class TrackerSample:
         angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined, and forearm
             supination NaN while an estimated elbow or wrist marker's axis is a guess
             (:attr:`tracking.hidden.Estimator.axis_guessed`).
-        message: a one-line explanation while WAITING (e.g. which reference-pose rule fails).
+        message: a one-line explanation while WAITING (e.g. which reference-pose rule fails); while
+            TRACKING, what the self-checks found ("" when nothing).
         n_points: unlabelled points measured in full-frame mode this frame (0 in window mode).
         windows_px: (M, C, 3) float64 search window of each marker in each camera this frame:
             predicted image position (u, v) and half size, pixels (the pixels within the half size
@@ -77,6 +78,8 @@ class TrackerSample:
         uv_px: (M, C, 2) float64 window centroid from which each marker's position was
             triangulated in each camera this frame; NaN where none (not measured, view not used,
             or the marker found again by full-frame measurement); None when no windows were searched.
+        suspect: (M,) bool markers whose names the self-checks doubt this frame (the angles that
+            need them are NaN); None while WAITING.
     """
 
     frame_index: int
@@ -89,6 +92,7 @@ class TrackerSample:
     n_points: int = 0
     windows_px: np.ndarray | None = None
     uv_px: np.ndarray | None = None
+    suspect: np.ndarray | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,6 +120,9 @@ class TrackerParams:
             were blocked while the arm moved: its windows then miss it for good), every
             ``reacquire_stale_every`` frames.
         reidentify_after: identify again when more than half the markers are lost this many frames.
+        identify_hold_s: the markers are named only once the patient has held still this long
+            (:class:`tracking.labelling.still.Stillness`; 0.2 s in ``rehab validate
+            --population``); 0 (the default for now): on any frame set, moving or not.
         max_reproj_px: largest RMS reprojection error of a candidate.
         max_reproj_px_two_view: the same for a candidate seen by two cameras only (which must also
             show a ball of the right size in both).
@@ -167,6 +174,7 @@ class TrackerParams:
     stale_after: int = 3
     reacquire_stale_every: int = 6
     reidentify_after: int = 30
+    identify_hold_s: float = 0.0
     max_reproj_px: float = 2.5
     max_reproj_px_two_view: float = 1.2
     max_loo_px: float = 3.0
@@ -282,6 +290,9 @@ class Tracker:
                  params: TrackerParams = TrackerParams(), fps: float = 30.0, compiled: bool = True):
         from tracking.hidden import Estimator, estimator_config
         from tracking.identify import Identifier
+        from tracking.labelling import BodyRoles, Labeller
+        from tracking.labelling.checks import SelfChecks
+        from tracking.labelling.still import Stillness
 
         self.cameras = tuple(cameras)
         self.markerset = markerset
@@ -302,6 +313,11 @@ class Tracker:
         self._label = (self.colour + 1).astype(np.uint8)  # each marker's label in the colour table
         self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.identifier = Identifier(markerset)
+        roles = BodyRoles.of(markerset)
+        self.labeller = Labeller.for_markerset(markerset) if roles is not None else None
+        self.checks = SelfChecks(roles) if roles is not None else None
+        self._stillness = Stillness(self.fps, params.identify_hold_s) if params.identify_hold_s > 0 else None
+        self._last_message = ""
         self.times = StageTimes(STEP_STAGES)
         m = markerset.n_markers
         # pairs of markers whose distance is (nearly) constant: markers of one segment, and the
@@ -331,6 +347,14 @@ class Tracker:
         self.estimator = self._estimator_factory()
         self.frame_count = 0
         self._lost_streak = 0
+        self._exchanged_streak = 0
+        if getattr(self, "_stillness", None) is not None:
+            self._stillness.reset()
+
+    @property
+    def hold_frames(self) -> int:
+        """Still frame sets after the first that the patient holds before the markers are named."""
+        return self._stillness.frames_needed if self._stillness is not None and self.labeller is not None else 0
 
     def compile_loops(self, images: Sequence[np.ndarray]) -> None:
         """Compile (or load from numba's disk cache) every compiled loop for these images' types
@@ -387,8 +411,11 @@ class Tracker:
             n_points = self._track(images)
         t0 = time.perf_counter()
         angles = {}
+        suspect = None
         if self.state == TrackingState.TRACKING:
-            angles = joint_angles(self.positions, self.markerset.names)
+            suspect, message = self._self_check()
+            # angles that need a suspect marker are withheld (NaN), the reason in the message
+            angles = joint_angles(np.where(suspect[:, None], np.nan, self.positions), self.markerset.names)
             for k in np.flatnonzero(self.estimator.axis_guessed).tolist():
                 # an elbow or wrist axis that no measurement pins: no supination rather than a guess
                 name = AXIS_ANGLES.get(self.markerset.names[k])
@@ -407,20 +434,115 @@ class Tracker:
             n_points=n_points,
             windows_px=self._windows_px,
             uv_px=self._used_uv,
+            suspect=suspect,
         )
+
+    # ------------------------------------------------------------------ self-checks
+    def _self_check(self) -> tuple[np.ndarray, str]:
+        """The labelling's per-frame checks (:mod:`tracking.labelling.checks`): a pair of markers
+        found exchanged two frame sets running is named back; until then, and where the checks
+        cannot tell which pair, the markers are suspect. Returns (suspect (M,), reason or "")."""
+        m = self.markerset.n_markers
+        if self.checks is None:
+            return np.zeros(m, bool), ""
+        res = self.checks.check(self.positions, self.markerset.names)
+        suspect = res.suspect.copy()
+        if not res.relabel:
+            self._exchanged_streak = 0
+            return suspect, res.reason
+        self._exchanged_streak += 1
+        if self._exchanged_streak < 2:
+            for i, j in res.relabel:
+                suspect[[i, j]] = True
+            return suspect, res.reason.replace("named back", "suspect, angles that need them withheld")
+        for i, j in res.relabel:
+            self._exchange(i, j)
+        self._exchanged_streak = 0
+        log.warning("self-check at frame %d: %s", self.frame_count - 1, res.reason)
+        return suspect, res.reason
+
+    def _exchange(self, i: int, j: int) -> None:
+        """Exchange the names of markers i and j (everything the tracker holds about them); the
+        hidden-marker estimator starts afresh from the measured markers."""
+        for a in (self.positions, self.velocity, self.status, self.frames_unmeasured, self._last_seen):
+            a[[i, j]] = a[[j, i]]
+        self.seg_length[[i, j]] = self.seg_length[[j, i]]
+        self.seg_length[:, [i, j]] = self.seg_length[:, [j, i]]
+        measured = self.status == MarkerStatus.MEASURED
+        self.estimator.reset()
+        self.estimator.update(np.where(measured[:, None], self.positions, np.nan), measured)
 
     # ------------------------------------------------------------------ identification
     def _try_identify(self, points: Points3D, views: Sequence[CameraObservations]) -> str:
+        """Name the markers once the patient holds the reference pose still, by the labelling's fit
+        (:mod:`tracking.labelling`); while no labelling is confident the message says why, in the
+        marker set's rules' words where a rule fails. A marker set whose YAML does not name the
+        body model's landmarks is named by its rules alone (:mod:`tracking.identify`)."""
         from tracking.identify import IdentificationError, single_view_rays, try_identify
 
+        if self.labeller is not None:
+            held = self._stillness.update(points.p_world_m, points.colour) if self._stillness is not None else 1.0
+            if held < 1.0:
+                return f"hold the reference pose still ({100 * held:.0f} %)"
+            if self._stillness is not None and (self._stillness.count - self._stillness.frames_needed) % 3 != 0:
+                return self._last_message  # (still and not confident: judged again every third frame set)
+        if self.labeller is None or self._unseen(points) > self.labeller.max_unseen:
+            # more markers unseen than the fit takes: the rules with the single-camera rays
+            # name them, and the body model must find the names within its ranges; not with one
+            # colour for all markers (there the rules' search with many stand-ins takes seconds
+            # and is what named elbow pairs exchanged): the counts are reported
+            if self.labeller is not None and len(self.identifier.words) == 1:
+                self._last_message = self.identifier.count_problem(np.asarray(points.colour)) or \
+                    "waiting for the reference pose"
+                return self._last_message
+            try:
+                rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
+                ident = try_identify(points, self.identifier, rays)
+            except IdentificationError as exc:
+                self._last_message = str(exc)
+                return self._last_message
+            if ident is not None and (self.labeller is None or self.labeller.score_of(
+                    points.p_world_m, ident.index, ident.yaw_deg) <= self.labeller.max_score):
+                return self._start_tracking(points, np.asarray(ident.index))
+            self._last_message = (self.identifier.count_problem(np.asarray(points.colour))
+                                  or "waiting for the reference pose")
+            return self._last_message
+        lab = self.labeller.label(points.p_world_m, points.colour)
+        if lab.confident:
+            log.info("labelled with score %.1f, margin %.1f", lab.score, lab.margin)
+            return self._start_tracking(points, np.asarray(lab.index))
+        self._last_message = self._not_confident(points, views, lab)
+        return self._last_message
+
+    def _unseen(self, points: Points3D) -> int:
+        """Markers short of a point of their colour (0 when a colour has too many points)."""
+        finite = np.isfinite(points.p_world_m).all(axis=1)
+        colour = np.asarray(points.colour)[finite]
+        n_col = len(self.identifier.words)
+        have = np.bincount(colour[(colour >= 0) & (colour < n_col)], minlength=n_col)
+        return int(np.maximum(np.bincount(self.colour, minlength=n_col) - have, 0).sum())
+
+    def _not_confident(self, points: Points3D, views: Sequence[CameraObservations], lab) -> str:
+        """Why no labelling is confident: the point counts, else the marker set's rule that fails
+        (the seed's ordering rules, in their plain words), else the fit's own words."""
+        from tracking.identify import IdentificationError, single_view_rays
+
+        finite = np.isfinite(points.p_world_m).all(axis=1)
+        colour = np.asarray(points.colour)[finite]
+        n_col = len(self.identifier.words)
+        short = np.bincount(self.colour, minlength=n_col) - np.bincount(colour[(colour >= 0) & (colour < n_col)],
+                                                                         minlength=n_col)
+        if np.any(short < 0) or short.sum() > self.labeller.max_unseen:
+            return self.identifier.count_problem(colour) or "waiting for the reference pose"
         try:
             rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
-            ident = try_identify(points, self.identifier, rays)
+            self.identifier.identify_with_unseen(points.p_world_m, points.colour, rays)
         except IdentificationError as exc:
             return str(exc)
-        if ident is None:
-            return self.identifier.count_problem(np.asarray(points.colour)) or "waiting for the reference pose"
-        idx = np.asarray(ident.index)
+        return self.labeller.advice(lab, self.markerset.names)
+
+    def _start_tracking(self, points: Points3D, idx: np.ndarray) -> str:
+        """Start tracking with marker k at point ``idx[k]`` (-1: not seen yet, found later)."""
         ok = idx >= 0
         self.positions[:] = np.nan
         self.positions[ok] = points.p_world_m[idx[ok]]

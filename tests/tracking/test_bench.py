@@ -20,3 +20,5 @@ def test_bench_reports_each_pass_and_the_best():
         ratio = float(full[k]) / float(passes[k])
         assert abs(float(track[k + 1]) - ratio) <= 0.051 + 0.01 * ratio
     assert sum("speed target" in line for line in lines) == 3
+    worst = re.search(r"worst frame set of each pass: ([\d.]+) ([\d.]+) ms", text)
+    assert worst and float(worst[1]) >= t1 and float(worst[2]) >= t2  # the slowest is not below the median

@@ -104,3 +104,36 @@ def test_bad_options_are_one_line(tmp_path, capsys, argv_tail, needle):
     assert main(["track", str(tmp_path / "rec"), "--out", str(tmp_path / "m.trc"), *argv_tail]) == 1
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("rehab: error:") and needle in err
+
+
+def test_marker_color_once_with_many_values_or_repeated(tmp_path, monkeypatch):
+    """`--marker-color R,G,B R,G,B ...` (spec/INTERFACES.md) and the repeated flag give the same colours,
+    also with the recording folder written after the colours."""
+    import tracking.offline as offline
+
+    seen = []
+    monkeypatch.setattr(offline, "track_recording", lambda folder, **kw: seen.append((folder, kw["marker_colours"])) or "")
+    colours = [f"{k},{2 * k},{3 * k}" for k in range(14)]
+    rec, out = str(tmp_path / "rec"), str(tmp_path / "m.trc")
+    assert main(["track", rec, "--out", out, "--marker-color", *colours]) == 0
+    assert main(["track", rec, "--out", out, *[a for c in colours for a in ("--marker-color", c)]]) == 0
+    assert main(["track", "--marker-color", *colours, rec, "--out", out]) == 0
+    assert main(["track", rec, "--marker-color", "0,200,70", "--out", out]) == 0
+    assert [str(f) for f, _ in seen] == [rec] * 4
+    assert seen[0][1] == seen[1][1] == seen[2][1] == colours and seen[3][1] == ["0,200,70"]
+
+
+def test_marker_color_fourteen_values_track(tmp_path):
+    """The 14 colours of the marker set given with one flag track like the marker set's own."""
+    write_recording(tmp_path / "rec", [reference_pose()] * 3)
+    from tracking.markerset import load_markerset
+
+    colours = [",".join(str(int(v)) for v in c) for c in load_markerset().rgb]
+    assert main(["track", str(tmp_path / "rec"), "--marker-color", *colours, "--status", str(tmp_path / "s.csv")]) == 0
+    assert (read_status_csv(tmp_path / "s.csv").status == 1).all()
+
+
+def test_track_without_folder_is_one_line(capsys):
+    assert main(["track", "--out", "m.trc"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("rehab: error:") and "recording folder" in err

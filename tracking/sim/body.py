@@ -712,11 +712,15 @@ class BodyModel:
         dims: the patient's anthropometry.
         markerset: which markers to place (their landmark text selects the body landmark), their
             colours, ball radius and soft-tissue thickness.
+        marker_offsets_m: (M, 3) each ball moved off its landmark (placement error), world metres;
+            fixed in the world, so meant for one pose (the population's reference poses).
     """
 
-    def __init__(self, dims: BodyDimensions, markerset: MarkerSet) -> None:
+    def __init__(self, dims: BodyDimensions, markerset: MarkerSet, marker_offsets_m: np.ndarray | None = None) -> None:
         self.dims = dims
         self.markerset = markerset
+        self._offsets = (np.zeros((markerset.n_markers, 3)) if marker_offsets_m is None
+                         else np.asarray(marker_offsets_m, dtype=np.float64).reshape(markerset.n_markers, 3))
         self._offset_m = markerset.radius_m + markerset.soft_tissue_m
         self._marker_landmark = np.array(
             [_LANDMARKS.index(_landmark_of(n, t)) for n, t in zip(markerset.names, markerset.landmarks)], dtype=np.intp
@@ -957,7 +961,8 @@ class BodyModel:
         thickness plus the ball radius, so the ball rests on the skin.
         """
         s = self._solve(pose)
-        return s["skin"][self._marker_landmark] + self.markerset.radius_m * s["normal"][self._marker_landmark]
+        return (s["skin"][self._marker_landmark] + self.markerset.radius_m * s["normal"][self._marker_landmark]
+                + self._offsets)
 
     def joint_centres_m(self, pose: Pose, side: str) -> dict[str, np.ndarray]:
         """World positions (3,) of one arm's ``gh``, ``elbow`` and ``wrist`` centres."""
@@ -1008,7 +1013,8 @@ class BodyModel:
         mirror = np.array([-1.0, 1.0, 1.0])
         # Trunk ellipsoids: thorax and head with the trunk, abdomen with half of it.
         half = rotation_exp(0.5 * rotation_log(rt))
-        markers = s["skin"][self._marker_landmark] + self.markerset.radius_m * s["normal"][self._marker_landmark]
+        markers = (s["skin"][self._marker_landmark] + self.markerset.radius_m * s["normal"][self._marker_landmark]
+                   + self._offsets)
 
         cap_p0, cap_p1 = [], []
         hand_c, hand_axes = [], []

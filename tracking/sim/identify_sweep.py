@@ -192,7 +192,8 @@ def body_label(p: float, sex: str) -> str:
 
 def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepPose, *, frames: int = 3,
              noise_sigma: float = 1.5, seed: int = 0) -> CaseResult:
-    """Render ``case.pose`` ``frames`` times (fresh noise each) and track it from a reset tracker."""
+    """Render ``case.pose`` ``frames`` times after the tracker's hold (fresh noise each) and track it
+    from a reset tracker."""
     ms = studio.markerset
     clash = seat_clash(studio.body, case.pose, ms)
     if clash:
@@ -200,7 +201,7 @@ def run_case(studio: Studio, tracker: Tracker, rig: str, body: str, case: SweepP
                           cameras=len(tracker.cameras))
     tracker.reset()
     identified_frame, message, sample, truth = -1, "", None, None
-    for k in range(frames):
+    for k in range(frames + tracker.hold_frames):
         sf = studio.render(case.pose, k, k / tracker.fps, noise_sigma=noise_sigma, seed=seed * 1009 + k,
                            with_visibility=False)
         sample = tracker.step(sf.frames.images)

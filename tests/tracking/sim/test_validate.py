@@ -114,3 +114,13 @@ def test_angles_the_tracker_withheld_count_as_lost_not_in_the_rmse(motion_truth)
     assert sup.rmse_deg > 1.0 and sup.lost == 0.0
     assert sup_told.rmse_deg == pytest.approx(0.0, abs=1e-9) and sup_told.lost == pytest.approx(30 / t)
     assert told.angles["right_elbow_flexion"].rmse_deg == plain.angles["right_elbow_flexion"].rmse_deg > 0.1
+
+
+def test_validate_population_prints_the_figures(capsys):
+    """rehab validate --population: the labelling's figures per colour scheme and the rendered draws'."""
+    from game.cli import main
+
+    assert main(["validate", "--population", "6", "--rendered", "1", "--size", "320x240"]) == 0
+    out = capsys.readouterr().out
+    assert "labelling of the points (6 draws, seeds 100000-100005" in out
+    assert "swaps" in out and "rendered and tracked (1 draws" in out and "per frame set" in out

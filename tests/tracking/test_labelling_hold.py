@@ -1,0 +1,70 @@
+"""The tracker with the hold of a still reference pose (TrackerParams.identify_hold_s): the markers are
+named only once the patient has held still, the message shows the progress, a moving body is never
+named; the issue's arm with the elbow crease forward is named in one colour and in four."""
+
+import numpy as np
+import pytest
+
+from tracking.markerset import load_markerset
+from tracking.sim.body import reference_pose
+from tracking.sim.population import ONE_COLOUR_RGB
+from tracking.sim.rigs import load_rig
+from tracking.sim.studio import SimulationSettings, Studio, studio_from_settings
+from tracking.sim.body import BodyDimensions
+from tracking.status import MarkerStatus
+from tracking.tracker import Tracker, TrackerParams, TrackingState
+
+HELD = TrackerParams(identify_hold_s=0.2)
+FOUR = load_markerset()
+
+
+def _held(ms, rig, pose):
+    cams = load_rig(rig, (640, 480))
+    with Studio(cams, ms, BodyDimensions.from_percentile(50, "female")) as studio:
+        tracker = Tracker(cams, ms, fps=15.0, params=HELD)
+        out = []
+        for k in range(tracker.hold_frames + 2):
+            sf = studio.render(pose, k, k / 15.0, noise_sigma=1.5, seed=k, with_visibility=False)
+            out.append((tracker.step(sf.frames.images, k / 15.0), sf.markers_m))
+    return tracker.hold_frames, out
+
+
+@pytest.mark.parametrize("ms, rig, abduction", [(FOUR, "ring4", 16.0), (FOUR.with_colours([ONE_COLOUR_RGB]), "corners4", 30.0)],
+                         ids=["four colours", "one colour"])
+def test_named_once_held_with_the_elbow_crease_forward(ms, rig, abduction):
+    """The upper arm in neutral rotation (the thumb-side elbow marker ~1 cm in front of the inner one,
+    which the rules' 10 mm ordering refused): named right after the hold (four colours with the
+    inner elbow markers seen by one camera only; one colour where every marker is seen twice)."""
+    pose = reference_pose(abduction_deg=abduction, external_rotation_deg=0.0, forearm_supination_deg=0.0)
+    hold, out = _held(ms, rig, pose)
+    assert hold == 3
+    for k, (s, _) in enumerate(out[:hold]):
+        assert s.state == TrackingState.WAITING and s.message == f"hold the reference pose still ({100 * k / hold:.0f} %)"
+    s, truth = out[hold]
+    assert s.state == TrackingState.TRACKING
+    named = s.status == MarkerStatus.MEASURED
+    assert named.sum() >= 12
+    assert np.linalg.norm(s.positions_m[named] - truth[named], axis=1).max() < 0.01
+
+
+def test_one_colour_with_an_unseen_partner_waits():
+    """One colour, both inner elbow markers seen by one camera only: each lone thumb-side point could be
+    either marker of its elbow, so nothing is named (a known limit: rays of single-camera blobs are not
+    in the fit yet)."""
+    pose = reference_pose(external_rotation_deg=0.0, forearm_supination_deg=0.0)
+    _, out = _held(FOUR.with_colours([ONE_COLOUR_RGB]), "ring4", pose)
+    assert all(s.state == TrackingState.WAITING for s, _ in out)
+    # the message: the marker set's rule the nearest naming breaks, in its plain words
+    assert out[-1][0].message and "\n" not in out[-1][0].message
+
+
+def test_a_moving_body_is_never_named():
+    studio, motion = studio_from_settings(SimulationSettings(motion="shoulder_abduction", size_px=(320, 240), fps=15.0))
+    with studio:
+        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0, params=HELD)
+        states = []
+        for k, t in enumerate(np.arange(2.0, 3.0, 1 / 15.0)):  # the arms rising
+            sf = studio.render(motion.pose_at(t), k, t, noise_sigma=1.5, seed=k, with_visibility=False)
+            s = tracker.step(sf.frames.images, t)
+            states.append(s.state)
+            assert s.state == TrackingState.WAITING and s.message.startswith("hold the reference pose still"), s.message

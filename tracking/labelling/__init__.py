@@ -1,0 +1,17 @@
+"""Labelling: which measured point is which marker, as the fit of a body model.
+
+The 3D points of the reference pose are labelled by the labelling that best explains them under a
+body model (:mod:`.prior`): segment lengths within population ranges, left/right structure, and
+the reference pose as a prior with tolerances. Colours decide wherever they differ (a marker is
+only ever given a point of its own colour). The search (:mod:`.fit`) scores every labelling that
+could be within reach of the best and reports the best with a confidence: the margin to the
+second best. A labelling is used only when it is confident. The per-frame self-checks on the
+named markers (:mod:`.checks`) use the pose-independent parts of the same model.
+
+The body parts each marker stands for (:mod:`.roles`) come from the marker set's YAML.
+"""
+
+from tracking.labelling.fit import Labeller, Labelling
+from tracking.labelling.roles import BodyRoles
+
+__all__ = ["BodyRoles", "Labeller", "Labelling"]
