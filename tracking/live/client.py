@@ -4,7 +4,8 @@ It creates the shared memory (so that it can release it whatever happens to the 
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
 that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it uses no CPU time: a
-process that a loaded machine merely slows down is not replaced) and replaces it without waiting: a warm standby process (source and tracker already built) takes over, or a new
+process that a loaded machine merely slows down is not replaced) and replaces it without
+waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
 
@@ -371,8 +372,7 @@ class LiveTracker:
             if self._spare is not None:
                 self._drop(self._spare)  # it publishes nothing: no need to wait for it
             if self._child is not None:
-                if not self._child.stop():
-                    self._stopping.append(self._child)
+                self._drop(self._child, STOP_TIMEOUT_S)
         finally:
             self._child = self._spare = None
             self._reap_stopped(REAP_TIMEOUT_S)
@@ -461,9 +461,10 @@ class LiveTracker:
         age_s = self._heartbeat_age_s()
         return age_s > SLOW_HEARTBEAT_S or (age_s > STALE_HEARTBEAT_S and idle_s > STALE_HEARTBEAT_S)
 
-    def _drop(self, child: _Child) -> None:
-        """Kill a process without waiting for it (a hung or unneeded one); it is reaped later."""
-        if not child.stop(0.0):
+    def _drop(self, child: _Child, timeout_s: float = 0.0) -> None:
+        """Stop a process (``timeout_s`` 0: kill it without waiting, a hung or unneeded one); one
+        not gone yet is reaped later."""
+        if not child.stop(timeout_s):
             self._stopping.append(child)
 
     def _reap_stopped(self, timeout_s: float) -> None:
@@ -543,8 +544,8 @@ class LiveTracker:
         h = self._reader.header
         age = self._heartbeat_age_s()
         child = self._child
-        alive = (child is not None and child.ready and child.proc.is_alive()
-                 and not self._hung(child, time.perf_counter()))
+        # _check replaced (or, without auto_restart, dropped) a hung process: what is left is not hung
+        alive = child is not None and child.ready and child.proc.is_alive()
         errors = int(h["errors"])
         if errors > self._errors_seen:
             self._errors_seen = errors
