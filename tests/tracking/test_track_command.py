@@ -72,8 +72,8 @@ def test_field_formats_read_by_independent_readers(tmp_path):
     k = angle_labels.index("right_elbow_flexion")
     np.testing.assert_allclose(frames[:, m + k, 0], angles.angles["right_elbow_flexion"], atol=1e-3)
     mot_lines = (out / "a.mot").read_text().splitlines()
-    assert mot_lines[1:6] == ["version=1", "nRows=5", f"nColumns={1 + len(angle_labels)}", "inDegrees=yes",
-                              "endheader"]
+    assert mot_lines[1:7] == ["version=3", "nRows=5", f"nColumns={1 + len(angle_labels)}", "inDegrees=yes",
+                              "DataType=double", "endheader"]
     skeleton = bvh.Bvh((out / "s.bvh").read_text())
     assert skeleton.nframes == 5 and skeleton.frame_time == pytest.approx(1 / 15.0)
     # the upper arm as long as the tracked acromion-to-elbow-centre distances (mean of the sides, cm)
