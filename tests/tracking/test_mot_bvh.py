@@ -259,3 +259,58 @@ def test_bvh_holds_undefined_angles_and_takes_lengths_from_markers(tmp_path):
     # Z X Y of Rx(flexion) Ry(-supination): flexion is the X channel; the NaN one holds frame 1's
     assert row[2][0] == 0.0 and row[2][1] == row[1][1] == pytest.approx(angles["right_elbow_flexion"][1], abs=1e-5)
     assert row[2][2] == pytest.approx(-angles["right_forearm_supination"][2], abs=1e-5)
+
+
+# Run inside Blender: import the BVH with Blender's own importer (File > Import > Motion Capture)
+# and write the armature's bones, the scene's rate, the action's frames and the posed joints.
+BLENDER_DUMP = '''
+import builtins, json, sys
+import bpy
+import io_anim_bvh.import_bvh as importer
+path, out = sys.argv[sys.argv.index("--") + 1:]
+# Debian's Blender 3.4 runs its bundled importer on Python 3.11, which refuses the importer's
+# open(path, "rU"): the same read without the removed "U" (Blender's own builds are unaffected)
+importer.open = lambda file, mode="r", *args, **kw: builtins.open(file, mode.replace("U", ""), *args, **kw)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath=path, update_scene_fps=True, update_scene_duration=True)
+arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+scene = bpy.context.scene
+first, last = (int(round(f)) for f in arm.animation_data.action.frame_range)
+heads = []
+for frame in range(first, last + 1):
+    scene.frame_set(frame)
+    heads.append({pb.name: list(arm.matrix_world @ pb.head) for pb in arm.pose.bones})
+json.dump({"parents": [[b.name, b.parent.name if b.parent else None] for b in arm.data.bones],
+           "fps": scene.render.fps / scene.render.fps_base, "frames": [first, last], "heads": heads}, open(out, "w"))
+'''
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_blender_imports_the_bvh_as_the_avatar(tmp_path, seed):
+    """Blender's importer (headless): the armature's bones and parents are the avatar's, the scene
+    rate and the action's frames the file's, and every posed joint is where the BVH's forward
+    kinematics (which give the angles back) put it, Blender's Z up (x, -z, y) against BVH's Y up."""
+    import json
+    import shutil
+    import subprocess
+
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Blender is not installed (apt-get install blender, or blender.org)")
+    bvh = pytest.importorskip("bvh")
+    from tracking.bvh import JOINTS
+
+    angles = simulated_angles(12, seed)
+    path, script, out = tmp_path / "skeleton.bvh", tmp_path / "dump.py", tmp_path / "out.json"
+    write_bvh(path, np.arange(12) / 25.0, angles, 25.0)
+    script.write_text(BLENDER_DUMP)
+    run = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script),
+                          "--", str(path), str(out)], capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0 and out.is_file(), run.stdout[-2000:] + run.stderr[-2000:]
+    result = json.loads(out.read_text())
+    assert [tuple(p) for p in result["parents"]] == list(JOINTS)
+    assert result["fps"] == pytest.approx(25.0, abs=1e-4) and result["frames"] == [1, 12]
+    mocap = bvh.Bvh(path.read_text())
+    for frame, heads in enumerate(result["heads"]):
+        for name, (p, _) in forward_kinematics(mocap, frame).items():
+            np.testing.assert_allclose(heads[name], [p[0], -p[2], p[1]], atol=1e-3, err_msg=f"{name}, frame {frame}")
