@@ -122,12 +122,14 @@ def test_gait_lab_toolkits_read_the_same_positions(tmp_path, reader):
     write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
     lost = status == MarkerStatus.LOST
     if reader == "kineticstoolkit":
-        ktk = pytest.importorskip("kineticstoolkit")
+        ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency: it "
+                                  "brings PyQt5, scikit-learn and pandas, ~340 MB)")
         points = ktk.read_c3d(str(path), convert_point_unit=True)["Points"]
         q = np.stack([points.data[n][:, :3] for n in NAMES], axis=1) * 1000.0  # it converts to metres
         assert set(angles) <= set(points.data)
     else:
-        pytest.importorskip("pyomeca")
+        pytest.importorskip("pyomeca", reason="pyomeca not installed (not a dependency: it brings xarray and pandas, "
+                                        "~110 MB)")
         from pyomeca import Markers
 
         markers = Markers.from_c3d(str(path))
@@ -186,7 +188,8 @@ def test_estimated_samples_identifiable_in_every_reader(tmp_path, seed):
                      MarkerStatus.LOST)
     np.testing.assert_array_equal(kind, status)
 
-    ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency)")
+    ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency: it brings "
+                              "PyQt5, scikit-learn and pandas, ~340 MB)")
     params = ktk.read_c3d(str(path), convert_point_unit=False)["C3DParameters"]["ESTIMATED"]
     ranges = np.concatenate([np.asarray(params[k]) for k in ("RANGES", "RANGES2", "RANGES3") if k in params], axis=1)
     np.testing.assert_array_equal(estimated_from_ranges(ranges, 600, n_points)[:, :m], estimated)
@@ -213,3 +216,23 @@ def test_no_estimated_samples_is_said_too(tmp_path):
     write_c3d(path, NAMES, np.zeros((3, len(NAMES), 3)), 30.0)
     group = ezc3d.c3d(str(path))["parameters"]["ESTIMATED"]
     assert int(group["USED"]["value"][0]) == 0 and "RANGES" not in group
+
+
+def test_qualisys_file_shows_which_byte_is_the_residual():
+    """A real QTM file (content/captures, from ezc3d's test data): by the C3D standard's layout
+    (residual in the low byte, camera mask in the high byte) its residuals are 64 distinct
+    multiples of |POINT:SCALE| up to ~5 mm, masks none, as QTM writes them; ezc3d 1.7 reads the
+    bytes the other way (all residuals 0, the residual bytes as camera masks). The project writes
+    the standard's layout."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "content" / "captures" / "ezc3d_qualisys_walk.c3d"
+    _, _, res, cams, _, _, scale = read_with_c3d_package(path)
+    valid = res >= 0
+    assert scale == pytest.approx(-0.0762, abs=1e-4)
+    assert len(np.unique(res[valid])) == 64 and 3.0 < res[valid].max() < 6.0 and (cams[valid] == 0).all()
+    e = ezc3d.c3d(str(path))
+    swapped = np.asarray(e["data"]["meta_points"]["residuals"])[0].T
+    masks = np.asarray(e["data"]["meta_points"]["camera_masks"]).transpose(2, 1, 0) @ (1 << np.arange(7))
+    assert (swapped[valid] == 0).all()
+    np.testing.assert_array_equal(masks[valid], np.round(res[valid] / abs(scale)).astype(int) & 0x7F)
