@@ -188,11 +188,18 @@ def test_estimated_samples_identifiable_in_every_reader(tmp_path, seed):
                      MarkerStatus.LOST)
     np.testing.assert_array_equal(kind, status)
 
+
+def test_kineticstoolkit_shows_the_estimated_runs(tmp_path):
+    """kineticstoolkit hands the C3D parameters over (``C3DParameters``), the ESTIMATED group too."""
     ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency: it brings "
                               "PyQt5, scikit-learn and pandas, ~340 MB)")
+    path = tmp_path / "m.c3d"
+    p, status, residuals, seen, angles = sample(n_frames=600, seed=9)
+    write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
     params = ktk.read_c3d(str(path), convert_point_unit=False)["C3DParameters"]["ESTIMATED"]
     ranges = np.concatenate([np.asarray(params[k]) for k in ("RANGES", "RANGES2", "RANGES3") if k in params], axis=1)
-    np.testing.assert_array_equal(estimated_from_ranges(ranges, 600, n_points)[:, :m], estimated)
+    estimated = estimated_from_ranges(ranges, 600, len(NAMES) + len(angles))[:, :len(NAMES)]
+    np.testing.assert_array_equal(estimated, status == MarkerStatus.ESTIMATED)
 
 
 def test_estimated_runs_too_many_for_the_parameters_leave_the_residuals(tmp_path, caplog):
