@@ -1036,9 +1036,9 @@ class Tracker:
             (M,) int, the point each marker found took, -1 for the others (``new_pos`` and
             ``measured`` are updated in place).
         """
-        found = np.full(len(measured), -1)
+        took = np.full(len(measured), -1)
         if len(points) == 0:
-            return found
+            return took
         p_m = points.p_world_m
         taken = np.zeros(len(points), dtype=bool)
         for m in np.flatnonzero(measured):
@@ -1068,8 +1068,8 @@ class Tracker:
                 if best < 0 and len(fits) == 1:
                     best = int(fits[0])
             if best >= 0:
-                new_pos[m], measured[m], taken[best], found[m] = p_m[best], True, True, best
-        return found
+                new_pos[m], measured[m], taken[best], took[m] = p_m[best], True, True, best
+        return took
 
 
 def centroids_used(points: Points3D, views: Sequence[CameraObservations], index: np.ndarray) -> np.ndarray:
