@@ -18,7 +18,10 @@ kineticstoolkit, pyomeca, Vicon/Qualisys tools) expects:
   point per angle named as in the angles CSV, the angle in X (Y = Z = 0), residual -1 where the
   angle is undefined, as gait labs store model outputs beside the markers;
 - ``SUBJECTS`` (name, marker set) and ``EVENT`` (label, context, description, time) groups
-  where they are known.
+  where they are known;
+- an ``ESTIMATED`` group lists the runs of estimated samples again (point, first and last frame),
+  for readers that decode the residual word differently or not at all (ezc3d 1.7 swaps its
+  bytes; pyomeca shows no residuals): every C3D reader exposes parameters.
 """
 
 from __future__ import annotations
@@ -44,6 +47,10 @@ MASK_CAMERAS = 7
 #: ``POINT`` parameters listing points that are model outputs, not markers.
 _MODEL_OUTPUT_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS")
 _HEADER_SCALE_OFFSET = 12  # bytes 13-16 of the header: the points' scale factor (float32)
+#: Runs per ``ESTIMATED:RANGES`` parameter (a C3D dimension holds at most 255), and parameters at
+#: most: 8160 runs, ~100 kB of the parameter section's 130 kB.
+_RUNS_PER_PARAMETER = 255
+_MAX_RANGE_PARAMETERS = 32
 
 
 class C3dError(RehabError):
@@ -179,6 +186,7 @@ def write_c3d(
         c3d.add_parameter("EVENT", "DESCRIPTIONS", [e.description or e.label for e in events])
         # TIMES is (2, n): minutes and seconds of each event; all in the seconds here
         c3d.add_parameter("EVENT", "TIMES", np.array([[0.0] * len(events), [float(e.time_s) for e in events]]))
+    _add_estimated_runs(c3d, estimated)
     c3d["data"]["points"] = points
     c3d["data"]["meta_points"] = {
         "residuals": np.where(all_words < 0, -1.0, 0.0).T[None, :, :],
@@ -186,6 +194,32 @@ def write_c3d(
     }
     c3d.write(str(path))
     _finish(Path(path), -_RESIDUAL_STEP_MM, all_words)
+
+
+def estimated_runs(estimated: np.ndarray) -> np.ndarray:
+    """(T, M) bool -> (R, 3) int64 runs of estimated samples: point (from 1), first and last frame
+    (from 1, the file's frame numbers), by point, then frame."""
+    e = np.asarray(estimated, dtype=bool)
+    edges = np.diff(np.pad(e.T.astype(np.int8), ((0, 0), (1, 1))), axis=1)  # (M, T + 1)
+    point, first = np.nonzero(edges == 1)
+    _, after = np.nonzero(edges == -1)
+    return np.column_stack([point + 1, first + 1, after]).astype(np.int64)
+
+
+def _add_estimated_runs(c3d, estimated: np.ndarray) -> None:
+    """The ``ESTIMATED`` group (module docstring): ``USED`` runs, ``RANGES``, ``RANGES2``, ...
+    each (3, <= 255) floats (exact integers): point, first frame, last frame."""
+    runs = estimated_runs(estimated)
+    if len(runs) > _RUNS_PER_PARAMETER * _MAX_RANGE_PARAMETERS:
+        log.warning("%d runs of estimated samples do not fit in the C3D parameters: no ESTIMATED group (the "
+                    "residuals, 0 where estimated, still mark them)", len(runs))
+        return
+    c3d.add_parameter("ESTIMATED", "DESCRIPTION", "runs of estimated samples: point (POINT:LABELS from 1), first "
+                                                  "frame, last frame (from 1)")
+    c3d.add_parameter("ESTIMATED", "USED", len(runs))
+    for k, start in enumerate(range(0, len(runs), _RUNS_PER_PARAMETER)):
+        c3d.add_parameter("ESTIMATED", "RANGES" if k == 0 else f"RANGES{k + 1}",
+                          runs[start:start + _RUNS_PER_PARAMETER].T.astype(np.float64))
 
 
 def _finish(path: Path, scale: float, words: np.ndarray) -> None:

@@ -17,8 +17,8 @@ was not used). From those the result files derive:
   mean reprojection distance of those views, converted to millimetres at the marker's depth).
 
 A marker measured in the full frame (the frame set that identifies the markers, or a marker found
-again after it was lost) has no window centroid that frame: it gets no row, no camera and the
-smallest residual.
+again after it was lost) has the centroids of the full-frame point it took, so every measured
+position names its views.
 """
 
 from __future__ import annotations

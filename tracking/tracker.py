@@ -75,9 +75,10 @@ class TrackerSample:
             predicted image position (u, v) and half size, pixels (the pixels within the half size
             of the rounded position were searched); NaN where the marker had no window in that
             camera; None when no windows were searched (waiting for identification).
-        uv_px: (M, C, 2) float64 window centroid from which each marker's position was
-            triangulated in each camera this frame; NaN where none (not measured, view not used,
-            or the marker found again by full-frame measurement); None when no windows were searched.
+        uv_px: (M, C, 2) float64 centroid from which each marker's position was triangulated in
+            each camera this frame (the window's, or the full frame's for the frame set that
+            identifies the markers and a marker found again); NaN where none (not measured, view
+            not used); None while waiting for identification.
         suspect: (M,) bool markers whose names the self-checks doubt this frame (the angles that
             need them are NaN); None while WAITING.
     """
@@ -503,14 +504,14 @@ class Tracker:
                 return self._last_message
             if ident is not None and (self.labeller is None or self.labeller.score_of(
                     points.p_world_m, ident.index, ident.yaw_deg) <= self.labeller.max_score):
-                return self._start_tracking(points, np.asarray(ident.index))
+                return self._start_tracking(points, np.asarray(ident.index), views)
             self._last_message = (self.identifier.count_problem(np.asarray(points.colour))
                                   or "waiting for the reference pose")
             return self._last_message
         lab = self.labeller.label(points.p_world_m, points.colour)
         if lab.confident:
             log.info("labelled with score %.1f, margin %.1f", lab.score, lab.margin)
-            return self._start_tracking(points, np.asarray(lab.index))
+            return self._start_tracking(points, np.asarray(lab.index), views)
         self._last_message = self._not_confident(points, views, lab)
         return self._last_message
 
@@ -541,9 +542,11 @@ class Tracker:
             return str(exc)
         return self.labeller.advice(lab, self.markerset.names)
 
-    def _start_tracking(self, points: Points3D, idx: np.ndarray) -> str:
-        """Start tracking with marker k at point ``idx[k]`` (-1: not seen yet, found later)."""
+    def _start_tracking(self, points: Points3D, idx: np.ndarray, views: Sequence[CameraObservations]) -> str:
+        """Start tracking with marker k at point ``idx[k]`` (-1: not seen yet, found later);
+        ``views`` are the centroids the points were triangulated from."""
         ok = idx >= 0
+        self._used_uv = centroids_used(points, views, idx)
         self.positions[:] = np.nan
         self.positions[ok] = points.p_world_m[idx[ok]]
         self.status[:] = np.where(ok, MarkerStatus.MEASURED, MarkerStatus.LOST)
@@ -580,9 +583,12 @@ class Tracker:
         found = np.zeros_like(measured)
         if search.any():
             t3 = time.perf_counter()
-            points = self.measurer.measure(images)
+            points, views = self.measurer.measure_views(images)
             n_points = len(points)
-            found = self._reacquire(points, new_pos, measured, search)
+            taken = self._reacquire(points, new_pos, measured, search)
+            found = taken >= 0
+            if found.any():  # the views of the found markers: those of the full-frame points they took
+                self._used_uv = np.where(found[:, None, None], centroids_used(points, views, taken), self._used_uv)
             self.times.add("full-frame re-acquisition", time.perf_counter() - t3)
 
         t4 = time.perf_counter()
@@ -1027,11 +1033,12 @@ class Tracker:
         windows already searched near its estimate).
 
         Returns:
-            (M,) bool, the markers found (``new_pos`` and ``measured`` are updated in place).
+            (M,) int, the point each marker found took, -1 for the others (``new_pos`` and
+            ``measured`` are updated in place).
         """
-        found = np.zeros(len(measured), dtype=bool)
+        took = np.full(len(measured), -1)
         if len(points) == 0:
-            return found
+            return took
         p_m = points.p_world_m
         taken = np.zeros(len(points), dtype=bool)
         for m in np.flatnonzero(measured):
@@ -1061,5 +1068,19 @@ class Tracker:
                 if best < 0 and len(fits) == 1:
                     best = int(fits[0])
             if best >= 0:
-                new_pos[m], measured[m], taken[best], found[m] = p_m[best], True, True, True
-        return found
+                new_pos[m], measured[m], taken[best], took[m] = p_m[best], True, True, best
+        return took
+
+
+def centroids_used(points: Points3D, views: Sequence[CameraObservations], index: np.ndarray) -> np.ndarray:
+    """(M, C, 2) the centroids full-frame point ``index[m]`` was triangulated from in each camera
+    (``Points3D.obs_index``); NaN where the point used no centroid of that camera or ``index[m]``
+    is -1."""
+    idx = np.asarray(index, dtype=np.int64)
+    out = np.full((len(idx), len(views), 2), np.nan)
+    for m in np.flatnonzero(idx >= 0).tolist():
+        for c, j in enumerate(points.obs_index[idx[m]].tolist()):
+            if j >= 0:
+                out[m, c] = views[c].uv_px[j]
+    return out
+

@@ -122,12 +122,14 @@ def test_gait_lab_toolkits_read_the_same_positions(tmp_path, reader):
     write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
     lost = status == MarkerStatus.LOST
     if reader == "kineticstoolkit":
-        ktk = pytest.importorskip("kineticstoolkit")
-        points = ktk.read_c3d(str(path))["Points"]
+        ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency: it "
+                                  "brings PyQt5, scikit-learn and pandas, ~340 MB)")
+        points = ktk.read_c3d(str(path), convert_point_unit=True)["Points"]
         q = np.stack([points.data[n][:, :3] for n in NAMES], axis=1) * 1000.0  # it converts to metres
         assert set(angles) <= set(points.data)
     else:
-        pytest.importorskip("pyomeca")
+        pytest.importorskip("pyomeca", reason="pyomeca not installed (not a dependency: it brings xarray and pandas, "
+                                        "~110 MB)")
         from pyomeca import Markers
 
         markers = Markers.from_c3d(str(path))
@@ -135,3 +137,109 @@ def test_gait_lab_toolkits_read_the_same_positions(tmp_path, reader):
         q = np.asarray(markers.sel(channel=list(NAMES)).values)[:3].transpose(2, 1, 0)
     assert (np.isnan(q).any(axis=2) == lost).all()
     np.testing.assert_allclose(q[~lost], p[~lost], rtol=1e-6, atol=1e-3)
+
+
+def estimated_from_ranges(ranges: np.ndarray, n_frames: int, n_points: int) -> np.ndarray:
+    """(3, R) point, first, last frame (all from 1) -> (T, P) bool."""
+    out = np.zeros((n_frames, n_points), dtype=bool)
+    for point, first, last in np.asarray(ranges, dtype=int).T.tolist():
+        out[first - 1:last, point - 1] = True
+    return out
+
+
+@pytest.mark.parametrize("seed", [6, 7, 8])
+def test_estimated_samples_identifiable_in_every_reader(tmp_path, seed):
+    """The ESTIMATED group's runs give the estimated samples exactly in ezc3d, the `c3d` package and
+    kineticstoolkit (parameters: every reader has them); and with every measured sample naming its
+    cameras (as the tracker's do), ezc3d's byte-swapped residual still tells the three kinds apart
+    (> 0 measured, 0 estimated, -1 lost), as the `c3d` package's does."""
+    path = tmp_path / "m.c3d"
+    p, status, residuals, seen, angles = sample(n_frames=600, seed=seed)
+    rng = np.random.default_rng(seed)
+    pair = np.argsort(rng.random(seen.shape), axis=2)[..., :2]  # two cameras at least for each sample
+    np.put_along_axis(seen, pair, True, axis=2)
+    write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
+    estimated = status == MarkerStatus.ESTIMATED
+    m = len(NAMES)
+    n_points = m + len(angles)
+
+    e = ezc3d.c3d(str(path))
+    group = e["parameters"]["ESTIMATED"]
+    assert int(group["USED"]["value"][0]) == sum(np.asarray(group[k]["value"]).shape[1] for k in group
+                                                 if k.startswith("RANGES"))
+    ranges = np.concatenate([np.asarray(group[k]["value"]) for k in sorted(group) if k.startswith("RANGES")], axis=1)
+    np.testing.assert_array_equal(estimated_from_ranges(ranges, 600, n_points)[:, :m], estimated)
+    assert not estimated_from_ranges(ranges, 600, n_points)[:, m:].any()  # angles are never "estimated"
+    word = np.asarray(e["data"]["meta_points"]["residuals"])[0].T[:, :m]  # (T, M)
+    kind = np.select([word > 0, word == 0], [MarkerStatus.MEASURED, MarkerStatus.ESTIMATED], MarkerStatus.LOST)
+    np.testing.assert_array_equal(kind, status)
+
+    with open(path, "rb") as fh, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reader = c3d.Reader(fh)
+        used = reader.get("ESTIMATED:USED").int16_value
+        arrays = [reader.get(f"ESTIMATED:{name}").float_array.T for name in ("RANGES", "RANGES2", "RANGES3")
+                  if reader.get(f"ESTIMATED:{name}") is not None]
+    assert used == sum(a.shape[1] for a in arrays) and len(arrays) >= 2  # more than one parameter's 255 runs
+    np.testing.assert_array_equal(estimated_from_ranges(np.concatenate(arrays, axis=1), 600, n_points)[:, :m],
+                                  estimated)
+    _, _, res, _, _, _, _ = read_with_c3d_package(path)
+    kind = np.select([res[:, :m] > 0, res[:, :m] == 0], [MarkerStatus.MEASURED, MarkerStatus.ESTIMATED],
+                     MarkerStatus.LOST)
+    np.testing.assert_array_equal(kind, status)
+
+
+def test_kineticstoolkit_shows_the_estimated_runs(tmp_path):
+    """kineticstoolkit hands the C3D parameters over (``C3DParameters``), the ESTIMATED group too."""
+    ktk = pytest.importorskip("kineticstoolkit", reason="kineticstoolkit not installed (not a dependency: it brings "
+                              "PyQt5, scikit-learn and pandas, ~340 MB)")
+    path = tmp_path / "m.c3d"
+    p, status, residuals, seen, angles = sample(n_frames=600, seed=9)
+    write_c3d(path, NAMES, p, 30.0, residuals=residuals, status=status, camera_masks=seen, angles_deg=angles)
+    params = ktk.read_c3d(str(path), convert_point_unit=False)["C3DParameters"]["ESTIMATED"]
+    ranges = np.concatenate([np.asarray(params[k]) for k in ("RANGES", "RANGES2", "RANGES3") if k in params], axis=1)
+    estimated = estimated_from_ranges(ranges, 600, len(NAMES) + len(angles))[:, :len(NAMES)]
+    np.testing.assert_array_equal(estimated, status == MarkerStatus.ESTIMATED)
+
+
+def test_estimated_runs_too_many_for_the_parameters_leave_the_residuals(tmp_path, caplog):
+    """More runs than the parameter section holds: no ESTIMATED group, a warning; the residuals
+    still say it (0 where estimated)."""
+    path = tmp_path / "m.c3d"
+    n = 4200
+    p = np.zeros((n, len(NAMES), 3))
+    status = np.full((n, len(NAMES)), MarkerStatus.MEASURED, dtype=np.uint8)
+    status[::2] = MarkerStatus.ESTIMATED  # 2100 runs per marker, 8400 in all
+    with caplog.at_level("WARNING", logger="tracking.c3d_io"):
+        write_c3d(path, NAMES, p, 30.0, status=status)
+    assert "8400 runs of estimated samples do not fit" in caplog.text
+    assert "ESTIMATED" not in ezc3d.c3d(str(path))["parameters"]
+    _, _, res, _, _, _, _ = read_with_c3d_package(path)
+    np.testing.assert_array_equal(res == 0, status == MarkerStatus.ESTIMATED)
+
+
+def test_no_estimated_samples_is_said_too(tmp_path):
+    path = tmp_path / "m.c3d"
+    write_c3d(path, NAMES, np.zeros((3, len(NAMES), 3)), 30.0)
+    group = ezc3d.c3d(str(path))["parameters"]["ESTIMATED"]
+    assert int(group["USED"]["value"][0]) == 0 and "RANGES" not in group
+
+
+def test_qualisys_file_shows_which_byte_is_the_residual():
+    """A real QTM file (content/captures, from ezc3d's test data): by the C3D standard's layout
+    (residual in the low byte, camera mask in the high byte) its residuals are 64 distinct
+    multiples of |POINT:SCALE| up to ~5 mm, masks none, as QTM writes them; ezc3d 1.7 reads the
+    bytes the other way (all residuals 0, the residual bytes as camera masks). The project writes
+    the standard's layout."""
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "content" / "captures" / "ezc3d_qualisys_walk.c3d"
+    _, _, res, cams, _, _, scale = read_with_c3d_package(path)
+    valid = res >= 0
+    assert scale == pytest.approx(-0.0762, abs=1e-4)
+    assert len(np.unique(res[valid])) == 64 and 3.0 < res[valid].max() < 6.0 and (cams[valid] == 0).all()
+    e = ezc3d.c3d(str(path))
+    swapped = np.asarray(e["data"]["meta_points"]["residuals"])[0].T
+    masks = np.asarray(e["data"]["meta_points"]["camera_masks"]).transpose(2, 1, 0) @ (1 << np.arange(7))
+    assert (swapped[valid] == 0).all()
+    np.testing.assert_array_equal(masks[valid], np.round(res[valid] / abs(scale)).astype(int) & 0x7F)

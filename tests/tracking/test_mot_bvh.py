@@ -27,7 +27,12 @@ MS = load_markerset("upper_limb_seated")
 
 
 def parse_storage(text: str) -> tuple[dict[str, str], list[str], np.ndarray]:
-    """OpenSim Storage / .mot text -> (metadata, labels, (rows, columns) values)."""
+    """OpenSim Storage / .mot text -> (metadata, labels, (rows, columns) values), by OpenSim 4's
+    rules (opensim-core's Storage and DelimFileAdapter): header lines up to ``endheader``,
+    ``key=value`` metadata, then the label line. A file of ``version`` 1 or less is read the
+    legacy way, number after number from a C++ stream, which fails on ``NaN`` and keeps the rows
+    before it; a higher version line by line, each cell as ``std::stod`` reads it (``NaN`` and
+    ``inf`` in any case are numbers)."""
     lines = text.splitlines()
     end = next(i for i, line in enumerate(lines) if line.strip().lower() == "endheader")
     meta = {}
@@ -35,13 +40,24 @@ def parse_storage(text: str) -> tuple[dict[str, str], list[str], np.ndarray]:
         if "=" in line:
             key, value = line.split("=", 1)
             meta[key.strip()] = value.strip()
-    labels = lines[end + 1].split("\t")
-    rows = [[float(v) for v in line.split("\t")] for line in lines[end + 2:] if line.strip()]
+    labels = lines[end + 1].split()
+    body = [line for line in lines[end + 2:] if line.strip()]
+    if int(meta.get("version", "0")) <= 1:
+        tokens = " ".join(body).split()
+        numbers = []
+        for token in tokens:   # a C++ stream's double: digits, sign, point, exponent; no NaN or inf
+            try:
+                if not all(c in "0123456789+-.eE" for c in token):
+                    raise ValueError(token)
+                numbers.append(float(token))
+            except ValueError:
+                break
+        rows = [numbers[k:k + len(labels)] for k in range(0, len(numbers) - len(labels) + 1, len(labels))]
+    else:
+        assert meta.get("DataType", "double") == "double"
+        rows = [[float(v) for v in line.split("\t")] for line in body]
+        assert all(len(r) == len(labels) for r in rows)
     values = np.array(rows, dtype=np.float64).reshape(len(rows), len(labels))
-    if "nRows" in meta:
-        assert int(meta["nRows"]) == len(rows)
-    if "nColumns" in meta:
-        assert int(meta["nColumns"]) == len(labels)
     return meta, labels, values
 
 
@@ -71,6 +87,11 @@ def test_parser_reads_opensim_files():
     np.testing.assert_allclose(values[:, 2], [-0.05440752, 0.01417949, 0.08815700])
     meta, labels, values = parse_storage(SIMM_STYLE)
     assert labels == ["time", "pelvis_tx", "pelvis_ty"] and values.shape == (2, 3)
+    # OpenSim's legacy reader stops at a NaN (as opensim 4.6's Storage does, measured): the rule
+    _, _, values = parse_storage(OPENSIM_IK.replace("0.01417949", "NaN"))
+    assert values.shape == (1, 3)
+    _, _, values = parse_storage(OPENSIM_IK.replace("version=1", "version=3").replace("0.01417949", "NaN"))
+    assert values.shape == (3, 3) and np.isnan(values[1, 2])
 
 
 def angles_table(n: int = 6, seed: int = 0) -> dict[str, np.ndarray]:
@@ -89,8 +110,9 @@ def test_mot_parses_as_opensim_storage(tmp_path):
     text = path.read_text()
     assert text.splitlines()[0] == "angles"
     meta, labels, values = parse_storage(text)
-    assert meta == {"version": "1", "nRows": "6", "nColumns": str(1 + len(ANGLE_COLUMNS)), "inDegrees": "yes"}
-    assert labels == ["time", *ANGLE_COLUMNS]
+    assert meta == {"version": "3", "nRows": "6", "nColumns": str(1 + len(ANGLE_COLUMNS)), "inDegrees": "yes",
+                    "DataType": "double"}
+    assert labels == ["time", *ANGLE_COLUMNS] and values.shape == (6, 1 + len(ANGLE_COLUMNS))  # NaN rows too
     np.testing.assert_allclose(values[:, 0], times, atol=1e-8)
     for j, name in enumerate(ANGLE_COLUMNS, start=1):
         np.testing.assert_allclose(values[:, j], a[name], atol=1e-6, equal_nan=True)
@@ -106,6 +128,22 @@ def test_opensim_table_reader_reads_the_mot(tmp_path):
     assert table.getTableMetaDataAsString("inDegrees") == "yes"
     for name in ("right_shoulder_horizontal_flexion", "left_shoulder_external_rotation", "trunk_forward_lean"):
         np.testing.assert_allclose(table.getDependentColumn(name).to_numpy(), a[name], atol=1e-6, equal_nan=True)
+
+
+def test_opensim_storage_reads_the_whole_mot(tmp_path):
+    """OpenSim's Storage (the GUI's File > Load Motion, the tools' inputs) reads every row, NaN
+    where an angle is undefined (a version-1 header made it stop at the first NaN)."""
+    opensim = pytest.importorskip("opensim", reason="opensim (PyPI wheel) not installed: not a dependency")
+    path = tmp_path / "angles.mot"
+    a = angles_table(n=40, seed=5)
+    write_mot(path, np.arange(40) / 30.0, a)
+    storage = opensim.Storage(str(path))
+    assert storage.getSize() == 40 and storage.isInDegrees()
+    for name in ("right_shoulder_horizontal_flexion", "left_shoulder_external_rotation", "right_elbow_flexion"):
+        column = opensim.ArrayDouble()
+        storage.getDataColumn(name, column)
+        np.testing.assert_allclose([column.get(i) for i in range(column.getSize())], a[name], atol=1e-6,
+                                   equal_nan=True)
 
 
 def test_mot_rejects_bad_labels(tmp_path):
@@ -221,3 +259,58 @@ def test_bvh_holds_undefined_angles_and_takes_lengths_from_markers(tmp_path):
     # Z X Y of Rx(flexion) Ry(-supination): flexion is the X channel; the NaN one holds frame 1's
     assert row[2][0] == 0.0 and row[2][1] == row[1][1] == pytest.approx(angles["right_elbow_flexion"][1], abs=1e-5)
     assert row[2][2] == pytest.approx(-angles["right_forearm_supination"][2], abs=1e-5)
+
+
+# Run inside Blender: import the BVH with Blender's own importer (File > Import > Motion Capture)
+# and write the armature's bones, the scene's rate, the action's frames and the posed joints.
+BLENDER_DUMP = '''
+import builtins, json, sys
+import bpy
+import io_anim_bvh.import_bvh as importer
+path, out = sys.argv[sys.argv.index("--") + 1:]
+# Debian's Blender 3.4 runs its bundled importer on Python 3.11, which refuses the importer's
+# open(path, "rU"): the same read without the removed "U" (Blender's own builds are unaffected)
+importer.open = lambda file, mode="r", *args, **kw: builtins.open(file, mode.replace("U", ""), *args, **kw)
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_anim.bvh(filepath=path, update_scene_fps=True, update_scene_duration=True)
+arm = next(o for o in bpy.context.scene.objects if o.type == "ARMATURE")
+scene = bpy.context.scene
+first, last = (int(round(f)) for f in arm.animation_data.action.frame_range)
+heads = []
+for frame in range(first, last + 1):
+    scene.frame_set(frame)
+    heads.append({pb.name: list(arm.matrix_world @ pb.head) for pb in arm.pose.bones})
+json.dump({"parents": [[b.name, b.parent.name if b.parent else None] for b in arm.data.bones],
+           "fps": scene.render.fps / scene.render.fps_base, "frames": [first, last], "heads": heads}, open(out, "w"))
+'''
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_blender_imports_the_bvh_as_the_avatar(tmp_path, seed):
+    """Blender's importer (headless): the armature's bones and parents are the avatar's, the scene
+    rate and the action's frames the file's, and every posed joint is where the BVH's forward
+    kinematics (which give the angles back) put it, Blender's Z up (x, -z, y) against BVH's Y up."""
+    import json
+    import shutil
+    import subprocess
+
+    blender = shutil.which("blender")
+    if blender is None:
+        pytest.skip("Blender is not installed (apt-get install blender, or blender.org)")
+    bvh = pytest.importorskip("bvh")
+    from tracking.bvh import JOINTS
+
+    angles = simulated_angles(12, seed)
+    path, script, out = tmp_path / "skeleton.bvh", tmp_path / "dump.py", tmp_path / "out.json"
+    write_bvh(path, np.arange(12) / 25.0, angles, 25.0)
+    script.write_text(BLENDER_DUMP)
+    run = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1", "--python", str(script),
+                          "--", str(path), str(out)], capture_output=True, text=True, timeout=180)
+    assert run.returncode == 0 and out.is_file(), run.stdout[-2000:] + run.stderr[-2000:]
+    result = json.loads(out.read_text())
+    assert [tuple(p) for p in result["parents"]] == list(JOINTS)
+    assert result["fps"] == pytest.approx(25.0, abs=1e-4) and result["frames"] == [1, 12]
+    mocap = bvh.Bvh(path.read_text())
+    for frame, heads in enumerate(result["heads"]):
+        for name, (p, _) in forward_kinematics(mocap, frame).items():
+            np.testing.assert_allclose(heads[name], [p[0], -p[2], p[1]], atol=1e-3, err_msg=f"{name}, frame {frame}")

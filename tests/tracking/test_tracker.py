@@ -94,8 +94,12 @@ def test_windows_and_centroids_for_the_camera_monitor():
         runs = [(tracker.step(sf.frames.images, sf.frames.time_s), sf.markers_m)
                 for sf in studio.play(motion, 15.0, seconds=1.0, noise_sigma=1.5)]
     m_count, n_cams = studio.markerset.n_markers, len(cams)
-    first, _ = runs[0]
-    assert first.windows_px is None and first.uv_px is None  # identified on full frames, no windows
+    first, first_truth = runs[0]
+    assert first.windows_px is None  # identified on full frames, no windows; the full frame's centroids
+    assert (np.isfinite(first.uv_px).all(axis=2).sum(axis=1) >= 2).all()
+    for c, cam in enumerate(cams):
+        has = np.isfinite(first.uv_px[:, c]).all(axis=1)
+        assert np.linalg.norm(first.uv_px[has, c] - cam.project(first_truth[has]), axis=1).max() < 1.5
     errors = []
     for sample, truth in runs[1:]:
         assert sample.windows_px.shape == (m_count, n_cams, 3) and sample.uv_px.shape == (m_count, n_cams, 2)
@@ -136,7 +140,7 @@ def test_partly_hidden_balls_are_measured_from_their_visible_arcs():
         for sf in studio.play(motion, 15.0, seconds=1.5, noise_sigma=1.5):
             for name, tracker in trackers.items():
                 sample = tracker.step(sf.frames.images, sf.frames.time_s)
-                if sample.uv_px is None:
+                if sample.windows_px is None:  # the full frame's plain centroids (identification)
                     continue
                 for c, cam in enumerate(cams):
                     vis = sf.visible_fraction[c]
@@ -214,3 +218,47 @@ def test_single_views_of_unmeasured_markers_go_to_the_estimator_as_rays(monkeypa
         misses += list(np.linalg.norm(v - along[:, None] * dirs, axis=1))
     assert len(misses) >= 5, "the first 4 s of the seed experiment hide markers from all but one view"
     assert np.median(misses) < 0.005, np.median(misses)
+
+
+def test_every_measured_marker_names_the_views_it_was_triangulated_from(monkeypatch):
+    """Window, identification and re-acquisition alike: each measured marker has the centroids of
+    at least two cameras (for the C3D camera masks and the detections CSV), and they lie where
+    its position projects. The right wrist's two markers are painted over in every camera for
+    25 frame sets, go lost, and are found again by the full-frame search."""
+    import cv2
+
+    import tracking.tracker as tracker_module
+
+    studio, motion = studio_from_settings(SimulationSettings(motion="shoulder_abduction", size_px=(320, 240), fps=15.0))
+    with studio:
+        sets = list(studio.play(motion, 15.0, seconds=3.0, noise_sigma=1.5))
+        tracker = Tracker(studio.cameras, studio.markerset, fps=15.0)
+    wrist = [studio.markerset.index(n) for n in ("MRW1", "MRW2")]
+    taken = []
+    reacquire = tracker_module.Tracker._reacquire
+
+    def spy(self, *args):
+        out = reacquire(self, *args)
+        taken.append(out.copy())
+        return out
+
+    monkeypatch.setattr(tracker_module.Tracker, "_reacquire", spy)
+    samples = []
+    for i, sf in enumerate(sets):
+        images = [im.copy() for im in sf.frames.images]
+        if 10 <= i < 35:
+            for img, cam in zip(images, studio.cameras):
+                for u, v in cam.project(sf.markers_m[wrist]):
+                    cv2.circle(img, (int(round(u)), int(round(v))), 14, (0, 0, 0), -1)
+        samples.append(tracker.step(images, sf.frames.time_s))
+    assert samples[0].state == TrackingState.TRACKING
+    status = np.array([s.status[wrist] for s in samples])
+    assert (status[30:35] == MarkerStatus.LOST).all()
+    assert any((t[wrist] >= 0).all() for t in taken), "the wrist markers must be found by the full-frame search"
+    cams = [np.isfinite(s.uv_px).all(axis=-1) for s in samples]
+    for s, seen in zip(samples, cams):
+        measured = s.status == MarkerStatus.MEASURED
+        assert (seen[measured].sum(axis=1) >= 2).all(), f"frame set {s.frame_index}: a measured marker without views"
+        assert not seen[~measured].any()
+        projected = np.stack([cam.project(s.positions_m) for cam in studio.cameras], axis=1)  # (M, C, 2)
+        assert np.linalg.norm(projected - s.uv_px, axis=-1)[seen].max() < 3.0
