@@ -330,8 +330,9 @@ def _add_play(sub) -> None:
                    help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
                    "--test playing its demo motion; progress: the progress review of --patient; calibrate: the "
                    "camera calibration on the simulated board")
-    p.add_argument("--db", type=Path, default=None,
-                   help="database of patients and results (default: the user's data directory)")
+    from game.cli_clinic import DB_HELP
+
+    p.add_argument("--db", default=None, metavar="PATH_OR_URL", help=DB_HELP)
     p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress, or --game")
     p.add_argument("--test", default=None, help="ROM test for --scene rom (default: shoulder_flexion)")
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")

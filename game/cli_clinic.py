@@ -1,8 +1,9 @@
 """Clinic commands of ``rehab``: ROM tests, patients, the database, reports.
 
 ``rehab rom-test``, ``rehab rom-accuracy``, ``rehab patients``, ``rehab export``, ``rehab import``,
-``rehab backup``, ``rehab report``. Every command that touches the database takes ``--db PATH``
-(default: the user's data directory, :func:`game.db.default_db_path`). Imports happen when a
+``rehab backup``, ``rehab report``, ``rehab db migrate|copy|check``. Every command that touches the
+database takes ``--db PATH_OR_URL``: an SQLite file or a clinic's ``postgresql://`` server
+(default: ``$REHAB_DB``, else the user's data directory, :func:`game.db.default_db_path`). Imports happen when a
 command runs, so none of them loads pygame or OpenGL unless it renders the simulated patient.
 """
 
@@ -23,18 +24,22 @@ def add_commands(sub) -> None:
     _add_import(sub)
     _add_backup(sub)
     _add_report(sub)
+    _add_db_commands(sub)
+
+
+DB_HELP = ("database: an SQLite file or a clinic's PostgreSQL server as postgresql://user@host:port/dbname "
+           "(default: $REHAB_DB, else the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
 
 
 def _add_db(p) -> None:
-    p.add_argument("--db", type=Path, default=None,
-                   help="database file (default: the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
+    p.add_argument("--db", default=None, metavar="PATH_OR_URL", help=DB_HELP)
 
 
 def _open_db(args, *, check_integrity: bool = True):
     """The command's database, checked in full at the command's start (``PRAGMA integrity_check``)."""
-    from game.db import Database, default_db_path
+    from game.db import Database
 
-    return Database(args.db or default_db_path(), check_integrity=check_integrity)
+    return Database(args.db, check_integrity=check_integrity)
 
 
 def _tell(message: str) -> None:
@@ -99,9 +104,16 @@ def _cmd_rom_test(args) -> int:
     db = None
     previous = []
     if not args.dry_run:
-        db = _open_db(args)
-        db.require_patient(args.patient)
-        previous = [r for r in db.rom_results(args.patient) if r.test == test.name and r.side == args.side]
+        from game.db import DatabaseUnreachable, db_location
+
+        try:
+            db = _open_db(args)
+            db.require_patient(args.patient)
+            previous = [r for r in db.rom_results(args.patient) if r.test == test.name and r.side == args.side]
+        except DatabaseUnreachable as exc:   # the station goes on; the result waits on it (game.db.pending)
+            _tell(f"{exc}; the test runs and its result is kept on this station until the server is back")
+            db = None
+        location = db_location(args.db)
     try:
         from game.rom.simulated import run_simulated_test
 
@@ -127,17 +139,18 @@ def _cmd_rom_test(args) -> int:
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
         number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
-        if db is None:
+        if args.dry_run:
             print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
             return 0
         from game.db import pending, rom_record
 
-        db.close()   # storing opens its own connection, waiting out another program's lock
-        outcome = pending.store_durably(db.path, rom_record(args.patient, r, source=f"sim:{run.motion}"),
+        if db is not None:
+            db.close()   # storing opens its own connection, waiting out another program's lock
+        outcome = pending.store_durably(location, rom_record(args.patient, r, source=f"sim:{run.motion}"),
                                         wait_s=pending.WAIT_S, notify=_tell)
         # "accepted" only once the result is on disk (in the database, or in its pending file)
         print(f"attempt {number}: {r.line()} -> accepted")
-        print(f"{outcome.line(db.path)} for patient {args.patient}")
+        print(f"{outcome.line(location)} for patient {args.patient}")
         return 0
     finally:
         if db is not None:
@@ -268,9 +281,10 @@ def _add_backup(sub) -> None:
 
 def _cmd_backup(args) -> int:
     from game.db.database import utc_now
+    from game.db.location import local_folder
 
     with _open_db(args) as db:
-        out = args.out or db.path.with_name(f"rehab-backup-{utc_now().replace(':', '')}.sqlite3")
+        out = args.out or local_folder(db.path) / f"rehab-backup-{utc_now().replace(':', '')}.sqlite3"
         db.backup(out)
     print(f"backed up to {out}")
     return 0
@@ -297,3 +311,67 @@ def _cmd_report(args) -> int:
     print(f"wrote {html} and {csv_path}")
     return 0
 
+
+
+# --------------------------------------------------------------------------- db migrate / copy / check
+def _add_db_commands(sub) -> None:
+    p = sub.add_parser("db", help="the database itself: migrate the schema, copy a clinic to another database, check it",
+                       description="migrate: bring the database (a file or a postgresql:// server) to this rehab's "
+                       "schema; copy: move every patient, session, result and limit to another database (e.g. an "
+                       "SQLite file to the clinic's PostgreSQL server) and compare both; check: the integrity checks.")
+    dsub = p.add_subparsers(dest="db_command", required=True, metavar="migrate|copy|check")
+    m = dsub.add_parser("migrate", help="create or upgrade the schema (every command also does it when it opens)")
+    _add_db(m)
+    m.set_defaults(func=_cmd_db_migrate)
+    c = dsub.add_parser("copy", help="copy all history from one database to another, then compare them",
+                        description="Copy every row from SOURCE to DEST in one transaction (rows DEST already has are "
+                        "kept; running it again adds nothing), then compare both row by row.")
+    c.add_argument("source", help="database to copy from (SQLite file or postgresql:// URL)")
+    c.add_argument("dest", help="database to copy into (postgresql:// URL, or a new SQLite file)")
+    c.set_defaults(func=_cmd_db_copy)
+    k = dsub.add_parser("check", help="integrity checks: orphans, missing or duplicate uids, SQLite's page check")
+    _add_db(k)
+    k.set_defaults(func=_cmd_db_check)
+
+
+def _cmd_db_migrate(args) -> int:
+    from game.db import LATEST_VERSION, Database
+
+    with Database(args.db, check_integrity=True) as db:
+        print(f"{db.path}: schema version {db.schema_version} (this rehab writes {LATEST_VERSION}, {db.dialect.name})")
+    return 0
+
+
+def _cmd_db_copy(args) -> int:
+    from game.db import Database, db_location
+    from game.db.copy import copy_database, differences
+
+    source, dest = db_location(args.source), db_location(args.dest)
+    if source == dest:
+        raise RehabError(f"{source} is both the source and the destination: give two databases")
+    if isinstance(source, Path) and not source.is_file():
+        raise RehabError(f"{source}: no such database file: give the SQLite file to copy")
+    with Database(source, check_integrity=True, store_pending=False) as src, Database(dest, store_pending=False) as dst:
+        counts = copy_database(src, dst)
+        for table, (added, present) in counts.items():
+            print(f"{table:17s} {added:6d} copied" + (f", {present} already in {dst.path}" if present else ""))
+        diff = differences(src, dst)
+    if diff:
+        for table, (missing, extra) in diff.items():
+            print(f"{table}: {missing} rows of {source} differ or are missing in {dest}, {extra} rows only in {dest}")
+        print(f"the databases differ: {dest} held other data before the copy (see above)")
+        return 1
+    print(f"{dest} now holds exactly the rows of {source} (compared row by row)")
+    return 0
+
+
+def _cmd_db_check(args) -> int:
+    from game.db.copy import integrity_problems
+
+    with _open_db(args) as db:
+        problems = integrity_problems(db)
+        for p in problems:
+            print(f"{db.path}: {p}")
+        if not problems:
+            print(f"{db.path}: all integrity checks pass ({db.dialect.name}, schema version {db.schema_version})")
+    return 1 if problems else 0

@@ -74,7 +74,7 @@ class PlayOptions:
     scene: str = "home"
     motion: str | None = None
     start_timeout_s: float = 60.0
-    db_path: Path | None = None
+    db_path: str | Path | None = None
     patient: str | None = None
     test: str | None = None
     side: str = "right"
@@ -114,12 +114,12 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return LiveScene(link, motions=motions, motion=options.motion, open_monitor=open_monitor,
                          make_avatar=make_avatar, source_kind=getattr(options.source, "kind", "sim") or "sim")
 
-    from game.db import default_db_path
+    from game.db import db_location
     from game.scenes.patients import PatientsScene
     from game.scenes.progress import ProgressScene
     from game.scenes.rom_test import RomTestScene, RomVisit, ChooseTestScene
 
-    db_path = options.db_path or default_db_path()
+    db_path = db_location(options.db_path)
     source_kind = getattr(options.source, "kind", "sim") or "sim"
 
     def open_test(visit, test, side, demo=False):
@@ -206,7 +206,7 @@ def check_scene_options(options: PlayOptions) -> None:
     Raises:
         RehabError: one line saying what to give or fix.
     """
-    from game.db import Database, default_db_path
+    from game.db import Database
 
     if not options.patient:
         what = "--game" if options.scene == "game" else f"--scene {options.scene}"
@@ -215,7 +215,7 @@ def check_scene_options(options: PlayOptions) -> None:
         from game.rom.spec import check_side, load_rom_test
 
         check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
-    with Database(options.db_path or default_db_path(), check_integrity=True) as db:   # the full check: at start-up
+    with Database(options.db_path, check_integrity=True) as db:   # the full check: at start-up
         db.require_patient(options.patient)
 
 

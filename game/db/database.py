@@ -630,8 +630,10 @@ class Database:
     # ------------------------------------------------------------------ backup
     @_guarded
     def backup(self, dest: str | Path) -> Path:
-        """Copy a consistent snapshot to ``dest`` (SQLite's online backup API); refuses to overwrite.
+        """Copy a consistent snapshot to the SQLite file ``dest``; refuses to overwrite.
 
+        SQLite uses its online backup API; a server's database is copied row by row in one
+        repeatable-read transaction (:func:`game.db.copy.copy_database`) into a new SQLite file.
         The copy is written to a temporary file beside ``dest``, checked, flushed to disk and then
         renamed: a killed backup never leaves a file under ``dest``.
         """
@@ -645,9 +647,12 @@ class Database:
             raise DatabaseError(f"{dest}: cannot write the backup ({exc.strerror or exc}): choose a folder you can "
                                 f"write") from None
         try:
+            if self._dialect is not SQLITE:
+                self._backup_server(tmp)
             target = sqlite3.connect(tmp)
             try:
-                self.conn.backup(target)
+                if self._dialect is SQLITE:
+                    self.conn.backup(target)
                 target.execute("PRAGMA journal_mode = DELETE")   # a backup is one self-contained file
                 check = target.execute("PRAGMA integrity_check").fetchone()[0]
             finally:
@@ -664,6 +669,17 @@ class Database:
             if tmp.exists():
                 tmp.unlink()
         return dest
+
+    def _backup_server(self, tmp: Path) -> None:
+        from game.db.copy import copy_database
+
+        tmp.unlink()
+        self.conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")   # one consistent snapshot
+        try:
+            with Database(tmp, store_pending=False) as target:
+                copy_database(self, target)
+        finally:
+            self.conn.execute("ROLLBACK")
 
     # ------------------------------------------------------------------ CSV
     @_guarded

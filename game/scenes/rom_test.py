@@ -35,6 +35,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db.location import db_location
 from game.gfx import theme
 from game.gfx.view3d import Viewport
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -85,7 +86,7 @@ class RomVisit:
 
     def __init__(self, db_path: Path, patient_id: str, standard: str = "jarm", source: str = "sim",
                  wait_s: float = 3.0) -> None:
-        self.db_path = Path(db_path)
+        self.db_path = db_location(db_path)
         self.patient_id = patient_id
         self.standard = standard
         self.source = source
