@@ -427,7 +427,12 @@ class Database:
     @_guarded
     def _prepare_server(self) -> None:
         try:
-            _migrate(self.conn, self._dialect, _checked_version(self.conn, self._dialect, self.path), self.path)
+            self.conn.execute(self._dialect.read_snapshot)   # one moment, though another station migrates
+            try:
+                version = _checked_version(self.conn, self._dialect, self.path)
+            finally:
+                self.conn.execute("ROLLBACK")
+            _migrate(self.conn, self._dialect, version, self.path)
         except BaseException:
             self.close()
             raise
@@ -674,7 +679,7 @@ class Database:
         from game.db.copy import copy_database
 
         tmp.unlink()
-        self.conn.execute("BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY")   # one consistent snapshot
+        self.conn.execute(self._dialect.read_snapshot)   # one consistent snapshot
         try:
             with Database(tmp, store_pending=False) as target:
                 copy_database(self, target)

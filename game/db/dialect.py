@@ -25,6 +25,8 @@ class Dialect:
         begin: the statement that opens a write transaction.
         tables_sql: lists the names of the tables of the rehab schema.
         migration_lock: run first inside each migration transaction ("" = none needed).
+        read_snapshot: begins a read-only transaction that sees one moment of the database
+            (checking the schema while another station migrates it; a server's backup).
         ddl: (pattern, replacement) regular expressions applied in order to migration SQL.
         errors: the driver's exception types the storage layer turns into one-line errors.
         error: (location, exception) -> the one-line :class:`game.db.DatabaseError`.
@@ -34,6 +36,7 @@ class Dialect:
     begin: str
     tables_sql: str
     migration_lock: str
+    read_snapshot: str
     ddl: tuple[tuple[str, str], ...]
     errors: tuple[type[BaseException], ...]
     error: Callable[[Any, BaseException], Exception]
@@ -56,6 +59,7 @@ SQLITE = Dialect(
     begin="BEGIN IMMEDIATE",   # take the write lock at once: two writers never deadlock on an upgrade
     tables_sql="SELECT name FROM sqlite_master WHERE type = 'table'",
     migration_lock="",   # BEGIN IMMEDIATE already serialises the writers
+    read_snapshot="BEGIN",   # SQLite's read transaction is a snapshot (WAL)
     ddl=(),
     errors=(sqlite3.Error,),
     error=_sqlite_error,

@@ -59,6 +59,7 @@ POSTGRESQL = Dialect(
     tables_sql="SELECT table_name FROM information_schema.tables WHERE table_schema = current_schema()",
     # two stations starting on a new database at once: one migrates, the other then sees it done
     migration_lock="SELECT pg_advisory_xact_lock(7283001)",
+    read_snapshot="BEGIN ISOLATION LEVEL REPEATABLE READ READ ONLY",
     ddl=POSTGRESQL_DDL,
     errors=(psycopg.Error,) if psycopg is not None else (),
     error=server_error,
