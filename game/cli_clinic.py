@@ -25,14 +25,54 @@ def add_commands(sub) -> None:
     _add_backup(sub)
     _add_report(sub)
     _add_db_commands(sub)
+    _add_accounts(sub)
 
 
 DB_HELP = ("database: an SQLite file or a clinic's PostgreSQL server as postgresql://user@host:port/dbname "
            "(default: $REHAB_DB, else the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
 
 
+USER_HELP = ("account to act as, where the database has accounts (default: $REHAB_USER); the password or PIN is "
+             "asked, or read from $REHAB_PIN")
+
+
 def _add_db(p) -> None:
     p.add_argument("--db", default=None, metavar="PATH_OR_URL", help=DB_HELP)
+    p.add_argument("--user", default=None, metavar="NAME", help=USER_HELP)
+
+
+def signed_in(user: str | None, db, action: str, patient_id: str | None = None):
+    """The account allowed to do ``action`` (None where the database has no accounts: all may, as before).
+
+    Raises:
+        AccessDenied: no account given, a wrong secret, or an account that may not do it (one line).
+    """
+    import os
+    import sys
+
+    from game.db.accounts import AccessDenied, accounts_in_use, authenticate
+
+    if not accounts_in_use(db):
+        return None
+    name = user or os.environ.get("REHAB_USER", "").strip()
+    if not name:
+        raise AccessDenied(f"{db.path} has accounts: give --user NAME (or set REHAB_USER)")
+    secret = os.environ.get("REHAB_PIN")
+    if secret is None:
+        if not sys.stdin.isatty():
+            raise AccessDenied(f"give the password or PIN of {name} (a terminal asks for it; or set REHAB_PIN)")
+        import getpass
+
+        secret = getpass.getpass(f"password or PIN of {name}: ")
+    account = authenticate(db, name, secret)
+    account.require(action, patient_id)
+    return account
+
+
+def _audit(db, account, action: str, patient_id: str | None, what: str) -> None:
+    from game.db.accounts import record
+
+    record(db, account.name if account else "", action, patient_id, what)
 
 
 def _open_db(args, *, check_integrity: bool = True):
@@ -103,16 +143,22 @@ def _cmd_rom_test(args) -> int:
     check_side(test, args.side)
     db = None
     previous = []
+    offline_user = ""
     if not args.dry_run:
+        import os
+
         from game.db import DatabaseUnreachable, db_location
 
         try:
             db = _open_db(args)
+            account = signed_in(args.user, db, "accept", args.patient)
             db.require_patient(args.patient)
             previous = [r for r in db.rom_results(args.patient) if r.test == test.name and r.side == args.side]
         except DatabaseUnreachable as exc:   # the station goes on; the result waits on it (game.db.pending)
             _tell(f"{exc}; the test runs and its result is kept on this station until the server is back")
             db = None
+            account = None
+            offline_user = args.user or os.environ.get("REHAB_USER", "").strip()
         location = db_location(args.db)
     try:
         from game.rom.simulated import run_simulated_test
@@ -146,8 +192,13 @@ def _cmd_rom_test(args) -> int:
 
         if db is not None:
             db.close()   # storing opens its own connection, waiting out another program's lock
-        outcome = pending.store_durably(location, rom_record(args.patient, r, source=f"sim:{run.motion}"),
-                                        wait_s=pending.WAIT_S, notify=_tell)
+        record = rom_record(args.patient, r, source=f"sim:{run.motion}")
+        if account is not None or offline_user:
+            from dataclasses import replace
+
+            # offline the name cannot be checked: the audit row says so
+            record = replace(record, accepted_by=account.name if account else f"{offline_user} (not verified: offline)")
+        outcome = pending.store_durably(location, record, wait_s=pending.WAIT_S, notify=_tell)
         # "accepted" only once the result is on disk (in the database, or in its pending file)
         print(f"attempt {number}: {r.line()} -> accepted")
         print(f"{outcome.line(location)} for patient {args.patient}")
@@ -221,10 +272,12 @@ def _add_patients(sub) -> None:
 
 def _cmd_patients(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "patients")
         if args.add:
             from game.db.database import identifying_hint
 
             db.add_patient(args.add, args.note)
+            _audit(db, account, "change", args.add, "added the patient")
             print(f"added patient {args.add} to {db.path}")
             hint = identifying_hint(args.note)
             if hint:
@@ -252,7 +305,9 @@ def _add_export(sub) -> None:
 
 def _cmd_export(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "export", args.patient)
         counts = db.export_csv(args.out, args.patient)
+        _audit(db, account, "export", args.patient, f"CSV to {args.out}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
     print(f"exported {', '.join(f'{n} {k}' for k, n in counts.items())} to {args.out}")
     return 0
 
@@ -266,7 +321,9 @@ def _add_import(sub) -> None:
 
 def _cmd_import(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "import")
         counts = db.import_csv(args.folder)
+        _audit(db, account, "change", None, f"imported {args.folder}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
     print(f"imported {', '.join(f'{n} {k}' for k, n in counts.items())} from {args.folder}")
     return 0
 
@@ -284,8 +341,10 @@ def _cmd_backup(args) -> int:
     from game.db.location import local_folder
 
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "backup")
         out = args.out or local_folder(db.path) / f"rehab-backup-{utc_now().replace(':', '')}.sqlite3"
         db.backup(out)
+        _audit(db, account, "export", None, f"backup to {out}")
     print(f"backed up to {out}")
     return 0
 
@@ -307,7 +366,9 @@ def _cmd_report(args) -> int:
     from game.report import write_report
 
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "report", args.patient)
         html, csv_path = write_report(db, args.patient, args.out, standard=args.standard)
+        _audit(db, account, "export", args.patient, f"report {html}")
     print(f"wrote {html} and {csv_path}")
     return 0
 
@@ -375,3 +436,58 @@ def _cmd_db_check(args) -> int:
         if not problems:
             print(f"{db.path}: all integrity checks pass ({db.dialect.name}, schema version {db.schema_version})")
     return 1 if problems else 0
+
+
+# --------------------------------------------------------------------------- accounts / audit
+def _add_accounts(sub) -> None:
+    p = sub.add_parser("accounts", help="therapist and patient accounts (who may do what), or add one",
+                       description="List the accounts, or add one with --add. The first therapist account may be "
+                       "added by anyone; from then on only a therapist adds accounts, and the commands that run ROM "
+                       "tests, accept results, change patients, write reports or export need a therapist (--user). A "
+                       "patient account may only play its own patient's games. The password or PIN is asked (or "
+                       "read from $REHAB_NEW_PIN) and stored only as a scrypt hash.")
+    p.add_argument("--add", metavar="NAME", default=None, help="add an account under this name (never a real name)")
+    p.add_argument("--role", choices=("therapist", "patient"), default="therapist", help="(default: %(default)s)")
+    p.add_argument("--patient", default=None, help="the patient of a patient account")
+    p.add_argument("--audit", action="store_true", help="list the audit record instead (who did what, when)")
+    _add_db(p)
+    p.set_defaults(func=_cmd_accounts)
+
+
+def _cmd_accounts(args) -> int:
+    import os
+    import sys
+
+    from game.db.accounts import accounts, accounts_in_use, add_account, audit_rows
+
+    with _open_db(args) as db:
+        first = not accounts_in_use(db)
+        if not (first and args.add and args.role == "therapist"):
+            account = signed_in(args.user, db, "accounts")
+        else:
+            account = None   # the first therapist account: whoever runs rehab on this database
+        if args.audit:
+            for r in audit_rows(db, args.patient):
+                print(f"{r.at_utc}  {r.account:12s} {r.action:8s} {r.patient_id or '-':10s} {r.what}")
+            return 0
+        if args.add:
+            secret = os.environ.get("REHAB_NEW_PIN")
+            if secret is None:
+                if not sys.stdin.isatty():
+                    raise RehabError(f"give the new password or PIN of {args.add} (a terminal asks; or set REHAB_NEW_PIN)")
+                import getpass
+
+                secret = getpass.getpass(f"new password or PIN of {args.add}: ")
+                if getpass.getpass("again: ") != secret:
+                    raise RehabError("the two entries differ: nothing added")
+            new = add_account(db, args.add, args.role, secret, args.patient)
+            _audit(db, account or new, "change", new.patient_id, f"added {new.role} account {new.name}")
+            print(f"added {new.role} account {new.name}" + (f" for patient {new.patient_id}" if new.patient_id else ""))
+            return 0
+        rows = accounts(db)
+        if not rows:
+            print(f"no accounts in {db.path}: everyone who can open it may do everything (add a therapist with "
+                  f"rehab accounts --add NAME)")
+        for a in rows:
+            print(f"{a.name:16s} {a.role:10s} {a.patient_id or ''}")
+    return 0

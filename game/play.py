@@ -88,6 +88,7 @@ class PlayOptions:
     calibration_board: object = None
     wait_for_tracker: bool = False
     stream: object = None
+    user: str | None = None
 
 
 def make_avatar(ctx, marker_names):
@@ -200,13 +201,39 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
     return app
 
 
+#: the first screen -> what the account must be allowed (game.db.accounts.PERMISSIONS)
+SCENE_ACTIONS = {"game": "play", "rom": "rom_test", "progress": "progress"}
+
+
+def check_account(options: PlayOptions):
+    """Where the database has accounts: the signed-in account may open the first screen (None: no accounts).
+
+    A patient account may only play its own patient's games (``--game``); every other screen is
+    the therapist's (the patient list, ROM tests, progress, limits, cameras, calibration).
+
+    Raises:
+        AccessDenied: no or a wrong account, or one that may not open this screen (one line).
+    """
+    from game.cli_clinic import signed_in
+    from game.db import Database, DatabaseUnreachable, db_location
+
+    location = db_location(options.db_path)
+    if isinstance(location, Path) and not location.is_file():
+        return None   # no database yet: no accounts
+    try:
+        with Database(location) as db:
+            return signed_in(options.user, db, SCENE_ACTIONS.get(options.scene, "patients"), options.patient)
+    except DatabaseUnreachable:
+        return None   # check_scene_options says it for the screens that need the server
+
+
 def check_scene_options(options: PlayOptions) -> None:
     """The ``rom``, ``progress`` and ``game`` scenes open on an existing patient (and a test for the side).
 
     Raises:
         RehabError: one line saying what to give or fix.
     """
-    from game.db import Database
+    from game.db import Database, DatabaseUnreachable
 
     if not options.patient:
         what = "--game" if options.scene == "game" else f"--scene {options.scene}"
@@ -215,8 +242,12 @@ def check_scene_options(options: PlayOptions) -> None:
         from game.rom.spec import check_side, load_rom_test
 
         check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
-    with Database(options.db_path, check_integrity=True) as db:   # the full check: at start-up
-        db.require_patient(options.patient)
+    try:
+        with Database(options.db_path, check_integrity=True) as db:   # the full check: at start-up
+            db.require_patient(options.patient)
+    except DatabaseUnreachable as exc:
+        raise RehabError(f"{str(exc).split('): ')[0]}): a visit needs the patient's stored ROM and the therapist's "
+                         f"limits from the server: start it again when the server is back") from None
 
 
 def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,

@@ -6,6 +6,7 @@ stores ROM and game results (alternating) for PATIENT through :func:`game.db.pen
 ``<uid> pending`` once each result is accepted (in the database or in its pending file). A
 shared ``--session`` makes every station write into the same session; ``--resend`` stores each
 record twice (a station that did not hear the server's answer): neither may duplicate anything.
+SIGTERM stops it after the result in hand (SIGKILL is the tests' crash).
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from __future__ import annotations
 import argparse
 import logging
 import random
+import signal
 import sys
 import time
 from pathlib import Path
@@ -50,8 +52,10 @@ def main() -> int:
     a = p.parse_args()
     logging.basicConfig(level=logging.ERROR)   # the queue's warnings are the test's to count, not to print
     rng = random.Random(a.seed)
+    stop = []
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(1))   # finish the result in hand, then stop
     k = 0
-    while a.count == 0 or k < a.count:
+    while (a.count == 0 or k < a.count) and not stop:
         record = make_record(a.patient, k, rng, a.session)
         outcome = store_durably(a.db, record, wait_s=a.wait)
         if a.resend:

@@ -36,6 +36,8 @@ from pg_cluster import TempCluster, why_not  # noqa: E402
 REHAB = [sys.executable, "-m", "game.cli"]
 _GAME_UID = re.compile(r"stored reach session ([0-9a-f]{32}) for")
 _ROM_UID = re.compile(r"(?:stored|kept) result ([0-9a-f]{32})")
+_STATION_UID = re.compile(r"^([0-9a-f]{32}) (?:stored|pending)$", re.MULTILINE)
+_QUEUED = re.compile(r"kept result [0-9a-f]{32}")
 
 
 class Station(threading.Thread):
@@ -50,18 +52,30 @@ class Station(threading.Thread):
         self.queued = 0
         self.runs = Counter()
         self.failures: list[str] = []
+        self.timeout = None   # seconds: one long process stopped then (SIGTERM), instead of runs again and again
 
     def run(self) -> None:
         while time.monotonic() < self.stop_at:
-            r = subprocess.run(self.cmd, capture_output=True, text=True, env=self.env, timeout=600)
+            if self.timeout is None:
+                r = subprocess.run(self.cmd, capture_output=True, text=True, env=self.env, timeout=600)
+            else:
+                proc = subprocess.Popen(self.cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                        env=self.env)
+                try:
+                    proc.wait(self.timeout)
+                except subprocess.TimeoutExpired:
+                    proc.terminate()   # between two results or during one: its printed ones are what counts
+                out, err = proc.communicate()
+                r = subprocess.CompletedProcess(self.cmd, 0 if proc.returncode in (0, -15) else proc.returncode,
+                                                out, err)
             out = r.stdout + r.stderr
-            found = self.pattern.findall(out)
+            found = list(dict.fromkeys(self.pattern.findall(out)))   # a run names its result on stdout and stderr
             self.uids += found
-            self.queued += out.count("kept result")
+            self.queued += len(set(_QUEUED.findall(out))) + r.stdout.count(" pending\n")
             self.runs["ok" if r.returncode == 0 else f"exit {r.returncode}"] += 1
             if r.returncode != 0:
                 self.failures.append(out.strip().splitlines()[-1] if out.strip() else "(no output)")
-                time.sleep(1.0)
+                time.sleep(3.0)
 
 
 def main() -> int:
@@ -69,6 +83,7 @@ def main() -> int:
     p.add_argument("--minutes", type=float, default=4.0)
     p.add_argument("--outage", type=float, default=15.0, help="seconds the server is down")
     p.add_argument("--game-seconds", type=float, default=20.0, help="length of each application run")
+    p.add_argument("--fast-pause", type=float, default=0.2, help="seconds between the fast station's results")
     a = p.parse_args()
     reason = why_not()
     if reason:
@@ -91,6 +106,12 @@ def main() -> int:
         ]
         stations.append(Station("rom", [*REHAB, "rom-test", "--db", url, "--patient", "ROM1", "--test",
                                         "shoulder_flexion", "--side", "right"], _ROM_UID, stop_at, work / "station-rom"))
+        # a fourth station writing fast into the same patient as the ROM loop, one process throughout
+        fast = Station("fast", [sys.executable, str(ROOT / "tests" / "pg_station.py"), url, "ROM1", "--pause",
+                                str(a.fast_pause), "--wait", "1", "--seed", "1"], _STATION_UID, stop_at,
+                       work / "station-fast")
+        fast.timeout = a.minutes * 60.0
+        stations.append(fast)
         for s in stations:
             s.start()
         time.sleep(a.minutes * 60.0 * 0.4)
@@ -111,14 +132,19 @@ def main() -> int:
         with Database(url) as db:
             problems = integrity_problems(db)
             stored = {pid: [r.uid for r in db.exercise_results(pid)] for pid in ("APP1", "APP2")}
-            stored["ROM1"] = [r.uid for r in db.rom_results("ROM1")]
+            stored["ROM1"] = [r.uid for r in db.rom_results("ROM1")] + [r.uid for r in db.exercise_results("ROM1")]
         check = subprocess.run([*REHAB, "db", "check", "--db", url], capture_output=True, text=True)
         ok = True
         print(f"soak: {wall:.0f} s, server down from {down_at:.0f} s to {up_at:.0f} s")
         print("| station | runs | accepted | queued while down | in database | missing | extra | duplicates |")
         print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
-        for s, pid in zip(stations, ("APP1", "APP2", "ROM1")):
+        rom_loop = set(stations[2].uids)
+        for s, pid in zip(stations, ("APP1", "APP2", "ROM1", "ROM1")):
             have = stored[pid]
+            if pid == "ROM1":   # two stations write this patient: each is checked against its own results
+                theirs = rom_loop if s.name == "rom" else set(stations[3].uids)
+                have = [u for u in have if u in theirs] + [u for u in have if u not in rom_loop | set(stations[3].uids)
+                                                            and s.name == "rom"]
             missing = len(set(s.uids) - set(have))
             extra = len(set(have) - set(s.uids))
             dup = len(have) - len(set(have))

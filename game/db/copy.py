@@ -1,7 +1,7 @@
 """Move a clinic's database between back-ends with all its history, and check a database's integrity.
 
 ``rehab db copy SQLITE_FILE postgresql://...`` (or back, or file to file) copies every patient,
-session, result and game limit, keyed by the ids and uids the rows already have: the copy runs in
+session, result, game limit, account and audit row, keyed by the ids and uids the rows already have: the copy runs in
 one transaction on the destination, so it lands whole or not at all, and running it again adds
 nothing. Afterwards both databases are compared row by row (every column but the internal row
 numbers): the copy is reported identical only when the destination holds exactly the source's
@@ -27,6 +27,10 @@ _SNAPSHOT = {
                          f"JOIN sessions s ON e.session_id = s.id ORDER BY e.id"),
     "game_limits": (", ".join(_LIMIT_COLUMNS),
                     f"SELECT {', '.join(_LIMIT_COLUMNS)} FROM game_limits ORDER BY patient_id, game"),
+    "accounts": ("name, role, patient_id, secret_hash, created_utc",
+                 "SELECT name, role, patient_id, secret_hash, created_utc FROM accounts ORDER BY name"),
+    "audit": ("uid, at_utc, account, action, patient_id, what",
+              "SELECT uid, at_utc, account, action, patient_id, what FROM audit ORDER BY id"),
 }
 
 
@@ -100,6 +104,8 @@ def integrity_problems(db: Database) -> list[str]:
         ("duplicate session uids", "SELECT count(*) - count(DISTINCT uid) FROM sessions"),
         ("duplicate ROM result uids", "SELECT count(*) - count(DISTINCT uid) FROM rom_results"),
         ("duplicate game result uids", "SELECT count(*) - count(DISTINCT uid) FROM exercise_results"),
+        ("patient accounts of no patient", "SELECT count(*) FROM accounts a LEFT JOIN patients p ON a.patient_id = p.id "
+                                           "WHERE a.role = 'patient' AND p.id IS NULL"),
         ("sessions that end before they start", "SELECT count(*) FROM sessions WHERE ended_utc < started_utc"),
     )
     for what, sql in checks:

@@ -66,8 +66,9 @@ class ResultRejected(DatabaseError):
 #: How long one statement waits for another program's lock before :class:`DatabaseLocked`.
 BUSY_TIMEOUT_S = 10.0
 #: The tables of a current database (a missing one is a damaged file, not a traceback later).
-_TABLES = ("schema_version", "patients", "sessions", "rom_results", "exercise_results", "game_limits")
-_TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES}
+_TABLES = ("schema_version", "patients", "sessions", "rom_results", "exercise_results", "game_limits", "accounts",
+           "audit")
+_TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES[:6], 4: _TABLES}
 _UTC = re.compile(r"^\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?Z$")
 
 
@@ -242,6 +243,8 @@ class ResultRecord:
             belongs to (created by the first of its results).
         table: ``rom_results`` or ``exercise_results``.
         values: the result's columns (``_ROM_COLUMNS`` or ``_EXERCISE_COLUMNS``).
+        accepted_by: the account that accepted it ("" = none signed in); stored as an audit row in
+            the result's own transaction.
     """
 
     patient_id: str
@@ -251,6 +254,7 @@ class ResultRecord:
     session_started_utc: str
     table: str
     values: dict
+    accepted_by: str = ""
 
     @property
     def uid(self) -> str:
@@ -268,6 +272,7 @@ class ResultRecord:
         """
         try:
             data = json.loads(text)
+            data.setdefault("accepted_by", "")   # pending files of rehab before accounts
             record = cls(**{f.name: data[f.name] for f in fields(cls)})
         except (ValueError, TypeError, KeyError) as exc:
             raise DatabaseError(f"{where}: not a pending result ({exc})") from None
@@ -573,6 +578,12 @@ class Database:
                       (sid, *(values[k] for k in columns)))
             c.execute("UPDATE sessions SET ended_utc = ? WHERE id = ? AND (ended_utc IS NULL OR ended_utc < ?)",
                       (values["recorded_utc"], sid, values["recorded_utc"]))
+            if record.accepted_by:
+                what = (f"{values['test']} {values['side']} {values['value_deg']:.1f} deg" if record.table == "rom_results"
+                        else f"{values['game']} {values['repetitions']} repetitions")
+                c.execute("INSERT INTO audit (uid, at_utc, account, action, patient_id, what) VALUES (?, ?, ?, ?, ?, ?) "
+                          "ON CONFLICT DO NOTHING", (f"accept-{record.uid}", values["recorded_utc"], record.accepted_by,
+                                                     "accept", record.patient_id, f"{what} (result {record.uid})"))
         return record.uid
 
     def add_rom_result(self, session_id: int, result: Any, recorded_utc: str | None = None) -> str:
