@@ -389,6 +389,7 @@ def _add_db_commands(sub) -> None:
                         "kept; running it again adds nothing), then compare both row by row.")
     c.add_argument("source", help="database to copy from (SQLite file or postgresql:// URL)")
     c.add_argument("dest", help="database to copy into (postgresql:// URL, or a new SQLite file)")
+    c.add_argument("--user", default=None, metavar="NAME", help=USER_HELP)
     c.set_defaults(func=_cmd_db_copy)
     k = dsub.add_parser("check", help="integrity checks: orphans, missing or duplicate uids, SQLite's page check")
     _add_db(k)
@@ -413,6 +414,8 @@ def _cmd_db_copy(args) -> int:
     if isinstance(source, Path) and not source.is_file():
         raise RehabError(f"{source}: no such database file: give the SQLite file to copy")
     with Database(source, check_integrity=True, store_pending=False) as src, Database(dest, store_pending=False) as dst:
+        account = signed_in(args.user, src, "export")
+        _audit(src, account, "export", None, f"copied to {dest}")   # first: the copy carries it too
         counts = copy_database(src, dst)
         for table, (added, present) in counts.items():
             print(f"{table:17s} {added:6d} copied" + (f", {present} already in {dst.path}" if present else ""))

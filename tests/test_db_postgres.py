@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from game.db import Database, DatabaseError, DatabaseUnreachable, LATEST_VERSION, ServerUrl, rom_record
+from game.db.accounts import add_account, record
 from game.db.copy import differences, integrity_problems, snapshot
 from game.db.pending import pending_dir, store_durably
 from pg_cluster import TempCluster, why_not
@@ -197,6 +198,9 @@ def _clinic_file(path: Path) -> None:
                 db.store_result(rec)
                 db.store_result(make_record(pid, 1, rng, None))
         db.set_game_limits("P001", "reach", '{"max_level": 5}')
+        add_account(db, "anna", "therapist", "4711")
+        add_account(db, "p1", "patient", "1234", "P001")
+        record(db, "anna", "export", "P001", "report")
 
 
 def _result_of(rec):
@@ -215,6 +219,8 @@ def test_db_copy_moves_a_sqlite_clinic_with_all_history_and_the_reports_are_iden
     from game import report
 
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.setenv("REHAB_USER", "anna")
+    monkeypatch.setenv("REHAB_PIN", "4711")
     src = tmp_path / "clinic.sqlite3"
     _clinic_file(src)
     dest = cluster.create_db(f"c_{uuid.uuid4().hex[:12]}")
@@ -243,6 +249,8 @@ def test_db_copy_into_a_database_with_other_rows_says_they_differ(cluster, tmp_p
     from game.cli import main
 
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.setenv("REHAB_USER", "anna")
+    monkeypatch.setenv("REHAB_PIN", "4711")
     src = tmp_path / "clinic.sqlite3"
     _clinic_file(src)
     dest = cluster.create_db(f"d_{uuid.uuid4().hex[:12]}")
