@@ -440,9 +440,12 @@ def _cmd_play(args) -> int:
         stream=stream_config(args),
         user=args.user,
     )
+    from dataclasses import replace
+
     from game.play import check_account
 
-    check_account(options)   # where the database has accounts: may this account open this screen
+    account = check_account(options)   # where the database has accounts: may this account open this screen
+    options = replace(options, user=account.name if account else None)
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
 

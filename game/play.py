@@ -88,7 +88,7 @@ class PlayOptions:
     calibration_board: object = None
     wait_for_tracker: bool = False
     stream: object = None
-    user: str | None = None
+    user: str | None = None   # the signed-in account (check_account), audited with accepted ROM results
 
 
 def make_avatar(ctx, marker_names):
@@ -127,8 +127,10 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return RomTestScene(link, visit, test, side, make_avatar=make_avatar, demo=demo)
 
     def open_rom():
-        return PatientsScene(db_path, lambda pid: ChooseTestScene(RomVisit(db_path, pid, options.standard, source_kind),
-                                                                  open_test),
+        def visit(pid):
+            return RomVisit(db_path, pid, options.standard, source_kind, accepted_by=options.user or "")
+
+        return PatientsScene(db_path, lambda pid: ChooseTestScene(visit(pid), open_test),
                              title="ROM test: choose the patient")
 
     def open_progress():
@@ -195,7 +197,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
             from game.rom.spec import load_rom_test
 
             test = load_rom_test(options.test or DEFAULT_ROM_TEST)
-            visit = RomVisit(db_path, options.patient, options.standard, source_kind)
+            visit = RomVisit(db_path, options.patient, options.standard, source_kind, accepted_by=options.user or "")
             app.push(ChooseTestScene(visit, open_test, side=options.side))
             app.push(open_test(visit, test, options.side, demo=True))
     return app

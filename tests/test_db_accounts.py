@@ -119,3 +119,19 @@ def test_without_accounts_everything_works_as_before(tmp_path, monkeypatch, caps
     assert check_account(PlayOptions(db_path=path, scene="home")) is None
     with Database(path) as db:
         assert [(r.account, r.action) for r in audit_rows(db)] == [("-", "change")]
+
+
+def test_the_rom_scene_audits_the_signed_in_therapist_with_each_accepted_result(clinic):
+    from types import SimpleNamespace
+
+    from game.scenes.rom_test import RomVisit
+
+    visit = RomVisit(clinic, "P001", accepted_by="anna")
+    r = SimpleNamespace(test="shoulder_flexion", side="right", angle="right_shoulder_flexion", mode="active",
+                        position="seated_arm_at_side", standard="jarm", reference_deg=180.0, max_deg=150.0,
+                        start_deg=-5.0, range_deg=155.0, started_s=0.0, ended_s=4.0, compensations=(),
+                        estimated_markers=())
+    uid = visit.store(r)
+    with Database(clinic) as db:
+        rows = [a for a in audit_rows(db, "P001") if a.action == "accept"]
+    assert [(a.account, uid in a.what) for a in rows] == [("anna", True)]
