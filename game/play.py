@@ -217,7 +217,7 @@ def check_account(options: PlayOptions):
         AccessDenied: no or a wrong account, or one that may not open this screen (one line).
     """
     from game.cli_clinic import signed_in
-    from game.db import Database, DatabaseUnreachable, db_location
+    from game.db import Database, DatabaseError, DatabaseUnreachable, db_location
 
     location = db_location(options.db_path)
     if isinstance(location, Path) and not location.is_file():
@@ -225,8 +225,8 @@ def check_account(options: PlayOptions):
     try:
         with Database(location) as db:
             return signed_in(options.user, db, SCENE_ACTIONS.get(options.scene, "patients"), options.patient)
-    except DatabaseUnreachable:
-        return None   # check_scene_options says it for the screens that need the server
+    except (DatabaseUnreachable, DatabaseError):
+        return None   # the screens that read the database say what is wrong with it (check_scene_options)
 
 
 def check_scene_options(options: PlayOptions) -> None:
