@@ -69,6 +69,10 @@ def signed_in(user: str | None, db, action: str, patient_id: str | None = None):
     return account
 
 
+def _counts(counts: dict[str, int]) -> str:
+    return ", ".join(f"{n} {k}" for k, n in counts.items())
+
+
 def _audit(db, account, action: str, patient_id: str | None, what: str) -> None:
     from game.db.accounts import record
 
@@ -307,8 +311,8 @@ def _cmd_export(args) -> int:
     with _open_db(args) as db:
         account = signed_in(args.user, db, "export", args.patient)
         counts = db.export_csv(args.out, args.patient)
-        _audit(db, account, "export", args.patient, f"CSV to {args.out}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
-    print(f"exported {', '.join(f'{n} {k}' for k, n in counts.items())} to {args.out}")
+        _audit(db, account, "export", args.patient, f"CSV to {args.out}: {_counts(counts)}")
+    print(f"exported {_counts(counts)} to {args.out}")
     return 0
 
 
@@ -323,8 +327,8 @@ def _cmd_import(args) -> int:
     with _open_db(args) as db:
         account = signed_in(args.user, db, "import")
         counts = db.import_csv(args.folder)
-        _audit(db, account, "change", None, f"imported {args.folder}: " + ", ".join(f"{n} {k}" for k, n in counts.items()))
-    print(f"imported {', '.join(f'{n} {k}' for k, n in counts.items())} from {args.folder}")
+        _audit(db, account, "change", None, f"imported {args.folder}: {_counts(counts)}")
+    print(f"imported {_counts(counts)} from {args.folder}")
     return 0
 
 
@@ -376,7 +380,8 @@ def _cmd_report(args) -> int:
 
 # --------------------------------------------------------------------------- db migrate / copy / check
 def _add_db_commands(sub) -> None:
-    p = sub.add_parser("db", help="the database itself: migrate the schema, copy a clinic to another database, check it",
+    p = sub.add_parser("db", help="the database itself: migrate the schema, copy a clinic to another database, "
+                       "check it",
                        description="migrate: bring the database (a file or a postgresql:// server) to this rehab's "
                        "schema; copy: move every patient, session, result and limit to another database (e.g. an "
                        "SQLite file to the clinic's PostgreSQL server) and compare both; check: the integrity checks.")
@@ -477,7 +482,8 @@ def _cmd_accounts(args) -> int:
             secret = os.environ.get("REHAB_NEW_PIN")
             if secret is None:
                 if not sys.stdin.isatty():
-                    raise RehabError(f"give the new password or PIN of {args.add} (a terminal asks; or set REHAB_NEW_PIN)")
+                    raise RehabError(f"give the new password or PIN of {args.add} (a terminal asks; or set "
+                                     f"REHAB_NEW_PIN)")
                 import getpass
 
                 secret = getpass.getpass(f"new password or PIN of {args.add}: ")

@@ -11,7 +11,7 @@ duplicate uids, the schema version) and SQLite's own page-level check where it a
 
 from __future__ import annotations
 
-from game.db.database import _EXERCISE_COLUMNS, _LIMIT_COLUMNS, _ROM_COLUMNS, Database
+from game.db.database import _EXERCISE_COLUMNS, _LIMIT_COLUMNS, _ROM_COLUMNS, Database, insert_result_sql
 from game.db.migrations import LATEST_VERSION
 
 #: table -> (columns compared and copied, the SELECT reading them by stable keys, in insertion order)
@@ -43,10 +43,7 @@ def _insert(db: Database, table: str, row: tuple) -> int:
     c = db.conn
     if table in ("rom_results", "exercise_results"):
         sid = c.execute("SELECT id FROM sessions WHERE uid = ?", (row[0],)).fetchone()[0]
-        columns = _ROM_COLUMNS if table == "rom_results" else _EXERCISE_COLUMNS
-        sql = (f"INSERT INTO {table} (session_id, {', '.join(columns)}) VALUES (?, {', '.join('?' * len(columns))}) "
-               f"ON CONFLICT DO NOTHING")
-        return c.execute(sql, (sid, *row[1:])).rowcount
+        return c.execute(insert_result_sql(table), (sid, *row[1:])).rowcount
     columns = _SNAPSHOT[table][0]
     n = columns.count(",") + 1
     return c.execute(f"INSERT INTO {table} ({columns}) VALUES ({', '.join('?' * n)}) ON CONFLICT DO NOTHING",
@@ -104,8 +101,8 @@ def integrity_problems(db: Database) -> list[str]:
         ("duplicate session uids", "SELECT count(*) - count(DISTINCT uid) FROM sessions"),
         ("duplicate ROM result uids", "SELECT count(*) - count(DISTINCT uid) FROM rom_results"),
         ("duplicate game result uids", "SELECT count(*) - count(DISTINCT uid) FROM exercise_results"),
-        ("patient accounts of no patient", "SELECT count(*) FROM accounts a LEFT JOIN patients p ON a.patient_id = p.id "
-                                           "WHERE a.role = 'patient' AND p.id IS NULL"),
+        ("patient accounts of no patient", "SELECT count(*) FROM accounts a LEFT JOIN patients p "
+                                           "ON a.patient_id = p.id WHERE a.role = 'patient' AND p.id IS NULL"),
         ("sessions that end before they start", "SELECT count(*) FROM sessions WHERE ended_utc < started_utc"),
     )
     for what, sql in checks:

@@ -230,6 +230,13 @@ _EXERCISE_COLUMNS = ("uid", "game", "repetitions", "duration_s", "score", "detai
 _RESULT_COLUMNS = {"rom_results": _ROM_COLUMNS, "exercise_results": _EXERCISE_COLUMNS}
 
 
+def insert_result_sql(table: str) -> str:
+    """Insert a result of ``table`` (session id, then its columns); a result already there (uid) is left alone."""
+    columns = _RESULT_COLUMNS[table]
+    return (f"INSERT INTO {table} (session_id, {', '.join(columns)}) VALUES (?, {', '.join('?' * len(columns))}) "
+            f"ON CONFLICT DO NOTHING")
+
+
 @dataclass(frozen=True, slots=True)
 class ResultRecord:
     """One result with its session, stored in one transaction (or kept in a pending file meanwhile).
@@ -573,16 +580,14 @@ class Database:
                       (record.session_uid, record.patient_id, record.session_started_utc, values["recorded_utc"],
                        record.session_kind, record.session_source))
             sid = c.execute("SELECT id FROM sessions WHERE uid = ?", (record.session_uid,)).fetchone()[0]
-            c.execute(f"INSERT INTO {record.table} (session_id, {', '.join(columns)}) "
-                      f"VALUES (?, {', '.join('?' * len(columns))}) ON CONFLICT DO NOTHING",
-                      (sid, *(values[k] for k in columns)))
+            c.execute(insert_result_sql(record.table), (sid, *(values[k] for k in columns)))
             c.execute("UPDATE sessions SET ended_utc = ? WHERE id = ? AND (ended_utc IS NULL OR ended_utc < ?)",
                       (values["recorded_utc"], sid, values["recorded_utc"]))
             if record.accepted_by:
-                what = (f"{values['test']} {values['side']} {values['value_deg']:.1f} deg" if record.table == "rom_results"
-                        else f"{values['game']} {values['repetitions']} repetitions")
-                c.execute("INSERT INTO audit (uid, at_utc, account, action, patient_id, what) VALUES (?, ?, ?, ?, ?, ?) "
-                          "ON CONFLICT DO NOTHING", (f"accept-{record.uid}", values["recorded_utc"], record.accepted_by,
+                what = (f"{values['test']} {values['side']} {values['value_deg']:.1f} deg"
+                        if record.table == "rom_results" else f"{values['game']} {values['repetitions']} repetitions")
+                c.execute("INSERT INTO audit (uid, at_utc, account, action, patient_id, what) "
+                          "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING", (f"accept-{record.uid}", values["recorded_utc"], record.accepted_by,
                                                      "accept", record.patient_id, f"{what} (result {record.uid})"))
         return record.uid
 
@@ -778,8 +783,7 @@ class Database:
                     sid = _session_id(c, r["session_uid"], path, line)
                     values = check_result_values(table, {k: r[k] for k in columns}, where)
                     added[table] += c.execute(
-                        f"INSERT INTO {table} (session_id, {', '.join(columns)}) "
-                        f"VALUES (?, {', '.join('?' * len(columns))}) ON CONFLICT DO NOTHING", (sid, *(values[k] for k in columns))).rowcount
+                        insert_result_sql(table), (sid, *(values[k] for k in columns))).rowcount
             path = src / "game_limits.csv"
             for line, g in lims:
                 where = f"{path} line {line}"
@@ -807,7 +811,7 @@ def _no_constant(name: str):
 
 # --------------------------------------------------------------------------------- helpers
 class _transaction:
-    """``BEGIN IMMEDIATE`` (the dialect's ``begin``) ... ``COMMIT`` (``ROLLBACK`` on error) on an autocommit connection."""
+    """The dialect's ``begin`` (SQLite: ``BEGIN IMMEDIATE``) ... ``COMMIT`` (``ROLLBACK`` on error), autocommit connection."""
 
     def __init__(self, conn, begin: str = "BEGIN IMMEDIATE"):
         self.conn = conn
