@@ -203,6 +203,16 @@ def _clinic_file(path: Path) -> None:
         record(db, "anna", "export", "P001", "report")
 
 
+def _clinic_and_server(cluster, tmp_path, monkeypatch) -> tuple[Path, str]:
+    """The SQLite clinic (its therapist signed in) and a new empty server database."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    monkeypatch.setenv("REHAB_USER", "anna")
+    monkeypatch.setenv("REHAB_PIN", "4711")
+    src = tmp_path / "clinic.sqlite3"
+    _clinic_file(src)
+    return src, cluster.create_db(f"c_{uuid.uuid4().hex[:12]}")
+
+
 def _result_of(rec):
     from types import SimpleNamespace
 
@@ -218,12 +228,7 @@ def test_db_copy_moves_a_sqlite_clinic_with_all_history_and_the_reports_are_iden
     from game.cli import main
     from game import report
 
-    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    monkeypatch.setenv("REHAB_USER", "anna")
-    monkeypatch.setenv("REHAB_PIN", "4711")
-    src = tmp_path / "clinic.sqlite3"
-    _clinic_file(src)
-    dest = cluster.create_db(f"c_{uuid.uuid4().hex[:12]}")
+    src, dest = _clinic_and_server(cluster, tmp_path, monkeypatch)
     assert main(["db", "copy", str(src), dest]) == 0
     out = capsys.readouterr().out
     assert "now holds exactly the rows" in out and "rom_results           12 copied" in out
@@ -248,12 +253,7 @@ def test_db_copy_moves_a_sqlite_clinic_with_all_history_and_the_reports_are_iden
 def test_db_copy_into_a_database_with_other_rows_says_they_differ(cluster, tmp_path, monkeypatch, capsys):
     from game.cli import main
 
-    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
-    monkeypatch.setenv("REHAB_USER", "anna")
-    monkeypatch.setenv("REHAB_PIN", "4711")
-    src = tmp_path / "clinic.sqlite3"
-    _clinic_file(src)
-    dest = cluster.create_db(f"d_{uuid.uuid4().hex[:12]}")
+    src, dest = _clinic_and_server(cluster, tmp_path, monkeypatch)
     with Database(dest) as db:
         db.add_patient("P009")
     assert main(["db", "copy", str(src), dest]) == 1
