@@ -330,8 +330,10 @@ def _add_play(sub) -> None:
                    help="first screen (default: home; live with --headless); rom: the ROM test of --patient and "
                    "--test playing its demo motion; progress: the progress review of --patient; calibrate: the "
                    "camera calibration on the simulated board")
-    p.add_argument("--db", type=Path, default=None,
-                   help="database of patients and results (default: the user's data directory)")
+    from game.cli_clinic import DB_HELP, USER_HELP
+
+    p.add_argument("--db", default=None, metavar="PATH_OR_URL", help=DB_HELP)
+    p.add_argument("--user", default=None, metavar="NAME", help=USER_HELP)
     p.add_argument("--patient", default=None, help="pseudonymous patient ID for --scene rom or progress, or --game")
     p.add_argument("--test", default=None, help="ROM test for --scene rom (default: shoulder_flexion)")
     p.add_argument("--side", choices=("right", "left"), default="right", help="side for --scene rom or --game")
@@ -436,7 +438,14 @@ def _cmd_play(args) -> int:
         calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
         calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
         stream=stream_config(args),
+        user=args.user,
     )
+    from dataclasses import replace
+
+    from game.play import check_account
+
+    account = check_account(options)   # where the database has accounts: may this account open this screen
+    options = replace(options, user=account.name if account else None)
     if options.scene in ("rom", "progress", "game"):
         from game.play import check_scene_options
 

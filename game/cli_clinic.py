@@ -1,8 +1,9 @@
 """Clinic commands of ``rehab``: ROM tests, patients, the database, reports.
 
 ``rehab rom-test``, ``rehab rom-accuracy``, ``rehab patients``, ``rehab export``, ``rehab import``,
-``rehab backup``, ``rehab report``. Every command that touches the database takes ``--db PATH``
-(default: the user's data directory, :func:`game.db.default_db_path`). Imports happen when a
+``rehab backup``, ``rehab report``, ``rehab db migrate|copy|check``. Every command that touches the
+database takes ``--db PATH_OR_URL``: an SQLite file or a clinic's ``postgresql://`` server
+(default: ``$REHAB_DB``, else the user's data directory, :func:`game.db.default_db_path`). Imports happen when a
 command runs, so none of them loads pygame or OpenGL unless it renders the simulated patient.
 """
 
@@ -23,18 +24,66 @@ def add_commands(sub) -> None:
     _add_import(sub)
     _add_backup(sub)
     _add_report(sub)
+    _add_db_commands(sub)
+    _add_accounts(sub)
+
+
+DB_HELP = ("database: an SQLite file or a clinic's PostgreSQL server as postgresql://user@host:port/dbname "
+           "(default: $REHAB_DB, else the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
+
+
+USER_HELP = ("account to act as, where the database has accounts (default: $REHAB_USER); the password or PIN is "
+             "asked, or read from $REHAB_PIN")
 
 
 def _add_db(p) -> None:
-    p.add_argument("--db", type=Path, default=None,
-                   help="database file (default: the user's data directory, e.g. ~/.local/share/rehab/rehab.sqlite3)")
+    p.add_argument("--db", default=None, metavar="PATH_OR_URL", help=DB_HELP)
+    p.add_argument("--user", default=None, metavar="NAME", help=USER_HELP)
+
+
+def signed_in(user: str | None, db, action: str, patient_id: str | None = None):
+    """The account allowed to do ``action`` (None where the database has no accounts: all may, as before).
+
+    Raises:
+        AccessDenied: no account given, a wrong secret, or an account that may not do it (one line).
+    """
+    import os
+    import sys
+
+    from game.db.accounts import AccessDenied, accounts_in_use, authenticate
+
+    if not accounts_in_use(db):
+        return None
+    name = user or os.environ.get("REHAB_USER", "").strip()
+    if not name:
+        raise AccessDenied(f"{db.path} has accounts: give --user NAME (or set REHAB_USER)")
+    secret = os.environ.get("REHAB_PIN")
+    if secret is None:
+        if not sys.stdin.isatty():
+            raise AccessDenied(f"give the password or PIN of {name} (a terminal asks for it; or set REHAB_PIN)")
+        import getpass
+
+        secret = getpass.getpass(f"password or PIN of {name}: ")
+    account = authenticate(db, name, secret)
+    account.require(action, patient_id)
+    return account
+
+
+def _counts(counts: dict[str, int]) -> str:
+    return ", ".join(f"{n} {k}" for k, n in counts.items())
+
+
+def _audit(db, account, action: str, patient_id: str | None, what: str) -> None:
+    from game.db.accounts import record
+
+    record(db, account.name if account else "", action, patient_id, what)
 
 
 def _open_db(args, *, check_integrity: bool = True):
     """The command's database, checked in full at the command's start (``PRAGMA integrity_check``)."""
-    from game.db import Database, default_db_path
+    from game.db import Database
 
-    return Database(args.db or default_db_path(), check_integrity=check_integrity)
+    return Database(args.db, check_integrity=check_integrity)
 
 
 def _tell(message: str) -> None:
@@ -98,10 +147,23 @@ def _cmd_rom_test(args) -> int:
     check_side(test, args.side)
     db = None
     previous = []
+    offline_user = ""
     if not args.dry_run:
-        db = _open_db(args)
-        db.require_patient(args.patient)
-        previous = [r for r in db.rom_results(args.patient) if r.test == test.name and r.side == args.side]
+        import os
+
+        from game.db import DatabaseUnreachable, db_location
+
+        try:
+            db = _open_db(args)
+            account = signed_in(args.user, db, "accept", args.patient)
+            db.require_patient(args.patient)
+            previous = [r for r in db.rom_results(args.patient) if r.test == test.name and r.side == args.side]
+        except DatabaseUnreachable as exc:   # the station goes on; the result waits on it (game.db.pending)
+            _tell(f"{exc}; the test runs and its result is kept on this station until the server is back")
+            db = None
+            account = None
+            offline_user = args.user or os.environ.get("REHAB_USER", "").strip()
+        location = db_location(args.db)
     try:
         from game.rom.simulated import run_simulated_test
 
@@ -127,17 +189,23 @@ def _cmd_rom_test(args) -> int:
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
         number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
-        if db is None:
+        if args.dry_run:
             print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
             return 0
         from game.db import pending, rom_record
 
-        db.close()   # storing opens its own connection, waiting out another program's lock
-        outcome = pending.store_durably(db.path, rom_record(args.patient, r, source=f"sim:{run.motion}"),
-                                        wait_s=pending.WAIT_S, notify=_tell)
+        if db is not None:
+            db.close()   # storing opens its own connection, waiting out another program's lock
+        record = rom_record(args.patient, r, source=f"sim:{run.motion}")
+        if account is not None or offline_user:
+            from dataclasses import replace
+
+            # offline the name cannot be checked: the audit row says so
+            record = replace(record, accepted_by=account.name if account else f"{offline_user} (not verified: offline)")
+        outcome = pending.store_durably(location, record, wait_s=pending.WAIT_S, notify=_tell)
         # "accepted" only once the result is on disk (in the database, or in its pending file)
         print(f"attempt {number}: {r.line()} -> accepted")
-        print(f"{outcome.line(db.path)} for patient {args.patient}")
+        print(f"{outcome.line(location)} for patient {args.patient}")
         return 0
     finally:
         if db is not None:
@@ -208,10 +276,12 @@ def _add_patients(sub) -> None:
 
 def _cmd_patients(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "patients")
         if args.add:
             from game.db.database import identifying_hint
 
             db.add_patient(args.add, args.note)
+            _audit(db, account, "change", args.add, "added the patient")
             print(f"added patient {args.add} to {db.path}")
             hint = identifying_hint(args.note)
             if hint:
@@ -239,8 +309,10 @@ def _add_export(sub) -> None:
 
 def _cmd_export(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "export", args.patient)
         counts = db.export_csv(args.out, args.patient)
-    print(f"exported {', '.join(f'{n} {k}' for k, n in counts.items())} to {args.out}")
+        _audit(db, account, "export", args.patient, f"CSV to {args.out}: {_counts(counts)}")
+    print(f"exported {_counts(counts)} to {args.out}")
     return 0
 
 
@@ -253,8 +325,10 @@ def _add_import(sub) -> None:
 
 def _cmd_import(args) -> int:
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "import")
         counts = db.import_csv(args.folder)
-    print(f"imported {', '.join(f'{n} {k}' for k, n in counts.items())} from {args.folder}")
+        _audit(db, account, "change", None, f"imported {args.folder}: {_counts(counts)}")
+    print(f"imported {_counts(counts)} from {args.folder}")
     return 0
 
 
@@ -268,10 +342,13 @@ def _add_backup(sub) -> None:
 
 def _cmd_backup(args) -> int:
     from game.db.database import utc_now
+    from game.db.location import local_folder
 
     with _open_db(args) as db:
-        out = args.out or db.path.with_name(f"rehab-backup-{utc_now().replace(':', '')}.sqlite3")
+        account = signed_in(args.user, db, "backup")
+        out = args.out or local_folder(db.path) / f"rehab-backup-{utc_now().replace(':', '')}.sqlite3"
         db.backup(out)
+        _audit(db, account, "export", None, f"backup to {out}")
     print(f"backed up to {out}")
     return 0
 
@@ -293,7 +370,133 @@ def _cmd_report(args) -> int:
     from game.report import write_report
 
     with _open_db(args) as db:
+        account = signed_in(args.user, db, "report", args.patient)
         html, csv_path = write_report(db, args.patient, args.out, standard=args.standard)
+        _audit(db, account, "export", args.patient, f"report {html}")
     print(f"wrote {html} and {csv_path}")
     return 0
 
+
+
+# --------------------------------------------------------------------------- db migrate / copy / check
+def _add_db_commands(sub) -> None:
+    p = sub.add_parser("db", help="the database itself: migrate the schema, copy a clinic to another database, "
+                       "check it",
+                       description="migrate: bring the database (a file or a postgresql:// server) to this rehab's "
+                       "schema; copy: move every patient, session, result and limit to another database (e.g. an "
+                       "SQLite file to the clinic's PostgreSQL server) and compare both; check: the integrity checks.")
+    dsub = p.add_subparsers(dest="db_command", required=True, metavar="migrate|copy|check")
+    m = dsub.add_parser("migrate", help="create or upgrade the schema (every command also does it when it opens)")
+    _add_db(m)
+    m.set_defaults(func=_cmd_db_migrate)
+    c = dsub.add_parser("copy", help="copy all history from one database to another, then compare them",
+                        description="Copy every row from SOURCE to DEST in one transaction (rows DEST already has are "
+                        "kept; running it again adds nothing), then compare both row by row.")
+    c.add_argument("source", help="database to copy from (SQLite file or postgresql:// URL)")
+    c.add_argument("dest", help="database to copy into (postgresql:// URL, or a new SQLite file)")
+    c.add_argument("--user", default=None, metavar="NAME", help=USER_HELP)
+    c.set_defaults(func=_cmd_db_copy)
+    k = dsub.add_parser("check", help="integrity checks: orphans, missing or duplicate uids, SQLite's page check")
+    _add_db(k)
+    k.set_defaults(func=_cmd_db_check)
+
+
+def _cmd_db_migrate(args) -> int:
+    from game.db import LATEST_VERSION, Database
+
+    with Database(args.db, check_integrity=True) as db:
+        print(f"{db.path}: schema version {db.schema_version} (this rehab writes {LATEST_VERSION}, {db.dialect.name})")
+    return 0
+
+
+def _cmd_db_copy(args) -> int:
+    from game.db import Database, db_location
+    from game.db.copy import copy_database, differences
+
+    source, dest = db_location(args.source), db_location(args.dest)
+    if source == dest:
+        raise RehabError(f"{source} is both the source and the destination: give two databases")
+    if isinstance(source, Path) and not source.is_file():
+        raise RehabError(f"{source}: no such database file: give the SQLite file to copy")
+    with Database(source, check_integrity=True, store_pending=False) as src, Database(dest, store_pending=False) as dst:
+        account = signed_in(args.user, src, "export")
+        _audit(src, account, "export", None, f"copied to {dest}")   # first: the copy carries it too
+        counts = copy_database(src, dst)
+        for table, (added, present) in counts.items():
+            print(f"{table:17s} {added:6d} copied" + (f", {present} already in {dst.path}" if present else ""))
+        diff = differences(src, dst)
+    if diff:
+        for table, (missing, extra) in diff.items():
+            print(f"{table}: {missing} rows of {source} differ or are missing in {dest}, {extra} rows only in {dest}")
+        print(f"the databases differ: {dest} held other data before the copy (see above)")
+        return 1
+    print(f"{dest} now holds exactly the rows of {source} (compared row by row)")
+    return 0
+
+
+def _cmd_db_check(args) -> int:
+    from game.db.copy import integrity_problems
+
+    with _open_db(args) as db:
+        problems = integrity_problems(db)
+        for p in problems:
+            print(f"{db.path}: {p}")
+        if not problems:
+            print(f"{db.path}: all integrity checks pass ({db.dialect.name}, schema version {db.schema_version})")
+    return 1 if problems else 0
+
+
+# --------------------------------------------------------------------------- accounts / audit
+def _add_accounts(sub) -> None:
+    p = sub.add_parser("accounts", help="therapist and patient accounts (who may do what), or add one",
+                       description="List the accounts, or add one with --add. The first therapist account may be "
+                       "added by anyone; from then on only a therapist adds accounts, and the commands that run ROM "
+                       "tests, accept results, change patients, write reports or export need a therapist (--user). A "
+                       "patient account may only play its own patient's games. The password or PIN is asked (or "
+                       "read from $REHAB_NEW_PIN) and stored only as a scrypt hash.")
+    p.add_argument("--add", metavar="NAME", default=None, help="add an account under this name (never a real name)")
+    p.add_argument("--role", choices=("therapist", "patient"), default="therapist", help="(default: %(default)s)")
+    p.add_argument("--patient", default=None, help="the patient of a patient account")
+    p.add_argument("--audit", action="store_true", help="list the audit record instead (who did what, when)")
+    _add_db(p)
+    p.set_defaults(func=_cmd_accounts)
+
+
+def _cmd_accounts(args) -> int:
+    import os
+    import sys
+
+    from game.db.accounts import accounts, accounts_in_use, add_account, audit_rows
+
+    with _open_db(args) as db:
+        first = not accounts_in_use(db)
+        if not (first and args.add and args.role == "therapist"):
+            account = signed_in(args.user, db, "accounts")
+        else:
+            account = None   # the first therapist account: whoever runs rehab on this database
+        if args.audit:
+            for r in audit_rows(db, args.patient):
+                print(f"{r.at_utc}  {r.account:12s} {r.action:8s} {r.patient_id or '-':10s} {r.what}")
+            return 0
+        if args.add:
+            secret = os.environ.get("REHAB_NEW_PIN")
+            if secret is None:
+                if not sys.stdin.isatty():
+                    raise RehabError(f"give the new password or PIN of {args.add} (a terminal asks; or set "
+                                     f"REHAB_NEW_PIN)")
+                import getpass
+
+                secret = getpass.getpass(f"new password or PIN of {args.add}: ")
+                if getpass.getpass("again: ") != secret:
+                    raise RehabError("the two entries differ: nothing added")
+            new = add_account(db, args.add, args.role, secret, args.patient)
+            _audit(db, account or new, "change", new.patient_id, f"added {new.role} account {new.name}")
+            print(f"added {new.role} account {new.name}" + (f" for patient {new.patient_id}" if new.patient_id else ""))
+            return 0
+        rows = accounts(db)
+        if not rows:
+            print(f"no accounts in {db.path}: everyone who can open it may do everything (add a therapist with "
+                  f"rehab accounts --add NAME)")
+        for a in rows:
+            print(f"{a.name:16s} {a.role:10s} {a.patient_id or ''}")
+    return 0

@@ -74,7 +74,7 @@ class PlayOptions:
     scene: str = "home"
     motion: str | None = None
     start_timeout_s: float = 60.0
-    db_path: Path | None = None
+    db_path: str | Path | None = None
     patient: str | None = None
     test: str | None = None
     side: str = "right"
@@ -88,6 +88,7 @@ class PlayOptions:
     calibration_board: object = None
     wait_for_tracker: bool = False
     stream: object = None
+    user: str | None = None   # the signed-in account (check_account), audited with accepted ROM results
 
 
 def make_avatar(ctx, marker_names):
@@ -114,20 +115,22 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         return LiveScene(link, motions=motions, motion=options.motion, open_monitor=open_monitor,
                          make_avatar=make_avatar, source_kind=getattr(options.source, "kind", "sim") or "sim")
 
-    from game.db import default_db_path
+    from game.db import db_location
     from game.scenes.patients import PatientsScene
     from game.scenes.progress import ProgressScene
     from game.scenes.rom_test import RomTestScene, RomVisit, ChooseTestScene
 
-    db_path = options.db_path or default_db_path()
+    db_path = db_location(options.db_path)
     source_kind = getattr(options.source, "kind", "sim") or "sim"
 
     def open_test(visit, test, side, demo=False):
         return RomTestScene(link, visit, test, side, make_avatar=make_avatar, demo=demo)
 
     def open_rom():
-        return PatientsScene(db_path, lambda pid: ChooseTestScene(RomVisit(db_path, pid, options.standard, source_kind),
-                                                                  open_test),
+        def visit(pid):
+            return RomVisit(db_path, pid, options.standard, source_kind, accepted_by=options.user or "")
+
+        return PatientsScene(db_path, lambda pid: ChooseTestScene(visit(pid), open_test),
                              title="ROM test: choose the patient")
 
     def open_progress():
@@ -194,10 +197,36 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
             from game.rom.spec import load_rom_test
 
             test = load_rom_test(options.test or DEFAULT_ROM_TEST)
-            visit = RomVisit(db_path, options.patient, options.standard, source_kind)
+            visit = RomVisit(db_path, options.patient, options.standard, source_kind, accepted_by=options.user or "")
             app.push(ChooseTestScene(visit, open_test, side=options.side))
             app.push(open_test(visit, test, options.side, demo=True))
     return app
+
+
+#: the first screen -> what the account must be allowed (game.db.accounts.PERMISSIONS)
+SCENE_ACTIONS = {"game": "play", "rom": "rom_test", "progress": "progress"}
+
+
+def check_account(options: PlayOptions):
+    """Where the database has accounts: the signed-in account may open the first screen (None: no accounts).
+
+    A patient account may only play its own patient's games (``--game``); every other screen is
+    the therapist's (the patient list, ROM tests, progress, limits, cameras, calibration).
+
+    Raises:
+        AccessDenied: no or a wrong account, or one that may not open this screen (one line).
+    """
+    from game.cli_clinic import signed_in
+    from game.db import Database, DatabaseError, DatabaseUnreachable, db_location
+
+    location = db_location(options.db_path)
+    if isinstance(location, Path) and not location.is_file():
+        return None   # no database yet: no accounts
+    try:
+        with Database(location) as db:
+            return signed_in(options.user, db, SCENE_ACTIONS.get(options.scene, "patients"), options.patient)
+    except (DatabaseUnreachable, DatabaseError):
+        return None   # the screens that read the database say what is wrong with it (check_scene_options)
 
 
 def check_scene_options(options: PlayOptions) -> None:
@@ -206,7 +235,7 @@ def check_scene_options(options: PlayOptions) -> None:
     Raises:
         RehabError: one line saying what to give or fix.
     """
-    from game.db import Database, default_db_path
+    from game.db import Database, DatabaseUnreachable
 
     if not options.patient:
         what = "--game" if options.scene == "game" else f"--scene {options.scene}"
@@ -215,8 +244,12 @@ def check_scene_options(options: PlayOptions) -> None:
         from game.rom.spec import check_side, load_rom_test
 
         check_side(load_rom_test(options.test or DEFAULT_ROM_TEST), options.side)
-    with Database(options.db_path or default_db_path(), check_integrity=True) as db:   # the full check: at start-up
-        db.require_patient(options.patient)
+    try:
+        with Database(options.db_path, check_integrity=True) as db:   # the full check: at start-up
+            db.require_patient(options.patient)
+    except DatabaseUnreachable as exc:
+        raise RehabError(f"{str(exc).split('): ')[0]}): a visit needs the patient's stored ROM and the therapist's "
+                         f"limits from the server: start it again when the server is back") from None
 
 
 def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_counter,

@@ -1,4 +1,4 @@
-"""The rehab database (SQLite, standard library only): patients, sessions, ROM and exercise results.
+"""The rehab database (SQLite embedded, or a clinic's PostgreSQL server): patients, sessions, results.
 
 See :mod:`game.db.database` and docs/DATABASE.md.
 """
@@ -7,6 +7,7 @@ from game.db.database import (
     Database,
     DatabaseError,
     DatabaseLocked,
+    DatabaseUnreachable,
     ExerciseRow,
     PatientRow,
     ResultRecord,
@@ -17,7 +18,9 @@ from game.db.database import (
     exercise_record,
     rom_record,
 )
+from game.db.location import ENV_VAR, ServerUrl, db_location, local_folder
 from game.db.migrations import LATEST_VERSION
 
-__all__ = ["Database", "DatabaseError", "DatabaseLocked", "ExerciseRow", "PatientRow", "ResultRecord", "ResultRejected",
+__all__ = ["Database", "DatabaseError", "DatabaseLocked", "DatabaseUnreachable", "ENV_VAR", "ServerUrl", "db_location",
+           "local_folder", "ExerciseRow", "PatientRow", "ResultRecord", "ResultRejected",
            "RomRow", "SessionRow", "default_db_path", "exercise_record", "rom_record", "LATEST_VERSION"]

@@ -36,6 +36,8 @@ from pathlib import Path
 from typing import Any, Iterable, Sequence
 
 from calibration.errors import RehabError
+from game.db.dialect import SQLITE, Dialect
+from game.db.location import ServerUrl, db_location
 from game.db.migrations import LATEST_VERSION, STEPS, schema_v1_sql
 from game.db.private import DIR_MODE, FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
 
@@ -53,6 +55,10 @@ class DatabaseLocked(DatabaseError):
     """Another program holds the database (a write transaction or an exclusive lock) past the wait."""
 
 
+class DatabaseUnreachable(DatabaseError):
+    """The database server does not answer (or the connection broke): results wait on the station."""
+
+
 class ResultRejected(DatabaseError):
     """A result that cannot be stored in any database: a value out of range, an unknown patient."""
 
@@ -60,8 +66,9 @@ class ResultRejected(DatabaseError):
 #: How long one statement waits for another program's lock before :class:`DatabaseLocked`.
 BUSY_TIMEOUT_S = 10.0
 #: The tables of a current database (a missing one is a damaged file, not a traceback later).
-_TABLES = ("schema_version", "patients", "sessions", "rom_results", "exercise_results", "game_limits")
-_TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES}
+_TABLES = ("schema_version", "patients", "sessions", "rom_results", "exercise_results", "game_limits", "accounts",
+           "audit")
+_TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES[:6], 4: _TABLES}
 _UTC = re.compile(r"^\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?Z$")
 
 
@@ -119,6 +126,8 @@ def _guarded(method):
             return method(self, *args, **kwargs)
         except sqlite3.Error as exc:
             raise sqlite_error(self.path, exc) from None
+        except self._dialect.errors as exc:
+            raise self._dialect.error(self.path, exc) from None
         except UnicodeDecodeError:   # a TEXT cell that is not UTF-8: the file was damaged
             raise _damaged(self.path, "text that is not UTF-8") from None
 
@@ -221,6 +230,13 @@ _EXERCISE_COLUMNS = ("uid", "game", "repetitions", "duration_s", "score", "detai
 _RESULT_COLUMNS = {"rom_results": _ROM_COLUMNS, "exercise_results": _EXERCISE_COLUMNS}
 
 
+def insert_result_sql(table: str) -> str:
+    """Insert a result of ``table`` (session id, then its columns); a result already there (uid) is left alone."""
+    columns = _RESULT_COLUMNS[table]
+    return (f"INSERT INTO {table} (session_id, {', '.join(columns)}) VALUES (?, {', '.join('?' * len(columns))}) "
+            f"ON CONFLICT DO NOTHING")
+
+
 @dataclass(frozen=True, slots=True)
 class ResultRecord:
     """One result with its session, stored in one transaction (or kept in a pending file meanwhile).
@@ -234,6 +250,8 @@ class ResultRecord:
             belongs to (created by the first of its results).
         table: ``rom_results`` or ``exercise_results``.
         values: the result's columns (``_ROM_COLUMNS`` or ``_EXERCISE_COLUMNS``).
+        accepted_by: the account that accepted it ("" = none signed in); stored as an audit row in
+            the result's own transaction.
     """
 
     patient_id: str
@@ -243,6 +261,7 @@ class ResultRecord:
     session_started_utc: str
     table: str
     values: dict
+    accepted_by: str = ""
 
     @property
     def uid(self) -> str:
@@ -260,6 +279,7 @@ class ResultRecord:
         """
         try:
             data = json.loads(text)
+            data.setdefault("accepted_by", "")   # pending files of rehab before accounts
             record = cls(**{f.name: data[f.name] for f in fields(cls)})
         except (ValueError, TypeError, KeyError) as exc:
             raise DatabaseError(f"{where}: not a pending result ({exc})") from None
@@ -380,10 +400,12 @@ def check_result_values(table: str, values: dict, where: str) -> dict:
 
 # --------------------------------------------------------------------------------- database
 class Database:
-    """A rehab database file, open and migrated. Use as a context manager or call :meth:`close`.
+    """A rehab database, open and migrated. Use as a context manager or call :meth:`close`.
 
     Args:
-        path: the SQLite file (created 0600, with its folder 0700, if missing).
+        path: the SQLite file (created 0600, with its folder 0700, if missing), or a PostgreSQL
+            server's ``postgresql://`` URL (:mod:`game.db.location`; ``None``: ``$REHAB_DB`` or
+            the user's data folder). Both hold the same schema, migrated the same way.
         check_integrity: run SQLite's full ``integrity_check`` first (seconds on a large file: at
             a command's start, before a backup or an import; not on every open).
         busy_timeout_s: how long a statement waits for another program's lock.
@@ -392,17 +414,45 @@ class Database:
 
     Raises:
         DatabaseLocked: another program holds the database locked (one line).
+        DatabaseUnreachable: the database server does not answer.
         DatabaseError: the file is damaged, not a rehab database, read-only, or from a newer rehab.
     """
 
-    def __init__(self, path: str | Path, *, check_integrity: bool = False, busy_timeout_s: float = BUSY_TIMEOUT_S,
-                 store_pending: bool = True):
-        self.path = Path(path)
-        self._conn = _open_checked(self.path, check_integrity=check_integrity, busy_timeout_s=busy_timeout_s)
+    def __init__(self, path: str | Path | ServerUrl | None, *, check_integrity: bool = False,
+                 busy_timeout_s: float = BUSY_TIMEOUT_S, store_pending: bool = True):
+        self.path = db_location(path)
+        self._conn = None
+        if isinstance(self.path, ServerUrl):
+            from game.db.server import POSTGRESQL, connect
+
+            self._dialect = POSTGRESQL
+            self._conn = connect(self.path, busy_timeout_s=busy_timeout_s)
+            self._prepare_server()
+        else:
+            self._dialect = SQLITE
+            self._conn = _open_checked(self.path, check_integrity=check_integrity, busy_timeout_s=busy_timeout_s)
         if store_pending:
             from game.db.pending import store_pending_results
 
             store_pending_results(self)
+
+    @_guarded
+    def _prepare_server(self) -> None:
+        try:
+            self.conn.execute(self._dialect.read_snapshot)   # one moment, though another station migrates
+            try:
+                version = _checked_version(self.conn, self._dialect, self.path)
+            finally:
+                self.conn.execute("ROLLBACK")
+            _migrate(self.conn, self._dialect, version, self.path)
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def dialect(self) -> Dialect:
+        """The back-end's differences (:mod:`game.db.dialect`)."""
+        return self._dialect
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
@@ -429,8 +479,11 @@ class Database:
 
     def _write(self, sql: str, params: Sequence[Any] = ()) -> sqlite3.Cursor:
         """One statement in its own durable transaction."""
-        with _transaction(self.conn):
+        with self._transaction():
             return self.conn.execute(sql, params)
+
+    def _transaction(self) -> "_transaction":
+        return _transaction(self.conn, self._dialect.begin)
 
     # ------------------------------------------------------------------ patients
     @_guarded
@@ -439,9 +492,10 @@ class Database:
         if not _PATIENT_ID.match(patient_id or ""):
             raise DatabaseError(f"patient ID {patient_id!r}: use a pseudonym of letters, digits, '_', '.', '-' "
                                 f"(up to 32 characters, e.g. P001), never a name")
-        if self.has_patient(patient_id):
+        cur = self._write("INSERT INTO patients (id, created_utc, note) VALUES (?, ?, ?) ON CONFLICT DO NOTHING",
+                          (patient_id, utc_now(), note))
+        if cur.rowcount != 1:   # another station may have added it a moment ago: the unique key decides
             raise DatabaseError(f"patient {patient_id} already exists in {self.path}")
-        self._write("INSERT INTO patients (id, created_utc, note) VALUES (?, ?, ?)", (patient_id, utc_now(), note))
 
     @_guarded
     def has_patient(self, patient_id: str) -> bool:
@@ -474,9 +528,11 @@ class Database:
         self.require_patient(patient_id)
         started_utc = started_utc or utc_now()
         check_session_fields(kind, started_utc, None, f"session of {patient_id}")
-        cur = self._write("INSERT INTO sessions (patient_id, started_utc, kind, note, uid, source) VALUES (?, ?, ?, ?, ?, ?)",
-                          (patient_id, started_utc, kind, note, uuid.uuid4().hex, source))
-        return int(cur.lastrowid)
+        uid = uuid.uuid4().hex
+        with self._transaction():
+            self.conn.execute("INSERT INTO sessions (patient_id, started_utc, kind, note, uid, source) "
+                              "VALUES (?, ?, ?, ?, ?, ?)", (patient_id, started_utc, kind, note, uid, source))
+            return int(self.conn.execute("SELECT id FROM sessions WHERE uid = ?", (uid,)).fetchone()[0])
 
     @_guarded
     def end_session(self, session_id: int, ended_utc: str | None = None) -> None:
@@ -515,19 +571,24 @@ class Database:
             raise ResultRejected(str(exc)) from None
         columns = _RESULT_COLUMNS[record.table]
         c = self.conn
-        with _transaction(c):
+        with self._transaction():
             if not self.has_patient(record.patient_id):
                 raise ResultRejected(f"no patient {record.patient_id!r} in {self.path}: add it with rehab patients "
                                      f"--add {record.patient_id}")
-            c.execute("INSERT OR IGNORE INTO sessions (uid, patient_id, started_utc, ended_utc, kind, source, note) "
-                      "VALUES (?, ?, ?, ?, ?, ?, '')",
+            c.execute("INSERT INTO sessions (uid, patient_id, started_utc, ended_utc, kind, source, note) "
+                      "VALUES (?, ?, ?, ?, ?, ?, '') ON CONFLICT DO NOTHING",
                       (record.session_uid, record.patient_id, record.session_started_utc, values["recorded_utc"],
                        record.session_kind, record.session_source))
             sid = c.execute("SELECT id FROM sessions WHERE uid = ?", (record.session_uid,)).fetchone()[0]
-            c.execute(f"INSERT OR IGNORE INTO {record.table} (session_id, {', '.join(columns)}) "
-                      f"VALUES (?, {', '.join('?' * len(columns))})", (sid, *(values[k] for k in columns)))
+            c.execute(insert_result_sql(record.table), (sid, *(values[k] for k in columns)))
             c.execute("UPDATE sessions SET ended_utc = ? WHERE id = ? AND (ended_utc IS NULL OR ended_utc < ?)",
                       (values["recorded_utc"], sid, values["recorded_utc"]))
+            if record.accepted_by:
+                what = (f"{values['test']} {values['side']} {values['value_deg']:.1f} deg"
+                        if record.table == "rom_results" else f"{values['game']} {values['repetitions']} repetitions")
+                c.execute("INSERT INTO audit (uid, at_utc, account, action, patient_id, what) "
+                          "VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING", (f"accept-{record.uid}", values["recorded_utc"], record.accepted_by,
+                                                     "accept", record.patient_id, f"{what} (result {record.uid})"))
         return record.uid
 
     def add_rom_result(self, session_id: int, result: Any, recorded_utc: str | None = None) -> str:
@@ -590,8 +651,10 @@ class Database:
     # ------------------------------------------------------------------ backup
     @_guarded
     def backup(self, dest: str | Path) -> Path:
-        """Copy a consistent snapshot to ``dest`` (SQLite's online backup API); refuses to overwrite.
+        """Copy a consistent snapshot to the SQLite file ``dest``; refuses to overwrite.
 
+        SQLite uses its online backup API; a server's database is copied row by row in one
+        repeatable-read transaction (:func:`game.db.copy.copy_database`) into a new SQLite file.
         The copy is written to a temporary file beside ``dest``, checked, flushed to disk and then
         renamed: a killed backup never leaves a file under ``dest``.
         """
@@ -605,9 +668,12 @@ class Database:
             raise DatabaseError(f"{dest}: cannot write the backup ({exc.strerror or exc}): choose a folder you can "
                                 f"write") from None
         try:
+            if self._dialect is not SQLITE:
+                self._backup_server(tmp)
             target = sqlite3.connect(tmp)
             try:
-                self.conn.backup(target)
+                if self._dialect is SQLITE:
+                    self.conn.backup(target)
                 target.execute("PRAGMA journal_mode = DELETE")   # a backup is one self-contained file
                 check = target.execute("PRAGMA integrity_check").fetchone()[0]
             finally:
@@ -624,6 +690,17 @@ class Database:
             if tmp.exists():
                 tmp.unlink()
         return dest
+
+    def _backup_server(self, tmp: Path) -> None:
+        from game.db.copy import copy_database
+
+        tmp.unlink()
+        self.conn.execute(self._dialect.read_snapshot)   # one consistent snapshot
+        try:
+            with Database(tmp, store_pending=False) as target:
+                copy_database(self, target)
+        finally:
+            self.conn.execute("ROLLBACK")
 
     # ------------------------------------------------------------------ CSV
     @_guarded
@@ -676,13 +753,14 @@ class Database:
         lims = _read_csv(src / "game_limits.csv", _LIMIT_COLUMNS) if (src / "game_limits.csv").is_file() else []
         added = {"patients": 0, "sessions": 0, "rom_results": 0, "exercise_results": 0, "game_limits": 0}
         c = self.conn
-        with _transaction(c):
+        with self._transaction():
             path = src / "patients.csv"
             for line, p in pats:
                 if not _PATIENT_ID.match(p["id"]):
                     raise DatabaseError(f"{path} line {line}: patient ID {p['id']!r} is not a pseudonymous ID")
                 _utc_text(p["created_utc"], "created_utc", f"{path} line {line}")
-                added["patients"] += c.execute("INSERT OR IGNORE INTO patients (id, created_utc, note) VALUES (?, ?, ?)",
+                added["patients"] += c.execute("INSERT INTO patients (id, created_utc, note) VALUES (?, ?, ?) "
+                                               "ON CONFLICT DO NOTHING",
                                                (p["id"], p["created_utc"], p["note"])).rowcount
             path = src / "sessions.csv"
             for line, s in sess:
@@ -693,8 +771,8 @@ class Database:
                     raise DatabaseError(f"{where}: the session has no uid")
                 check_session_fields(s["kind"], s["started_utc"], s["ended_utc"], where)
                 added["sessions"] += c.execute(
-                    "INSERT OR IGNORE INTO sessions (uid, patient_id, started_utc, ended_utc, kind, source, note) "
-                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT INTO sessions (uid, patient_id, started_utc, ended_utc, kind, source, note) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?) ON CONFLICT DO NOTHING",
                     (s["uid"], s["patient_id"], s["started_utc"], s["ended_utc"] or None, s["kind"], s["source"],
                      s["note"])).rowcount
             for table, rows in (("rom_results", roms), ("exercise_results", exes)):
@@ -705,8 +783,7 @@ class Database:
                     sid = _session_id(c, r["session_uid"], path, line)
                     values = check_result_values(table, {k: r[k] for k in columns}, where)
                     added[table] += c.execute(
-                        f"INSERT OR IGNORE INTO {table} (session_id, {', '.join(columns)}) "
-                        f"VALUES (?, {', '.join('?' * len(columns))})", (sid, *(values[k] for k in columns))).rowcount
+                        insert_result_sql(table), (sid, *(values[k] for k in columns))).rowcount
             path = src / "game_limits.csv"
             for line, g in lims:
                 where = f"{path} line {line}"
@@ -719,7 +796,8 @@ class Database:
                     raise DatabaseError(f"{where}: limits are not valid JSON ({exc})") from None
                 _utc_text(g["updated_utc"], "updated_utc", where)
                 added["game_limits"] += c.execute(
-                    "INSERT OR IGNORE INTO game_limits (patient_id, game, limits, updated_utc) VALUES (?, ?, ?, ?)",
+                    "INSERT INTO game_limits (patient_id, game, limits, updated_utc) VALUES (?, ?, ?, ?) "
+                    "ON CONFLICT DO NOTHING",
                     tuple(g[k] for k in _LIMIT_COLUMNS)).rowcount
         return added
 
@@ -733,13 +811,14 @@ def _no_constant(name: str):
 
 # --------------------------------------------------------------------------------- helpers
 class _transaction:
-    """``BEGIN IMMEDIATE`` ... ``COMMIT`` (``ROLLBACK`` on error) on an autocommit connection."""
+    """The dialect's ``begin`` (SQLite: ``BEGIN IMMEDIATE``) ... ``COMMIT`` (``ROLLBACK`` on error), autocommit connection."""
 
-    def __init__(self, conn: sqlite3.Connection):
+    def __init__(self, conn, begin: str = "BEGIN IMMEDIATE"):
         self.conn = conn
+        self.begin = begin
 
     def __enter__(self):
-        self.conn.execute("BEGIN IMMEDIATE")
+        self.conn.execute(self.begin)
         return self.conn
 
     def __exit__(self, exc_type, exc, tb):
@@ -747,13 +826,18 @@ class _transaction:
             try:
                 self.conn.execute("COMMIT")
                 return False
-            except sqlite3.Error:
-                if self.conn.in_transaction:
-                    self.conn.execute("ROLLBACK")
+            except Exception:
+                self._rollback()
                 raise
-        if self.conn.in_transaction:
-            self.conn.execute("ROLLBACK")
+        self._rollback()
         return False
+
+    def _rollback(self) -> None:
+        try:
+            if self.conn.in_transaction:
+                self.conn.execute("ROLLBACK")
+        except Exception:   # a broken connection: the server rolls back; the first error is the one to tell
+            pass
 
 
 def _version(conn: sqlite3.Connection, path: Path) -> int:
@@ -805,26 +889,15 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
         raise sqlite_error(path, exc) from None
     try:
         conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout_s * 1000)}")
-        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-        if tables:
-            if "schema_version" not in tables:
-                raise _damaged(path, "no schema_version table")
-            if check_integrity:
-                problems = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
-                if problems != ["ok"]:
-                    raise _damaged(path, f"integrity check: {problems[0]}")
-        version = _version(conn, path) if tables else 0
-        if version > LATEST_VERSION:
-            raise DatabaseError(f"{path} has schema version {version}, newer than this rehab knows "
-                                f"({LATEST_VERSION}): update rehab")
-        if tables:
-            missing = [t for t in _TABLES_BY_VERSION.get(version, _TABLES) if t not in tables]
-            if version < 1 or missing:
-                raise _damaged(path, f"missing table {missing[0]}" if missing else f"schema version {version}")
+        if check_integrity and _table_names(conn, SQLITE):
+            problems = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
+            if problems != ["ok"]:
+                raise _damaged(path, f"integrity check: {problems[0]}")
+        version = _checked_version(conn, SQLITE, path)
         conn.execute("PRAGMA journal_mode = WAL")
         conn.execute("PRAGMA synchronous = FULL")  # a commit that returned survives a crash or power cut
         conn.execute("PRAGMA foreign_keys = ON")
-        _migrate(conn, version, path)
+        _migrate(conn, SQLITE, version, path)
     except sqlite3.Error as exc:
         conn.close()
         raise sqlite_error(path, exc) from None
@@ -837,19 +910,46 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
     return conn
 
 
-def _migrate(conn: sqlite3.Connection, version: int, path: Path) -> None:
-    """Bring the schema from ``version`` to :data:`LATEST_VERSION`, one transaction per step."""
-    if version == 0:
-        with _transaction(conn):
-            for statement in _statements(schema_v1_sql()):
-                conn.execute(statement)
-        version = 1
+def _table_names(conn, dialect: Dialect) -> set[str]:
+    return {r[0] for r in conn.execute(dialect.tables_sql).fetchall()}
+
+
+def _checked_version(conn, dialect: Dialect, path) -> int:
+    """The schema version (0: an empty database), after checking the tables it should have."""
+    tables = _table_names(conn, dialect)
+    if not tables:
+        return 0
+    if "schema_version" not in tables:
+        raise _damaged(path, "no schema_version table")
+    version = _version(conn, path)
+    if version > LATEST_VERSION:
+        raise DatabaseError(f"{path} has schema version {version}, newer than this rehab knows "
+                            f"({LATEST_VERSION}): update rehab")
+    missing = [t for t in _TABLES_BY_VERSION.get(version, _TABLES) if t not in tables]
+    if version < 1 or missing:
+        raise _damaged(path, f"missing table {missing[0]}" if missing else f"schema version {version}")
+    return version
+
+
+def _migrate(conn, dialect: Dialect, version: int, path) -> None:
+    """Bring the schema from ``version`` to :data:`LATEST_VERSION`, one transaction per step.
+
+    Each step re-reads the version inside its transaction (after the dialect's migration lock), so
+    two stations opening a new database at once apply every step exactly once.
+    """
     for target in range(version + 1, LATEST_VERSION + 1):
-        log.info("migrating %s from schema version %d to %d", path, target - 1, target)
-        with _transaction(conn):
-            for statement in _statements(STEPS[target]):
+        with _transaction(conn, dialect.begin):
+            if dialect.migration_lock:
+                conn.execute(dialect.migration_lock)
+            now = _version(conn, path) if "schema_version" in _table_names(conn, dialect) else 0
+            if now >= target:
+                continue
+            log.info("migrating %s from schema version %d to %d", path, now, target)
+            script = schema_v1_sql() if target == 1 else STEPS[target]
+            for statement in _statements(dialect.translate(script)):
                 conn.execute(statement)
-            conn.execute("UPDATE schema_version SET version = ?", (target,))
+            if target > 1:
+                conn.execute("UPDATE schema_version SET version = ?", (target,))
 
 
 def _statements(script: str) -> list[str]:

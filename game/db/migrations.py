@@ -10,7 +10,7 @@ from __future__ import annotations
 from importlib import resources
 
 #: The schema version this code writes.
-LATEST_VERSION = 3
+LATEST_VERSION = 4
 
 
 def schema_v1_sql() -> str:
@@ -74,5 +74,29 @@ CREATE TABLE game_limits (
 );
 """
 
+_V4 = """
+-- Who may do what (game/db/accounts.py): therapist and patient accounts, the secret (password or
+-- PIN) only as a scrypt hash; a patient account belongs to one pseudonymous patient.
+CREATE TABLE accounts (
+    name        TEXT PRIMARY KEY,
+    role        TEXT NOT NULL,
+    patient_id  TEXT REFERENCES patients(id),
+    secret_hash TEXT NOT NULL,
+    created_utc TEXT NOT NULL
+);
+
+-- Who accepted, changed or exported what, and when (one row per act; never updated).
+CREATE TABLE audit (
+    id         INTEGER PRIMARY KEY,
+    uid        TEXT NOT NULL UNIQUE,
+    at_utc     TEXT NOT NULL,
+    account    TEXT NOT NULL,
+    action     TEXT NOT NULL,
+    patient_id TEXT,
+    what       TEXT NOT NULL DEFAULT ''
+);
+CREATE INDEX audit_patient ON audit(patient_id, at_utc);
+"""
+
 #: version -> the SQL that brings version-1 to it (applied in order).
-STEPS: dict[int, str] = {2: _V2, 3: _V3}
+STEPS: dict[int, str] = {2: _V2, 3: _V3, 4: _V4}

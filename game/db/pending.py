@@ -1,12 +1,15 @@
 """Never lose an accepted result: wait for a locked database, else keep the result in a pending file.
 
 Another program (a database browser, a second ``rehab`` importing) may hold the database locked
-for longer than a statement waits. :func:`store_durably` then tells the user (``notify``), keeps
-trying for ``wait_s`` seconds, and finally writes the result to a pending file beside the database
-(``rehab.sqlite3.pending/<uid>.json``, 0600 in a 0700 folder, written through a temporary file and
-fsync). Every later open of the database (:class:`game.db.Database`) stores the pending results
-and removes their files; storing is keyed by uids, so a kill between storing and removing the file
-adds nothing twice. A result is only reported stored once it is in the database or in its file.
+for longer than a statement waits, or the clinic's database server may be unreachable (network,
+restart). :func:`store_durably` then tells the user (``notify``), keeps trying a lock for ``wait_s``
+seconds, and finally writes the result to a pending file on this station (beside an SQLite file:
+``rehab.sqlite3.pending/<uid>.json``; for a server: ``<data folder>/pending/<host_port_db>/``; 0600
+in a 0700 folder, written through a temporary file and fsync). Every later open of the database
+(:class:`game.db.Database`) stores the pending results and removes their files; storing is keyed
+by the uids the station generated, so a kill between storing and removing the file, or two
+processes sending the same queue, add nothing twice. A result is only reported stored once it is
+in the database or in its file.
 """
 
 from __future__ import annotations
@@ -19,7 +22,9 @@ from pathlib import Path
 from typing import Callable
 
 from calibration.errors import RehabError
-from game.db.database import BUSY_TIMEOUT_S, Database, DatabaseError, DatabaseLocked, ResultRecord, ResultRejected
+from game.db.database import (BUSY_TIMEOUT_S, Database, DatabaseError, DatabaseLocked, DatabaseUnreachable, ResultRecord,
+                              ResultRejected)
+from game.db.location import ServerUrl, db_location, local_folder
 from game.db.private import make_private_dir, open_private
 
 log = logging.getLogger(__name__)
@@ -55,10 +60,12 @@ class StoreOutcome:
                 f"time rehab opens it")
 
 
-def pending_dir(db_path: str | Path) -> Path:
-    """The folder of results waiting for the database ``db_path``."""
-    db_path = Path(db_path)
-    return db_path.with_name(db_path.name + ".pending")
+def pending_dir(db_path: str | Path | ServerUrl) -> Path:
+    """The folder of results waiting for the database ``db_path`` (a file or a server URL)."""
+    location = db_location(db_path)
+    if isinstance(location, ServerUrl):
+        return local_folder(location) / "pending" / location.key
+    return location.with_name(location.name + ".pending")
 
 
 def keep_pending(db_path: str | Path, record: ResultRecord) -> Path:
@@ -92,6 +99,8 @@ def store_pending_results(db: Database) -> int:
     for path in sorted(folder.glob("*.json")):
         try:
             record = ResultRecord.from_json(path.read_text(encoding="utf-8"), str(path))
+        except FileNotFoundError:
+            continue   # another process of this station has just sent it
         except (OSError, UnicodeDecodeError, DatabaseError) as exc:
             log.warning("pending result %s cannot be read (%s): kept as %s.bad", path, exc, path.name)
             with contextlib.suppress(OSError):
@@ -101,10 +110,10 @@ def store_pending_results(db: Database) -> int:
             db.store_result(record)
         except DatabaseError as exc:
             log.warning("pending result %s not stored yet: %s", path.name, exc)
-            if isinstance(exc, DatabaseLocked):
+            if isinstance(exc, (DatabaseLocked, DatabaseUnreachable)):
                 break
             continue
-        path.unlink()
+        path.unlink(missing_ok=True)
         n += 1
         log.info("stored pending result %s in %s", record.uid, db.path)
     return n
@@ -116,7 +125,7 @@ def store_durably(db_path: str | Path, record: ResultRecord, *, wait_s: float = 
     """Store ``record`` in the database, waiting out a lock for ``wait_s``, else keep it in a pending file.
 
     Args:
-        db_path: the database file.
+        db_path: the database file or server URL.
         record: the result (:func:`game.db.database.rom_record`, :func:`~game.db.database.exercise_record`).
         wait_s: how long to keep trying a locked database.
         notify: called with one line when the wait begins (e.g. print it, or show it on screen).
@@ -129,7 +138,7 @@ def store_durably(db_path: str | Path, record: ResultRecord, *, wait_s: float = 
         RehabError: a bad result (unknown patient, a value out of range), or neither the database
             nor the pending folder can be written.
     """
-    db_path = Path(db_path)
+    db_path = db_location(db_path)
     start = clock()
     told = False
     while True:

@@ -22,6 +22,7 @@ from typing import Callable, Sequence
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db.location import db_location
 from game.exergames.limits import LABELS, LIMIT_KEYS, describe, load_limits, save_limits, step_limit, whose
 from game.exergames.spec import GameSpec, TherapistLimits, load_all_games
 from game.gfx import theme
@@ -52,7 +53,7 @@ class ChooseGameScene(BaseScene):
         self.open_game = open_game
         self.side = side
         self.games = list(games) if games is not None else load_all_games()
-        self.db_path = Path(db_path) if db_path is not None else None
+        self.db_path = db_location(db_path) if db_path is not None else None
         self.selected = 0          # the game
         self.column = None         # None: the games; 0: Play; 1..: the limits
         self.auto = False

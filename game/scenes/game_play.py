@@ -26,6 +26,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db.location import db_location
 from game.exergames.audio import Sounds
 from game.exergames.autoplay import AutoPlayer
 from game.exergames.session import Cue, GameSession, Phase, read_sample, store_log
@@ -188,7 +189,7 @@ class GameScene(BaseScene):
         self.link = link
         self.spec = spec
         self.side = side
-        self.db_path = Path(db_path)
+        self.db_path = db_location(db_path)
         self.patient_id = patient_id
         self.make_avatar = make_avatar
         self.auto = auto

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from game.app import BaseScene, Frame
+from game.db.location import db_location
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 
@@ -66,7 +67,7 @@ class PatientsScene(BaseScene):
 
     def __init__(self, db_path: Path, then: Callable[[str], BaseScene], *, title: str,
                  allow_new: bool = True) -> None:
-        self.db_path = Path(db_path)
+        self.db_path = db_location(db_path)
         self.then = then
         self.title = title
         self.allow_new = allow_new

@@ -23,6 +23,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db.location import db_location, local_folder
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.report import HistoryLook, plot_games, plot_rom_history, session_order
@@ -158,7 +159,7 @@ class ProgressScene(BaseScene):
     """
 
     def __init__(self, db_path: Path, patient_id: str, *, standard: str = "jarm") -> None:
-        self.db_path = Path(db_path)
+        self.db_path = db_location(db_path)
         self.patient_id = patient_id
         self.standard = standard
         self.roms: list = []
@@ -232,7 +233,7 @@ class ProgressScene(BaseScene):
         from game.report import write_report
         from game.db.database import utc_now
 
-        folder = self.db_path.parent / "reports"
+        folder = local_folder(self.db_path) / "reports"
         out = folder / f"{self.patient_id}_{utc_now()[:10]}.html"
         try:
             folder.mkdir(mode=0o700, parents=True, exist_ok=True)

@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import math
 import uuid
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -35,6 +35,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db.location import db_location
 from game.gfx import theme
 from game.gfx.view3d import Viewport
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -81,15 +82,17 @@ class RomVisit:
         standard: ``jarm`` or ``aaos``: every result of the visit is labelled with it.
         source: what measured the results (stored with the session), e.g. ``sim`` or ``cameras``.
         wait_s: how long a locked database is waited for before a result is kept aside.
+        accepted_by: the signed-in therapist account ("" = none): audited with each result.
     """
 
     def __init__(self, db_path: Path, patient_id: str, standard: str = "jarm", source: str = "sim",
-                 wait_s: float = 3.0) -> None:
-        self.db_path = Path(db_path)
+                 wait_s: float = 3.0, accepted_by: str = "") -> None:
+        self.db_path = db_location(db_path)
         self.patient_id = patient_id
         self.standard = standard
         self.source = source
         self.wait_s = wait_s
+        self.accepted_by = accepted_by
         self.session_uid = uuid.uuid4().hex
         self.session_started_utc: str | None = None
         self.stored: list[str] = []
@@ -110,8 +113,8 @@ class RomVisit:
         from game.db import rom_record
         from game.db.pending import store_durably
 
-        record = rom_record(self.patient_id, result, session_uid=self.session_uid, source=source or self.source,
-                            started_utc=self.session_started_utc)
+        record = replace(rom_record(self.patient_id, result, session_uid=self.session_uid, source=source or self.source,
+                                    started_utc=self.session_started_utc), accepted_by=self.accepted_by)
         self.session_started_utc = record.session_started_utc
         self.last_outcome = store_durably(self.db_path, record, wait_s=self.wait_s)
         self.stored.append(record.uid)
