@@ -175,9 +175,16 @@ def open_source(config: SourceConfig) -> FrameSource:
 class SimSource:
     """The simulated patient rendered by the studio's virtual cameras.
 
+    Like a camera, it is tied to the clock (``paced_by_clock``): the loop asks for the frame set
+    due now, whose time stamp is its wall-clock time since the start, and frame sets the loop was
+    too late for are never rendered. A scripted motion and the interactive patient thus move at
+    the clock's pace however busy the machine is (with fewer frame sets per second).
+
     Args:
         config: rig, size, frame rate, body, marker set, motion (None: interactive), noise.
     """
+
+    paced_by_clock = True
 
     def __init__(self, config: SourceConfig) -> None:
         from tracking.sim.body import BodyDimensions
