@@ -221,3 +221,31 @@ def test_game_menu_limits(open_headless, db_path, size):
             menu.handle(Press(Action.BACK))
     finally:
         app.close()
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("interactive", [True, False])
+def test_live_view_explains_why_the_rest_pose_reads_below_zero(open_headless, size, interactive):
+    """Issue 25: the patient at rest read -11 degrees of shoulder flexion and trunk forward lean
+    with nothing to say why (the sternum markers' slope, tests/test_rest_pose_angles.py)."""
+    from game.scenes.live import REST_NOTE
+
+    clock = Clock()
+    link = BodyLink(clock)
+    app = App(open_headless(size), Settings(show_fps=False, max_fps=0), clock=clock, sleep=lambda s: None,
+              services=Services(link), events=lambda: [])
+    app.push(BaseScene())
+    app.push(LiveScene(link, motions=[None, "reference"], motion=None if interactive else "reference",
+                       open_monitor=lambda: None, make_avatar=None))
+    try:
+        link.feed(reference_pose())
+        rec = frame_texts(app)
+        assert_text_fits(rec, size)
+        texts = [t for t, _ in rec.texts]
+        assert "-11\N{DEGREE SIGN}" in texts      # the reading it explains
+        words = REST_NOTE.format(example=" (-11\N{DEGREE SIGN} on the simulated patient)").split()
+        drawn = " ".join(texts).split()
+        start = drawn.index("(upright,") - 2
+        assert drawn[start:start + len(words)] == words  # every word of it, in order
+    finally:
+        app.close()
