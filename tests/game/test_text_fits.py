@@ -249,3 +249,28 @@ def test_live_view_explains_why_the_rest_pose_reads_below_zero(open_headless, si
         assert drawn[start:start + len(words)] == words  # every word of it, in order
     finally:
         app.close()
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_rom_test_list_titles_stay_inside_their_rows(open_headless, db_path, size):
+    """Issue 25's walk-through: "Shoulder external rotation (arm at the side)" ran past its row's
+    highlight at 1280x720."""
+    from game.scenes.rom_test import ChooseTestScene
+
+    app = App(open_headless(size), Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    choice = ChooseTestScene(RomVisit(db_path, "P001"), lambda *a: BaseScene())
+    app.push(choice)
+    try:
+        for selected in range(len(choice.tests)):
+            choice.selected = selected
+            rec = frame_texts(app)
+            assert_text_fits(rec, size)
+            rows = choice._layout()[1]
+            for test, (rx, ry, rw, rh) in zip(choice.tests, rows):
+                drawn = [(t, r) for t, r in rec.texts if rx < r[0] < rx + rw and r[1] >= ry - 1 and r[1] + r[3] <= ry + rh + 1]
+                assert drawn, test.title
+                for t, (x, y, tw, th) in drawn:
+                    assert x + tw <= rx + rw - 8, (t, x + tw, rx + rw)
+    finally:
+        app.close()
