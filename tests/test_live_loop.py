@@ -199,3 +199,16 @@ def test_a_loop_on_time_grabs_every_frame_set_at_its_time(source, blocks):
     indices = [int(r["frame_index"]) for r in reader.read_new()]
     assert indices == list(range(len(indices))) and 15 <= len(indices) <= 16
     assert loop.dropped_frames == 0
+
+
+def test_the_simulated_patient_is_tied_to_the_wall_clock_unless_asked_for_frame_time(source):
+    from tracking.live.protocol import LiveError
+
+    assert source.paced_by_clock                    # the default: like a camera
+    frames = SimSource(SourceConfig(size=(320, 240), fps=30.0, motion="reference", sim_clock="frames"))
+    try:
+        assert not frames.paced_by_clock
+    finally:
+        frames.close()
+    with pytest.raises(LiveError, match="sim_clock 'fast': give one of wall, frames"):
+        SourceConfig(sim_clock="fast").check()
