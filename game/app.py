@@ -217,8 +217,8 @@ class RunSummary:
         cpu_ms: CPU time of this process per frame, all threads (llvmpipe rasterizes on
             threads of its own): what a frame costs on a machine shared with other work.
         screenshot: the PNG written, if any.
-        interval_p99_ms, interval_max_ms: the 99th percentile and the longest time between the
-            starts of two frames (a stall the patient sees).
+        interval_p50_ms, interval_p99_ms, interval_max_ms: the median, the 99th percentile and the
+            longest time between the ends of two frames (a stall the patient sees).
         slowest: where the longest frame spent its time (stage: ms, ...).
     """
 
@@ -231,6 +231,7 @@ class RunSummary:
     interval_p99_ms: float = math.nan
     interval_max_ms: float = math.nan
     slowest: str = ""
+    interval_p50_ms: float = math.nan
 
     @property
     def fps(self) -> float:
@@ -241,7 +242,8 @@ class RunSummary:
         capable = 1000.0 / self.work_ms if self.work_ms > 0 else math.nan
         stalls = ""
         if math.isfinite(self.interval_max_ms):
-            stalls = (f"; frame interval p99 {self.interval_p99_ms:.0f} ms, longest {self.interval_max_ms:.0f} ms"
+            stalls = (f"; frame interval median {self.interval_p50_ms:.0f} ms, p99 {self.interval_p99_ms:.0f} ms, "
+                      f"longest {self.interval_max_ms:.0f} ms"
                       + (f" ({self.slowest})" if self.slowest else ""))
         return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
                 f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
@@ -488,13 +490,14 @@ class App:
         work_ms = 1000.0 * (self._work_total_s - work_before_s) / n if n else math.nan
         cpu_ms = 1000.0 * (time.process_time() - start_cpu_s) / n if n else math.nan
         intervals = list(self.intervals)[-n:][1:] if n > 1 else []   # the first counts the start-up
-        p99 = 1000.0 * float(sorted(intervals)[min(len(intervals) - 1, int(0.99 * len(intervals)))]) \
-            if intervals else math.nan
+        ordered = sorted(intervals)
+        p50, p99 = (1000.0 * float(ordered[min(len(ordered) - 1, int(q * len(ordered)))]) if ordered else math.nan
+                    for q in (0.5, 0.99))
         worst = 1000.0 * max(intervals) if intervals else math.nan
         _, parts, wait = self._slowest
         names = ("events", "tracker link", "updates", "prepare", "present", "draw")
         slowest = ", ".join(f"{k} {1000 * v:.0f}" for k, v in (("before", wait), *zip(names, parts)) if v > 0.002)
-        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest)
+        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest, p50)
 
     def close(self) -> None:
         """Exit every scene and release the canvas (the screen and services belong to the caller)."""

@@ -39,9 +39,25 @@ def _fixed(x: float) -> int:
 
 
 def _text(img: np.ndarray, text: str, org: tuple[int, int], scale: float, bgr: tuple[int, int, int]) -> None:
-    """Text with a dark outline, readable on any background."""
+    """Text with a dark outline, readable on any background.
+
+    The outline is the text's own strokes grown by a pixel. (Drawn as the same text with thicker
+    strokes it was wider: OpenCV's Hershey letters advance by their stroke width, so the dark copy
+    drifted right letter by letter and its last letters showed after the text, "MRW2 W2".)
+    """
     thick = max(1, int(round(scale * 2)))
-    cv2.putText(img, text, org, _FONT, scale, (0, 0, 0), thick + 2, cv2.LINE_AA)
+    (tw, th), base = cv2.getTextSize(text, _FONT, scale, thick)
+    h, w = img.shape[:2]
+    pad = thick + 2
+    x0, y0 = max(org[0] - pad, 0), max(org[1] - th - pad, 0)
+    x1, y1 = min(org[0] + tw + pad, w), min(org[1] + base + pad, h)
+    if x1 <= x0 or y1 <= y0:
+        return
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    cv2.putText(mask, text, (org[0] - x0, org[1] - y0), _FONT, scale, 255, thick, cv2.LINE_AA)
+    outline = cv2.dilate(mask, np.ones((3, 3), np.uint8))
+    roi = img[y0:y1, x0:x1]
+    roi[:] = (roi * (1.0 - outline[..., None] / 255.0)).astype(np.uint8)
     cv2.putText(img, text, org, _FONT, scale, bgr, thick, cv2.LINE_AA)
 
 

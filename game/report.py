@@ -233,6 +233,7 @@ def plot_games(ax_reps, ax_minutes, rows: Sequence[ExerciseRow], order: dict[str
     the patient's own, hatched and faded; returns the legend handles (one per game, and one for
     the demo when it played)."""
     from matplotlib.patches import Patch
+    from matplotlib.ticker import MaxNLocator
 
     games = sorted({r.game for r in rows})
     width = 0.8 / max(len(games), 1)
@@ -267,6 +268,11 @@ def plot_games(ax_reps, ax_minutes, rows: Sequence[ExerciseRow], order: dict[str
                        alpha=DEMO_ALPHA, hatch=DEMO_HATCH, edgecolor=demo_edge_rgb, linewidth=0)
     if any(demo_part(r).seconds > 0 for r in rows):
         handles.append(Patch(facecolor="none", hatch=DEMO_HATCH, edgecolor=demo_edge_rgb, label="played by the demo"))
+    # counts and minutes from zero, repetitions in whole numbers (a game with none collected drew an
+    # axis from -0.05 to 0.05)
+    ax_reps.yaxis.set_major_locator(MaxNLocator(integer=True))
+    for ax, least in ((ax_reps, 1.0), (ax_minutes, 0.5)):
+        ax.set_ylim(0.0, max(ax.get_ylim()[1], least))
     return handles
 
 

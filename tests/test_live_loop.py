@@ -116,3 +116,99 @@ def test_images_of_the_wrong_size_are_refused_before_tracking(source, blocks):
     assert reader.error_line() == ("source error at frame 0: LiveError: camera cam1 delivered 320x100 uint8 images "
                                    "but is calibrated for 320x240 uint8 BGR: recalibrate or set the camera size")
     assert reader.read_new() == []
+
+
+class _FakeClock:
+    def __init__(self):
+        self.now_s = 100.0
+
+    def __call__(self):
+        return self.now_s
+
+
+class _Conn:
+    """The control pipe: waiting on it passes fake time; Stop once ``until_s`` is reached."""
+
+    def __init__(self, clock, until_s):
+        self.clock, self.until_s = clock, until_s
+
+    def poll(self, timeout_s=0.0):
+        if self.clock.now_s >= self.until_s:
+            return True
+        self.clock.now_s += timeout_s
+        return False
+
+    def recv(self):
+        return Stop()
+
+
+class _Slow(_Broken):
+    """A machine too busy for the frame rate: every frame set takes 2.5 frame periods."""
+
+    def __init__(self, inner, clock, paced_by_clock):
+        super().__init__(inner)
+        self.clock, self.paced_by_clock, self.times = clock, paced_by_clock, []
+
+    def grab(self, index, time_s, identified):
+        self.clock.now_s += 2.5 / CONFIG.fps
+        self.times.append(time_s)
+        return self.inner.grab(index, time_s, identified)
+
+
+@pytest.mark.parametrize("paced_by_clock", [True, False])
+def test_a_late_loop_drops_frame_sets_of_a_source_tied_to_the_clock(source, blocks, paced_by_clock):
+    """Issue 25: on a busy machine the simulated patient played in slow motion (one frame period of
+    motion per frame set tracked, however long it took). A source tied to the clock, like a camera,
+    is asked for the frame set due now: its motion time follows the wall clock, the late frame sets
+    are dropped. A recording (not tied to the clock) still plays every frame set."""
+    writer, slot, reader = blocks
+    clock = _FakeClock()
+    slow = _Slow(source, clock, paced_by_clock)
+    source.handle(Reidentify())
+    loop = TrackerLoop(slow, writer, slot, fps=CONFIG.fps, clock=clock)
+    start_s = clock.now_s
+    loop.run(_Conn(clock, start_s + 1.0))
+    got = reader.read_new()
+    indices = [int(r["frame_index"]) for r in got]
+    assert len(indices) >= 10 and indices[0] == 0
+    elapsed_s = clock.now_s - start_s
+    if paced_by_clock:
+        # each frame set is the one due when it was grabbed: its time stamp is the clock's, within
+        # one period, and the steps between them are the 2-3 periods the tracking took
+        assert {b - a for a, b in zip(indices, indices[1:])} <= {2, 3}
+        assert float(got[-1]["time_s"]) == pytest.approx(elapsed_s, abs=3.5 / CONFIG.fps)
+        assert loop.dropped_frames == indices[-1] - len(indices) + 1 > 0
+    else:
+        assert indices == list(range(len(indices)))
+        assert float(got[-1]["time_s"]) < 0.5 * elapsed_s   # a recording's own time: every frame set
+        assert loop.dropped_frames == 0
+    assert [round(t * CONFIG.fps) for t in slow.times] == indices
+
+
+def test_a_loop_on_time_grabs_every_frame_set_at_its_time(source, blocks):
+    writer, slot, reader = blocks
+    clock = _FakeClock()
+
+    class _Quick(_Slow):
+        def grab(self, index, time_s, identified):
+            self.clock.now_s += 0.2 / CONFIG.fps
+            return self.inner.grab(index, time_s, identified)
+
+    loop = TrackerLoop(_Quick(source, clock, True), writer, slot, fps=CONFIG.fps, clock=clock)
+    loop.run(_Conn(clock, clock.now_s + 0.5))
+    indices = [int(r["frame_index"]) for r in reader.read_new()]
+    assert indices == list(range(len(indices))) and 15 <= len(indices) <= 16
+    assert loop.dropped_frames == 0
+
+
+def test_the_simulated_patient_is_tied_to_the_wall_clock_unless_asked_for_frame_time(source):
+    from tracking.live.protocol import LiveError
+
+    assert source.paced_by_clock                    # the default: like a camera
+    frames = SimSource(SourceConfig(size=(320, 240), fps=30.0, motion="reference", sim_clock="frames"))
+    try:
+        assert not frames.paced_by_clock
+    finally:
+        frames.close()
+    with pytest.raises(LiveError, match="sim_clock 'fast': give one of wall, frames"):
+        SourceConfig(sim_clock="fast").check()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -45,6 +46,26 @@ def test_labels_and_footer_name_the_markers():
     assert diff[:20, :60].any()  # title
     assert diff[-16:, :120].any()  # footer
     assert not diff[150:200, 20:60].any()
+
+
+@pytest.mark.parametrize("width", [320, 640, 1280])
+def test_text_outline_ends_where_the_text_ends(width):
+    """Issue 25: the camera check's footer showed leftover letters after its text ("... MRW2 W2"):
+    the dark outline, drawn as the same text with thicker strokes, was wider than the text. Every
+    dark pixel of the title and footer lies within a pixel or two of the text's own letters."""
+    img = grey(width, 240)
+    footer = "not seen here: MB, MP, MLE1, MLE2, MLW1, MLW2, MRW1, MRW2"
+    out = overlay_camera(img, NAMES, RGB, title="cam1  TRACKING", footer=footer)
+    bgr = out.astype(int)
+    dark = (bgr < 60).all(axis=2)                      # the outline (the image is grey 100)
+    light = (bgr > 140).any(axis=2)                    # the letters (white title, pale blue footer)
+    for rows in (slice(0, 60), slice(180, 240)):       # the title's band, the footer's band
+        d_cols, l_cols = np.flatnonzero(dark[rows].any(axis=0)), np.flatnonzero(light[rows].any(axis=0))
+        assert l_cols.size and d_cols.size
+        assert d_cols.max() <= l_cols.max() + 2 and d_cols.min() >= l_cols.min() - 2, (d_cols.max(), l_cols.max())
+        # and the outline surrounds the letters: most pixels just around them are dark
+        near = cv2.dilate(light[rows].astype(np.uint8), np.ones((3, 3), np.uint8)).astype(bool) & ~light[rows]
+        assert dark[rows][near].mean() > 0.5
 
 
 def test_colour_regions_are_painted_in_the_palette_colour():

@@ -109,3 +109,22 @@ def test_games_say_who_played_and_scores_in_whole_percent(db, tmp_path):
     assert "<th>played by</th>" in html and "patient + demo (30 s)" in html and "2 (1 by the demo)" in html
     assert "22 %" in html and "0.2222" not in html
     assert html.count('<tr class="demo">') == 1
+
+
+@pytest.mark.parametrize("repetitions", [0, 3])
+def test_game_charts_start_at_zero_in_whole_repetitions(repetitions):
+    """Issue 25: a game with no target collected drew its repetitions from -0.05 to 0.05."""
+    from matplotlib.figure import Figure
+
+    from game.db.database import ExerciseRow
+    from game.report import plot_games
+
+    row = ExerciseRow("e1", "s1", "P001", "2026-03-02T10:00:00Z", "rotation", repetitions, 27.0, 0.0, "{}",
+                      "2026-03-02T10:01:00Z")
+    fig = Figure()
+    reps, minutes = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    plot_games(reps, minutes, [row], {"s1": 1}, ("#5ec8be",), "#a3aebe", "#333333")
+    assert reps.get_ylim()[0] == 0.0 and reps.get_ylim()[1] >= max(repetitions, 1)
+    assert minutes.get_ylim()[0] == 0.0 and minutes.get_ylim()[1] >= 27.0 / 60.0
+    ticks = [t for t in reps.get_yticks() if reps.get_ylim()[0] <= t <= reps.get_ylim()[1]]
+    assert ticks and all(t >= 0 and float(t).is_integer() for t in ticks)

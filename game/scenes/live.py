@@ -49,6 +49,11 @@ INPUT_PERIOD_S = 1.0 / 60.0
 #: A sample older than this while the process runs means the source has stalled.
 STALE_SAMPLE_S = 1.0
 
+#: Why the rest pose reads below zero (docs/SIMULATOR.md, "At rest"): the spec's trunk axis runs from the
+#: lower to the upper sternum marker, and the chest's front slopes back towards the top.
+REST_NOTE = ("At rest (upright, arms hanging) shoulder flexion and trunk forward read below 0{example}: the trunk's "
+             "axis follows the sloping breastbone. ROM tests count from the start position.")
+
 MARKER_LOST, MARKER_MEASURED, MARKER_ESTIMATED = 0, 1, 2
 TRACKING = 1
 
@@ -429,7 +434,11 @@ class LiveScene(BaseScene):
                 for sd in sides for suffix, label, rng in ARM_ROWS]
         if side:
             rows += TRUNK_ROWS
-        row_h = (ph - (y - py) - 150 * s) / max(len(rows), 1)
+        # from the bottom up: the key help, the note on the rest pose, the marker counts, the rows
+        note, note_size, note_h = self._rest_note(frame, right - x)
+        note_y = self._help_top(frame) - 8 * s - len(note) * note_h
+        counts_y = note_y - 64 * s
+        row_h = (counts_y - 8 * s - y) / max(len(rows), 1)
         row_h = min(row_h, 74 * s)
         size = round((theme.BODY if row_h >= 60 * s else theme.SMALL) * s)
         value_size = round((theme.MEDIUM if row_h >= 60 * s else theme.BODY) * s)
@@ -445,7 +454,16 @@ class LiveScene(BaseScene):
                 a, b = min(zero, at), max(zero, at)
                 c.rect((a, bar_y, max(b - a, 3 * s), 8 * s), theme.ACCENT, radius=4 * s)
             y += row_h
-        self._draw_marker_counts(frame, sample, (x, py + ph - 142 * s), right)
+        self._draw_marker_counts(frame, sample, (x, counts_y), right)
+        for k, line in enumerate(note):
+            c.text(line, (x, note_y + k * note_h), note_size, theme.TEXT_FAINT)
+
+    def _rest_note(self, frame: Frame, width: float) -> tuple[list[str], int, float]:
+        """Why sitting upright with the arms hanging reads below zero: lines, size, line height."""
+        c, s = frame.canvas, self.layout.scale
+        size = round(theme.SMALL * 0.8 * s)
+        example = " (-11\N{DEGREE SIGN} on the simulated patient)" if self.simulated else ""
+        return c.wrap(REST_NOTE.format(example=example), size, width), size, c.measure("Ag", size)[1] + 3 * s
 
     def _draw_marker_counts(self, frame: Frame, sample, pos, right: float) -> None:
         c, s = frame.canvas, self.layout.scale
@@ -499,17 +517,26 @@ class LiveScene(BaseScene):
         c.banner(text, (v.x + theme.MARGIN * s, theme.MARGIN * s), v.w - 2 * theme.MARGIN * s, round(theme.BODY * s),
                  theme.OVERLAY, colour, theme.TEXT, scale=s)
 
-    def _draw_help(self, frame: Frame) -> None:
+    def _help_lines(self, frame: Frame) -> tuple[list[str], int, float]:
+        """The key help's lines, their size and line height."""
         c, s = frame.canvas, self.layout.scale
-        px, py, pw, ph = self.layout.panel
         if self.interactive:
             text = "Mouse: hand, wheel: nearer/farther   Tab: other arm   Q/E: turn forearm   Arrows: lean   "
         else:
             text = ""
         text += ("M: motions   " if self.simulated else "") + "R: find markers   C: cameras   Esc: back"
         size = round(theme.SMALL * 0.8 * s)
-        lines = c.wrap(text, size, pw - 36 * s)
-        line_h = c.measure("Ag", size)[1] + 5 * s
+        return c.wrap(text, size, self.layout.panel[2] - 36 * s), size, c.measure("Ag", size)[1] + 5 * s
+
+    def _help_top(self, frame: Frame) -> float:
+        lines, _, line_h = self._help_lines(frame)
+        px, py, pw, ph = self.layout.panel
+        return py + ph - len(lines) * line_h
+
+    def _draw_help(self, frame: Frame) -> None:
+        c, s = frame.canvas, self.layout.scale
+        px, py, pw, ph = self.layout.panel
+        lines, size, line_h = self._help_lines(frame)
         y = py + ph - len(lines) * line_h
         for k, line in enumerate(lines):
             c.text(line, (px + 26 * s, y + k * line_h), size, theme.TEXT_FAINT)

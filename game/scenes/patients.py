@@ -52,6 +52,13 @@ def hit(rects: Sequence[Rect], x_px: float, y_px: float) -> int | None:
     return None
 
 
+
+def patient_counts(rom_results: int, games: int) -> str:
+    """"1 ROM result, 2 games" (the picker's line of a patient's stored results)."""
+    return (f"{rom_results} ROM result{'' if rom_results == 1 else 's'}, "
+            f"{games} game{'' if games == 1 else 's'}")
+
+
 class PatientsScene(BaseScene):
     """Choose a patient (or add one), then open ``then(patient_id)`` in place of this scene.
 
@@ -197,7 +204,7 @@ class PatientsScene(BaseScene):
             p = by_id[label]
             c.text(label, (x + 30 * s, y + rh / 2), round(theme.MEDIUM * s), colour, anchor="midleft")
             last = p.last_utc[:10] if p.last_utc else "no sessions yet"
-            info = f"{p.rom_results} ROM results, {p.exercise_results} games, last {last}" if p.last_utc else last
+            info = f"{patient_counts(p.rom_results, p.exercise_results)}, last {last}" if p.last_utc else last
             c.text(info, (x + rw - 30 * s, y + rh / 2), round(theme.SMALL * s), theme.TEXT_DIM, anchor="midright")
         if self.first > 0:
             c.text("more above", (w / 2, 166 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="midbottom")

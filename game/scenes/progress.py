@@ -170,7 +170,9 @@ class ProgressScene(BaseScene):
         self.selected = 0
         self.error = ""
         self._textures: dict[str, object] = {}
-        self._shown: tuple | None = None
+        self._shown: tuple | None = None          # (test, size) of the ROM plot's texture
+        self._games_shown: tuple | None = None    # size of the games plot's texture
+        self._rom_plots: dict[tuple, np.ndarray] = {}   # (test, size) -> the plot's RGB image
         self.notice: tuple[str, tuple] = ("", theme.TEXT_DIM)   # what the export did
 
     # ------------------------------------------------------------------ data
@@ -257,19 +259,26 @@ class ProgressScene(BaseScene):
         return tex
 
     def _ensure_plots(self, plot: tuple, games: tuple) -> None:
-        want = (self.selected, round(plot[2]), round(plot[3]), round(games[3]))
-        if self._shown == want:
-            return
+        """The selected test's plot and the games' plot as textures. Each is drawn by matplotlib
+        once per size (a second or more on a busy machine, in the frame that needs it): moving
+        through the list shows a test drawn before from memory, and never redraws the games."""
+        rom_size, games_size = (round(plot[2]), round(plot[3])), (round(games[2]), round(games[3]))
         if self.tests:  # a patient may have played games before any ROM test
             test = self.tests[self.selected]
-            info = self.infos[test]
-            rows = [r for r in self.roms if r.test == test]
-            self.plot_rgb = rom_plot_rgb(info.title, rows, self.order, info.normal_deg, self.standard,
-                                         (round(plot[2]), round(plot[3])))
-            self._texture("rom", self.plot_rgb)
-        if self.games and games[3] > 40:
-            self._texture("games", games_plot_rgb(self.games, self.order, (round(games[2]), round(games[3]))))
-        self._shown = want
+            key = (test, rom_size)
+            if self._shown != key:
+                rgb = self._rom_plots.get(key)
+                if rgb is None:
+                    info = self.infos[test]
+                    rows = [r for r in self.roms if r.test == test]
+                    rgb = self._rom_plots[key] = rom_plot_rgb(info.title, rows, self.order, info.normal_deg,
+                                                              self.standard, rom_size)
+                self.plot_rgb = rgb
+                self._texture("rom", rgb)
+                self._shown = key
+        if self.games and games[3] > 40 and self._games_shown != games_size:
+            self._texture("games", games_plot_rgb(self.games, self.order, games_size))
+            self._games_shown = games_size
 
     # ------------------------------------------------------------------ input
     def handle(self, event: InputEvent) -> None:

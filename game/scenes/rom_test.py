@@ -261,8 +261,10 @@ class ChooseTestScene(BaseScene):
             chosen = i == self.selected
             if chosen:
                 c.rect(rect, (*theme.ACCENT_DARK, 255), radius=12 * s, border=3 * s, border_colour=theme.ACCENT)
-            c.text(t.title, (rect[0] + 20 * s, rect[1] + rect[3] / 2), round(theme.BODY * s),
-                   theme.TEXT if chosen else theme.TEXT_DIM, anchor="midleft")
+            # inside the row's box (the longest titles ran past the highlight at 1280x720)
+            title, size = c.fit(t.title, round(theme.BODY * s), rect[2] - 32 * s)
+            c.text(title, (rect[0] + 20 * s, rect[1] + rect[3] / 2), size, theme.TEXT if chosen else theme.TEXT_DIM,
+                   anchor="midleft")
         if not tests:
             return
         t = tests[self.selected]

@@ -147,7 +147,8 @@ def test_the_run_reports_its_frame_intervals_and_where_the_longest_went(screen):
     assert summary.interval_max_ms == pytest.approx(250.0, abs=1.0)
     assert summary.slowest.startswith("prepare 250")
     assert summary.interval_p99_ms == pytest.approx(250.0, abs=1.0)   # 1 of 59 intervals: above the 98th
-    assert "longest 250 ms (prepare 250)" in summary.line()
+    assert summary.interval_p50_ms == pytest.approx(5.0, abs=0.5)      # the usual frame
+    assert "median 5 ms, p99 250 ms, longest 250 ms (prepare 250)" in summary.line()
 
 
 def test_scene_stack_push_pop_replace_and_quit(screen):

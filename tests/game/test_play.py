@@ -71,7 +71,8 @@ def test_headless_play_saves_the_avatar(headless, tmp_path, capsys):
 def test_the_mouse_moves_the_hand_and_killing_the_tracker_keeps_the_window_drawing(headless, tmp_path):
     from tracking.live import LiveTracker, SourceConfig
 
-    source = SourceConfig(motion=None, fps=30.0)   # the interactive simulated patient
+    # the interactive simulated patient, every frame set tracked whatever the load (docs/LIVE.md)
+    source = SourceConfig(motion=None, fps=30.0, sim_clock="frames")
     link = LiveLink(lambda: LiveTracker(source))
     screen = open_screen((640, 360), "test", headless=True)
     app = None

@@ -68,13 +68,19 @@ def test_plot_has_the_normal_band_at_the_normal_value(tmp_path):
     assert (np.abs(plain - expected).sum(axis=2) < 12).sum() < 50
 
 
-def test_progress_scene_draws_the_plot_and_the_games(screen, tmp_path):
+def open_progress(screen, tmp_path):
+    """The progress review of P001 (three sessions of two tests, and games) over a base scene."""
     path = tmp_path / "db.sqlite3"
     fill(path, games=True)
     app = App(screen, Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, events=lambda: [])
     app.push(BaseScene())
     scene = ProgressScene(path, "P001", standard="jarm")
     app.push(scene)
+    return app, scene
+
+
+def test_progress_scene_draws_the_plot_and_the_games(screen, tmp_path):
+    app, scene = open_progress(screen, tmp_path)
     assert scene.tests == ["elbow_flexion", "shoulder_flexion"]   # first session, then name
     app.frame()
     rgb = screen.read_rgb().astype(int)
@@ -190,3 +196,24 @@ def test_the_export_button_writes_the_report_beside_the_database(screen, tmp_pat
         app.frame()
     finally:
         app.close()
+
+
+def test_moving_through_the_list_draws_each_plot_once(screen, tmp_path, monkeypatch):
+    """Issue 25 (stalls): every change of the selected test, even the pointer passing over the
+    list, redrew the test's plot and the unchanged games' plot with matplotlib in the frame (a
+    second or more on a busy machine). Each is drawn once; a test seen before comes from memory."""
+    import game.scenes.progress as progress
+
+    drawn = []
+    for name in ("rom_plot_rgb", "games_plot_rgb"):
+        real = getattr(progress, name)
+        monkeypatch.setattr(progress, name, lambda *a, _real=real, _name=name, **k: drawn.append(_name) or _real(*a, **k))
+    app, scene = open_progress(screen, tmp_path)
+    app.frame()
+    first = screen.read_rgb()
+    for action in (Action.DOWN, Action.UP, Action.DOWN, Action.UP):
+        app.dispatch(Press(action))
+        app.frame()
+    assert sorted(drawn) == ["games_plot_rgb", "rom_plot_rgb", "rom_plot_rgb"]
+    assert scene.selected == 0 and np.array_equal(screen.read_rgb(), first)   # the same picture again
+    app.close()

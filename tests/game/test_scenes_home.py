@@ -147,3 +147,11 @@ def test_home_draws_the_selected_button_highlighted(app):
     label = rgb[int(y + 8):int(y + h / 2), int(x + 20):int(x + w / 2)]
     assert (label.max(axis=2) > 130).sum() > 100                       # the label's text is drawn
     assert home.selected == 1
+
+
+def test_the_patient_picker_counts_in_words():
+    """Issue 25's walk-through: the picker read "1 ROM results, 1 games"."""
+    from game.scenes.patients import patient_counts
+
+    assert patient_counts(1, 1) == "1 ROM result, 1 game"
+    assert patient_counts(0, 2) == "0 ROM results, 2 games"

@@ -221,3 +221,56 @@ def test_game_menu_limits(open_headless, db_path, size):
             menu.handle(Press(Action.BACK))
     finally:
         app.close()
+
+
+@pytest.mark.parametrize("size", SIZES)
+@pytest.mark.parametrize("interactive", [True, False])
+def test_live_view_explains_why_the_rest_pose_reads_below_zero(open_headless, size, interactive):
+    """Issue 25: the patient at rest read -11 degrees of shoulder flexion and trunk forward lean
+    with nothing to say why (the sternum markers' slope, tests/test_rest_pose_angles.py)."""
+    from game.scenes.live import REST_NOTE
+
+    clock = Clock()
+    link = BodyLink(clock)
+    app = App(open_headless(size), Settings(show_fps=False, max_fps=0), clock=clock, sleep=lambda s: None,
+              services=Services(link), events=lambda: [])
+    app.push(BaseScene())
+    app.push(LiveScene(link, motions=[None, "reference"], motion=None if interactive else "reference",
+                       open_monitor=lambda: None, make_avatar=None))
+    try:
+        link.feed(reference_pose())
+        rec = frame_texts(app)
+        assert_text_fits(rec, size)
+        texts = [t for t, _ in rec.texts]
+        assert "-11\N{DEGREE SIGN}" in texts      # the reading it explains
+        words = REST_NOTE.format(example=" (-11\N{DEGREE SIGN} on the simulated patient)").split()
+        drawn = " ".join(texts).split()
+        start = drawn.index("(upright,") - 2
+        assert drawn[start:start + len(words)] == words  # every word of it, in order
+    finally:
+        app.close()
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_rom_test_list_titles_stay_inside_their_rows(open_headless, db_path, size):
+    """Issue 25's walk-through: "Shoulder external rotation (arm at the side)" ran past its row's
+    highlight at 1280x720."""
+    from game.scenes.rom_test import ChooseTestScene
+
+    app = App(open_headless(size), Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    choice = ChooseTestScene(RomVisit(db_path, "P001"), lambda *a: BaseScene())
+    app.push(choice)
+    try:
+        for selected in range(len(choice.tests)):
+            choice.selected = selected
+            rec = frame_texts(app)
+            assert_text_fits(rec, size)
+            rows = choice._layout()[1]
+            for test, (rx, ry, rw, rh) in zip(choice.tests, rows):
+                drawn = [(t, r) for t, r in rec.texts if rx < r[0] < rx + rw and r[1] >= ry - 1 and r[1] + r[3] <= ry + rh + 1]
+                assert drawn, test.title
+                for t, (x, y, tw, th) in drawn:
+                    assert x + tw <= rx + rw - 8, (t, x + tw, rx + rw)
+    finally:
+        app.close()

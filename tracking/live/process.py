@@ -4,10 +4,13 @@
 the shared memory the game created (:mod:`tracking.live.ring`), opens the source, reports
 ``("ready", ...)`` or ``("failed", line)`` on the control pipe and runs :class:`TrackerLoop`:
 
-- the source is paced in real time at its frame rate (the game sees 30 frame sets/s), while its
-  time stamps come from the frame index (simulated time: a scripted motion plays the same frames
-  however loaded the machine is; when the loop falls behind it runs as fast as it can instead of
-  bursting to catch up);
+- the source is paced in real time at its frame rate (the game sees 30 frame sets/s), its time
+  stamps are ``frame_index / fps``. A source tied to the clock (``paced_by_clock``: the simulated
+  patient) behaves like a camera: frame set k is due at ``start + k / fps`` of the wall clock, and
+  when the loop is late it grabs the frame set due now and drops the ones it missed, so the
+  patient's motion keeps the clock's pace on a busy machine instead of playing in slow motion. A
+  recording plays every frame set; when the loop falls behind it runs as fast as it can instead of
+  bursting to catch up (:class:`Pacer`);
 - each frame set is grabbed, tracked (:meth:`tracking.tracker.Tracker.step`) and published into
   the ring and the latest slot, then its images into the image block;
 - an exception while grabbing or tracking a frame set is logged and published as the header's
@@ -101,6 +104,49 @@ def one_line(where: str, frame_index: int, exc: BaseException) -> str:
     return f"{where} error at frame {frame_index}: {type(exc).__name__}: {text}"
 
 
+class Pacer:
+    """When the loop's next frame set is due and, for a source tied to the clock, which one.
+
+    Args:
+        fps: the source's frame rate.
+        now_s: the clock now (frame set ``index`` is due at once).
+        index: the next frame set's number.
+        drops: the source is tied to the clock (a camera, the simulated patient): frame set
+            ``index + k`` is due ``k / fps`` after ``now_s`` whatever happens, and a late loop skips
+            to the one due now. False: every frame set is grabbed, one period after the last one
+            (after a stall the pace starts afresh: no burst of catch-up frames).
+    """
+
+    def __init__(self, fps: float, now_s: float, index: int, *, drops: bool) -> None:
+        self.period_s = 1.0 / float(fps)
+        self.drops = drops
+        self.restart(now_s, index)
+
+    def restart(self, now_s: float, index: int) -> None:
+        """Frame set ``index`` is due now (the start, the end of a pause)."""
+        self._t0_s, self._index0, self._next_due_s = now_s, index, now_s
+
+    def wait_s(self, now_s: float, index: int) -> float:
+        """Seconds until frame set ``index`` is due (zero or less: due now)."""
+        if self.drops:
+            return self._t0_s + (index - self._index0) * self.period_s - now_s
+        return self._next_due_s - now_s
+
+    def to_grab(self, now_s: float, index: int) -> int:
+        """The frame set to grab now that ``index`` is due: the latest one due for a source tied
+        to the clock (those in between are dropped), else ``index``."""
+        if not self.drops:
+            return index
+        return max(index, self._index0 + int((now_s - self._t0_s) / self.period_s + 1e-9))
+
+    def grabbed(self, now_s: float) -> None:
+        """A frame set was grabbed and tracked (``now_s``: the clock after it)."""
+        if not self.drops:
+            self._next_due_s += self.period_s
+            if now_s - self._next_due_s > self.period_s:  # fell behind: go on from now
+                self._next_due_s = now_s
+
+
 class TrackerLoop:
     """Grabs, tracks and publishes frame sets.
 
@@ -134,6 +180,7 @@ class TrackerLoop:
         self.adapter = adapter
         self.streamer = streamer
         self.paused = False
+        self.dropped_frames = 0  # frame sets of a source tied to the clock skipped because the loop was late
         self._fps_ema = math.nan
         self._step_ema = math.nan
         self._last_ready = math.nan
@@ -310,9 +357,8 @@ class TrackerLoop:
     def run(self, conn, parent_pid: int | None = None) -> None:
         """Pace, step and obey commands until :class:`Stop`, a closed pipe, or the parent's death."""
         h = self.writer.header
-        period = 1.0 / self.fps
-        next_due = self.clock()
-        next_parent_check = next_due + PARENT_CHECK_S
+        pacer = Pacer(self.fps, self.clock(), self.frame_index, drops=bool(getattr(self.source, "paced_by_clock", False)))
+        next_parent_check = self.clock() + PARENT_CHECK_S
         try:
             while True:
                 now = self.clock()
@@ -328,16 +374,17 @@ class TrackerLoop:
                         return
                 if self.paused:
                     conn.poll(MAX_IDLE_S)
-                    next_due = self.clock()
+                    pacer.restart(self.clock(), self.frame_index)
                     continue
-                if now < next_due:
-                    conn.poll(min(next_due - now, MAX_IDLE_S))
+                wait_s = pacer.wait_s(now, self.frame_index)
+                if wait_s > 0:
+                    conn.poll(min(wait_s, MAX_IDLE_S))
                     continue
+                index = pacer.to_grab(now, self.frame_index)
+                self.dropped_frames += index - self.frame_index
+                self.frame_index = index
                 self.step()
-                next_due += period
-                late = self.clock() - next_due
-                if late > period:  # fell behind: go on from now, no burst of catch-up frames
-                    next_due = self.clock()
+                pacer.grabbed(self.clock())
         except (EOFError, BrokenPipeError, ConnectionResetError):
             log.warning("the control pipe closed: the tracker process exits")
         finally:

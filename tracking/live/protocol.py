@@ -21,6 +21,8 @@ class LiveError(RehabError):
 
 #: The built-in source kinds of :class:`SourceConfig`.
 SOURCE_KINDS = ("sim", "recording", "cameras")
+#: Clocks of the simulated patient (:attr:`SourceConfig.sim_clock`).
+SIM_CLOCKS = ("wall", "frames")
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,6 +55,12 @@ class SourceConfig:
         adapt_colours: the colour table follows lighting drift, learning from the pixels of the
             tracked markers (:class:`tracking.colour_adapt.ColourAdapter`, docs/COLOUR.md); False:
             the table stays as it starts.
+        sim_clock: the simulated patient's clock. ``"wall"``: like a camera, its frame sets are
+            tied to the wall clock and those the tracker is too late for are dropped (the motion
+            keeps its real speed on a busy machine, with fewer frame sets); ``"frames"``: every
+            frame set is rendered and its time is its number over ``fps`` (the motion slows down
+            when the machine is busy, every frame set as on an idle machine: for measurements
+            that must not depend on the load).
     """
 
     kind: str = "sim"
@@ -68,6 +76,7 @@ class SourceConfig:
     devices: tuple[str, ...] = ()
     calibration: str | None = None
     adapt_colours: bool = False
+    sim_clock: str = "wall"
 
     def body_percentile_sex(self) -> tuple[float, str]:
         """``"p50_male"`` -> (50.0, "male"); :class:`LiveError` if malformed."""
@@ -83,6 +92,8 @@ class SourceConfig:
             raise LiveError(f"source size {w}x{h}: give a camera image size between 16x16 and 4096x4096")
         if not (1.0 <= self.fps <= 240.0):
             raise LiveError(f"source fps {self.fps:g}: give a frame rate between 1 and 240")
+        if self.sim_clock not in SIM_CLOCKS:
+            raise LiveError(f"sim_clock {self.sim_clock!r}: give one of {', '.join(SIM_CLOCKS)}")
         if self.kind not in SOURCE_KINDS and ":" not in self.kind:
             raise LiveError(f"source kind {self.kind!r}: give one of {', '.join(SOURCE_KINDS)} or module:function")
         if self.kind == "recording" and not self.path:

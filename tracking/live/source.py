@@ -175,6 +175,13 @@ def open_source(config: SourceConfig) -> FrameSource:
 class SimSource:
     """The simulated patient rendered by the studio's virtual cameras.
 
+    Like a camera, it is tied to the clock (``paced_by_clock``, ``config.sim_clock == "wall"``):
+    the loop asks for the frame set due now, whose time stamp is its wall-clock time since the
+    start, and frame sets the loop was too late for are never rendered. A scripted motion and the
+    interactive patient thus move at the clock's pace however busy the machine is (with fewer
+    frame sets per second). With ``sim_clock="frames"`` every frame set is rendered, the time
+    being the frame count (measurements independent of the machine's load).
+
     Args:
         config: rig, size, frame rate, body, marker set, motion (None: interactive), noise.
     """
@@ -185,6 +192,7 @@ class SimSource:
         from tracking.sim.studio import Studio
 
         self.config = config
+        self.paced_by_clock = config.sim_clock == "wall"
         cameras, markerset = source_geometry(config)
         percentile, sex = config.body_percentile_sex()
         dims = BodyDimensions.from_percentile(percentile, sex)
