@@ -52,6 +52,16 @@ def make_app(screen, tmp_path, *, auto=False):
     return app, scene, clock
 
 
+def to_floor_and_report(app, clock, scene):
+    """D from step 2, then the board laid on the seat until the rig is solved."""
+    app.dispatch(Press(Action.RIGHT))
+    assert scene.stage == "floor"
+    for _ in range(20):
+        step(app, clock)
+        if scene.stage == "report":
+            break
+
+
 def step(app, clock, frames=1):
     """Frames of 0.1 s: one new camera image each."""
     for _ in range(frames):
@@ -150,12 +160,7 @@ def test_guided_calibration_from_lenses_to_a_report_in_millimetres(screen, tmp_p
         if scene.rig_views.linked() and len(scene.rig_views.views) >= 9:
             break
     assert scene.rig_views.linked()
-    app.dispatch(Press(Action.RIGHT))
-    assert scene.stage == "floor"
-    for _ in range(20):
-        step(app, clock)
-        if scene.stage == "report":
-            break
+    to_floor_and_report(app, clock, scene)
     assert scene.stage == "report" and scene.saved_path == tmp_path / "cal.toml"
     step(app, clock)
     cams = load_calibration(scene.saved_path)
@@ -196,12 +201,7 @@ def test_guided_wand_step_gives_a_calibration_within_the_bar_and_the_report_meas
     assert scene.wand_views.ready() and scene.wand_views.pair_counts()[0, 1] >= MIN_WAND_FRAMES
     step(app, clock)
     assert screen.read_rgb().std() > 10   # the cameras' pictures with the balls drawn
-    app.dispatch(Press(Action.RIGHT))
-    assert scene.stage == "floor"
-    for _ in range(20):
-        step(app, clock)
-        if scene.stage == "report":
-            break
+    to_floor_and_report(app, clock, scene)
     assert scene.stage == "report" and scene.method == "wand"
     pos, ang = rig_errors(load_calibration(tmp_path / "cal.toml"), [f.truth for f in feeds])
     assert pos.max() < 5.0 and ang.max() < 0.2, (pos, ang)
