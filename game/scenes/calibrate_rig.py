@@ -116,7 +116,7 @@ class SimRigFeed:
 
     def close(self) -> None:
         if self._renderer is not None:
-            self._renderer.close()
+            self._renderer.release()
             self._renderer = None
 
     def next_frames(self) -> list[np.ndarray]:
