@@ -19,6 +19,11 @@ by a simulated helper in front of one camera of the simulated studio, with the t
 :class:`CameraBoardFeed` a real camera (or a video file) through OpenCV (:func:`camera_feeds`).
 The board may be a checkerboard or a ChArUco board (whose corners are found, and drawn, even when
 part of it is out of the picture).
+
+After the lenses (:mod:`calibration.guided`): where the cameras stand, from the board held where
+two cameras see it or (W) from the wand waved through the volume (cameras that take their
+pictures at the same instant only), the world frame from the board on the seat, and the report
+in millimetres, which goes on measuring the wand waved again with the finished calibration.
 """
 
 from __future__ import annotations
@@ -336,6 +341,8 @@ class CalibrateScene(BaseScene):
         need_views: views to capture before calibrating.
         threaded: read the feed and look for the board on a helper thread (the window stays
             smooth); False: in :meth:`update`, one image per ``1 / FEED_RATE_HZ`` of updates (tests).
+        lenses: lens data calibrated earlier, one camera per feed (their lens step is done).
+        wand_length_m, wand_colours_rgb255: the wand of step 2 and of the report.
     """
 
     def __init__(self, feeds: Sequence[BoardFeed], board, *, out_path: Path | None = None,
