@@ -164,7 +164,8 @@ class WandViews:
         if not self.linked():
             return link_advice(self.names, self.pair_counts(), MIN_WAND_FRAMES, "Wave the wand", "frame", "")
         if len(self.frames) < WAND_FRAMES:
-            return f"Every camera is linked: keep waving the wand through the whole volume ({len(self.frames)} of {WAND_FRAMES} frames)"
+            return (f"Every camera is linked: keep waving the wand through the whole volume "
+                    f"({len(self.frames)} of {WAND_FRAMES} frames)")
         return "Enough wand frames: go on to the floor board"
 
 
@@ -349,7 +350,8 @@ def quality_report(cameras: Sequence[Camera], board, views: dict[str, list[Detec
         elif r >= GOOD_RMS_PX:
             advice.append(f"Redo {n}'s lens step: its corners or wand balls fit to {r:.2f} px (blurred views, or the lens moved)")
     if not figures:
-        advice.append("Redo the positions: neither the board nor the wand was seen whole by two cameras, so no length could be measured")
+        advice.append("Redo the positions: neither the board nor the wand was seen whole by two cameras, "
+                      "so no length could be measured")
     elif lengths.size and figures[0] >= GOOD_LENGTH_MM:
         advice.append("Measure the printed square again and give its exact size; then redo the positions")
     if use_wand and wand.length_rms_mm >= GOOD_LENGTH_MM:
