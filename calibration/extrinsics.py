@@ -10,7 +10,9 @@ Steps (:func:`calibrate_extrinsics`):
    the patient sees a board only two by two).
 4. Bundle adjustment (``scipy.optimize.least_squares``, sparse Jacobian pattern, soft-L1 loss with
    a 1 px scale) over all camera poses but the first and all board poses; intrinsics stay as
-   calibrated.
+   calibrated. Then again with each camera's view of each board weighed by its own corner
+   scatter (:func:`view_sigmas_px`): an oblique board's corners in one camera can be several
+   times as scattered as in another, and the seat board alone sets the world frame.
 5. The world frame of spec/INTERFACES.md from one board lying face up on the floor or the seat
    (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
    corners (the patient's right), corner 0 at ``origin_m``.
@@ -160,6 +162,7 @@ def calibrate_extrinsics(
     origin_m=(0.0, 0.0, 0.0),
     turn_deg: float = 0.0,
     check_world: bool = True,
+    weigh_views: bool = True,
 ) -> ExtrinsicsResult:
     """Calibrate the cameras' poses from board views.
 
@@ -176,6 +179,8 @@ def calibrate_extrinsics(
         turn_deg: the floor board's x axis points this many degrees from +X towards -Z (turned
             counter-clockwise seen from above) instead of along +X.
         check_world: refuse a world frame no room has (:func:`check_world_frame`).
+        weigh_views: weigh each camera's view of a board by its own corner scatter (see
+            :func:`view_sigmas_px`); False: every corner alike.
     Raises:
         CalibrationError: a camera shares no view with the others, the floor view is missing, or
             the world frame it gives is not a room's.
@@ -201,6 +206,8 @@ def calibrate_extrinsics(
     objs = [views[view_names[v]][c].object_points(board) for c, v in obs]
     starts = np.concatenate([[0], np.cumsum([2 * len(o) for o in objs])])  # residual rows of each observation
 
+    weights = np.ones(starts[-1])
+
     def residuals(x: np.ndarray) -> np.ndarray:
         cams = [(np.eye(3), np.zeros(3))] + _unpack(x[: 6 * (n - 1)], n - 1)
         boards = _unpack(x[6 * (n - 1):], len(view_names))
@@ -208,7 +215,7 @@ def calibrate_extrinsics(
         for k, (c, v) in enumerate(obs):
             out[starts[k] : starts[k + 1]] = _reprojection(cameras[c], compose(cams[c], boards[v]),
                                                            views[view_names[v]][c], objs[k]).ravel()
-        return out
+        return out * weights
 
     sparsity = lil_matrix((int(starts[-1]), 6 * (n - 1) + 6 * len(view_names)), dtype=int)
     for k, (c, v) in enumerate(obs):
@@ -219,6 +226,12 @@ def calibrate_extrinsics(
     x0 = np.concatenate([_pack(cam_poses[1:]), _pack(board_poses)])
     sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="soft_l1", f_scale=1.0, x_scale="jac", method="trf",
                         xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
+    if weigh_views:  # again, each view weighed by its own scatter (in units of it: the loss scale 3 sigma)
+        sigma = view_sigmas_px([sol.fun[starts[k] : starts[k + 1]] for k in range(len(obs))])
+        weights = np.repeat(1.0 / sigma, np.diff(starts))
+        sol = least_squares(residuals, sol.x, jac_sparsity=sparsity, loss="soft_l1", f_scale=3.0, x_scale="jac",
+                            method="trf", xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
+        sol.fun = sol.fun / weights   # back to pixels for the report
     cam_poses = [(np.eye(3), np.zeros(3))] + _unpack(sol.x[: 6 * (n - 1)], n - 1)
     board_poses = _unpack(sol.x[6 * (n - 1):], len(view_names))
     rms = np.full(n, np.nan)
@@ -247,6 +260,23 @@ def calibrate_extrinsics(
     for w in warnings:  # returned for the caller to show; logged for the record
         log.info(w)
     return ExtrinsicsResult(out, rms, n_views, floor_view is not None, tuple(warnings))
+
+
+def view_sigmas_px(residuals: Sequence[np.ndarray]) -> np.ndarray:
+    """Each observation's corner scatter, pixels: one camera's view of one board, from its residuals.
+
+    Corners are not equally exact: a board seen obliquely or from afar by one camera gives corners
+    several times as scattered as another camera's (ChArUco on the seat of ``corners4``: 0.3-0.5 px
+    RMS from the truth in the front cameras, 0.1-0.15 px in the back ones; docs/CALIBRATION.md), and
+    the board lying on the seat alone sets the world frame. Each observation's variance is its mean
+    squared residual, shrunk towards the pooled one with the weight of one corner (so a view of few
+    corners cannot claim to be exact by chance): weighing by the inverse gives the least-squares
+    estimate for unequal scatter (variance components, as in photogrammetric adjustment).
+    """
+    sq = [float(np.sum(np.asarray(r, float) ** 2)) for r in residuals]
+    m = [np.asarray(r).size for r in residuals]
+    pooled = sum(sq) / max(sum(m), 1)
+    return np.sqrt((np.array(sq) + 2.0 * pooled) / (np.array(m) + 2.0))
 
 
 def board_from_world(origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0) -> Pose:

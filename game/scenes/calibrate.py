@@ -19,6 +19,11 @@ by a simulated helper in front of one camera of the simulated studio, with the t
 :class:`CameraBoardFeed` a real camera (or a video file) through OpenCV (:func:`camera_feeds`).
 The board may be a checkerboard or a ChArUco board (whose corners are found, and drawn, even when
 part of it is out of the picture).
+
+After the lenses (:mod:`calibration.guided`): where the cameras stand, from the board held where
+two cameras see it or (W) from the wand waved through the volume (cameras that take their
+pictures at the same instant only), the world frame from the board on the seat, and the report
+in millimetres, which goes on measuring the wand waved again with the finished calibration.
 """
 
 from __future__ import annotations
@@ -303,18 +308,26 @@ BUTTONS = (("Capture", "Space"), ("Auto", "A"), ("Calibrate", "C"), ("Next camer
            ("Next step", "D"), ("Back", "Esc"))
 STAGE_BUTTONS = {
     "lens": BUTTONS,
-    "positions": (("Capture", "Space"), ("Auto", "A"), ("Next step", "D"), ("Back", "Esc")),
+    "positions": (("Capture", "Space"), ("Auto", "A"), ("Use the wand", "W"), ("Next step", "D"), ("Back", "Esc")),
+    "wand": (("Use the board", "W"), ("Next step", "D"), ("Back", "Esc")),
     "floor": (("Capture", "Space"), ("Auto", "A"), ("Redo positions", "Tab"), ("Back", "Esc")),
     "report": (("Redo positions", "Tab"), ("Back", "Esc")),
 }
 STAGE_TITLES = {"lens": "Step 1 of 4, lenses", "positions": "Step 2 of 4, where the cameras stand",
+                "wand": "Step 2 of 4, where the cameras stand (wand)",
                 "floor": "Step 3 of 4, the floor", "report": "Step 4 of 4, how well it measures"}
 _KEYS = {Action.SELECT: "Space", Action.LEFT: "A", Action.MONITOR: "C", Action.SWITCH_ARM: "Tab", Action.DOWN: "S",
-         Action.RIGHT: "D", Action.BACK: "Esc"}
+         Action.RIGHT: "D", Action.BACK: "Esc", Action.UP: "W"}
 #: A board counts as held still when no corner moved more than this between two images, pixels.
 STILL_PX = 2.0
 #: Where the floor board's centre lies when the screen cannot know better: centred over the origin on a 45 cm seat.
 SEAT_BOARD_CENTRE_M = (0.0, 0.45, 0.0)
+#: The wand of the screen: ball distance (centres) and colours, as the simulated helper's and docs/CALIBRATION.md's.
+WAND_LENGTH_M = 0.5
+WAND_BALL_RADIUS_M = 0.02
+WAND_COLOURS_RGB255 = ((255, 214, 0), (225, 0, 210))
+#: Wand frames the report measures at most.
+MAX_CHECK_FRAMES = 200
 
 
 class CalibrateScene(BaseScene):
@@ -328,11 +341,14 @@ class CalibrateScene(BaseScene):
         need_views: views to capture before calibrating.
         threaded: read the feed and look for the board on a helper thread (the window stays
             smooth); False: in :meth:`update`, one image per ``1 / FEED_RATE_HZ`` of updates (tests).
+        lenses: lens data calibrated earlier, one camera per feed (their lens step is done).
+        wand_length_m, wand_colours_rgb255: the wand of step 2 and of the report.
     """
 
     def __init__(self, feeds: Sequence[BoardFeed], board, *, out_path: Path | None = None,
                  auto: bool = False, need_views: int = NEED_VIEWS, threaded: bool = True, rig_feed=None,
-                 board_centre_m=SEAT_BOARD_CENTRE_M) -> None:
+                 board_centre_m=SEAT_BOARD_CENTRE_M, lenses: Sequence[Camera] | None = None,
+                 wand_length_m: float = WAND_LENGTH_M, wand_colours_rgb255=WAND_COLOURS_RGB255) -> None:
         if not feeds:
             raise RehabError("no camera to calibrate: connect a camera or use the simulated studio")
         self.feeds = list(feeds)
@@ -370,6 +386,18 @@ class CalibrateScene(BaseScene):
         self.rig_result = None
         self.report = None
         self.lens_path: Path | None = None
+        # the wand (step 2 instead of the board, and the report's measure)
+        self.method = "board"
+        self.wand_length_m = float(wand_length_m)
+        self.wand_colours = np.asarray(wand_colours_rgb255, np.uint8).reshape(2, 3)
+        self.wand_views = None
+        self.wand_uv: np.ndarray | None = None
+        self.check_frames: list[np.ndarray] = []
+        self._table = None
+        self._report_views: dict = {}
+        for k, cam in enumerate(lenses or ()):   # lens data calibrated earlier (intrinsics.toml)
+            if k < len(self.progress):
+                self.progress[k].result = IntrinsicsResult(cam, float("nan"), np.zeros(0), float("nan"), ())
 
     # ----------------------------------------------------------------- state
     @property
@@ -388,8 +416,12 @@ class CalibrateScene(BaseScene):
         if stage in ("positions", "floor"):   # every camera at once
             images = self.rig_feed.next_frames()
             return stage, images, [detect_board(img, self.board)[0] for img in images]
-        if stage == "report":
-            return ("report",)
+        if stage in ("wand", "report"):
+            if stage == "report" and (not self.wand_ready() or len(self.check_frames) >= MAX_CHECK_FRAMES):
+                return ("report",)
+            images = self.rig_feed.next_frames()
+            return stage, images, self._find_wand(images)
+        
         image = self.feeds[index].next_frame()
         detection, reason = detect_board(image, self.board)
         return index, image, detection, reason
@@ -415,7 +447,9 @@ class CalibrateScene(BaseScene):
 
     def _show(self, *got) -> None:
         if isinstance(got[0], str):
-            if got[0] == self.stage and got[0] != "report":
+            if got[0] == self.stage and got[0] in ("wand", "report") and len(got) == 3:
+                self._show_wand(*got[1:])
+            elif got[0] == self.stage and got[0] in ("positions", "floor"):
                 self._show_rig(*got[1:])
             return
         index, image, detection, reason = got
@@ -479,7 +513,8 @@ class CalibrateScene(BaseScene):
         path = self.lens_data_path()
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            save_calibration_toml(path, [r.camera for r in done], error=float(np.mean([r.rms_px for r in done])))
+            rms = [r.rms_px for r in done if np.isfinite(r.rms_px)]   # lens data given (``lenses``) have none
+            save_calibration_toml(path, [r.camera for r in done], error=float(np.mean(rms)) if rms else 0.0)
         except (RehabError, OSError) as exc:
             self._say(f"Not saved: {exc}", theme.FAILURE)
             return None
@@ -532,6 +567,10 @@ class CalibrateScene(BaseScene):
             self.next_step()
         elif what == "Redo positions":
             self.to_positions(keep=False)
+        elif what == "Use the wand":
+            self.to_wand()
+        elif what == "Use the board":
+            self.to_positions(keep=True)
         elif what == "Back":
             self.app.pop()
 
@@ -545,10 +584,12 @@ class CalibrateScene(BaseScene):
                 return
             if self.save() is not None:
                 self.to_positions(keep=False)
-        elif self.stage == "positions":
-            if not self.rig_views.linked():
-                self._say(self.rig_views.advice(), theme.ATTENTION)
+        elif self.stage in ("positions", "wand"):
+            views = self.rig_views if self.stage == "positions" else self.wand_views
+            if not (views.linked() if self.stage == "positions" else views.ready()):
+                self._say(views.advice(), theme.ATTENTION)
                 return
+            self.method = "board" if self.stage == "positions" else "wand"
             self.stage = "floor"
             self.rig_feed.lay_on_seat()
             self._previous = []
@@ -561,14 +602,67 @@ class CalibrateScene(BaseScene):
 
         if self.rig_feed is None:
             sim = all(isinstance(f, SimBoardFeed) for f in self.feeds)
-            self.rig_feed = SimRigFeed.from_feeds(self.feeds, self.board) if sim else CameraRigFeed(self.feeds)
+            ctx = None if self.threaded or self.app is None else self.app.screen.ctx   # GL on the thread that reads
+            self.rig_feed = SimRigFeed.from_feeds(self.feeds, self.board, ctx=ctx) if sim else CameraRigFeed(self.feeds)
         if not keep or self.rig_views is None:
             self.rig_views = RigViews([f.name for f in self.feeds])
         self.rig_feed.hold_up()
         self.stage = "positions"
         self.rig_images, self.rig_detections, self._previous = None, [], []
         self.rig_result = self.report = None
+        self.wand_views, self.check_frames = None, []
         self._since = 1.0 / FEED_RATE_HZ
+
+    def wand_ready(self) -> bool:
+        """Whether the cameras take their pictures at the same instant (a moving wand needs it)."""
+        return bool(getattr(self.rig_feed, "synchronised", False))
+
+    def to_wand(self) -> None:
+        """Step 2 with the wand instead of the board (cameras taking pictures at the same instant only)."""
+        from calibration.guided import WandViews
+
+        if not self.wand_ready():
+            self._say("The wand needs cameras that take their pictures at the same instant; these are read one "
+                      "after the other: use the board", theme.ATTENTION)
+            return
+        self.wand_views = WandViews([f.name for f in self.feeds])
+        self.rig_feed.wave_wand()
+        self.stage = "wand"
+        self.rig_images, self.wand_uv = None, None
+        self._say("Wave the wand slowly through the whole volume, turning it in all directions", theme.TEXT)
+
+    def _find_wand(self, images: list[np.ndarray]) -> np.ndarray:
+        """(C, 2, 2) the two balls' centroids in every camera's image, NaN where not seen once exactly."""
+        from tracking.colour_table import ColourTable
+        from tracking.wand_capture import wand_centroids_in_images
+
+        if self._table is None:
+            self._table = ColourTable.build(self.wand_colours)
+        cams = [p.result.camera for p in self.progress]
+        return wand_centroids_in_images(images, cams, self._table, WAND_BALL_RADIUS_M)
+
+    def _show_wand(self, images: list[np.ndarray], uv: np.ndarray) -> None:
+        """A wand frame: kept for the solve (step 2) or measured by the finished calibration (report)."""
+        self.rig_images, self.wand_uv = images, uv
+        if self.stage == "wand":
+            if self.wand_views.add(uv):
+                self._say(self.wand_views.advice(), theme.ACCENT if self.wand_views.ready() else theme.TEXT)
+            return
+        if int(np.all(np.isfinite(uv), axis=(1, 2)).sum()) >= 2:
+            self.check_frames.append(uv)
+            if len(self.check_frames) % 5 == 0 or len(self.check_frames) == MAX_CHECK_FRAMES:
+                self._update_report()
+
+    def _update_report(self) -> None:
+        from calibration.guided import quality_report, wand_check
+
+        res = self.rig_result
+        check = None
+        if self.wand_ready():
+            uv = np.stack(self.check_frames, axis=1) if self.check_frames else np.full((len(self.feeds), 0, 2, 2), np.nan)
+            check = wand_check(res.cameras, uv, self.wand_length_m)
+        self.report = quality_report(res.cameras, self.board, self._report_views, res.rms_px, wand=check,
+                                     wand_length_m=self.wand_length_m)
 
     def _show_rig(self, images: list[np.ndarray], detections: list[Detection | None]) -> None:
         prev = self._previous
@@ -614,20 +708,29 @@ class CalibrateScene(BaseScene):
     def capture_floor(self) -> bool:
         """Solve the rig with the board on the seat, report its quality and save the calibration."""
         from calibration.files import save_calibration_toml
-        from calibration.guided import quality_report, solve_rig
+        from calibration.guided import solve_rig, solve_rig_wand
 
         if self.rig_images is None or not any(d is not None for d in self.rig_detections):
             self._say("No camera sees the board on the seat yet", theme.FAILURE)
             return False
         cams = [p.result.camera for p in self.progress]
         try:
-            res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m())
+            if self.method == "wand":
+                res = solve_rig_wand(cams, self.wand_views, self.wand_length_m, self.board, self.rig_detections,
+                                     origin_m=self.floor_origin_m())
+                self._report_views = {"floor": list(self.rig_detections)}
+            else:
+                res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m())
+                self._report_views = {**self.rig_views.views, "floor": list(self.rig_detections)}
         except RehabError as exc:
             self.auto = False   # a wrong floor board is said once, not at every frame
             self._say(f"{exc}", theme.FAILURE)
             return False
-        self.report = quality_report(res.cameras, self.board, self.rig_views.views, res.rms_px)
         self.rig_result = res
+        self.check_frames = []
+        self._update_report()
+        if self.wand_ready():   # the report measures the wand waved again with the finished calibration
+            self.rig_feed.wave_wand()
         path = Path(self.out_path or default_calibration_path())
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -652,7 +755,7 @@ class CalibrateScene(BaseScene):
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-        for feed in self.feeds:  # real cameras are released for the tracker to open
+        for feed in [*self.feeds, self.rig_feed]:  # real cameras are released for the tracker to open
             close = getattr(feed, "close", None)
             if close is not None:
                 close()
@@ -678,7 +781,8 @@ class CalibrateScene(BaseScene):
         if self.stage != "lens":
             title = STAGE_TITLES[self.stage]
             c.text(f"Calibrate cameras: {title}", (theme.MARGIN * s, 18 * s), round(theme.MEDIUM * s), theme.TEXT)
-            {"positions": self._render_positions, "floor": self._render_floor, "report": self._render_report}[self.stage](c, w, h, s)
+            {"positions": self._render_positions, "wand": self._render_wand, "floor": self._render_floor,
+             "report": self._render_report}[self.stage](c, w, h, s)
             self._draw_buttons(c, w, h, s)
             return
         m = theme.MARGIN * s
@@ -757,12 +861,22 @@ class CalibrateScene(BaseScene):
         iw, ih = self.feeds[0].size_px
         cell_w = min(aw / cols, (ah / rows - 26 * s) * iw / ih)
         cell_h = cell_w * ih / iw
-        for k, (img, det) in enumerate(zip(self.rig_images, self.rig_detections)):
+        wand = self.stage in ("wand", "report") and self.wand_uv is not None and len(self.wand_uv) == n
+        for k, img in enumerate(self.rig_images):
             x = x0 + (k % cols) * (cell_w + 8 * s)
             y = y0 + (k // cols) * (cell_h + 30 * s)
-            c.image(f"calibrate-rig-{k}", draw_feedback(img, det, [], self.board, grid=False), (x, y, cell_w, cell_h))
-            label = f"{self.feeds[k].name}: " + ("board found" if det is not None else "no board")
-            c.text(label, (x, y + cell_h + 2 * s), round(theme.SMALL * 0.9 * s), theme.ACCENT if det is not None else theme.TEXT_DIM)
+            if wand:
+                from game.scenes.calibrate_rig import draw_wand
+
+                balls = int(np.all(np.isfinite(self.wand_uv[k]), axis=1).sum())
+                picture, found = draw_wand(img, self.wand_uv[k]), balls == 2
+                label = f"{self.feeds[k].name}: " + ("both balls" if found else f"{balls} of 2 balls")
+            else:
+                det = self.rig_detections[k] if k < len(self.rig_detections) else None
+                picture, found = draw_feedback(img, det, [], self.board, grid=False), det is not None
+                label = f"{self.feeds[k].name}: " + ("board found" if found else "no board")
+            c.image(f"calibrate-rig-{k}", picture, (x, y, cell_w, cell_h))
+            c.text(label, (x, y + cell_h + 2 * s), round(theme.SMALL * 0.9 * s), theme.ACCENT if found else theme.TEXT_DIM)
 
     def _side_text(self, c, lines, x: float, y: float, s: float, col_w: float, size=theme.BODY, colour=theme.TEXT) -> float:
         for text in lines:
@@ -796,6 +910,22 @@ class CalibrateScene(BaseScene):
         y = self._side_text(c, [self.rig_views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if linked else theme.ATTENTION)
         self._side_text(c, [self.message], x, y + 6 * s, s, col_w, theme.SMALL * 0.9, self.message_colour)
 
+    def _render_wand(self, c, w: float, h: float, s: float) -> None:
+        from calibration.guided import MIN_WAND_FRAMES, WAND_FRAMES
+        from game.scenes.calibrate_rig import link_diagram
+
+        views = self.wand_views
+        x, y, col_w = self._rig_layout(c, w, h, s, f"Wave the wand ({1000 * self.wand_length_m:.0f} mm) slowly through the "
+                                       "volume where the patient will sit, turning it; frames seen by two cameras are kept.",
+                                       theme.TEXT_DIM)
+        side = min(col_w, 0.36 * h)
+        c.image("calibrate-links", link_diagram(views.names, views.pair_counts(), need=MIN_WAND_FRAMES),
+                (x, y + 4 * s, side * 1.2, side))
+        y += side + 14 * s
+        c.text(f"{len(views.frames)} of {WAND_FRAMES} frames", (x, y), round(theme.BODY * s), theme.TEXT)
+        y += 40 * s
+        self._side_text(c, [views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if views.ready() else theme.ATTENTION)
+
     def _render_floor(self, c, w: float, h: float, s: float) -> None:
         from game.scenes.calibrate_rig import floor_board_picture
 
@@ -815,23 +945,31 @@ class CalibrateScene(BaseScene):
         rep, res = self.report, self.rig_result
         colour = {"good": theme.ACCENT, "usable": theme.ATTENTION, "redo": theme.FAILURE}[rep.verdict]
         lines = rep.lines()
+        n_cams = len(res.cameras)
+        figures = lines[1:len(lines) - n_cams - len(rep.advice)]
         c.text(lines[0], (m, 76 * s), round(theme.LARGE * s), colour)
-        y = 150 * s
-        y = self._side_text(c, [lines[1]], m, y, s, w - 2 * m, theme.BODY, theme.TEXT)
-        y += 10 * s
+        y = 140 * s
+        y = self._side_text(c, figures, m, y, s, w - 2 * m, theme.BODY * 0.9, theme.TEXT)
+        y += 6 * s
         truth = getattr(self.rig_feed, "truth", None)
         pos = ang = None
         if truth is not None:
             pos, ang = rig_errors(res.cameras, truth)
+        what = "wand balls" if self.method == "wand" else "board corners"
+        wand_px = None if rep.wand is None else rep.wand.rms_px
         for k, cam in enumerate(res.cameras):
             at = ", ".join(f"{v:.2f}" for v in cam.centre_m)
-            extra = "" if pos is None else f"   (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg from the truth)"
-            c.text(f"{cam.name}: reprojection {rep.rms_px[k]:.2f} px, at ({at}) m{extra}", (m, y),
-                   round(theme.SMALL * s), theme.TEXT if rep.rms_px[k] < 0.5 else theme.ATTENTION)
-            y += 34 * s
+            fit = f"{what} {rep.rms_px[k]:.2f} px"
+            if wand_px is not None and self.method != "wand" and np.isfinite(wand_px[k]):
+                fit += f", wand {wand_px[k]:.2f} px"
+            extra = "" if pos is None else f"  (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg off)"
+            worst = np.nanmax([rep.rms_px[k], -1.0 if wand_px is None else wand_px[k]])
+            c.text(f"{cam.name}: {fit}, at ({at}) m{extra}", (m, y), round(theme.SMALL * 0.9 * s),
+                   theme.TEXT if worst < 0.5 else theme.ATTENTION)
+            y += 30 * s
         y += 8 * s
-        y = self._side_text(c, list(rep.advice), m, y, s, w - 2 * m, theme.SMALL, theme.ATTENTION)
-        self._side_text(c, [self.message], m, y + 6 * s, s, w - 2 * m, theme.SMALL, self.message_colour)
+        y = self._side_text(c, list(rep.advice), m, y, s, w - 2 * m, theme.SMALL * 0.9, theme.ATTENTION)
+        self._side_text(c, [self.message], m, y + 6 * s, s, w - 2 * m, theme.SMALL * 0.9, self.message_colour)
 
     def _draw_buttons(self, c, w: float, h: float, s: float) -> None:
         n = len(self.buttons)

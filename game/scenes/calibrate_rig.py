@@ -1,11 +1,13 @@
 """The calibration screen's rig steps: every camera's images at once, and the pictures they show.
 
 - :class:`SimRigFeed`: the simulated helper holding the board where neighbouring cameras both see
-  it, one place after the other, then laying it face up on the seat (when the screen asks for
-  the floor board); :class:`CameraRigFeed`: real cameras read one after the other (the board is
-  held still, so the images need no hardware synchronisation).
+  it, one place after the other, waving the wand through the volume (rendered by the studio
+  renderer, as the patient's markers are), or laying the board face up on the seat (when the
+  screen asks for the floor board); :class:`CameraRigFeed`: real cameras read one after the other
+  (the board is held still, so the images need no hardware synchronisation; a moving wand does,
+  so it is not offered with them).
 - :func:`link_diagram`: the cameras around a circle, a line for each pair that shared board views
-  (teal when linked, amber while too few).
+  or wand frames (teal when linked, amber while too few); :func:`draw_wand`: the balls found.
 - :func:`floor_board_picture`: how to lay the board on the seat, seen from above.
 """
 
@@ -39,10 +41,17 @@ class SimRigFeed:
         cameras: the true cameras.
         backgrounds: the empty room as each sees it.
         board: the board.
+        ctx: the application's moderngl context to render the wand with when the feed is read on
+            the drawing thread (the screen rebinds its own framebuffer every frame); None: a
+            standalone context, made on the thread that first reads a wand frame.
     """
 
+    #: cameras that take their pictures at the same instant: the wand may move between pictures
+    synchronised = True
+
     def __init__(self, cameras: Sequence[Camera], backgrounds: Sequence[np.ndarray], board, *, per_pair: int = 3,
-                 hold: int = 4, move: int = 3, seed: int = 0, noise_sigma: float = 1.5) -> None:
+                 hold: int = 4, move: int = 3, seed: int = 0, noise_sigma: float = 1.5, wand_fps: float = 10.0,
+                 ctx=None) -> None:
         from tracking.sim.calibration_material import BoardRaycaster, extrinsics_poses, seat_board_pose
 
         from game.scenes.calibrate import _between
@@ -62,25 +71,59 @@ class SimRigFeed:
         self._seat = seat_board_pose(board)
         centre = board.object_points().mean(axis=0)
         self.seat_board_centre_m = self._seat.R @ centre + self._seat.t_m  # where the helper lays it
-        self.on_seat = False
+        self.mode = "board"   # "board" held up, "seat" lying on the seat, "wand" waved
         self._k = 0
         self._last = None
         self._clean: list[np.ndarray] = []
+        self._seed = seed
+        self._wand_fps = float(wand_fps)
+        self._wand = None
+        self._w = 0
+        self._renderer = None
+        self._ctx = ctx
 
     @classmethod
     def from_feeds(cls, feeds, board, **kwargs) -> "SimRigFeed":
         """From the screen's per-camera simulated feeds (their true cameras and rooms)."""
         return cls([f.truth for f in feeds], [f._background for f in feeds], board, **kwargs)
 
+    @property
+    def on_seat(self) -> bool:
+        return self.mode == "seat"
+
     def lay_on_seat(self) -> None:
-        self.on_seat = True
+        self.mode = "seat"
 
     def hold_up(self) -> None:
-        self.on_seat = False
+        self.mode = "board"
+
+    def wave_wand(self) -> None:
+        """The helper waves the wand (yellow and magenta balls 500 mm apart) through the volume;
+        each call goes on along the same path, so later frames are new places."""
+        self.mode = "wand"
+
+    def _wand_frames(self) -> list[np.ndarray]:
+        from tracking.sim.calibration_material import wand_path, wand_scene
+        from tracking.sim.renderer import StudioRenderer
+
+        if self._renderer is None:   # the given context, or a standalone one made on the thread that reads the feed
+            self._renderer = StudioRenderer(self.truth, ctx=self._ctx)
+            self._wand = wand_path(int(120 * self._wand_fps), self._wand_fps, seed=self._seed)
+        balls = self._wand[self._w % len(self._wand)]
+        self._w += 1
+        return list(self._renderer.render(wand_scene(balls), noise_sigma=self._noise, seed=self._seed * 1_000_003 + self._w,
+                                          with_visibility=False).images)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.release()
+            self._renderer = None
 
     def next_frames(self) -> list[np.ndarray]:
         from tracking.sim.calibration_material import add_noise, board_light
 
+        if self.mode == "wand":
+            return self._wand_frames()
         pose = self._seat if self.on_seat else self._path[self._k % len(self._path)]
         self._k += 1
         if pose is not self._last:
@@ -93,6 +136,7 @@ class CameraRigFeed:
     """Real cameras (the screen's per-camera feeds), read one after the other."""
 
     seat_board_centre_m = None
+    synchronised = False
 
     def __init__(self, feeds) -> None:
         self.feeds = list(feeds)
@@ -105,13 +149,32 @@ class CameraRigFeed:
     def hold_up(self) -> None:
         pass
 
+    def wave_wand(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
     def next_frames(self) -> list[np.ndarray]:
         return [f.next_frame() for f in self.feeds]
 
 
+def draw_wand(image: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
+    """A camera's image with the wand balls found drawn over it: (2, 2) pixels, NaN where not seen."""
+    out = image.copy()
+    r = max(6, round(image.shape[1] / 60))
+    pts = [tuple(int(v) for v in np.rint(p)) for p in uv_px if np.all(np.isfinite(p))]
+    if len(pts) == 2:
+        cv2.line(out, pts[0], pts[1], _TEAL, max(1, r // 4), cv2.LINE_AA)
+    for p in pts:
+        cv2.circle(out, p, r, _TEAL if len(pts) == 2 else _AMBER, max(1, r // 3), cv2.LINE_AA)
+    return out
+
+
 def link_diagram(names: Sequence[str], counts: np.ndarray, size_px: tuple[int, int] = (360, 300),
                  need: int = MIN_SHARED_VIEWS) -> np.ndarray:
-    """(H, W, 3) BGR picture: the cameras around a circle, the views each pair shared on its line."""
+    """(H, W, 3) BGR picture: the cameras around a circle, the views (or wand frames) each pair
+    shared on its line, teal from ``need``."""
     w, h = size_px
     img = np.full((h, w, 3), _BACK, np.uint8)
     n = len(names)
