@@ -44,7 +44,11 @@ class SimAttempt:
 
 @dataclass(frozen=True, slots=True)
 class SimRun:
-    """A simulated ROM test run: its attempts, the frames processed and the wall time."""
+    """A simulated ROM test run: its attempts, the frames processed and the wall time.
+
+    ``motion_start_s`` is when the scripted motion began (sample time): 0, or when the session
+    said "go" for a patient who waited for it (NaN: it never did).
+    """
 
     test: str
     side: str
@@ -54,6 +58,7 @@ class SimRun:
     motion_s: float
     wall_s: float
     last: RomProgress
+    motion_start_s: float = 0.0
 
     @property
     def accepted(self) -> SimAttempt | None:
@@ -62,14 +67,19 @@ class SimRun:
 
 def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str | None = None, rig: str = "ring4",
                        size_px: tuple[int, int] = (320, 240), fps: float = 30.0, percentile: float = 50.0,
-                       sex: str = "female", noise_sigma: float = 1.5, seed: int = 0, max_attempts: int = 1,
+                       sex: str = "female", noise_sigma: float = 1.5, seed: int = 0, donning: int | None = None,
+                       wait_for_go_s: float | None = None, max_attempts: int = 1,
                        decide: Callable[[RomResult], bool] = lambda r: not r.compensated,
                        on_progress: Callable[[RomProgress], None] | None = None) -> SimRun:
     """Run a ROM test on the simulated patient performing ``motion`` (default: the test's own motion).
 
     Each finished attempt goes to ``decide`` (the therapist's accept/discard); a discarded attempt
     is followed by another (the patient repeats) until one is accepted, ``max_attempts`` are done or
-    the motion ends. Rendering stops as soon as the run is over.
+    the motion ends. Rendering stops as soon as the run is over. ``donning`` puts the markers on
+    again with a placement error of that seed (:mod:`tracking.sim.redonning`; None: on their
+    landmarks). ``wait_for_go_s`` makes the patient hold the motion's first pose until the session
+    says "go" (recording starts), at most that long, and only then move, as a patient does; by
+    default the scripted motion plays without waiting for the start check.
 
     Raises:
         RehabError: no motion for this test and side, or an unknown motion/rig.
@@ -88,12 +98,36 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     attempts: list[SimAttempt] = []
     frames = 0
     with studio:
+        if donning is not None:
+            from tracking.sim.redonning import redon
+
+            redon(studio, donning)
         names = studio.markerset.names
         tracker = Tracker(studio.cameras, studio.markerset, fps=fps)
         session = RomTestSession(test, side, standard, names)
         truth: list[float] = []
         progress = session.progress
-        for sf in studio.play(mot, fps, noise_sigma=noise_sigma, seed=seed, with_visibility=False):
+        go_s = [0.0 if wait_for_go_s is None else math.nan]
+
+        def waiting_frames():
+            """The frames of a patient who holds the first pose until "go" (seeded as ``studio.play``)."""
+            i = 0
+            while True:
+                t = i / fps
+                if math.isnan(go_s[0]) and session.state >= RomState.RECORDING:
+                    go_s[0] = t
+                if math.isnan(go_s[0]) and t > wait_for_go_s:
+                    return
+                motion_t = 0.0 if math.isnan(go_s[0]) else t - go_s[0]
+                if motion_t > mot.duration_s:
+                    return
+                yield studio.render(mot.pose_at(motion_t), i, t, noise_sigma=noise_sigma, seed=seed * 1_000_003 + i,
+                                    with_visibility=False)
+                i += 1
+
+        frame_sets = (studio.play(mot, fps, noise_sigma=noise_sigma, seed=seed, with_visibility=False)
+                      if wait_for_go_s is None else waiting_frames())
+        for sf in frame_sets:
             frames += 1
             sample = tracker.step(sf.frames.images, sf.frames.time_s)
             was = session.state
@@ -124,4 +158,5 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
                 attempts.append(SimAttempt(result, float(np.nanmax(truth)) if truth else math.nan, ok))
                 if ok:
                     session.accept()
-    return SimRun(test.name, side, name, tuple(attempts), frames, frames / fps, time.perf_counter() - t_start, progress)
+    return SimRun(test.name, side, name, tuple(attempts), frames, frames / fps, time.perf_counter() - t_start, progress,
+                  go_s[0])
