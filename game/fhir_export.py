@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from calibration.errors import RehabError
+from game.report import NORMAL_BAND_FRACTION
 
 SNOMED = "http://snomed.info/sct"
 UCUM = "http://unitsofmeasure.org"
@@ -42,9 +43,6 @@ BODY_SITES: dict[str, dict[str, tuple[str, str]]] = {
     "forearm": {"right": ("64262003", "Structure of right forearm"),
                 "left": ("66480008", "Structure of left forearm")},
 }
-
-#: the share below the normal value that the reports' normal band (and the reference range) covers
-NORMAL_BAND_SHARE = 0.10
 
 #: the capture system, as the Device of every Observation
 DEVICE_NAME = "rehab-mocap colour-marker motion capture"
@@ -140,10 +138,10 @@ def observation(row, device_url: str, position_words: str, title: str) -> dict:
 
         normal = float(row.reference_deg)
         obs["referenceRange"] = [{
-            "low": _deg(normal * (1.0 - NORMAL_BAND_SHARE)), "high": _deg(normal),
+            "low": _deg(normal * (1.0 - NORMAL_BAND_FRACTION)), "high": _deg(normal),
             "type": {"coding": [{"system": REFERENCE_RANGE_MEANING, "code": "normal", "display": "Normal Range"}]},
             "text": f"normal value {normal:g} degrees in this test position, {STANDARDS.get(row.standard, row.standard)}; "
-                    f"the range is the normal value down {NORMAL_BAND_SHARE:.0%}",
+                    f"the range is the normal value down {NORMAL_BAND_FRACTION:.0%}",
         }]
     notes = []
     if row.compensation:

@@ -46,8 +46,8 @@ class SimAttempt:
 class SimRun:
     """A simulated ROM test run: its attempts, the frames processed and the wall time.
 
-    ``motion_start_s`` is when the scripted motion began (sample time): 0, or when the session
-    said "go" for a patient who waited for it (NaN: it never did).
+    ``motion_start_s``: the sample time minus the motion's own time at "go" (the pauses before
+    it); 0 without pauses, NaN when the session never said "go".
     """
 
     test: str
@@ -77,9 +77,9 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     is followed by another (the patient repeats) until one is accepted, ``max_attempts`` are done or
     the motion ends. Rendering stops as soon as the run is over. ``donning`` puts the markers on
     again with a placement error of that seed (:mod:`tracking.sim.redonning`; None: on their
-    landmarks). ``wait_for_go_s`` makes the patient hold the motion's first pose until the session
-    says "go" (recording starts), at most that long, and only then move, as a patient does; by
-    default the scripted motion plays without waiting for the start check.
+    landmarks). With ``wait_for_go_s`` the patient holds still while the tracker names the
+    markers and while the start position is being held, as a patient told to hold still does, for
+    at most that long in all; by default the scripted motion plays without waiting for the session.
 
     Raises:
         RehabError: no motion for this test and side, or an unknown motion/rig.
@@ -109,24 +109,29 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
         progress = session.progress
         go_s = [0.0 if wait_for_go_s is None else math.nan]
 
-        def waiting_frames():
-            """The frames of a patient who holds the first pose until "go" (seeded as ``studio.play``)."""
-            i = 0
-            while True:
+        def patient_frames():
+            """The frames of a patient who holds still while the tracker names the markers and
+            while the start position is held, and otherwise follows the script (seeded as
+            ``studio.play``); the pauses add up to at most ``wait_for_go_s``."""
+            i, motion_t, paused_s = 0, 0.0, 0.0
+            while motion_t <= mot.duration_s:
                 t = i / fps
-                if math.isnan(go_s[0]) and session.state >= RomState.RECORDING:
-                    go_s[0] = t
-                if math.isnan(go_s[0]) and t > wait_for_go_s:
-                    return
-                motion_t = 0.0 if math.isnan(go_s[0]) else t - go_s[0]
-                if motion_t > mot.duration_s:
-                    return
+                state = session.state
+                if math.isnan(go_s[0]) and state >= RomState.RECORDING:
+                    go_s[0] = t - motion_t
                 yield studio.render(mot.pose_at(motion_t), i, t, noise_sigma=noise_sigma, seed=seed * 1_000_003 + i,
                                     with_visibility=False)
                 i += 1
+                state = session.state   # after the tracker and the session have seen this frame
+                holding = state == RomState.WAITING_TRACKER or (
+                    state == RomState.CHECKING_START and session.progress.hold_fraction > 0.0)
+                if holding and paused_s < wait_for_go_s:
+                    paused_s += 1.0 / fps
+                else:
+                    motion_t += 1.0 / fps
 
         frame_sets = (studio.play(mot, fps, noise_sigma=noise_sigma, seed=seed, with_visibility=False)
-                      if wait_for_go_s is None else waiting_frames())
+                      if wait_for_go_s is None else patient_frames())
         for sf in frame_sets:
             frames += 1
             sample = tracker.step(sf.frames.images, sf.frames.time_s)

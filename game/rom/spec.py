@@ -13,6 +13,7 @@ Every result of these tests is *active* ROM (the patient moves the limb; nobody 
 
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -94,7 +95,7 @@ class _Sdc(StrictModel):
     n: int = pydantic.Field(ge=3, le=100000, description="sessions it was measured on")
     side: Literal["right", "left"] = pydantic.Field(description="the side measured")
     seeds: str = pydantic.Field(pattern=r"^[0-9]+-[0-9]+$", description="first-last seed of the simulated sessions")
-    measured: str = pydantic.Field(pattern=r"^[0-9]{4}-[0-9]{2}-[0-9]{2}$", description="date of the measurement")
+    measured: datetime.date = pydantic.Field(description="date of the measurement (YYYY-MM-DD)")
 
     @pydantic.model_validator(mode="after")
     def _consistent(self):

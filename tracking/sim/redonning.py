@@ -23,7 +23,16 @@ from tracking.sim.body import BodyModel, Pose
 #: the largest shift of a ball along the skin at one donning (metres), as in the population draws
 MAX_PLACEMENT_M = 0.015
 
+#: the smallest gap between two balls' surfaces at a donning (as the population draws)
+MIN_GAP_M = 0.005
+
 _ARM_SEGMENTS = {"upper_arm": ("gh", "elbow"), "forearm": ("elbow", "wrist")}
+
+
+def _min_gap_m(p: np.ndarray) -> float:
+    """The smallest distance between two of the (M, 3) centres."""
+    gap = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(len(p)) * 1e9
+    return float(gap.min())
 
 
 def _segment_of(markerset: MarkerSet, k: int) -> tuple[str, str]:
@@ -47,23 +56,30 @@ class RedonnedBody:
     The shift of each marker is ``a * t1 + b * t2`` with ``t1``, ``t2`` the skin's tangent
     directions at its landmark: ``t1`` the carrying part's long axis (or, where that is nearly
     along the skin normal, its forward axis) made perpendicular to the normal, ``t2 = n x t1``.
-    ``(a, b)`` is drawn once: a uniform direction and a length uniform in ``[0, max_m]``.
+    ``(a, b)`` is drawn once: a uniform direction and a length uniform in ``[0, max_m]``; a
+    placement where two balls would overlap (closer than :data:`MIN_GAP_M` in the neutral pose)
+    is drawn again.
     Everything else is delegated to ``body``.
     """
 
     def __init__(self, body: BodyModel, seed: int, max_m: float = MAX_PLACEMENT_M) -> None:
         self._body = body
         ms = body.markerset
-        rng = np.random.default_rng([seed, 0x5EDD0])
-        angle = rng.uniform(0.0, 2.0 * np.pi, ms.n_markers)
-        length = rng.uniform(0.0, max_m, ms.n_markers)
-        self.shift_ab_m = np.stack([length * np.cos(angle), length * np.sin(angle)], axis=1)
         self._parts = [_segment_of(ms, k) for k in range(ms.n_markers)]
         self._use_forward = np.zeros(ms.n_markers, dtype=bool)
         # the axis is chosen once, in the neutral pose, so that it never switches during a motion
         _, normal = body.landmarks_m(Pose())
         axes = self._long_axes(Pose())
         self._use_forward = np.abs(np.sum(axes * normal, axis=1)) > 0.8
+        rng = np.random.default_rng([seed, 0x5EDD0])
+        for _ in range(100):   # balls cannot overlap: such a placement is drawn again (as in the population)
+            angle = rng.uniform(0.0, 2.0 * np.pi, ms.n_markers)
+            length = rng.uniform(0.0, max_m, ms.n_markers)
+            self.shift_ab_m = np.stack([length * np.cos(angle), length * np.sin(angle)], axis=1)
+            if _min_gap_m(self.markers_m(Pose())) > 2.0 * ms.radius_m + MIN_GAP_M:
+                break
+        else:
+            raise RuntimeError(f"no placement without overlapping balls in 100 draws of seed {seed}")
 
     def __getattr__(self, name: str):
         return getattr(self._body, name)
