@@ -125,8 +125,11 @@ def _cmd_rom_test(args) -> int:
         if ref is not None and not ref.comparable:
             print(f"reference: {ref.label()}")
         if previous:
+            from game.rom.sdc import change_words
+
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
+            print(f"change from the previous session: {change_words(r.max_deg - previous[-1].value_deg, test.sdc_deg)}")
         number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
         if db is None:
             print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
@@ -198,7 +201,7 @@ def _cmd_rom_accuracy(args) -> int:
 
 # --------------------------------------------------------------------------- rom-sdc
 def _add_rom_sdc(sub) -> None:
-    from game.rom.sdc import REPORTED_SEEDS_FROM
+    from tracking.sim.population import REPORTED_SEEDS_FROM   # numpy only: no renderer
 
     p = sub.add_parser(
         "rom-sdc",

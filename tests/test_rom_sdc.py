@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from game.rom.sdc import REPORTED_SEEDS_FROM, SDC_FACTOR, change_words, is_real_change, measure_sdc, sdc_from_results
+from game.rom.sdc import SDC_FACTOR, change_words, is_real_change, measure_sdc, sdc_from_results
 from game.rom.spec import available_rom_tests, load_rom_test
 from tracking.errors import ContentError
+from tracking.sim.population import REPORTED_SEEDS_FROM
 
 
 def test_sem_and_sdc95_of_repeated_results():

@@ -23,7 +23,6 @@ from typing import Callable, Iterable
 import numpy as np
 
 from game.rom.spec import RomTest
-from tracking.sim.population import REPORTED_SEEDS_FROM  # noqa: F401  (reported seeds; below: tuning, tests)
 
 #: 1.96 * sqrt(2): SDC95 = SDC_FACTOR * SEM
 SDC_FACTOR = 1.96 * math.sqrt(2.0)
