@@ -1,6 +1,6 @@
 """Clinic commands of ``rehab``: ROM tests, patients, the database, reports.
 
-``rehab rom-test``, ``rehab rom-accuracy``, ``rehab patients``, ``rehab export``, ``rehab import``,
+``rehab rom-test``, ``rehab rom-accuracy``, ``rehab rom-sdc``, ``rehab patients``, ``rehab export``, ``rehab import``,
 ``rehab backup``, ``rehab report``, ``rehab db migrate|copy|check``. Every command that touches the
 database takes ``--db PATH_OR_URL``: an SQLite file or a clinic's ``postgresql://`` server
 (default: ``$REHAB_DB``, else the user's data directory, :func:`game.db.default_db_path`). Imports happen when a
@@ -19,6 +19,7 @@ def add_commands(sub) -> None:
     """Register the clinic sub-commands on the ``rehab`` parser's sub-parsers."""
     _add_rom_test(sub)
     _add_rom_accuracy(sub)
+    _add_rom_sdc(sub)
     _add_patients(sub)
     _add_export(sub)
     _add_import(sub)
@@ -186,8 +187,11 @@ def _cmd_rom_test(args) -> int:
         if ref is not None and not ref.comparable:
             print(f"reference: {ref.label()}")
         if previous:
+            from game.rom.sdc import change_words
+
             hist = ", ".join(f"{p.session_started_utc[:10]} {round(p.value_deg / 5) * 5:g}" for p in previous[-5:])
             print(f"previous ({test.title}, {args.side}): {hist}")
+            print(f"change from the previous session: {change_words(r.max_deg - previous[-1].value_deg, test.sdc_deg)}")
         number = next(i for i, a in enumerate(run.attempts, 1) if a.accepted)
         if args.dry_run:
             print(f"attempt {number}: {r.line()} -> accepted (dry run: not stored)")
@@ -263,6 +267,69 @@ def _cmd_rom_accuracy(args) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------- rom-sdc
+def _add_rom_sdc(sub) -> None:
+    from tracking.sim.population import REPORTED_SEEDS_FROM   # numpy only: no renderer
+
+    p = sub.add_parser(
+        "rom-sdc",
+        help="measure each ROM test's smallest detectable change on the simulated patient",
+        description="Repeat each ROM test on the simulated patient as new sessions of an unchanged patient (new "
+        "sensor noise, the markers put on again with a placement error) through the renderer and the tracker; "
+        "print each test's results, their spread, the standard error of measurement (SEM) and the smallest "
+        "detectable change SDC95 = 1.96 * sqrt(2) * SEM, and the sdc: line for its content file. Seeds from "
+        f"{REPORTED_SEEDS_FROM} on are the reported ones; smaller seeds are for tuning and tests.",
+    )
+    p.add_argument("--test", action="append", default=None, help="test name (repeat; default: all)")
+    p.add_argument("--side", choices=("right", "left"), default="right", help="side measured (default: %(default)s)")
+    p.add_argument("--draws", type=number(3, 1000, integer=True), default=10,
+                   help="sessions per test (default: %(default)s)")
+    p.add_argument("--first-seed", type=number(0, 2**31 - 1000, integer=True), default=REPORTED_SEEDS_FROM,
+                   help="seed of the first session; the next ones count up (default: %(default)s)")
+    p.add_argument("--rig", default="ring4")
+    p.add_argument("--size", type=_size, default=(320, 240))
+    p.add_argument("--fps", type=FPS, default=30.0)
+    p.set_defaults(func=_cmd_rom_sdc)
+
+
+def _cmd_rom_sdc(args) -> int:
+    import datetime
+
+    from game.rom.sdc import measure_sdc
+    from game.rom.spec import load_all_rom_tests, load_rom_test
+
+    tests = [load_rom_test(n) for n in args.test] if args.test else load_all_rom_tests()
+    seeds = range(args.first_seed, args.first_seed + args.draws)
+    print(f"seeds {seeds.start}-{seeds.stop - 1}, {args.side} side, rig {args.rig}, {args.size[0]}x{args.size[1]} "
+          f"at {args.fps:g} fps")
+    print("| test | n | failed | mean | SD = SEM | SEM 95 % CI | min | max | SDC95 | mean error vs truth | wall s |")
+    print("| --- | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: |")
+    lines = []
+    today = datetime.date.today().isoformat()
+    for test in tests:
+        if args.side not in test.simulated_motion:
+            print(f"| {test.name} | - | - | no simulated motion for the {args.side} side | | | | | | | |", flush=True)
+            continue
+        m = measure_sdc(test, args.side, seeds, size_px=args.size, fps=args.fps, rig=args.rig,
+                        on_draw=lambda d: _tell(f"{d.seed}: {d.value_deg:.2f} deg (truth {d.true_deg:.2f}) "
+                                                f"{d.message} in {d.wall_s:.1f} s"))
+        e = m.estimate
+        wall = sum(d.wall_s for d in m.draws)
+        if e is None:
+            print(f"| {test.name} | {len(m.draws) - m.failed} | {m.failed} | too few finished | | | | | | | {wall:.0f} |",
+                  flush=True)
+            continue
+        err = [d.value_deg - d.true_deg for d in m.draws if d.message == ""]
+        print(f"| {test.name} | {e.n} | {m.failed} | {e.mean_deg:.1f} | {e.sd_deg:.2f} | {e.sem_ci_deg[0]:.2f}-"
+              f"{e.sem_ci_deg[1]:.2f} | {e.min_deg:.1f} | {e.max_deg:.1f} | {e.sdc95_deg:.1f} | "
+              f"{sum(err) / len(err):+.2f} | {wall:.0f} |", flush=True)
+        lines.append(f"{test.name}: sdc: {{sdc95_deg: {e.sdc95_deg:.1f}, sem_deg: {e.sem_deg:.2f}, n: {e.n}, "
+                     f"side: {args.side}, seeds: {seeds.start}-{seeds.stop - 1}, measured: {today}}}")
+    print()
+    print("\n".join(lines))
+    return 0
+
+
 # --------------------------------------------------------------------------- patients
 def _add_patients(sub) -> None:
     p = sub.add_parser("patients", help="list the patients (pseudonymous IDs), or add one",
@@ -303,6 +370,9 @@ def _add_export(sub) -> None:
     p = sub.add_parser("export", help="export the database (or one patient) to CSV files")
     p.add_argument("--out", type=Path, required=True, help="folder for patients.csv, sessions.csv, rom_results.csv, exercise_results.csv, game_limits.csv")
     p.add_argument("--patient", default=None, help="only this patient (an empty ID is an error, not everyone)")
+    p.add_argument("--fhir", action="store_true",
+                   help="also write each patient's accepted ROM results as a FHIR R4 Bundle of Observations "
+                        "(fhir/<patient>.json in the folder), validated before it is written")
     _add_db(p)
     p.set_defaults(func=_cmd_export)
 
@@ -312,7 +382,15 @@ def _cmd_export(args) -> int:
         account = signed_in(args.user, db, "export", args.patient)
         counts = db.export_csv(args.out, args.patient)
         _audit(db, account, "export", args.patient, f"CSV to {args.out}: {_counts(counts)}")
-    print(f"exported {_counts(counts)} to {args.out}")
+        print(f"exported {_counts(counts)} to {args.out}")
+        if args.fhir:
+            from game.fhir_export import export_fhir
+
+            fhir = export_fhir(db, args.out, args.patient)
+            _audit(db, account, "export", args.patient,
+                   f"FHIR to {Path(args.out) / 'fhir'}: {fhir['bundles']} bundles, {fhir['observations']} observations")
+            print(f"wrote {fhir['bundles']} FHIR bundles ({fhir['observations']} observations, validated) to "
+                  f"{Path(args.out) / 'fhir'}")
     return 0
 
 

@@ -5,7 +5,9 @@ session order, both sides, with the normal band of the chosen standard and the 5
 grid), the table of every ROM result (raw and rounded, labelled active ROM with the test position
 and the standard it was recorded with), and the games' repetitions and session durations. Plots
 are PNG (matplotlib, Agg, no pyplot state) embedded as data URIs; the ROM table is also written
-as CSV beside the HTML. Nothing but the pseudonymous ID identifies the patient.
+as CSV beside the HTML. Nothing but the pseudonymous ID identifies the patient. A change between
+two sessions is called real only beyond the test's smallest detectable change (content ``sdc:``,
+:mod:`game.rom.sdc`), in words, per side and per row.
 """
 
 from __future__ import annotations
@@ -25,6 +27,61 @@ from game.rom.session import round_to_5
 
 #: The normal band: from this fraction below the standard's normal value up to it.
 NORMAL_BAND_FRACTION = 0.10
+
+
+@dataclass(frozen=True, slots=True)
+class SessionChange:
+    """The change of one test and side from one session to the next.
+
+    Attributes:
+        side: ``right`` or ``left``.
+        previous, latest: the two results (:class:`game.db.RomRow`), in session order.
+        change_deg: ``latest.value_deg - previous.value_deg`` (raw maxima).
+        real: beyond the smallest detectable change (None: no SDC measured for the test).
+        words: the change in words (:func:`game.rom.sdc.change_words`).
+    """
+
+    side: str
+    previous: RomRow
+    latest: RomRow
+    change_deg: float
+    real: bool | None
+    words: str
+
+
+def session_changes(rows: Sequence[RomRow], order: dict[str, int], sdc_deg: float | None) -> list[SessionChange]:
+    """Every change between consecutive sessions of one test's results (both sides), in order."""
+    from game.rom.sdc import change_words, is_real_change
+
+    out = []
+    for side in ("right", "left"):
+        mine = sorted((r for r in rows if r.side == side), key=lambda r: (order[r.session_uid], r.recorded_utc))
+        for prev, last in zip(mine, mine[1:]):
+            change = last.value_deg - prev.value_deg
+            out.append(SessionChange(side, prev, last, change, is_real_change(change, sdc_deg),
+                                     change_words(change, sdc_deg)))
+    return out
+
+
+def latest_changes(rows: Sequence[RomRow], order: dict[str, int], sdc_deg: float | None) -> list[SessionChange]:
+    """Per side, the change from the previous session to the latest one (sides with one result: none)."""
+    latest: dict[str, SessionChange] = {}
+    for ch in session_changes(rows, order, sdc_deg):
+        latest[ch.side] = ch
+    return [latest[s] for s in ("right", "left") if s in latest]
+
+
+def change_line(ch: SessionChange, order: dict[str, int]) -> str:
+    """``Right, #2 to #3: +8 degrees: within ... not a real change yet`` (session numbers)."""
+    return f"{ch.side.capitalize()}, #{order[ch.previous.session_uid]} to #{order[ch.latest.session_uid]}: {ch.words}"
+
+
+def sdc_words(sdc_deg: float | None) -> str:
+    """The test's smallest detectable change in one sentence."""
+    if sdc_deg is None:
+        return "No smallest detectable change has been measured for this test: changes are not judged."
+    return (f"Smallest detectable change of this test: {sdc_deg:.0f} degrees (measured on the simulated patient); "
+            f"a change between two sessions is real only beyond it.")
 
 
 
@@ -130,6 +187,7 @@ class _TestInfo:
     title: str
     normal_deg: float | None
     position_words: str
+    sdc_deg: float | None
 
 
 def _test_info(test: str, standard: str) -> _TestInfo:
@@ -139,8 +197,8 @@ def _test_info(test: str, standard: str) -> _TestInfo:
     try:
         t = load_rom_test(test)
     except ContentError:  # a result of a test this installation does not define
-        return _TestInfo(test.replace("_", " "), None, "")
-    return _TestInfo(t.title, t.normal_deg(standard), t.position_words)
+        return _TestInfo(test.replace("_", " "), None, "", None)
+    return _TestInfo(t.title, t.normal_deg(standard), t.position_words, t.sdc_deg)
 
 
 def _png(fig) -> str:
@@ -331,7 +389,7 @@ h1 {{ font-size: 22px; margin-bottom: 4px; }} h2 {{ font-size: 18px; margin-top:
 .meta {{ color: #555; font-size: 13px; }}
 table {{ border-collapse: collapse; font-size: 12px; margin-top: 8px; }}
 th, td {{ border: 1px solid #ccc; padding: 3px 6px; text-align: left; }}
-td.num {{ text-align: right; }} tr.flag td {{ background: #fff4e5; }} tr.demo td {{ color: #777777; }}
+td.num {{ text-align: right; }} li.real {{ font-weight: bold; }} tr.flag td {{ background: #fff4e5; }} tr.demo td {{ color: #777777; }}
 img {{ display: block; margin: 8px 0 16px 0; max-width: 100%; }}
 </style></head><body>
 <h1>Range of motion progress: patient {esc(patient_id)}</h1>
@@ -353,13 +411,22 @@ markers.</p>
         latest = {side: max((r for r in rows if r.side == side), key=lambda r: order[r.session_uid], default=None)
                   for side in ("right", "left")}
         summary = "; ".join(f"{side} latest {round_to_5(r.value_deg)} deg" for side, r in latest.items() if r is not None)
+        changes = latest_changes(rows, order, info.sdc_deg)
+        change_html = "".join(f"<li class=\"{'real' if ch.real else 'noise'}\">{esc(change_line(ch, order))}</li>"
+                              for ch in changes)
         parts.append(f"<h2>{esc(info.title)}</h2><p class=\"meta\">{esc(info.position_words)} {esc(summary)}.</p>"
-                     f"<img alt=\"{esc(info.title)} over the sessions\" src=\"data:image/png;base64,{png}\">")
+                     f"<p class=\"meta\">{esc(sdc_words(info.sdc_deg))}</p>"
+                     + (f"<ul class=\"changes\">{change_html}</ul>" if changes else "")
+                     + f"<img alt=\"{esc(info.title)} over the sessions\" src=\"data:image/png;base64,{png}\">")
     if roms:
         parts.append("<h2>All ROM results</h2><table><tr><th>session</th><th>date (UTC)</th><th>test</th><th>side</th>"
                      "<th>recorded</th><th>raw</th><th>start</th><th>range</th><th>normal</th><th>mode</th>"
-                     "<th>position</th><th>compensation</th><th>estimated markers</th></tr>")
+                     "<th>position</th><th>compensation</th><th>estimated markers</th>"
+                     "<th>change from the previous session</th></tr>")
+        row_change = {ch.latest.uid: ch for t in by_test
+                      for ch in session_changes(by_test[t], order, _test_info(t, standard).sdc_deg)}
         for r in roms:
+            ch = row_change.get(r.uid)
             normal = f"{r.standard.upper()} {r.reference_deg:g}" if r.reference_deg is not None else f"{r.standard.upper()}: none for this position"
             parts.append(
                 f"<tr class=\"{'flag' if r.compensation else ''}\"><td class=\"num\">#{order[r.session_uid]}</td>"
@@ -368,7 +435,7 @@ markers.</p>
                 f"<td class=\"num\">{r.value_deg:.1f}</td><td class=\"num\">{r.start_deg:.1f}</td>"
                 f"<td class=\"num\">{r.range_deg:.1f}</td><td>{esc(normal)}</td><td>{esc(r.mode)}</td>"
                 f"<td>{esc(r.position.replace('_', ' '))}</td><td>{esc(r.compensation) or '-'}</td>"
-                f"<td>{esc(r.estimated_markers) or '-'}</td></tr>")
+                f"<td>{esc(r.estimated_markers) or '-'}</td><td>{esc(ch.words) if ch else '-'}</td></tr>")
         parts.append("</table>")
     parts.append("<h2>Games</h2>")
     if games:

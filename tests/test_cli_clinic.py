@@ -87,3 +87,27 @@ def test_rom_test_on_the_simulated_patient_stores_the_result(tmp_path, capsys):
     # committed durably: a plain sqlite3 reader sees it
     with sqlite3.connect(db) as conn:
         assert conn.execute("SELECT count(*) FROM rom_results").fetchone()[0] == 1
+
+
+def test_rom_test_says_whether_the_change_from_the_previous_session_is_real(tmp_path, capsys):
+    import re
+
+    from game.rom.session import RomResult
+    from game.rom.spec import load_rom_test
+
+    db = tmp_path / "r.sqlite3"
+    with Database(db) as d:
+        d.add_patient("P001")
+        s = d.start_session("P001", "rom", started_utc="2026-11-01T09:00:00Z")
+        d.add_rom_result(s, RomResult(
+            test="forearm_supination", title="Forearm supination", side="right", angle="right_forearm_supination",
+            direction=1, mode="active", position="seated_arm_at_side_elbow_90", position_words="x", standard="jarm",
+            reference_deg=90.0, max_deg=80.0, start_deg=0.0, range_deg=80.0, max_time_s=3.0, started_s=1.0,
+            ended_s=6.0, compensations=(), estimated_markers=(), n_samples=90))
+    code, out, err = run(capsys, "rom-test", "--patient", "P001", "--test", "forearm_supination", "--fps", "15",
+                         "--db", db)
+    assert code == 0, err
+    sdc = load_rom_test("forearm_supination").sdc_deg
+    m = re.search(r"change from the previous session: \+(\d+) degrees: within the measurement's smallest detectable "
+                  r"change of (\d+) degrees \u2014 not a real change yet", out)
+    assert m and int(m.group(2)) == round(sdc) and int(m.group(1)) < sdc, out

@@ -128,3 +128,43 @@ def test_game_charts_start_at_zero_in_whole_repetitions(repetitions):
     assert minutes.get_ylim()[0] == 0.0 and minutes.get_ylim()[1] >= 27.0 / 60.0
     ticks = [t for t in reps.get_yticks() if reps.get_ylim()[0] <= t <= reps.get_ylim()[1]]
     assert ticks and all(t >= 0 and float(t).is_integer() for t in ticks)
+
+
+def test_changes_between_sessions_are_called_real_only_beyond_the_sdc(tmp_path, monkeypatch):
+    """The report says per side whether the latest change is beyond the test's smallest detectable
+    change, and the table marks every change from the previous session the same way."""
+    import game.report as report
+
+    real_info = report._test_info
+    monkeypatch.setattr(report, "_test_info", lambda test, standard: report._TestInfo(
+        real_info(test, standard).title, 180.0, "Seated.", 9.0))
+    with Database(tmp_path / "db.sqlite3") as db:
+        db.add_patient("P001")
+        for day, value in (("2026-01-01", 100.0), ("2026-02-01", 108.0), ("2026-03-01", 120.4)):
+            s = db.start_session("P001", "rom", started_utc=f"{day}T09:00:00Z")
+            db.add_rom_result(s, rom_result(value=value), recorded_utc=f"{day}T09:05:00Z")
+        html_path, _ = write_report(db, "P001", tmp_path / "r.html")
+    text = html_path.read_text(encoding="utf-8")
+    assert "Smallest detectable change of this test: 9 degrees" in text
+    # the latest change, in the summary under the test's title
+    assert ('<li class="real">Right, #2 to #3: +12 degrees: beyond the smallest detectable change of 9 degrees '
+            '\u2014 a real improvement</li>') in text
+    # every change in the table: +8 is within the SDC, +12 beyond it
+    cells = re.findall(r"<td>([^<]*(?:detectable change)[^<]*)</td>", text)
+    assert cells == ["+8 degrees: within the measurement&#x27;s smallest detectable change of 9 degrees \u2014 "
+                     "not a real change yet",
+                     "+12 degrees: beyond the smallest detectable change of 9 degrees \u2014 a real improvement"]
+
+
+def test_a_test_without_a_measured_sdc_says_changes_are_not_judged(tmp_path, monkeypatch):
+    import game.report as report
+
+    monkeypatch.setattr(report, "_test_info", lambda test, standard: report._TestInfo("Flexion", None, "", None))
+    with Database(tmp_path / "db.sqlite3") as db:
+        db.add_patient("P001")
+        for day, value in (("2026-01-01", 100.0), ("2026-02-01", 96.0)):
+            s = db.start_session("P001", "rom", started_utc=f"{day}T09:00:00Z")
+            db.add_rom_result(s, rom_result(value=value), recorded_utc=f"{day}T09:05:00Z")
+        text = write_report(db, "P001", tmp_path / "r.html")[0].read_text(encoding="utf-8")
+    assert "No smallest detectable change has been measured for this test" in text
+    assert "Right, #1 to #2: -4 degrees (no smallest detectable change measured for this test: not judged)" in text

@@ -44,7 +44,11 @@ class SimAttempt:
 
 @dataclass(frozen=True, slots=True)
 class SimRun:
-    """A simulated ROM test run: its attempts, the frames processed and the wall time."""
+    """A simulated ROM test run: its attempts, the frames processed and the wall time.
+
+    ``motion_start_s``: the sample time minus the motion's own time at "go" (the pauses before
+    it); 0 without pauses, NaN when the session never said "go".
+    """
 
     test: str
     side: str
@@ -54,6 +58,7 @@ class SimRun:
     motion_s: float
     wall_s: float
     last: RomProgress
+    motion_start_s: float = 0.0
 
     @property
     def accepted(self) -> SimAttempt | None:
@@ -62,14 +67,19 @@ class SimRun:
 
 def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str | None = None, rig: str = "ring4",
                        size_px: tuple[int, int] = (320, 240), fps: float = 30.0, percentile: float = 50.0,
-                       sex: str = "female", noise_sigma: float = 1.5, seed: int = 0, max_attempts: int = 1,
+                       sex: str = "female", noise_sigma: float = 1.5, seed: int = 0, donning: int | None = None,
+                       wait_for_go_s: float | None = None, max_attempts: int = 1,
                        decide: Callable[[RomResult], bool] = lambda r: not r.compensated,
                        on_progress: Callable[[RomProgress], None] | None = None) -> SimRun:
     """Run a ROM test on the simulated patient performing ``motion`` (default: the test's own motion).
 
     Each finished attempt goes to ``decide`` (the therapist's accept/discard); a discarded attempt
     is followed by another (the patient repeats) until one is accepted, ``max_attempts`` are done or
-    the motion ends. Rendering stops as soon as the run is over.
+    the motion ends. Rendering stops as soon as the run is over. ``donning`` puts the markers on
+    again with a placement error of that seed (:mod:`tracking.sim.redonning`; None: on their
+    landmarks). With ``wait_for_go_s`` the patient holds still while the tracker names the
+    markers and while the start position is being held, as a patient told to hold still does, for
+    at most that long in all; by default the scripted motion plays without waiting for the session.
 
     Raises:
         RehabError: no motion for this test and side, or an unknown motion/rig.
@@ -88,12 +98,41 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     attempts: list[SimAttempt] = []
     frames = 0
     with studio:
+        if donning is not None:
+            from tracking.sim.redonning import redon
+
+            redon(studio, donning)
         names = studio.markerset.names
         tracker = Tracker(studio.cameras, studio.markerset, fps=fps)
         session = RomTestSession(test, side, standard, names)
         truth: list[float] = []
         progress = session.progress
-        for sf in studio.play(mot, fps, noise_sigma=noise_sigma, seed=seed, with_visibility=False):
+        go_s = [0.0 if wait_for_go_s is None else math.nan]
+
+        def patient_frames():
+            """The frames of a patient who holds still while the tracker names the markers and
+            while the start position is held, and otherwise follows the script (seeded as
+            ``studio.play``); the pauses add up to at most ``wait_for_go_s``."""
+            i, motion_t, paused_s = 0, 0.0, 0.0
+            while motion_t <= mot.duration_s:
+                t = i / fps
+                state = session.state
+                if math.isnan(go_s[0]) and state >= RomState.RECORDING:
+                    go_s[0] = t - motion_t
+                yield studio.render(mot.pose_at(motion_t), i, t, noise_sigma=noise_sigma, seed=seed * 1_000_003 + i,
+                                    with_visibility=False)
+                i += 1
+                state = session.state   # after the tracker and the session have seen this frame
+                holding = state == RomState.WAITING_TRACKER or (
+                    state == RomState.CHECKING_START and session.progress.hold_fraction > 0.0)
+                if holding and paused_s < wait_for_go_s:
+                    paused_s += 1.0 / fps
+                else:
+                    motion_t += 1.0 / fps
+
+        frame_sets = (studio.play(mot, fps, noise_sigma=noise_sigma, seed=seed, with_visibility=False)
+                      if wait_for_go_s is None else patient_frames())
+        for sf in frame_sets:
             frames += 1
             sample = tracker.step(sf.frames.images, sf.frames.time_s)
             was = session.state
@@ -124,4 +163,5 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
                 attempts.append(SimAttempt(result, float(np.nanmax(truth)) if truth else math.nan, ok))
                 if ok:
                     session.accept()
-    return SimRun(test.name, side, name, tuple(attempts), frames, frames / fps, time.perf_counter() - t_start, progress)
+    return SimRun(test.name, side, name, tuple(attempts), frames, frames / fps, time.perf_counter() - t_start, progress,
+                  go_s[0])

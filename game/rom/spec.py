@@ -13,6 +13,7 @@ Every result of these tests is *active* ROM (the patient moves the limb; nobody 
 
 from __future__ import annotations
 
+import datetime
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -88,6 +89,24 @@ class _Start(StrictModel):
         return value
 
 
+class _Sdc(StrictModel):
+    sdc95_deg: float = pydantic.Field(gt=0, le=90, description="smallest detectable change, 1.96 * sqrt(2) * SEM")
+    sem_deg: float = pydantic.Field(gt=0, le=45, description="standard error of measurement it came from")
+    n: int = pydantic.Field(ge=3, le=100000, description="sessions it was measured on")
+    side: Literal["right", "left"] = pydantic.Field(description="the side measured")
+    seeds: str = pydantic.Field(pattern=r"^[0-9]+-[0-9]+$", description="first-last seed of the simulated sessions")
+    measured: datetime.date = pydantic.Field(description="date of the measurement (YYYY-MM-DD)")
+
+    @pydantic.model_validator(mode="after")
+    def _consistent(self):
+        if abs(self.sdc95_deg - 1.96 * 2 ** 0.5 * self.sem_deg) > 0.1 + 1e-9:
+            raise ValueError(f"sdc95_deg {self.sdc95_deg} is not 1.96 * sqrt(2) * sem_deg {self.sem_deg}")
+        first, last = (int(x) for x in self.seeds.split("-"))
+        if last - first + 1 < self.n:
+            raise ValueError(f"seeds {self.seeds} are fewer than n {self.n}")
+        return self
+
+
 class _RomTestSpec(StrictModel):
     title: str = pydantic.Field(min_length=3)
     angle: str = pydantic.Field(description="the arm angle of spec/JOINT_ANGLES.md the test reads")
@@ -103,6 +122,8 @@ class _RomTestSpec(StrictModel):
     references: dict[Literal["jarm", "aaos"], _Reference] = pydantic.Field(min_length=1)
     simulated_motion: dict[Literal["right", "left"], str] = pydantic.Field(
         default_factory=dict, description="built-in motion of the simulated patient that performs the test")
+    sdc: _Sdc | None = pydantic.Field(
+        None, description="smallest detectable change measured on the simulated patient (rehab rom-sdc; docs/ROM.md)")
 
     @pydantic.field_validator("angle")
     @classmethod
@@ -182,6 +203,9 @@ class RomTest:
         compensations: the ones the system checks.
         references: standard -> :class:`Reference`.
         simulated_motion: side -> built-in motion of the simulated patient performing the test.
+        sdc_deg: the smallest detectable change (SDC95, degrees) measured on the simulated patient
+            with ``rehab rom-sdc``; None when not measured. A change between two sessions is real
+            only beyond it (:func:`game.rom.sdc.change_words`).
     """
 
     name: str
@@ -200,6 +224,7 @@ class RomTest:
     compensations: tuple[Compensation, ...]
     references: dict[str, Reference]
     simulated_motion: dict[str, str]
+    sdc_deg: float | None = None
 
     def angle_name(self, side: str) -> str:
         """The column of spec/JOINT_ANGLES.md read on ``side``, e.g. ``right_shoulder_flexion``."""
@@ -232,6 +257,7 @@ def _from_spec(name: str, spec: _RomTestSpec) -> RomTest:
         start_angles={k: (float(lo), float(hi)) for k, (lo, hi) in spec.start.angles.items()},
         start_hold_s=spec.start.hold_s, min_range_deg=spec.min_range_deg, max_duration_s=spec.max_duration_s,
         watch=tuple(spec.watch), compensations=comps, references=refs, simulated_motion=dict(spec.simulated_motion),
+        sdc_deg=None if spec.sdc is None else float(spec.sdc.sdc95_deg),
     )
 
 

@@ -4,8 +4,10 @@ Left, the tests the patient has results for (Up/Down or the mouse choose); right
 test's maxima over the sessions as a plot (both sides, in session order), with the normal band
 of the standard (from the normal value down 10 %, as in ``rehab report``; none when the standard's
 value is for another position) and the 5-degree recording grid; rings mark compensated attempts,
-crosses maxima that rested on estimated markers. Below, the games' repetitions and minutes per
-session, or "No games yet".
+crosses maxima that rested on estimated markers. Under the plot, per side, the change from the
+previous session in words, called real only beyond the test's smallest detectable change
+(``+8 degrees: within the measurement's smallest detectable change of 9 degrees — not a real
+change yet``). Below, the games' repetitions and minutes per session, or "No games yet".
 
 Plots are drawn by matplotlib (Agg, no pyplot state) into an RGB array once per choice and
 uploaded as one texture; the scene's colours match the application's theme. **Export report**
@@ -26,8 +28,11 @@ from game.app import BaseScene, Frame
 from game.db.location import db_location, local_folder
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.report import HistoryLook, plot_games, plot_rom_history, session_order
+from game.report import HistoryLook, change_line, latest_changes, plot_games, plot_rom_history, sdc_words, session_order
 from game.rom.session import round_to_5
+
+#: Height of the change lines under the plot (at 1280x720).
+CHANGE_LINES_H = 56
 
 #: Plot colours (sRGB hex) on the application's dark background.
 BAND_COLOUR = "#5ec8be"
@@ -82,7 +87,7 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
     ax.set_xticks(xs)
     ax.set_xticklabels([f"#{x}\n{dates[x]}" for x in xs])
     ax.set_xlim(min(xs) - 0.5, max(xs) + 0.5)
-    ax.set_ylabel("maximum, degrees (active ROM)", fontsize=13)
+    ax.set_ylabel("degrees (active ROM)", fontsize=13)
     ax.set_title(title, color=_TEXT, fontsize=17, loc="left")
     # beside the axes: over the plot it would hide the band or the points
     legend = ax.legend(fontsize=12, loc="upper left", bbox_to_anchor=(1.01, 1.0), facecolor=_BG, edgecolor=_GRID)
@@ -131,6 +136,7 @@ class TestInfo:
 
     title: str
     normal_deg: float | None
+    sdc_deg: float | None = None
 
 
 def _inside(rect, x: float, y: float) -> bool:
@@ -146,7 +152,7 @@ def test_info(test: str, standard: str) -> TestInfo:
         t = load_rom_test(test)
     except ContentError:
         return TestInfo(test.replace("_", " ").capitalize(), None)
-    return TestInfo(t.title, t.normal_deg(standard))
+    return TestInfo(t.title, t.normal_deg(standard), t.sdc_deg)
 
 
 class ProgressScene(BaseScene):
@@ -218,9 +224,19 @@ class ProgressScene(BaseScene):
         pitch = min(58 * s, (h - 60 * s - top) / max(len(self.tests), 1))
         rows = [(m, top + i * pitch, list_w, pitch - 8 * s) for i in range(len(self.tests))]
         plot_x = m + list_w + 24 * s
-        plot = (plot_x, top, w - plot_x - m, (h - top - 60 * s) * 0.66)
-        games = (plot_x, plot[1] + plot[3] + 14 * s, plot[2], h - 60 * s - plot[1] - plot[3] - 14 * s)
+        plot = (plot_x, top, w - plot_x - m, (h - top - 60 * s) * 0.66 - CHANGE_LINES_H * s)
+        below = plot[1] + plot[3] + CHANGE_LINES_H * s
+        games = (plot_x, below + 14 * s, plot[2], h - 60 * s - below - 14 * s)
         return s, rows, plot, games
+
+    def change_lines(self, test: str) -> list[tuple[str, bool | None]]:
+        """The lines under the chosen test's plot: per side the latest change in words and whether
+        it is real (None: no SDC measured), or the SDC sentence when no side has two sessions."""
+        info = self.infos[test]
+        changes = latest_changes([r for r in self.roms if r.test == test], self.order, info.sdc_deg)
+        if not changes:
+            return [(sdc_words(info.sdc_deg), None)]
+        return [(change_line(ch, self.order), ch.real) for ch in changes]
 
     def export_rect(self) -> tuple[float, float, float, float]:
         """The Export report button, top right under the standard's line."""
@@ -362,6 +378,13 @@ class ProgressScene(BaseScene):
         self._ensure_plots(plot, games)
         if self.tests:
             c.texture(self._textures["rom"], plot)
+            lines = self.change_lines(self.tests[self.selected])[:2]
+            size = round(theme.SMALL * s)
+            size = min(c.fit(line, size, plot[2], min_size=round(size * 0.75))[1] for line, _ in lines)  # one size
+            for k, (line, real) in enumerate(lines):
+                text, _ = c.fit(line, size, plot[2], min_size=size)
+                c.text(text, (plot[0], plot[1] + plot[3] + 6 * s + k * 26 * s), size,
+                       theme.ACCENT if real else theme.TEXT_DIM)
         if self.games and "games" in self._textures:
             c.texture(self._textures["games"], games)
         else:

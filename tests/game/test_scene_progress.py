@@ -217,3 +217,48 @@ def test_moving_through_the_list_draws_each_plot_once(screen, tmp_path, monkeypa
     assert sorted(drawn) == ["games_plot_rgb", "rom_plot_rgb", "rom_plot_rgb"]
     assert scene.selected == 0 and np.array_equal(screen.read_rgb(), first)   # the same picture again
     app.close()
+
+
+def test_the_change_since_the_last_session_is_called_real_only_beyond_the_sdc(screen, tmp_path):
+    """Under the plot, per side, the latest change in words: +8 degrees within a smallest
+    detectable change of 9 is "not a real change yet" (dim), +12 is "a real improvement" (accent)."""
+    from game.gfx import theme
+    from game.scenes.progress import TestInfo
+
+    path = tmp_path / "db.sqlite3"
+    with Database(path) as db:
+        db.add_patient("P001")
+        for day, (right, left) in enumerate(((120.0, 110.0), (128.0, 122.0)), start=1):
+            sid = db.start_session("P001", "rom", started_utc=f"2026-11-{day:02d}T09:00:00Z")
+            db.add_rom_result(sid, result("shoulder_flexion", right))
+            db.add_rom_result(sid, result("shoulder_flexion", left, side="left"))
+    app = App(screen, Settings(show_fps=False, max_fps=0), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    scene = ProgressScene(path, "P001")
+    app.push(scene)
+    try:
+        scene.infos["shoulder_flexion"] = TestInfo("Shoulder flexion", 180.0, 9.0)
+        lines = scene.change_lines("shoulder_flexion")
+        assert lines == [
+            ("Right, #1 to #2: +8 degrees: within the measurement's smallest detectable change of 9 degrees "
+             "\u2014 not a real change yet", False),
+            ("Left, #1 to #2: +12 degrees: beyond the smallest detectable change of 9 degrees \u2014 a real "
+             "improvement", True)]
+        app.frame()
+        rgb = screen.read_rgb().astype(int)
+        _, _, plot, games = scene._layout()
+        x, w = round(plot[0]), round(plot[2])
+        top = round(plot[1] + plot[3])
+        first = rgb[top:top + round(30), x:x + w]            # the right side's line: dim
+        second = rgb[top + 30:round(games[1]), x:x + w]      # the left side's line: the accent colour
+        near = lambda img, colour: (np.abs(img - np.array(colour)).sum(axis=2) < 40).sum()  # noqa: E731
+        assert near(first, theme.TEXT_DIM) > 150 and near(first, theme.ACCENT) < 20
+        assert near(second, theme.ACCENT) > 150
+        screen.save_png(tmp_path / "changes.png")
+        # without a measured SDC the change is not judged
+        scene.infos["shoulder_flexion"] = TestInfo("Shoulder flexion", 180.0, None)
+        assert scene.change_lines("shoulder_flexion")[0] == (
+            "Right, #1 to #2: +8 degrees (no smallest detectable change measured for this test: not judged)",
+            None)
+    finally:
+        app.close()
