@@ -102,6 +102,9 @@ class Camera:
         rvec: (3,) float64 Rodrigues vector, world -> camera.
         t_m: (3,) float64 translation in metres, world -> camera.
         fisheye: True for the OpenCV fisheye model (``dist`` holds k1..k4).
+        rolling_shutter_s: rolling-shutter readout, seconds from the first image row to the last
+            (row ``v`` is exposed ``v / height * rolling_shutter_s`` after the image's time stamp);
+            0 for a global shutter (docs/FILES.md).
     """
 
     name: str
@@ -111,6 +114,7 @@ class Camera:
     rvec: np.ndarray
     t_m: np.ndarray
     fisheye: bool = False
+    rolling_shutter_s: float = 0.0
     R: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -142,6 +146,11 @@ class Camera:
         t_m = np.asarray(self.t_m, dtype=np.float64).reshape(-1)
         if rvec.size != 3 or t_m.size != 3 or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(t_m))):
             raise CalibrationError(f"{what}: rotation and translation must be 3 finite numbers each")
+        readout = self.rolling_shutter_s
+        if isinstance(readout, bool) or not isinstance(readout, (int, float)) or not 0.0 <= readout < 1.0:
+            raise CalibrationError(f"{what}: rolling_shutter_s must be the readout in seconds, 0 (global shutter) "
+                                   f"up to 1, got {readout!r}")
+        object.__setattr__(self, "rolling_shutter_s", float(readout))
         for arr in (K, dist, rvec, t_m):
             arr.setflags(write=False)
         R = rotation_from_rvec(rvec)
@@ -197,7 +206,7 @@ class Camera:
         K[1, 1] *= sy
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return Camera(self.name, size_px, K, self.dist, self.rvec, self.t_m, self.fisheye)
+        return Camera(self.name, size_px, K, self.dist, self.rvec, self.t_m, self.fisheye, self.rolling_shutter_s)
 
     # ----------------------------------------------------------------- derived quantities
     @property
