@@ -400,6 +400,10 @@ class CameraStack:
         p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
         return (np.matmul(p, self._rotation_t) + self._t_col).transpose(1, 0, 2)
 
+    def rotate_to_cameras(self, v_world: np.ndarray) -> np.ndarray:
+        """(N, 3) world vectors (e.g. velocities) -> (N, C, 3) the same in each camera's frame."""
+        return np.matmul(np.asarray(v_world, dtype=np.float64).reshape(-1, 3), self._rotation_t).transpose(1, 0, 2)
+
     def project(self, p_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project points into every camera.
 
@@ -410,8 +414,14 @@ class CameraStack:
                 :meth:`Camera.project`.
             depth_m: (N, C) float64 camera-frame z of each point in each camera.
         """
-        # (C, N, 3): the same products as Camera.world_to_camera, camera by camera
-        p_cam = self.world_to_cameras(p_world_m).transpose(1, 0, 2)
+        # the same products as Camera.world_to_camera, camera by camera
+        return self.project_camera_points(self.world_to_cameras(p_world_m))
+
+    def project_camera_points(self, p_cam_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`project` for points already in each camera's frame: (N, C, 3) camera-frame
+        metres (e.g. each camera seeing a moving point at its own instant) -> uv_px (N, C, 2),
+        depth_m (N, C)."""
+        p_cam = np.asarray(p_cam_m, dtype=np.float64).transpose(1, 0, 2)
         z = p_cam[..., 2]
         fx, skew, cx, fy, cy = (k[:, None] for k in self._k)  # (C, 1): broadcast over the points
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

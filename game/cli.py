@@ -144,6 +144,9 @@ def _add_track(sub) -> None:
                    help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
+    p.add_argument("--sync", choices=("auto", "stamps", "none"), default="auto",
+                   help="the cameras' image instants: auto (timestamps.csv when the recording has it), stamps "
+                        "(timestamps.csv, required), none (taken as synchronized) (default: %(default)s)")
     p.set_defaults(func=_cmd_track)
 
 
@@ -189,6 +192,7 @@ def _cmd_track(args) -> int:
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,
+        sync=args.sync,
     )
     print(report)
     return 0
