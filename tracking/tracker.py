@@ -637,6 +637,8 @@ class Tracker:
             both = np.isfinite(seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
             self._seen_velocity = np.where(both[:, None], seen_now - self._seen_pos, self.velocity)
             self._seen_pos = seen_now
+        else:
+            self._seen_pos[:] = np.nan
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
         self._last_seen[measured] = est_pos[measured]
         self._learn_lengths(measured)
@@ -715,12 +717,15 @@ class Tracker:
             moved = cam + self._moving_cam * dt[..., None]
         return moved
 
-    def _to_set_instant(self, xn: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    def _to_set_instant(self, xn: np.ndarray, uv: np.ndarray, moving: np.ndarray | None = None,
+                        cam: np.ndarray | None = None) -> np.ndarray:
         """(M, C, 2) normalized centroids seen at each image's instant (``uv`` their pixel rows)
-        -> where each marker's predicted motion puts them at the frame set's instant."""
+        -> where each marker's motion puts them at the frame set's instant. ``moving``: (M, C, 3)
+        the markers' camera-frame velocities (m/s), ``cam`` their camera-frame positions (default:
+        the prediction's, :meth:`_at_image_instants`)."""
         dt = self._skew_s + self._row_s * uv[..., 1]  # NaN where no centroid
-        cam = self._pred_cam
-        then = cam + self._moving_cam * dt[..., None]
+        cam = self._pred_cam if cam is None else cam
+        then = cam + (self._moving_cam if moving is None else moving) * dt[..., None]
         with np.errstate(invalid="ignore"):  # (NaN for unknown markers: not seen)
             return xn + cam[..., :2] / cam[..., 2:] - then[..., :2] / then[..., 2:]
 
@@ -978,8 +983,21 @@ class Tracker:
         surprise = off_m / sigma  # distance to the prediction in sigmas
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
-        if self._skew_s is not None:  # the same views as seen, for the velocity that corrects them
-            self._seen_now = triangulate(xn_seen, seen & measured[:, None])
+        if self._skew_s is not None and measured.any():
+            # the same views as seen: their change since the last frame set is the markers' velocity
+            # over the last period (not the prediction's, a period older: it lagged a fast swing's
+            # acceleration), which brings the views to the set's instant once more
+            use = seen & measured[:, None]
+            self._seen_now = triangulate(xn_seen, use)
+            both = np.isfinite(self._seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
+            velocity = np.where(both[:, None], self._seen_now - self._seen_pos, self._seen_velocity)
+            moving = self._stack.rotate_to_cameras(velocity * self.fps)
+            redo = np.flatnonzero(measured)
+            xn_redo = self._to_set_instant(xn_seen[redo], uv[redo], moving[redo], self._pred_cam[redo])
+            new_pos[redo] = triangulate(xn_redo, use[redo])
+            xn[redo] = xn_redo
+        elif self._skew_s is not None:
+            self._seen_now = np.full((m_count, 3), np.nan)
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)
