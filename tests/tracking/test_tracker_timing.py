@@ -86,3 +86,23 @@ def test_a_timestamps_file_that_does_not_fit_is_one_line(tmp_path, capsys):
     assert rehab(["track", str(rec), "--out", str(tmp_path / "a.trc")]) == 1
     err = capsys.readouterr().err
     assert "timestamps.csv line 3" in err and err.count("\n") == 1
+
+
+def test_live_sources_carry_the_recordings_stamps(tmp_path):
+    """A recording tracked live (RecordingSource through DeviceSource, the tracker process's source)
+    gives the tracker the same image instants as ``rehab track``."""
+    from tracking.live.source import DeviceSource
+    from tracking.recording import read_timestamps
+    from tracking.sources.recording import RecordingSource
+
+    settings = dataclasses.replace(BASE, seconds=0.3, camera_offsets=(0.0, 0.45, -0.4, 0.3), clock_drift=0.001,
+                                   images=True)
+    simulate_recording(tmp_path / "rec", settings)
+    times, stamps = read_timestamps(tmp_path / "rec", ["cam1", "cam2", "cam3", "cam4"])
+    src = RecordingSource(tmp_path / "rec")
+    assert src.timing.startswith("image time stamps from timestamps.csv")
+    device = DeviceSource(src, src.markerset())
+    for k in range(len(times)):
+        frame = device.grab(k, k / BASE.fps, False)
+        assert frame.time_s == pytest.approx(times[k], abs=1e-6)
+        assert frame.stamps_s == pytest.approx(stamps[k], abs=1e-6)
