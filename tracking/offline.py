@@ -203,10 +203,39 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
     )
 
 
+#: how much of a recording without time stamps ``--sync auto`` studies for the cameras' clocks
+SYNC_STUDY_S = 10.0
+
+
+def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tuple[np.ndarray | None, str]:
+    """The cameras' image instants estimated from the markers' motion (:mod:`tracking.clock_sync`)
+    over the first ``SYNC_STUDY_S`` seconds: tracked as synchronized, estimated, tracked again with
+    the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
+    when every camera is within 1 ms of the first, and a line saying what was found)."""
+    from tracking.clock_sync import block_offsets, fit_clocks
+    from tracking.status import MarkerStatus
+
+    study = int(round(SYNC_STUDY_S * fps))
+    skews = None
+    est = None
+    for _ in range(2):
+        run = track_frames_of(folder, sync="none", _skews=skews, _max_frames=study, **tracking)
+        pos = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm / 1000.0, np.nan)
+        est = fit_clocks(*block_offsets(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
+        skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
+    names = [c.name for c in run.cameras]
+    line = est.line(names)
+    if np.abs(skews).max() < 0.001:  # (a camera not estimated keeps the first camera's instants)
+        return None, line + "; cameras taken as synchronized"
+    return skews, line + "; applied"
+
+
 def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=None, colours=None,
-                    adapt_colours=False, progress=False, sync="auto") -> TrackedRecording:
+                    adapt_colours=False, progress=False, sync="auto", _skews=None, _max_frames=None
+                    ) -> TrackedRecording:
     """Run the tracker over a recording folder; :class:`RecordingError` (one line) if it never
-    identified the markers. ``sync``: the images' instants (:func:`image_skews`)."""
+    identified the markers. ``sync``: the images' instants (:func:`image_skews`; "auto" without
+    timestamps.csv estimates them, :func:`estimated_skews`)."""
     from tracking.angles import ANGLE_COLUMNS
     from tracking.status import MarkerStatus
     from tracking.tracker import Tracker, TrackingState
@@ -214,6 +243,12 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         skews, timing = image_skews(rec, sync)
+        if _skews is not None:
+            skews, timing = _skews, ""
+        elif sync == "auto" and skews is None and _max_frames is None:
+            skews, found = estimated_skews(folder, rec.n_frames, rec.fps, calibration=calibration, markerset=markerset,
+                                           marker_colours=marker_colours, colours=colours)
+            timing = "; ".join(x for x in (found, timing) if x)
         adapter = None
         learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
@@ -229,6 +264,8 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         was_tracking = False
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
         for fs in frame_iter:
+            if _max_frames is not None and fs.index >= _max_frames:
+                break
             stamps = None if skews is None or fs.index >= len(skews) else fs.time_s + skews[fs.index]
             sample = tracker.step(fs.images, fs.time_s, stamps)
             tracking = sample.state == TrackingState.TRACKING
