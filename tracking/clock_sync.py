@@ -28,7 +28,7 @@ class ClockEstimate:
         offset_s: (C,) each camera's offset at time 0, seconds (0 for the first camera).
         rate: (C,) each camera's drift, seconds per second.
         sigma_s: (C,) the offsets' standard error from the blocks' scatter (inf: not estimated; NaN:
-            too few blocks to tell).
+            too few blocks to tell; negative: above ``max_sigma_s`` of :func:`fit_clocks`, not used).
         period_s: the frame period (the skews wrap into +-half of it).
     """
 
@@ -48,6 +48,8 @@ class ClockEstimate:
         for name, o, r, s in zip(names[1:], self.offset_s[1:], self.rate[1:], self.sigma_s[1:]):
             if np.isinf(s):
                 parts.append(f"{name} not estimated (too little motion)")
+            elif s < 0:
+                parts.append(f"{name} uncertain (+-{-1000 * s:.1f} ms: too little motion), not used")
             else:
                 spread = f"+-{1000 * s:.2f}" if np.isfinite(s) else "few seconds of motion: no spread"
                 parts.append(f"{name} {1000 * o:+.1f} ms ({spread}), drift {100 * r:+.3f} %")
@@ -136,7 +138,7 @@ def block_offsets(cameras: Sequence[Camera], times_s: np.ndarray, positions_m: n
 
 
 def fit_clocks(centres_s: np.ndarray, tau_s: np.ndarray, info: np.ndarray, period_s: float,
-               min_span_s: float = 3.0) -> ClockEstimate:
+               min_span_s: float = 3.0, max_sigma_s: float = 0.001) -> ClockEstimate:
     """Blocks' skews (B,), (B, C) -> offsets and drifts relative to the first camera: each
     camera's block values taken against the first camera's, unwrapped modulo the period and fitted
     by a line weighted by each block's information squared (``info`` of :func:`block_offsets`; a
@@ -172,4 +174,9 @@ def fit_clocks(centres_s: np.ndarray, tau_s: np.ndarray, info: np.ndarray, perio
         offset[c], rate[c], sigma[c] = coef[0], coef[1], scatter / np.sqrt(n)
     half = period_s / 2.0
     offset = (offset + half) % period_s - half
-    return ClockEstimate(offset, rate, sigma, float(period_s))
+    # an estimate whose blocks scatter by more than a millisecond (slow motions: the skews' image
+    # displacement is below the centroids' noise; on the population's slow motion such estimates
+    # were several milliseconds off) is not used: that camera keeps the first camera's instants
+    unsure = np.isfinite(sigma) & (sigma > max_sigma_s)
+    offset[unsure], rate[unsure] = 0.0, 0.0
+    return ClockEstimate(offset, rate, np.where(unsure, -sigma, sigma), float(period_s))

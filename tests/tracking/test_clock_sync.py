@@ -59,3 +59,16 @@ def test_still_markers_tell_nothing():
     est = fit_clocks(*block_offsets(cams, t, still, uv), 1.0 / FPS)
     assert np.isinf(est.sigma_s[1:]).all() and (est.offset_s == 0).all()
     assert "not estimated (too little motion)" in est.line(["cam1", "cam2", "cam3", "cam4"])
+
+
+def test_an_uncertain_estimate_is_not_used():
+    """Blocks that scatter by more than a millisecond (a slow motion's) leave the camera at the
+    first camera's instants, and the line says so."""
+    centres = np.arange(6) + 0.5
+    tau = np.zeros((6, 2))
+    tau[:, 1] = 0.010 + np.array([-4, 4, -4, 4, -4, 4]) * 0.001
+    est = fit_clocks(centres, tau, np.ones((6, 2)), 1.0 / FPS)
+    assert est.offset_s[1] == 0.0 and est.rate[1] == 0.0
+    assert "cam2 uncertain (+-1.9 ms: too little motion), not used" in est.line(["cam1", "cam2"])
+    tau[:, 1] = 0.010 + np.array([-1, 1, -1, 1, -1, 1]) * 0.0002
+    assert fit_clocks(centres, tau, np.ones((6, 2)), 1.0 / FPS).offset_s[1] == pytest.approx(0.010, abs=2e-4)
