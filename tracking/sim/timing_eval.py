@@ -1,6 +1,7 @@
 """Tracking accuracy with free-running cameras and rolling shutters against synchronized global
 shutters (docs/TRACKING.md, "Cameras on their own clocks"): the same motion rendered with the
-cameras in step and on their own clocks, tracked with and without the images' instants."""
+cameras in step and on their own clocks, tracked with and without the images' instants, and
+(``--auto FOLDER``) with the clocks estimated from the motion (``rehab track --sync auto``)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import argparse
 import dataclasses
 import json
 import time
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
@@ -65,18 +67,72 @@ def evaluate(motion: str, seed: int, *, size=(640, 480), seconds: float = 8.0, f
     return out
 
 
+def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seconds: float = 8.0,
+                  fps: float = 30.0, drift: float = 0.001) -> dict:
+    """``--sync auto`` on a recording without time stamps: the first camera at offset 0, the others'
+    drawn in +-0.5 frame period (from ``seed``), every camera's drift in +-``drift``; measured-marker
+    RMSE with the estimate, with the stamps, as synchronized, and of the synchronized recording;
+    the recovered skews' errors against the first camera (modulo the period). Writes the
+    recordings into ``folder`` and removes them."""
+    import shutil
+
+    from tracking.offline import estimated_skews, track_frames_of
+    from tracking.recording import read_timestamps
+    from tracking.sim.studio import simulate_recording
+    from tracking.trc import read_trc
+
+    def rmse(run, truth_mm):
+        meas = run.status == MarkerStatus.MEASURED
+        e = np.linalg.norm(run.positions_mm - truth_mm[: len(run.positions_mm)], axis=-1)[meas]
+        return float(np.sqrt(np.mean(e**2)))
+
+    rng = np.random.default_rng([seed, 99])
+    offsets = (0.0, *(round(float(v), 3) for v in rng.uniform(-0.5, 0.5, 3)))
+    base = SimulationSettings(motion=motion, size_px=tuple(size), fps=fps, seconds=seconds, seed=seed, images=True)
+    sync_dir, free_dir = folder / f"{motion}_{seed}_sync", folder / f"{motion}_{seed}_free"
+    try:
+        simulate_recording(sync_dir, base)
+        simulate_recording(free_dir, dataclasses.replace(base, camera_offsets=offsets, clock_drift=drift))
+        names = [f"cam{k + 1}" for k in range(4)]
+        _, stamps = read_timestamps(free_dir, names)
+        studio, mo = studio_from_settings(base)
+        with studio:  # the truth at the first camera's instants (the frame sets' instants of --sync auto)
+            truth_first = np.stack([studio.body.markers_m(mo.pose_at(float(t))) for t in stamps[:, 0]]) * 1000.0
+        out = {"motion": motion, "seed": seed, "offsets_frames": list(offsets)}
+        out["sync"] = rmse(track_frames_of(sync_dir, sync="none"), read_trc(sync_dir / "truth.trc").positions_mm)
+        out["stamps"] = rmse(track_frames_of(free_dir, sync="stamps"), read_trc(free_dir / "truth.trc").positions_mm)
+        (free_dir / "timestamps.csv").unlink()
+        skews, out["line"] = estimated_skews(free_dir, len(stamps), fps)
+        true_rel = stamps - stamps[:, :1]
+        d = np.abs((np.zeros_like(true_rel) if skews is None else skews) - true_rel)
+        d = np.minimum(d, 1.0 / fps - d)[:, 1:] * 1000.0
+        out["skew_error_ms"] = [float(np.median(d)), float(np.percentile(d, 95))]
+        out["auto"] = rmse(track_frames_of(free_dir), truth_first)
+        out["none"] = rmse(track_frames_of(free_dir, sync="none"), truth_first)
+        return out
+    finally:
+        shutil.rmtree(sync_dir, ignore_errors=True)
+        shutil.rmtree(free_dir, ignore_errors=True)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__)
     p.add_argument("--motions", default="right_external_rotation,vicon_upper_limb")
     p.add_argument("--seeds", default="0,1,2")
     p.add_argument("--size", default="640x480")
     p.add_argument("--seconds", type=float, default=8.0)
+    p.add_argument("--auto", type=Path, default=None, metavar="FOLDER",
+                   help="evaluate --sync auto instead (recordings written to FOLDER and removed)")
     args = p.parse_args(argv)
     size = tuple(int(v) for v in args.size.split("x"))
     for motion in args.motions.split(","):
         for seed in (int(s) for s in args.seeds.split(",")):
             t0 = time.perf_counter()
-            r = evaluate(motion, seed, size=size, seconds=args.seconds)
+            if args.auto is not None:
+                args.auto.mkdir(parents=True, exist_ok=True)
+                r = evaluate_auto(motion, seed, args.auto, size=size, seconds=args.seconds)
+            else:
+                r = evaluate(motion, seed, size=size, seconds=args.seconds)
             r["seconds"] = round(time.perf_counter() - t0, 1)
             print(json.dumps(r), flush=True)
     return 0
