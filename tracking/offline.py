@@ -218,11 +218,20 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
     study = int(round(SYNC_STUDY_S * fps))
     skews = None
     est = None
-    for _ in range(2):
-        run = track_frames_of(folder, sync="none", _skews=skews, _max_frames=study, **tracking)
-        pos = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm / 1000.0, np.nan)
-        est = fit_clocks(*block_offsets(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
-        skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
+    reading = logging.getLogger("tracking.recording")
+    level = reading.level
+    reading.setLevel(logging.ERROR)  # the recording's warnings (a camera that ends early) once, in the real pass
+    try:
+        for _ in range(2):
+            try:
+                run = track_frames_of(folder, sync="none", _skews=skews, _max_frames=study, **tracking)
+            except RecordingError:  # (not named in the first seconds: the real pass says why)
+                return None, f"clock offsets not estimated: the markers were not named in the first {SYNC_STUDY_S:g} s"
+            pos = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm / 1000.0, np.nan)
+            est = fit_clocks(*block_offsets(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
+            skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
+    finally:
+        reading.setLevel(level)
     names = [c.name for c in run.cameras]
     line = est.line(names)
     if np.abs(skews).max() < 0.001:  # (a camera not estimated keeps the first camera's instants)
