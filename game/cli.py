@@ -145,8 +145,9 @@ def _add_track(sub) -> None:
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.add_argument("--sync", choices=("auto", "stamps", "none"), default="auto",
-                   help="the cameras' image instants: auto (timestamps.csv when the recording has it), stamps "
-                        "(timestamps.csv, required), none (taken as synchronized) (default: %(default)s)")
+                   help="the cameras' image instants: auto (timestamps.csv when the recording has it, else each "
+                        "camera's clock offset and drift estimated from the markers' motion in the first 10 s), "
+                        "stamps (timestamps.csv, required), none (taken as synchronized) (default: %(default)s)")
     p.set_defaults(func=_cmd_track)
 
 
