@@ -102,6 +102,9 @@ class Camera:
         rvec: (3,) float64 Rodrigues vector, world -> camera.
         t_m: (3,) float64 translation in metres, world -> camera.
         fisheye: True for the OpenCV fisheye model (``dist`` holds k1..k4).
+        rolling_shutter_s: rolling-shutter readout, seconds from the first image row to the last
+            (row ``v`` is exposed ``v / height * rolling_shutter_s`` after the image's time stamp);
+            0 for a global shutter (docs/FILES.md).
     """
 
     name: str
@@ -111,6 +114,7 @@ class Camera:
     rvec: np.ndarray
     t_m: np.ndarray
     fisheye: bool = False
+    rolling_shutter_s: float = 0.0
     R: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -142,6 +146,11 @@ class Camera:
         t_m = np.asarray(self.t_m, dtype=np.float64).reshape(-1)
         if rvec.size != 3 or t_m.size != 3 or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(t_m))):
             raise CalibrationError(f"{what}: rotation and translation must be 3 finite numbers each")
+        readout = self.rolling_shutter_s
+        if isinstance(readout, bool) or not isinstance(readout, (int, float)) or not 0.0 <= readout < 1.0:
+            raise CalibrationError(f"{what}: rolling_shutter_s must be the readout in seconds, 0 (global shutter) "
+                                   f"up to 1, got {readout!r}")
+        object.__setattr__(self, "rolling_shutter_s", float(readout))
         for arr in (K, dist, rvec, t_m):
             arr.setflags(write=False)
         R = rotation_from_rvec(rvec)
@@ -197,7 +206,7 @@ class Camera:
         K[1, 1] *= sy
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return Camera(self.name, size_px, K, self.dist, self.rvec, self.t_m, self.fisheye)
+        return Camera(self.name, size_px, K, self.dist, self.rvec, self.t_m, self.fisheye, self.rolling_shutter_s)
 
     # ----------------------------------------------------------------- derived quantities
     @property
@@ -391,6 +400,10 @@ class CameraStack:
         p = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
         return (np.matmul(p, self._rotation_t) + self._t_col).transpose(1, 0, 2)
 
+    def rotate_to_cameras(self, v_world: np.ndarray) -> np.ndarray:
+        """(N, 3) world vectors (e.g. velocities) -> (N, C, 3) the same in each camera's frame."""
+        return np.matmul(np.asarray(v_world, dtype=np.float64).reshape(-1, 3), self._rotation_t).transpose(1, 0, 2)
+
     def project(self, p_world_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Project points into every camera.
 
@@ -401,8 +414,14 @@ class CameraStack:
                 :meth:`Camera.project`.
             depth_m: (N, C) float64 camera-frame z of each point in each camera.
         """
-        # (C, N, 3): the same products as Camera.world_to_camera, camera by camera
-        p_cam = self.world_to_cameras(p_world_m).transpose(1, 0, 2)
+        # the same products as Camera.world_to_camera, camera by camera
+        return self.project_camera_points(self.world_to_cameras(p_world_m))
+
+    def project_camera_points(self, p_cam_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """As :meth:`project` for points already in each camera's frame: (N, C, 3) camera-frame
+        metres (e.g. each camera seeing a moving point at its own instant) -> uv_px (N, C, 2),
+        depth_m (N, C)."""
+        p_cam = np.asarray(p_cam_m, dtype=np.float64).transpose(1, 0, 2)
         z = p_cam[..., 2]
         fx, skew, cx, fy, cy = (k[:, None] for k in self._k)  # (C, 1): broadcast over the points
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

@@ -58,6 +58,7 @@ names the file and says how to fix it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -84,8 +85,9 @@ __all__ = [
 TOML_SUFFIXES = (".toml",)
 OPENCV_SUFFIXES = (".yaml", ".yml", ".xml")
 
-_TOML_CAMERA_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation", "fisheye")
-_TOML_REQUIRED_KEYS = _TOML_CAMERA_KEYS[:-1]
+_TOML_CAMERA_KEYS = ("name", "size", "matrix", "distortions", "rotation", "translation", "fisheye",
+                     "rolling_shutter_s")
+_TOML_REQUIRED_KEYS = _TOML_CAMERA_KEYS[:-2]  # fisheye and rolling_shutter_s are optional
 _FIX_FILE = "fix the file or recalibrate with 'rehab calibrate'"
 _DIST_LENGTHS = (4, 5, 8)
 # R and rvec given together must agree to this angle (rad); files store about 16 digits.
@@ -293,8 +295,12 @@ def _camera_from_toml_table(path: Path, key: str, table: dict) -> Camera:
     fisheye = table.get("fisheye", False)
     if not isinstance(fisheye, bool):
         raise CalibrationError(f"{where}: 'fisheye' must be true or false: {_FIX_FILE}")
+    readout = table.get("rolling_shutter_s", 0.0)
+    if isinstance(readout, bool) or not isinstance(readout, (int, float)) or not 0.0 <= readout < 1.0:
+        raise CalibrationError(f"{where}: 'rolling_shutter_s' must be the rolling-shutter readout in seconds "
+                               f"(0 for a global shutter, e.g. 0.025): {_FIX_FILE}")
     size_px = _whole_size(size, where, "size")
-    return _wrap_camera(path, lambda: Camera(name, size_px, K, dist, rvec, t_m, fisheye))
+    return _wrap_camera(path, lambda: Camera(name, size_px, K, dist, rvec, t_m, fisheye, float(readout)))
 
 
 # --------------------------------------------------------------------- OpenCV FileStorage
@@ -451,6 +457,14 @@ def _camera_from_opencv_node(path: Path, index: int, node) -> Camera:
         if flag is None or flag.size != 1 or flag[0] not in (0.0, 1.0):
             raise CalibrationError(f"{where}: 'fisheye' must be 0 or 1: {_FIX_FILE}")
         fisheye = bool(flag[0])
+    readout = 0.0
+    _, s_node = _aliased(node, ("rolling_shutter_s",), where, required=False)
+    if s_node is not None:
+        value = _node_numbers(s_node, where, "rolling_shutter_s").reshape(-1) if not s_node.isString() else None
+        if value is None or value.size != 1 or not 0.0 <= value[0] < 1.0:
+            raise CalibrationError(f"{where}: 'rolling_shutter_s' must be the rolling-shutter readout in seconds "
+                                   f"(0 for a global shutter, e.g. 0.025): {_FIX_FILE}")
+        readout = float(value[0])
 
     r_node = node.getNode("R")
     v_node = node.getNode("rvec")
@@ -469,7 +483,8 @@ def _camera_from_opencv_node(path: Path, index: int, node) -> Camera:
             )
         R = _node_sized(r_node, (9,), where, "R", "a 3x3 rotation matrix").reshape(3, 3)
         check_rotation(R, f"{where}: 'R'")
-        cam = _wrap_camera(path, lambda: Camera.from_rotation(name, size_px, K, dist, R, t_m, fisheye))
+        cam = _wrap_camera(path, lambda: dataclasses.replace(
+            Camera.from_rotation(name, size_px, K, dist, R, t_m, fisheye), rolling_shutter_s=readout))
         if rvec is not None:
             dR = cam.R.T @ Camera(name, size_px, K, dist, rvec, t_m).R
             angle = math.acos(min(1.0, max(-1.0, (np.trace(dR) - 1.0) / 2.0)))
@@ -479,7 +494,7 @@ def _camera_from_opencv_node(path: Path, index: int, node) -> Camera:
                     "apart): keep only one of them"
                 )
         return cam
-    return _wrap_camera(path, lambda: Camera(name, size_px, K, dist, rvec, t_m, fisheye))
+    return _wrap_camera(path, lambda: Camera(name, size_px, K, dist, rvec, t_m, fisheye, readout))
 
 
 def _opencv_size(node, where: str) -> tuple[int, int]:
@@ -596,6 +611,7 @@ def save_calibration_toml(
             f"rotation = {_toml_list(cam.rvec)}",
             f"translation = {_toml_list(cam.t_m)}",
             f"fisheye = {'true' if cam.fisheye else 'false'}",
+            *([f"rolling_shutter_s = {cam.rolling_shutter_s!r}"] if cam.rolling_shutter_s else []),
             "",
         ]
     lines += ["[metadata]", f"adjusted = {'true' if adjusted else 'false'}", f"error = {float(error)!r}", ""]
@@ -641,6 +657,8 @@ def save_calibration_opencv(path: str | os.PathLike, cameras: Sequence[Camera]) 
                 fs.write("R", np.ascontiguousarray(cam.R))
                 fs.write("t", cam.t_m.reshape(3, 1).copy())
                 fs.write("fisheye", int(cam.fisheye))
+                if cam.rolling_shutter_s:
+                    fs.write("rolling_shutter_s", float(cam.rolling_shutter_s))
                 fs.endWriteStruct()
             fs.endWriteStruct()
         finally:

@@ -59,7 +59,16 @@ def _add_simulate(sub) -> None:
     p.add_argument("--cast", default=None, help="colour cast as R,G,B gains reached at the end, e.g. 1.1,1.0,0.85")
     p.add_argument("--images", action="store_true", help="write PNG folders instead of lossless AVI videos")
     p.add_argument("--markerset", default="upper_limb_seated", help="marker set name or YAML file")
-    p.add_argument("--seed", type=SEED, default=0, help="random seed of the sensor noise")
+    p.add_argument("--seed", type=SEED, default=0, help="random seed of the sensor noise (and of drawn camera clocks)")
+    p.add_argument("--camera-offsets", default=None, metavar="F,F,...|random",
+                   help="free-running cameras: each camera's phase in frame periods (one per camera, -0.5..0.5), or "
+                        "'random' (drawn from --seed); their instants go to timestamps.csv (default: in step)")
+    p.add_argument("--clock-drift", type=number(0.0, 0.05), default=0.0, metavar="FRACTION",
+                   help="largest rate difference of a camera's clock, e.g. 0.001 (0.1 %%); each camera's is drawn "
+                        "from --seed (default: 0)")
+    p.add_argument("--rolling-shutter-ms", type=number(0.0, 200.0), default=0.0, metavar="MS",
+                   help="rolling-shutter readout, first row to last, e.g. 25; written to calibration.toml "
+                        "(default: 0, global shutter)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -73,7 +82,20 @@ def _cmd_simulate(args) -> int:
             assert len(cast) == 3 and all(0.2 < v < 5 for v in cast)
         except (ValueError, AssertionError):
             raise RehabError(f"--cast {args.cast!r}: give three gains like 1.1,1.0,0.85") from None
+    offsets = args.camera_offsets
+    if offsets is not None and offsets.strip().lower() != "random":
+        try:
+            offsets = tuple(float(v) for v in offsets.split(","))
+            assert all(-0.5 <= v <= 0.5 for v in offsets)
+        except (ValueError, AssertionError):
+            raise RehabError(f"--camera-offsets {args.camera_offsets!r}: give one phase per camera in frame "
+                             f"periods, -0.5..0.5, like 0,0.4,-0.3,0.2, or 'random'") from None
+    elif offsets is not None:
+        offsets = "random"
     settings = SimulationSettings(
+        camera_offsets=offsets,
+        clock_drift=args.clock_drift,
+        rolling_shutter_s=args.rolling_shutter_ms / 1000.0,
         motion=args.motion,
         rig=args.rig,
         n_cameras=args.cameras,
@@ -122,6 +144,10 @@ def _add_track(sub) -> None:
                    help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
+    p.add_argument("--sync", choices=("auto", "stamps", "none"), default="auto",
+                   help="the cameras' image instants: auto (timestamps.csv when the recording has it, else each "
+                        "camera's clock offset and drift estimated from the markers' motion in the first 10 s), "
+                        "stamps (timestamps.csv, required), none (taken as synchronized) (default: %(default)s)")
     p.set_defaults(func=_cmd_track)
 
 
@@ -167,6 +193,7 @@ def _cmd_track(args) -> int:
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,
+        sync=args.sync,
     )
     print(report)
     return 0

@@ -15,7 +15,7 @@ from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet, load_markerset, parse_rgb
 from tracking.measure import FrameMeasurer
 from tracking.errors import RecordingError
-from tracking.recording import Recording
+from tracking.recording import Recording, read_timestamps
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +51,7 @@ def track_recording(
     colours: Path | None = None,
     adapt_colours: bool = False,
     progress: bool = False,
+    sync: str = "auto",
 ) -> str:
     """Track a recording frame by frame and write what was asked. Returns a summary line.
 
@@ -67,7 +68,7 @@ def track_recording(
         return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                                points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
                                c3d=c3d, mot=mot, bvh=bvh, detections=detections, colours=colours,
-                               adapt_colours=adapt_colours, progress=progress)
+                               adapt_colours=adapt_colours, progress=progress, sync=sync)
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
@@ -137,6 +138,7 @@ class TrackedRecording:
         identified: (T,) bool, the frame sets where the tracker identified the markers (the first
             TRACKING frame set after WAITING).
         subject: meta.yaml's ``subject`` (a pseudonymous ID), or None.
+        timing: one line on the images' instants used (time stamps, rolling shutter), or "".
     """
 
     names: tuple[str, ...]
@@ -151,15 +153,45 @@ class TrackedRecording:
     uv_px: np.ndarray
     identified: np.ndarray
     subject: str | None = None
+    timing: str = ""
+
+
+SYNC_MODES = ("auto", "stamps", "none")
+
+
+def image_skews(rec: Recording, sync: str = "auto") -> tuple[np.ndarray | None, str]:
+    """Each image's instant minus its frame set's, from the recording's ``timestamps.csv``.
+
+    ``sync``: "auto" and "stamps" use the file ("stamps" requires it), "none" takes the cameras as
+    synchronized. Returns (F, C) seconds (NaN unknown) or None, and one line saying what is used."""
+    if sync not in SYNC_MODES:
+        raise RecordingError(f"--sync {sync!r}: give one of {', '.join(SYNC_MODES)}")
+    rolling = [c.name for c in rec.cameras if c.rolling_shutter_s > 0]
+    shutter = (f"rolling shutter of {', '.join(rolling)} from the calibration ("
+               f"{1000 * max(c.rolling_shutter_s for c in rec.cameras):g} ms readout)") if rolling else ""
+    read = None if sync == "none" else read_timestamps(rec.folder, [c.name for c in rec.cameras])
+    if read is None:
+        if sync == "stamps":
+            raise RecordingError(f"{rec.folder}: no timestamps.csv for --sync stamps: give a recording from "
+                                 f"'rehab record', or --sync none")
+        what = "cameras taken as synchronized (--sync none)" if sync == "none" else ""
+        return None, "; ".join(x for x in (what, shutter) if x)
+    times, stamps = read
+    skew = stamps - times[:, None]
+    worst = float(np.nanmax(np.abs(skew))) if np.isfinite(skew).any() else 0.0
+    line = f"image time stamps from timestamps.csv (up to {1000 * worst:.1f} ms from their frame sets' instants)"
+    if len(times) < (rec.n_frames or 0):
+        line += f"; only {len(times)} of {rec.n_frames} frame sets stamped"
+    return skew, "; ".join(x for x in (line, shutter) if x)
 
 
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
                     c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
-                    progress=False) -> str:
+                    progress=False, sync="auto") -> str:
     from tracking.status import MarkerStatus
 
     run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
-                          colours=colours, adapt_colours=adapt_colours, progress=progress)
+                          colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync)
     write_results(run, trc=trc, status_csv=status_csv, angles_csv=angles_csv, c3d=c3d, mot=mot, bvh=bvh,
                   detections=detections)
     st = run.status
@@ -167,19 +199,65 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
     return (
         f"{len(run.frames)} frame sets: {100 * share['measured']:.1f} % of marker positions measured, "
         f"{100 * share['estimated']:.1f} % estimated, {100 * share['lost']:.1f} % lost"
+        + (f"\n{run.timing}" if run.timing else "")
     )
 
 
+#: how much of a recording without time stamps ``--sync auto`` studies for the cameras' clocks
+SYNC_STUDY_S = 10.0
+
+
+def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tuple[np.ndarray | None, str]:
+    """The cameras' image instants estimated from the markers' motion (:mod:`tracking.clock_sync`)
+    over the first ``SYNC_STUDY_S`` seconds: tracked as synchronized, estimated, tracked again with
+    the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
+    when every camera is within 1 ms of the first, and a line saying what was found)."""
+    from tracking.clock_sync import block_offsets, fit_clocks
+    from tracking.status import MarkerStatus
+
+    study = int(round(SYNC_STUDY_S * fps))
+    skews = None
+    est = None
+    reading = logging.getLogger("tracking.recording")
+    level = reading.level
+    reading.setLevel(logging.ERROR)  # the recording's warnings (a camera that ends early) once, in the real pass
+    try:
+        for _ in range(2):
+            try:
+                run = track_frames_of(folder, sync="none", _skews=skews, _max_frames=study, **tracking)
+            except RecordingError:  # (not named in the first seconds: the real pass says why)
+                return None, f"clock offsets not estimated: the markers were not named in the first {SYNC_STUDY_S:g} s"
+            pos = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm / 1000.0, np.nan)
+            est = fit_clocks(*block_offsets(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
+            skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
+    finally:
+        reading.setLevel(level)
+    names = [c.name for c in run.cameras]
+    line = est.line(names)
+    if np.abs(skews).max() < 0.001:  # (a camera not estimated keeps the first camera's instants)
+        return None, line + "; cameras taken as synchronized"
+    return skews, line + "; applied"
+
+
 def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=None, colours=None,
-                    adapt_colours=False, progress=False) -> TrackedRecording:
+                    adapt_colours=False, progress=False, sync="auto", _skews=None, _max_frames=None
+                    ) -> TrackedRecording:
     """Run the tracker over a recording folder; :class:`RecordingError` (one line) if it never
-    identified the markers."""
+    identified the markers. ``sync``: the images' instants (:func:`image_skews`; "auto" without
+    timestamps.csv estimates them, :func:`estimated_skews`)."""
     from tracking.angles import ANGLE_COLUMNS
     from tracking.status import MarkerStatus
     from tracking.tracker import Tracker, TrackingState
 
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
+        skews, timing = image_skews(rec, sync)
+        if _skews is not None:
+            skews, timing = _skews, ""
+        elif sync == "auto" and skews is None and _max_frames is None:
+            skews, found = estimated_skews(folder, rec.n_frames, rec.fps, calibration=calibration, markerset=markerset,
+                                           marker_colours=marker_colours, colours=colours)
+            timing = "; ".join(x for x in (found, timing) if x)
         adapter = None
         learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
@@ -195,7 +273,10 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         was_tracking = False
         frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
         for fs in frame_iter:
-            sample = tracker.step(fs.images, fs.time_s)
+            if _max_frames is not None and fs.index >= _max_frames:
+                break
+            stamps = None if skews is None or fs.index >= len(skews) else fs.time_s + skews[fs.index]
+            sample = tracker.step(fs.images, fs.time_s, stamps)
             tracking = sample.state == TrackingState.TRACKING
             if not tracking:
                 waiting_message = sample.message
@@ -225,6 +306,7 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         times_s=np.asarray(times, dtype=np.float64), rate_hz=float(rate), positions_mm=np.stack(positions) * 1000.0,
         status=st, angles_deg={c: np.array([a.get(c, np.nan) for a in angles]) for c in ANGLE_COLUMNS},
         uv_px=np.stack(uv), identified=np.asarray(identified), subject=None if subject is None else str(subject),
+        timing=timing,
     )
 
 

@@ -13,6 +13,7 @@ recording/
 
 from __future__ import annotations
 
+import csv
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -344,3 +345,55 @@ class RecordingWriter:
         for w in self._writers:
             w.release()
         self._writers = []
+
+
+TIMESTAMPS_FILE = "timestamps.csv"
+
+
+def write_timestamps(path: Path, camera_names: Sequence[str], times_s: np.ndarray, stamps_s: np.ndarray) -> None:
+    """``frame,time,<cam1>,<cam2>...``: each frame set's instant and each camera's image instant,
+    seconds (the format ``rehab record`` writes; NaN is written empty: a missing image)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        table = csv.writer(fh)
+        table.writerow(["frame", "time", *camera_names])
+        for k, (t, row) in enumerate(zip(times_s, stamps_s)):
+            table.writerow([k, f"{t:.6f}", *("" if not np.isfinite(v) else f"{v:.6f}" for v in row)])
+
+
+def read_timestamps(folder: Path, camera_names: Sequence[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """A recording's ``timestamps.csv``: (F,) frame-set instants and (F, C) image instants of the
+    cameras ``camera_names`` (NaN where empty), seconds; None without the file. A file that does
+    not fit (other cameras, text for numbers, frames out of order) is a one-line
+    :class:`RecordingError`."""
+    path = Path(folder) / TIMESTAMPS_FILE
+    if not path.is_file():
+        return None
+    try:
+        rows = list(csv.reader(utf8_text(path, path.read_bytes(), RecordingError).splitlines()))
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read ({exc.strerror})") from None
+    fix = "fix it or move it out of the folder (then the cameras are taken as synchronized)"
+    if not rows or rows[0][:2] != ["frame", "time"]:
+        raise RecordingError(f"{path}: the first line must be frame,time,<camera names>: {fix}")
+    header = rows[0][2:]
+    missing = [n for n in camera_names if n not in header]
+    if missing:
+        raise RecordingError(f"{path} has no column for {', '.join(missing)}: {fix}")
+    cols = [2 + header.index(n) for n in camera_names]
+    times, stamps = [], []
+    for line, row in enumerate(rows[1:], start=2):
+        if not row:
+            continue
+        try:
+            if int(row[0]) != len(times) or len(row) != len(header) + 2:
+                raise ValueError
+            t = float(row[1])
+            s = [float(row[c]) if row[c].strip() else np.nan for c in cols]
+        except ValueError:
+            raise RecordingError(f"{path} line {line}: expected frame {len(times)}, its time and one time per "
+                                 f"camera in seconds: {fix}") from None
+        if not np.isfinite(t) or np.isinf(s).any():
+            raise RecordingError(f"{path} line {line}: times must be finite numbers of seconds: {fix}")
+        times.append(t)
+        stamps.append(s)
+    return np.asarray(times, dtype=np.float64), np.asarray(stamps, dtype=np.float64).reshape(-1, len(camera_names))

@@ -330,6 +330,11 @@ class Tracker:
         # pairs of markers of one colour: their windows can hold the same ball
         self._colour_pairs = np.argwhere(np.triu(self.colour[:, None] == self.colour[None, :], 1))
         self._colour_pairs_ij = tuple(np.ascontiguousarray(self._colour_pairs.T))
+        # rolling shutter: seconds per pixel row of each camera (0: global shutter)
+        self._row_s = np.array([c.rolling_shutter_s / c.size_px[1] for c in self.cameras])
+        self._rolling = bool(self._row_s.any())
+        self._skew_s: np.ndarray | None = None  # (C,) this frame set: each image's instant - the set's
+        self._moving_cam: np.ndarray | None = None  # (M, C, 3) the markers' camera-frame velocity, m/s
         self._image_shapes: list[tuple[int, ...]] = []
         self._image_size = np.zeros((0, 2), dtype=np.int64)
         self.reset()
@@ -341,6 +346,12 @@ class Tracker:
         self.state = TrackingState.WAITING
         self.positions = np.full((m, 3), np.nan)
         self.velocity = np.zeros((m, 3))
+        # images off the frame set's instant: each marker's point triangulated from its centroids as
+        # seen (not brought to the set's instant) and its change per frame set, the velocity that
+        # brings them there (free of its own correction, which fed back into the corrected
+        # positions' velocity and oscillated under a rolling shutter)
+        self._seen_pos = np.full((m, 3), np.nan)
+        self._seen_velocity = np.zeros((m, 3))
         self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
         self.frames_unmeasured = np.zeros(m, dtype=np.int64)
         self.seg_length = np.full((m, m), np.nan)  # learned distances on segments
@@ -392,13 +403,31 @@ class Tracker:
         self.measurer.table = table
 
     # ------------------------------------------------------------------ the step
-    def step(self, images: Sequence[np.ndarray], time_s: float | None = None) -> TrackerSample:
-        """Process one synchronized frame set (one BGR image per camera, calibration order)."""
+    def step(self, images: Sequence[np.ndarray], time_s: float | None = None,
+             stamps_s: np.ndarray | None = None) -> TrackerSample:
+        """Process one frame set (one BGR image per camera, calibration order) of instant ``time_s``.
+
+        ``stamps_s``: (C,) the instant of each image (its first row's under a rolling shutter), on
+        the clock of ``time_s``; NaN where unknown. Cameras that do not image at the set's instant
+        (free-running clocks, rolling shutters: ``Camera.rolling_shutter_s``) have their window
+        centroids brought to the set's instant before triangulation, with the motion that the
+        tracker predicts for each marker (its velocity from the last frame sets). None: every image
+        taken at ``time_s``.
+        """
         if len(images) != len(self.cameras):
             raise RehabError(f"the tracker has {len(self.cameras)} cameras but got {len(images)} images")
         index = self.frame_count
         self.frame_count += 1
         t = index / self.fps if time_s is None else float(time_s)
+        self._skew_s = None
+        if stamps_s is not None:
+            skew = np.nan_to_num(np.asarray(stamps_s, dtype=np.float64).reshape(-1) - t)  # (unknown: 0)
+            if skew.size != len(self.cameras):
+                raise RehabError(f"the tracker has {len(self.cameras)} cameras but got {skew.size} time stamps")
+            if skew.any():
+                self._skew_s = skew
+        if self._skew_s is None and self._rolling:
+            self._skew_s = np.zeros(len(self.cameras))
         message = ""
         n_points = 0
         self._windows_px = self._used_uv = None
@@ -465,7 +494,8 @@ class Tracker:
     def _exchange(self, i: int, j: int) -> None:
         """Exchange the names of markers i and j (everything the tracker holds about them); the
         hidden-marker estimator starts afresh from the measured markers."""
-        for a in (self.positions, self.velocity, self.status, self.frames_unmeasured, self._last_seen):
+        for a in (self.positions, self.velocity, self.status, self.frames_unmeasured, self._last_seen,
+                  self._seen_pos, self._seen_velocity):
             a[[i, j]] = a[[j, i]]
         self.seg_length[[i, j]] = self.seg_length[[j, i]]
         self.seg_length[:, [i, j]] = self.seg_length[:, [j, i]]
@@ -551,6 +581,8 @@ class Tracker:
         self.positions[ok] = points.p_world_m[idx[ok]]
         self.status[:] = np.where(ok, MarkerStatus.MEASURED, MarkerStatus.LOST)
         self.velocity[:] = 0.0
+        self._seen_pos[:] = np.nan
+        self._seen_velocity[:] = 0.0
         self.frames_unmeasured[:] = np.where(ok, 0, 1)
         self._learn_lengths(ok)
         self._last_seen[ok] = self.positions[ok]
@@ -606,6 +638,13 @@ class Tracker:
         has = np.isfinite(est_pos).all(axis=1) & np.isfinite(prev).all(axis=1)
         # a marker found again far from its estimate: the jump is the estimate's error, not motion
         self.velocity = np.where((has & ~found)[:, None], est_pos - prev, 0.0)
+        if self._skew_s is not None:
+            seen_now = np.where(measured[:, None], self._seen_now, np.nan)
+            both = np.isfinite(seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
+            self._seen_velocity = np.where(both[:, None], seen_now - self._seen_pos, self.velocity)
+            self._seen_pos = seen_now
+        else:
+            self._seen_pos[:] = np.nan
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
         self._last_seen[measured] = est_pos[measured]
         self._learn_lengths(measured)
@@ -639,7 +678,10 @@ class Tracker:
         uv_out.fill(np.nan)
         rad_out = np.empty((m_count, n_cams))
         rad_out.fill(np.nan)
-        uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
+        if self._skew_s is None:
+            uv, depth = self._stack.project(pred)  # predictions in each image (also for Q); NaN if unknown
+        else:  # where each camera sees the marker: at its image's instant (and its row's)
+            uv, depth = self._stack.project_camera_points(self._at_image_instants(pred))
         self._pred_uv, self._pred_depth = uv, depth
         focal = self._stack.focal_px
         safe_depth = np.maximum(depth, 1e-3)
@@ -663,6 +705,35 @@ class Tracker:
             self._windows(images, valid, uv, half, r_px, sigma_px, known, size, uv_out, rad_out)
             self._one_ball_one_marker(uv, sigma_px, r_px, uv_out, rad_out)
         return uv_out, rad_out
+
+    def _at_image_instants(self, pred: np.ndarray) -> np.ndarray:
+        """(M, C, 3) camera-frame positions of the markers predicted at each camera's image
+        instant: ``pred`` (the frame set's instant) moved by the marker's velocity for the image's
+        skew, plus, under a rolling shutter, the time to the predicted row. Keeps the prediction
+        and the velocity in camera frames for :meth:`_to_set_instant`."""
+        cam = self._stack.world_to_cameras(pred)
+        # velocity in m/s (the tracker's velocity is the displacement per frame set)
+        self._moving_cam = self._stack.rotate_to_cameras(self._seen_velocity * self.fps)
+        self._pred_cam = cam
+        dt = np.broadcast_to(self._skew_s, cam.shape[:2])
+        moved = cam + self._moving_cam * dt[..., None]
+        if self._rolling:
+            rows = self._stack.project_camera_points(moved)[0][..., 1]
+            dt = self._skew_s + self._row_s * np.nan_to_num(rows)
+            moved = cam + self._moving_cam * dt[..., None]
+        return moved
+
+    def _to_set_instant(self, xn: np.ndarray, uv: np.ndarray, moving: np.ndarray | None = None,
+                        cam: np.ndarray | None = None) -> np.ndarray:
+        """(M, C, 2) normalized centroids seen at each image's instant (``uv`` their pixel rows)
+        -> where each marker's motion puts them at the frame set's instant. ``moving``: (M, C, 3)
+        the markers' camera-frame velocities (m/s), ``cam`` their camera-frame positions (default:
+        the prediction's, :meth:`_at_image_instants`)."""
+        dt = self._skew_s + self._row_s * uv[..., 1]  # NaN where no centroid
+        cam = self._pred_cam if cam is None else cam
+        then = cam + (self._moving_cam if moving is None else moving) * dt[..., None]
+        with np.errstate(invalid="ignore"):  # (NaN for unknown markers: not seen)
+            return xn + cam[..., :2] / cam[..., 2:] - then[..., :2] / then[..., 2:]
 
     def _one_ball_one_marker(self, uv, sigma_px, r_px, uv_out, rad_out) -> None:
         """A ball that the windows of two markers of its colour both found (the same blob in one
@@ -837,6 +908,9 @@ class Tracker:
         stack = self._stack
         m_count, n_cams = uv.shape[:2]
         xn = stack.undistort_points(uv)
+        xn_seen = xn
+        if self._skew_s is not None:
+            xn = self._to_set_instant(xn, uv)
         seen = np.isfinite(xn[..., 0]) & known[:, None]
         ball_px = stack.focal_px * self.markerset.radius_m  # ball radius in pixels at 1 m
         # a partly hidden ball (blob much smaller than the ball at the predicted depth) has a
@@ -915,6 +989,21 @@ class Tracker:
         surprise = off_m / sigma  # distance to the prediction in sigmas
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
+        if self._skew_s is not None and measured.any():
+            # the same views as seen: their change since the last frame set is the markers' velocity
+            # over the last period (not the prediction's, a period older: it lagged a fast swing's
+            # acceleration), which brings the views to the set's instant once more
+            use = seen & measured[:, None]
+            self._seen_now = triangulate(xn_seen, use)
+            both = np.isfinite(self._seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
+            velocity = np.where(both[:, None], self._seen_now - self._seen_pos, self._seen_velocity)
+            moving = self._stack.rotate_to_cameras(velocity * self.fps)
+            redo = np.flatnonzero(measured)
+            xn_redo = self._to_set_instant(xn_seen[redo], uv[redo], moving[redo], self._pred_cam[redo])
+            new_pos[redo] = triangulate(xn_redo, use[redo])
+            xn[redo] = xn_redo
+        elif self._skew_s is not None:
+            self._seen_now = np.full((m_count, 3), np.nan)
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import tomllib
 from pathlib import Path
 
@@ -485,3 +487,17 @@ def test_check_camera_count():
         check_camera_count(cams, 1, "this computer", kind="cameras")
     with pytest.raises(CalibrationError, match="rec/ has 1 video or image folder: "):
         check_camera_count(cams, 1, "rec/")
+
+
+def test_rolling_shutter_readout_is_an_optional_key_of_both_formats(tmp_path):
+    cams = random_cameras(np.random.default_rng(3), 3)
+    cams[1] = dataclasses.replace(cams[1], rolling_shutter_s=0.025)
+    for name in ("c.toml", "c.yaml"):
+        path = tmp_path / name
+        (save_calibration_toml if name.endswith("toml") else save_calibration_opencv)(path, cams)
+        assert [c.rolling_shutter_s for c in load_calibration(path)] == [0.0, 0.025, 0.0]
+    assert "rolling_shutter_s" not in (tmp_path / "c.toml").read_text().split("[cam_2]")[0]  # 0: not written
+    text = (tmp_path / "c.toml").read_text().replace("rolling_shutter_s = 0.025", "rolling_shutter_s = -1.0")
+    (tmp_path / "bad.toml").write_text(text)
+    with pytest.raises(CalibrationError, match="rolling_shutter_s"):
+        load_calibration(tmp_path / "bad.toml")

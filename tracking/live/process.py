@@ -263,7 +263,7 @@ class TrackerLoop:
         t0 = self.clock()
         self.writer.header["heartbeat_s"] = t0
         try:
-            sample = self.tracker.step(frame.images, time_s)
+            sample = self.tracker.step(frame.images, time_s, frame.stamps_s)
         except Exception as exc:
             self._report("tracker", exc, index)
             return False

@@ -42,6 +42,8 @@ class SourceFrame:
         source_ms: time the source took to deliver them.
         time_s: the source's own time stamp of the set (NaN: the loop's ``frame_index / fps``).
         warnings: the source's current problems, one line each.
+        stamps_s: (C,) each image's own instant on the clock of ``time_s`` (NaN unknown), or None:
+            all taken at ``time_s`` (the tracker brings the views to the set's instant).
     """
 
     images: Sequence[np.ndarray]
@@ -50,6 +52,7 @@ class SourceFrame:
     source_ms: float
     time_s: float = math.nan
     warnings: tuple[str, ...] = ()
+    stamps_s: np.ndarray | None = None
 
 
 class FrameSource(Protocol):
@@ -294,7 +297,7 @@ class DeviceSource:
             log.warning("%s", self._ended)
             return None
         self._next += 1
-        frame = SourceFrame(fs.images, fs.truth_m, t1, (t1 - t0) * 1000.0, fs.time_s, self.warnings())
+        frame = SourceFrame(fs.images, fs.truth_m, t1, (t1 - t0) * 1000.0, fs.time_s, self.warnings(), fs.stamps_s)
         self._last = (frame_index, frame)
         return frame
 

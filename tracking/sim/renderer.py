@@ -774,7 +774,7 @@ class StudioRenderer:
 
     def render(
         self,
-        scene: SceneFrame,
+        scene: SceneFrame | Sequence[SceneFrame],
         *,
         exposure: float = 1.0,
         colour_cast: Sequence[float] = (1.0, 1.0, 1.0),
@@ -785,7 +785,8 @@ class StudioRenderer:
         """Render one frame set: every camera's image and the markers' visible pixel counts.
 
         Args:
-            scene: the primitives of this instant (world metres).
+            scene: the primitives of this instant (world metres); or one SceneFrame per camera
+                (cameras that image at their own instants: free-running clocks, rolling shutter).
             exposure: gain on all channels (brightness drift); applied before the 8-bit clamp.
             colour_cast: (3,) per-channel gains in R, G, B order (white balance error).
             noise_sigma: standard deviation of additive Gaussian sensor noise in 8-bit units.
@@ -801,7 +802,11 @@ class StudioRenderer:
         # game's window context) may have left none, or its own, current.
         ctx.__enter__()
         vis = bool(with_visibility)
-        self._upload_scene(scene)
+        per_camera = not isinstance(scene, SceneFrame)
+        if per_camera and len(scene) != len(self._cameras):
+            raise RehabError(f"StudioRenderer.render: {len(scene)} scenes for {len(self._cameras)} cameras")
+        if not per_camera:
+            self._upload_scene(scene)
         gain = tuple(float(exposure) * float(g) for g in colour_cast)
         for prog in self._programs:
             prog["u_gain"].value = gain
@@ -822,7 +827,9 @@ class StudioRenderer:
         fbo.scissor = None
         fbo.viewport = (0, 0, *self._ideal_size)
         fbo.clear(0.0, 0.0, 0.0, 1.0, depth=1.0)
-        for vp, uniform_bytes in zip(self._ideal_vps, self._camera_uniform_bytes):
+        for c, (vp, uniform_bytes) in enumerate(zip(self._ideal_vps, self._camera_uniform_bytes)):
+            if per_camera:
+                self._upload_scene(scene[c])
             fbo.viewport = vp
             fbo.scissor = vp  # guard-band clipping must not spill into a neighbour's viewport
             for uniform, data in uniform_bytes:
@@ -839,7 +846,7 @@ class StudioRenderer:
         out_fbo = self._fbo_resolved[vis]
         if self._distorted:
             out_fbo = self._post_pass(vis)
-        return self._read(out_fbo, vis, scene.n_markers)
+        return self._read(out_fbo, vis, scene[0].n_markers if per_camera else scene.n_markers)
 
     def release(self) -> None:
         """Free every GL object (and the context if this renderer created it). Idempotent."""

@@ -9,6 +9,7 @@ sees the truth: it gets only the images, as from real cameras.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,11 +20,14 @@ from tqdm import tqdm
 
 from calibration.camera import Camera
 from tracking.markerset import MarkerSet, load_markerset
-from tracking.recording import FrameSet, RecordingWriter
+from calibration.files import save_calibration_toml
+from tracking.recording import FrameSet, RecordingWriter, write_timestamps
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
+from tracking.sim.clocks import CameraClocks, rolling_marker_positions
 from tracking.sim.motions import Motion, load_motion
 from tracking.sim.renderer import StudioRenderer
 from tracking.sim.rigs import load_rig
+from tracking.sim.scene import SceneFrame
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +52,26 @@ class SimulationSettings:
     seed: int = 0
     images: bool = False
     msaa: int | None = None
+    camera_offsets: tuple[float, ...] | str | None = None
+    clock_drift: float = 0.0
+    rolling_shutter_s: float = 0.0
+
+    def clocks(self, n_cameras: int) -> CameraClocks | None:
+        """The cameras' timing (:mod:`tracking.sim.clocks`): ``camera_offsets`` one phase per
+        camera in frame periods, or ``"random"`` (drawn in +-0.5 from the seed); ``clock_drift``
+        the largest rate difference (each camera's drawn in +-); None: synchronized global shutters."""
+        if self.camera_offsets is None and self.clock_drift == 0 and self.rolling_shutter_s == 0:
+            return None
+        offsets = self.camera_offsets
+        if isinstance(offsets, str) or offsets is None:
+            offsets = None if offsets == "random" else (0.0,) * n_cameras
+        elif len(offsets) != n_cameras:
+            from tracking.errors import ContentError
+
+            raise ContentError(f"--camera-offsets gives {len(offsets)} offsets for {n_cameras} cameras: give one per "
+                               f"camera (fractions of a frame period) or 'random'")
+        return CameraClocks.drawn(n_cameras, self.seed, offsets=offsets, drift=self.clock_drift,
+                                  readout_s=self.rolling_shutter_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,6 +86,8 @@ class SimFrame:
         merged: (C, M) bool, the marker's disc touches that of another marker of the same colour in
             that camera (one blob shows both: it is a view of neither); None when rendered
             without visibility.
+        stamps_s: (C,) instant of each camera's image (its first row's), seconds; None when all
+            cameras imaged the frame set's instant (``frames.time_s``, where ``markers_m`` are).
     """
 
     frames: FrameSet
@@ -69,6 +95,7 @@ class SimFrame:
     markers_m: np.ndarray
     visible_fraction: np.ndarray
     merged: np.ndarray | None
+    stamps_s: np.ndarray | None = None
 
 
 def merged_markers(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float, colour_index: np.ndarray) -> np.ndarray:
@@ -121,13 +148,21 @@ class Studio:
 
     def render(self, pose: Pose, index: int, time_s: float, *, exposure: float = 1.0,
                colour_cast: Sequence[float] = (1.0, 1.0, 1.0), noise_sigma: float = 0.0,
-               seed: int = 0, with_visibility: bool = True) -> SimFrame:
-        scene = self.body.scene(pose)
+               seed: int = 0, with_visibility: bool = True,
+               camera_scenes: tuple[Sequence[SceneFrame], np.ndarray, np.ndarray] | None = None) -> SimFrame:
+        """Render ``pose`` at ``time_s``; ``camera_scenes``: instead, (one scene per camera, (C, M, 3)
+        marker centres drawn in each, (C,) stamps) of cameras imaging at their own instants
+        (:meth:`timed_scenes`); ``pose`` then gives the truth at ``time_s``."""
         markers = self.body.markers_m(pose)
+        scene = self.body.scene(pose) if camera_scenes is None else list(camera_scenes[0])
         res = self.renderer.render(scene, exposure=exposure, colour_cast=colour_cast,
                                    noise_sigma=noise_sigma, seed=seed, with_visibility=with_visibility)
         if res.marker_pixels is not None:
-            expected = expected_marker_pixels(self.cameras, markers, self.markerset.radius_m)
+            if camera_scenes is None:
+                expected = expected_marker_pixels(self.cameras, markers, self.markerset.radius_m)
+            else:
+                expected = np.concatenate([expected_marker_pixels([cam], drawn, self.markerset.radius_m)
+                                           for cam, drawn in zip(self.cameras, camera_scenes[1])])
             with np.errstate(divide="ignore", invalid="ignore"):
                 vis = np.where(expected > 0, res.marker_pixels / expected, 0.0)
             vis = np.clip(vis, 0.0, 1.0)
@@ -136,13 +171,35 @@ class Studio:
         merged = None  # an evaluation figure, like the visibility (the live source needs neither)
         if with_visibility:
             merged = merged_markers(self.cameras, markers, self.markerset.radius_m, self.markerset.colour_index)
-        return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis, merged)
+        stamps = None if camera_scenes is None else np.asarray(camera_scenes[2], dtype=np.float64)
+        return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis, merged, stamps)
+
+    def timed_scenes(self, motion: Motion, index: int, fps: float, clocks: CameraClocks
+                     ) -> tuple[list[SceneFrame], np.ndarray, np.ndarray]:
+        """Each camera's scene of frame set ``index`` on free-running clocks with rolling shutters
+        (:mod:`tracking.sim.clocks`): the body at the instant of the camera's middle row, each
+        marker ball at the instant of its own row. Returns (scenes, (C, M, 3) drawn marker centres,
+        (C,) stamps: each camera's first-row instant)."""
+        stamps = clocks.capture_times(index, fps)
+        readout = np.asarray(clocks.readout_s)
+        markers = rolling_marker_positions(self.cameras, lambda t: self.body.markers_m(motion.pose_at(t)),
+                                           stamps, readout)
+        scenes = []
+        for c in range(len(self.cameras)):
+            scene = self.body.scene(motion.pose_at(float(stamps[c] + readout[c] / 2)))
+            centre = scene.sphere_centre_m.copy()
+            idx = np.asarray(scene.sphere_marker_index)
+            ball = idx >= 0
+            centre[ball] = markers[c][idx[ball]]
+            scenes.append(dataclasses.replace(scene, sphere_centre_m=centre))
+        return scenes, markers, stamps
 
     def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
              brightness_drop: float = 0.0, colour_cast: Sequence[float] | None = None, seed: int = 0,
-             with_visibility: bool = True, drift_start_s: float = 0.0, drift_s: float | None = None
-             ) -> Iterator[SimFrame]:
-        """Render a motion frame by frame.
+             with_visibility: bool = True, drift_start_s: float = 0.0, drift_s: float | None = None,
+             clocks: CameraClocks | None = None) -> Iterator[SimFrame]:
+        """Render a motion frame by frame (``clocks``: cameras on free-running clocks and rolling
+        shutters, :meth:`timed_scenes`; the truth stays at the frame sets' nominal instants).
 
         Lighting drifts linearly from full exposure and no cast at ``drift_start_s`` to
         ``1 - brightness_drop`` and ``colour_cast`` ``drift_s`` seconds later (default: over the
@@ -155,8 +212,9 @@ class Studio:
         for i in range(n):
             t = i / fps
             frac = float(np.clip((t - drift_start_s) / ramp_s, 0.0, 1.0)) if ramp_s > 0 else float(t >= drift_start_s)
+            timed = None if clocks is None or clocks.synchronous else self.timed_scenes(motion, i, fps, clocks)
             yield self.render(
-                motion.pose_at(t), i, t,
+                motion.pose_at(t), i, t, camera_scenes=timed,
                 exposure=1.0 - brightness_drop * frac,
                 colour_cast=tuple(1.0 + (cast_end - 1.0) * frac),
                 noise_sigma=noise_sigma,
@@ -205,17 +263,29 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
         writer = RecordingWriter(out_dir, studio.cameras, settings.fps, images=settings.images)
         truth, vis_rows = [], []
         n = studio.n_frames(motion, settings.fps, settings.seconds)
+        clocks = settings.clocks(len(studio.cameras))
         frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
                              brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
-                             seed=settings.seed, drift_start_s=settings.drift_start_s, drift_s=settings.drift_s)
+                             seed=settings.seed, drift_start_s=settings.drift_start_s, drift_s=settings.drift_s,
+                             clocks=clocks)
+        stamps = []
         try:
             for sf in tqdm(frames, total=n, unit="frame", desc="simulating", disable=not progress):
                 writer.write(sf.frames.images)
                 truth.append(sf.markers_m)
                 vis_rows.append(sf.visible_fraction)
+                stamps.append(np.full(len(studio.cameras), sf.frames.time_s) if sf.stamps_s is None else sf.stamps_s)
         finally:
             writer.close()
         ms = studio.markerset
+        timing = {}
+        if clocks is not None:
+            timing["camera_clocks"] = clocks.as_meta()
+            times = np.arange(len(stamps)) / settings.fps
+            write_timestamps(out_dir / "timestamps.csv", [c.name for c in studio.cameras], times, np.stack(stamps))
+            if any(clocks.readout_s):  # the calibration says what the cameras do (docs/FILES.md)
+                save_calibration_toml(out_dir / "calibration.toml", [
+                    dataclasses.replace(c, rolling_shutter_s=r) for c, r in zip(studio.cameras, clocks.readout_s)])
         writer.write_meta(
             ms.name, ms.rgb,
             source="simulator",
@@ -228,6 +298,7 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
             brightness_drop=settings.brightness_drop,
             colour_cast=list(settings.colour_cast) if settings.colour_cast else None,
             seed=settings.seed,
+            **timing,
         )
     positions_m = np.stack(truth)
     n_frames = len(positions_m)

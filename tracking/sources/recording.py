@@ -38,6 +38,10 @@ class RecordingSource:
         self.fps = self._rec.fps
         self.meta = self._rec.meta
         self.n_frames = self._rec.n_frames
+        from tracking.offline import image_skews
+
+        # each image's instant from timestamps.csv when the recording has one, as rehab track
+        self._skews, self.timing = image_skews(self._rec)
         self._index = 0
         self._end = ""
 
@@ -68,7 +72,10 @@ class RecordingSource:
                 raise SourceError(self._end)
             return None
         t = self._index / self.fps
-        fs = SourceFrameSet(self._index, t, tuple(images), np.full(len(images), t), np.zeros(len(images), bool))
+        stamps = np.full(len(images), t)
+        if self._skews is not None and self._index < len(self._skews):
+            stamps += np.nan_to_num(self._skews[self._index])
+        fs = SourceFrameSet(self._index, t, tuple(images), stamps, np.zeros(len(images), bool))
         self._index += 1
         return fs
 
