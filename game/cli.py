@@ -319,6 +319,10 @@ def _add_play(sub) -> None:
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
+    p.add_argument("--render-scale", type=number(0.25, 1.0), default=None, metavar="0.25..1",
+                   help="fixed share of the window's pixels (each axis) the 3D views render, e.g. 1.0 for full "
+                   "resolution always; default: dynamic, from 1.0 down to 0.5 while frames take too long (a busy "
+                   "machine), then back up; the text always stays at full resolution")
     p.add_argument("--game", default=None,
                    help="open this exercise game (content/games name or YAML) for --patient on --side")
     p.add_argument("--auto", action="store_true",
@@ -419,7 +423,8 @@ def _cmd_play(args) -> int:
 
     options = PlayOptions(
         # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
-        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False),
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False,
+                          render_scale=args.render_scale),
         source=source,
         headless=args.headless,
         seconds=seconds,
