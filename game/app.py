@@ -55,8 +55,9 @@ class Settings:
         max_frame_s: longest frame time the logic catches up on (a stall is not replayed).
         show_fps: draw the frame rate in the corner.
         title: window caption.
-        render_scale: a fixed scale (0 < s <= 1) of the 3D views' pixels; None: dynamic, lowered
-            down to half when frames take longer than the frame budget (:mod:`game.gfx.render_scale`).
+        render_scale: a fixed scale (0 < s <= 1) of the 3D views' pixels along each axis; None:
+            dynamic, lowered down to half when frames take longer than the frame budget
+            (:mod:`game.gfx.render_scale`; on llvmpipe the upscale costs more than it saves).
     """
 
     window_px: tuple[int, int] = (1280, 720)
@@ -65,7 +66,7 @@ class Settings:
     max_frame_s: float = 0.25
     show_fps: bool = True
     title: str = "rehab: motion capture for rehabilitation"
-    render_scale: float | None = None
+    render_scale: float | None = 1.0
 
     def __post_init__(self) -> None:
         if self.update_hz <= 0 or self.max_fps < 0 or self.max_frame_s <= 0:

@@ -87,35 +87,33 @@ def _gl_flush() -> None:
 
 _UPSCALE_VS = """
 #version 330
-uniform vec2 u_uv_max;
 out vec2 v_uv;
 void main() {
-    vec2 c = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
-    v_uv = c * u_uv_max;
-    gl_Position = vec4(c * 2.0 - 1.0, 0.0, 1.0);
+    v_uv = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
+    gl_Position = vec4(v_uv * 2.0 - 1.0, 0.0, 1.0);
 }
 """
 
 _UPSCALE_FS = """
 #version 330
 uniform sampler2D u_texture;
-uniform vec4 u_uv_clamp;
 in vec2 v_uv;
 out vec4 f_colour;
 void main() {
-    f_colour = vec4(texture(u_texture, clamp(v_uv, u_uv_clamp.xy, u_uv_clamp.zw)).rgb, 1.0);
+    f_colour = texture(u_texture, v_uv);   // a bare texture fetch: llvmpipe has a fast path for it
 }
 """
 
 
 class _ScaledTarget:
-    """An offscreen colour texture and depth buffer of the window's size: a 3D view drawn at a
-    reduced scale goes into its bottom-left corner, then is upscaled (linear) into the window."""
+    """An offscreen colour texture and depth buffer of a reduced-scale 3D view's size, upscaled
+    (linear) into the window. RGB: the window's alpha stays 1 whatever the view blended."""
 
     def __init__(self, ctx: moderngl.Context, size_px: tuple[int, int]) -> None:
         self.size_px = size_px
-        self.colour = ctx.texture(size_px, 4)
+        self.colour = ctx.texture(size_px, 3)
         self.colour.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.colour.repeat_x = self.colour.repeat_y = False   # the edges' texels, not the far side's
         self.depth = ctx.depth_renderbuffer(size_px)
         self.fbo = ctx.framebuffer(color_attachments=[self.colour], depth_attachment=self.depth)
         self.prog = ctx.program(vertex_shader=_UPSCALE_VS, fragment_shader=_UPSCALE_FS)
@@ -197,23 +195,21 @@ class Screen:
             finally:
                 self.ctx.viewport = full
             return
-        if self._scaled is None:
-            self._scaled = _ScaledTarget(self.ctx, self.size_px)
-        st = self._scaled
         sw, sh = min(max(1, round(w * scale)), w), min(max(1, round(h * scale)), h)
+        if self._scaled is None or self._scaled.size_px != (sw, sh):   # a new size only when the scale steps
+            if self._scaled is not None:
+                self._scaled.release()
+            self._scaled = _ScaledTarget(self.ctx, (sw, sh))
+        st = self._scaled
         st.fbo.use()
         self.ctx.viewport = (0, 0, sw, sh)
-        st.fbo.clear(*self._clear_rgb, 1.0, depth=1.0)   # the whole surface: a cheap tile clear on llvmpipe
+        st.fbo.clear(*self._clear_rgb, 1.0, depth=1.0)
         try:
             yield (0, 0, sw, sh)
         finally:
             self.target.use()
             self.ctx.viewport = (x, y, w, h)
             self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
-            tw, th = st.size_px
-            st.prog["u_uv_max"].value = (sw / tw, sh / th)
-            # sample no further than the centres of the drawn edge texels (beyond: last frame's pixels)
-            st.prog["u_uv_clamp"].value = (0.5 / tw, 0.5 / th, (sw - 0.5) / tw, (sh - 0.5) / th)
             st.colour.use(0)
             st.prog["u_texture"].value = 0
             st.vao.render(moderngl.TRIANGLE_STRIP, vertices=4)

@@ -148,3 +148,16 @@ def test_a_3d_view_at_half_scale_fills_its_rectangle_upscaled_and_the_text_stays
     text_full, text_half = full[:, 160:], half[:, 160:]
     assert (text_full.sum(axis=2) > 400).sum() > 50
     assert (text_full == text_half).all()
+
+
+def test_the_play_command_takes_auto_or_a_scale_and_defaults_to_full_resolution(capsys):
+    from game.cli import build_parser
+
+    parse = build_parser().parse_args
+    assert parse(["play"]).render_scale == 1.0
+    assert parse(["play", "--render-scale", "auto"]).render_scale is None
+    assert parse(["play", "--render-scale", "0.5"]).render_scale == 0.5
+    for bad in ("2", "0.1", "nan", "half"):
+        with pytest.raises(SystemExit):
+            parse(["play", "--render-scale", bad])
+        assert "--render-scale" in capsys.readouterr().err
