@@ -33,6 +33,7 @@ from typing import Callable, Iterable, Protocol
 import pygame
 
 from game.gfx.canvas import Canvas
+from game.gfx.render_scale import RenderScaler
 from game.gfx.screen import Screen
 from game.gfx import theme
 from game.input import Action, InputEvent, InputMapper, Press
@@ -54,6 +55,9 @@ class Settings:
         max_frame_s: longest frame time the logic catches up on (a stall is not replayed).
         show_fps: draw the frame rate in the corner.
         title: window caption.
+        render_scale: a fixed scale (0 < s <= 1) of the 3D views' pixels along each axis; None:
+            dynamic, lowered down to half when frames take longer than the frame budget
+            (:mod:`game.gfx.render_scale`; on llvmpipe the upscale costs more than it saves).
     """
 
     window_px: tuple[int, int] = (1280, 720)
@@ -62,10 +66,13 @@ class Settings:
     max_frame_s: float = 0.25
     show_fps: bool = True
     title: str = "rehab: motion capture for rehabilitation"
+    render_scale: float | None = 1.0
 
     def __post_init__(self) -> None:
         if self.update_hz <= 0 or self.max_fps < 0 or self.max_frame_s <= 0:
             raise ValueError("Settings: update_hz and max_frame_s must be positive, max_fps >= 0")
+        if self.render_scale is not None and not 0.0 < self.render_scale <= 1.0:
+            raise ValueError("Settings: render_scale is in (0, 1] or None")
 
 
 class FixedStep:
@@ -132,12 +139,15 @@ class Frame:
         canvas: the 2D layer (between ``canvas.begin()`` and ``canvas.end()``, done by the app).
         alpha: fraction of an update step since the last update, for interpolation.
         size_px: (width, height) of the frame.
+        render_scale: share of the pixels (along each axis) 3D views render; pass it to
+            :meth:`Screen.view_3d`.
     """
 
     screen: Screen
     canvas: Canvas
     alpha: float
     size_px: tuple[int, int]
+    render_scale: float = 1.0
 
 
 class Scene(Protocol):
@@ -220,6 +230,7 @@ class RunSummary:
         interval_p50_ms, interval_p99_ms, interval_max_ms: the median, the 99th percentile and the
             longest time between the ends of two frames (a stall the patient sees).
         slowest: where the longest frame spent its time (stage: ms, ...).
+        scale_mean, scale_min: the 3D views' render scale over the frames (1.0: full resolution).
     """
 
     frames: int
@@ -232,6 +243,8 @@ class RunSummary:
     interval_max_ms: float = math.nan
     slowest: str = ""
     interval_p50_ms: float = math.nan
+    scale_mean: float = 1.0
+    scale_min: float = 1.0
 
     @property
     def fps(self) -> float:
@@ -245,6 +258,8 @@ class RunSummary:
             stalls = (f"; frame interval median {self.interval_p50_ms:.0f} ms, p99 {self.interval_p99_ms:.0f} ms, "
                       f"longest {self.interval_max_ms:.0f} ms"
                       + (f" ({self.slowest})" if self.slowest else ""))
+        if self.scale_min < 1.0:
+            stalls += f"; 3D at {self.scale_mean:.2f} of full resolution on average, {self.scale_min:.2f} at least"
         return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
                 f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
                 f"{self.cpu_ms:.1f} ms CPU per frame{stalls}){shot}")
@@ -277,6 +292,8 @@ class App:
         self.running = True
         self.show_fps = settings.show_fps
         self.rate = RateMeter()
+        # the frame budget: the capped rate's period (uncapped: 60 frames/s)
+        self.scaler = RenderScaler(1.0 / (settings.max_fps or 60.0), fixed=settings.render_scale)
         self.frames = 0
         self._step = FixedStep(1.0 / settings.update_hz, settings.max_frame_s, clock())
         self._last_frame_s = clock()
@@ -284,6 +301,7 @@ class App:
         self._pending = False  # a frame drawn and flushed but not presented yet
         self._loading = ""     # words shown while a scene is being opened (:meth:`open`)
         self.intervals: deque[float] = deque(maxlen=100_000)   # frame-to-frame times of the run, seconds
+        self.scales: deque[float] = deque(maxlen=100_000)      # the render scale of each frame
         self._slowest: tuple = (0.0, (), 0.0)   # the longest interval, its stages, the wait before it
         self._timed_from = 0                     # frames before this one are not searched for the slowest
 
@@ -373,7 +391,7 @@ class App:
         for _ in range(steps):
             scene.update(dt_s)
         stages.append(self.clock())
-        frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+        frame = self._frame()
         scene.prepare(frame)  # while the previous frame is rasterized
         stages.append(self.clock())
         self.present()
@@ -388,9 +406,12 @@ class App:
         stages.append(end_s)
         interval_s = end_s - self._last_frame_s
         self.intervals.append(interval_s)
+        self.scales.append(frame.render_scale)
         if interval_s > self._slowest[0] and self.frames > self._timed_from:
             self._slowest = (interval_s, tuple(b - a for a, b in zip(stages, stages[1:])), start_s - self._last_frame_s)
         self.rate.add(end_s - self._last_frame_s, end_s - start_s)
+        # the time to make the frame, waiting for the last one's pixels included (not the pacing sleep)
+        self.scaler.observe(end_s - start_s)
         self._work_total_s += end_s - start_s
         self._last_frame_s = end_s
         self.frames += 1
@@ -405,7 +426,7 @@ class App:
     def render(self, scene: BaseScene, frame: Frame | None = None) -> None:
         """Draw ``scene`` (3D pass, then the 2D layer and the overlay) into the screen's target."""
         if frame is None:
-            frame = Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px)
+            frame = self._frame()
             scene.prepare(frame)
         # A whole-target clear is a fast tile clear on llvmpipe: cheaper than painting the part a
         # 3D pass leaves as a large 2D shape (tried: ~1.5-3 ms more per 1280x720 frame).
@@ -418,6 +439,9 @@ class App:
         if self.show_fps:
             self._draw_fps()
         self.canvas.end()
+
+    def _frame(self) -> Frame:
+        return Frame(self.screen, self.canvas, self._step.alpha, self.screen.size_px, self.scaler.scale)
 
     def _draw_loading(self, words: str) -> None:
         w, h = self.screen.size_px
@@ -497,7 +521,9 @@ class App:
         _, parts, wait = self._slowest
         names = ("events", "tracker link", "updates", "prepare", "present", "draw")
         slowest = ", ".join(f"{k} {1000 * v:.0f}" for k, v in (("before", wait), *zip(names, parts)) if v > 0.002)
-        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest, p50)
+        scales = list(self.scales)[-n:] if n else [1.0]
+        return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest, p50,
+                          sum(scales) / len(scales), min(scales))
 
     def close(self) -> None:
         """Exit every scene and release the canvas (the screen and services belong to the caller)."""

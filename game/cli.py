@@ -331,6 +331,11 @@ def check_motion(motion: str | None) -> None:
                          "or give a motion YAML file")
 
 
+def _render_scale(text: str) -> float | None:
+    """``--render-scale``: ``auto`` (None: dynamic) or a fixed scale."""
+    return None if text.strip().lower() == "auto" else number(0.25, 1.0)(text)
+
+
 def _add_play(sub) -> None:
     p = sub.add_parser(
         "play",
@@ -346,6 +351,11 @@ def _add_play(sub) -> None:
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
+    p.add_argument("--render-scale", type=_render_scale, default=1.0, metavar="auto|0.25..1",
+                   help="share of the window's pixels (each axis) the 3D views render, upscaled; auto: from 1.0 "
+                   "down to 0.5 while frames take longer than 1/--max-fps, then back up (for a GPU: on the software "
+                   "rasterizer the upscale costs more than it saves, docs/APP.md); the text stays at full "
+                   "resolution (default: 1.0)")
     p.add_argument("--game", default=None,
                    help="open this exercise game (content/games name or YAML) for --patient on --side")
     p.add_argument("--auto", action="store_true",
@@ -446,7 +456,8 @@ def _cmd_play(args) -> int:
 
     options = PlayOptions(
         # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
-        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False),
+        settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False,
+                          render_scale=args.render_scale),
         source=source,
         headless=args.headless,
         seconds=seconds,

@@ -17,8 +17,9 @@ import logging
 import os
 import sys
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable, Iterator, Mapping
 
 import cv2
 import moderngl
@@ -84,6 +85,45 @@ def _gl_flush() -> None:
     _gl_flush_function()()
 
 
+_UPSCALE_VS = """
+#version 330
+out vec2 v_uv;
+void main() {
+    v_uv = vec2(float(gl_VertexID & 1), float(gl_VertexID >> 1));
+    gl_Position = vec4(v_uv * 2.0 - 1.0, 0.0, 1.0);
+}
+"""
+
+_UPSCALE_FS = """
+#version 330
+uniform sampler2D u_texture;
+in vec2 v_uv;
+out vec4 f_colour;
+void main() {
+    f_colour = texture(u_texture, v_uv);
+}
+"""
+
+
+class _ScaledTarget:
+    """An offscreen colour texture and depth buffer of a reduced-scale 3D view's size, upscaled
+    (linear) into the window. RGB: the window's alpha stays 1 whatever the view blended."""
+
+    def __init__(self, ctx: moderngl.Context, size_px: tuple[int, int]) -> None:
+        self.size_px = size_px
+        self.colour = ctx.texture(size_px, 3)
+        self.colour.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.colour.repeat_x = self.colour.repeat_y = False   # the edges' texels, not the far side's
+        self.depth = ctx.depth_renderbuffer(size_px)
+        self.fbo = ctx.framebuffer(color_attachments=[self.colour], depth_attachment=self.depth)
+        self.prog = ctx.program(vertex_shader=_UPSCALE_VS, fragment_shader=_UPSCALE_FS)
+        self.vao = ctx.vertex_array(self.prog, [])
+
+    def release(self) -> None:
+        for obj in (self.vao, self.prog, self.fbo, self.depth, self.colour):
+            obj.release()
+
+
 class Screen:
     """An OpenGL context and the framebuffer a frame is drawn into.
 
@@ -105,6 +145,8 @@ class Screen:
         self.headless = headless
         self._owned = owned
         self._closed = False
+        self._clear_rgb = (0.0, 0.0, 0.0)
+        self._scaled: _ScaledTarget | None = None
 
     @property
     def aspect(self) -> float:
@@ -126,12 +168,52 @@ class Screen:
         self.target.use()
         self.ctx.viewport = (0, 0, *self.size_px)
         if clear_rgb is not None:
+            self._clear_rgb = tuple(float(c) for c in clear_rgb)
             if depth:
                 self.target.clear(*clear_rgb, 1.0, depth=1.0)
             else:   # glClear honours the depth mask: the colour alone
                 self.target.depth_mask = False
                 self.target.clear(*clear_rgb, 1.0)
                 self.target.depth_mask = True
+
+    @contextmanager
+    def view_3d(self, viewport, scale: float = 1.0) -> Iterator[tuple[int, int, int, int]]:
+        """Draw a 3D view into ``viewport`` (a :class:`game.gfx.view3d.Viewport`, window pixels)
+        at ``scale`` of its pixels along each axis; yields the GL viewport the drawing is in.
+
+        At 1.0 the view is drawn straight into the frame's target. Below, it is drawn into an
+        offscreen framebuffer (cleared to the frame's clear colour and the far depth), then
+        stretched with linear filtering over ``viewport``: the rasterizer's work falls with the
+        square of the scale, while whatever is drawn after (the 2D text) stays at full resolution.
+        """
+        x, y, w, h = viewport.gl(self.size_px[1])
+        full = (0, 0, *self.size_px)
+        if scale >= 1.0 or w <= 0 or h <= 0:
+            self.ctx.viewport = (x, y, w, h)
+            try:
+                yield (x, y, w, h)
+            finally:
+                self.ctx.viewport = full
+            return
+        sw, sh = min(max(1, round(w * scale)), w), min(max(1, round(h * scale)), h)
+        if self._scaled is None or self._scaled.size_px != (sw, sh):   # a new size only when the scale steps
+            if self._scaled is not None:
+                self._scaled.release()
+            self._scaled = _ScaledTarget(self.ctx, (sw, sh))
+        st = self._scaled
+        st.fbo.use()
+        self.ctx.viewport = (0, 0, sw, sh)
+        st.fbo.clear(*self._clear_rgb, 1.0, depth=1.0)
+        try:
+            yield (0, 0, sw, sh)
+        finally:
+            self.target.use()
+            self.ctx.viewport = (x, y, w, h)
+            self.ctx.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
+            st.colour.use(0)
+            st.prog["u_texture"].value = 0
+            st.vao.render(moderngl.TRIANGLE_STRIP, vertices=4)
+            self.ctx.viewport = full
 
     def flush(self) -> None:
         """Hand the commands issued so far to the rasterizer without waiting for them (glFlush):
@@ -172,6 +254,8 @@ class Screen:
         if self._closed:
             return
         self._closed = True
+        if self._scaled is not None:
+            self._scaled.release()
         for obj in self._owned:
             obj.release()
         if self.headless:

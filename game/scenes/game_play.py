@@ -434,16 +434,12 @@ class GameScene(BaseScene):
     def render_3d(self, frame: Frame) -> None:
         if self.avatar is None:
             return
-        ctx = frame.screen.ctx
-        ctx.viewport = self.view.gl(frame.size_px[1])
-        try:
+        with frame.screen.view_3d(self.view, frame.render_scale):
             # the gradient at the far plane resets the view's depth (the frame's clear spares it:
             # nothing else of the frame is depth-tested)
             self.avatar.renderer.render_background(depth=not self.clear_depth)
             if self._prepared is not None:
                 self.avatar.renderer.draw(self._prepared)
-        finally:
-            ctx.viewport = (0, 0, *frame.size_px)
 
     def _project(self, p_m) -> tuple[float, float] | None:
         if self.proj_m is None:

@@ -361,13 +361,9 @@ class LiveScene(BaseScene):
     def render_3d(self, frame: Frame) -> None:
         if self.avatar is None:
             return
-        ctx = frame.screen.ctx
         v = self.layout.view
-        ctx.viewport = v.gl(frame.size_px[1])
-        try:
+        with frame.screen.view_3d(v, frame.render_scale):
             pose = self.avatar.render((v.w, v.h), self.app.clock())
-        finally:
-            ctx.viewport = (0, 0, *frame.size_px)
         if pose is not None:
             # The avatar's still mirror camera: markers, the hand target and the pointer use it too.
             self.view_m, self.proj_m = self.avatar.camera(pose, v.aspect)

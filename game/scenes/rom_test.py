@@ -490,13 +490,9 @@ class RomTestScene(BaseScene):
     def render_3d(self, frame: Frame) -> None:
         if self.avatar is None:
             return
-        ctx = frame.screen.ctx
         v = self.view
-        ctx.viewport = v.gl(frame.size_px[1])
-        try:
+        with frame.screen.view_3d(v, frame.render_scale):
             self.avatar.render((v.w, v.h), self.app.clock())
-        finally:
-            ctx.viewport = (0, 0, *frame.size_px)
 
     def status_line(self) -> tuple[str, tuple]:
         """What the scene says now, and its colour."""
