@@ -152,7 +152,8 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         from game.scenes.game_menu import ChooseGameScene
 
         return PatientsScene(db_path, lambda pid: ChooseGameScene(pid, open_game, side=options.side,
-                                                                  max_level=options.max_level, db_path=db_path),
+                                                                  max_level=options.max_level, db_path=db_path,
+                                                                  account=options.user or ""),
                              title="Games: choose the patient")
 
     def open_calibrate():

@@ -135,3 +135,25 @@ def test_the_rom_scene_audits_the_signed_in_therapist_with_each_accepted_result(
     with Database(clinic) as db:
         rows = [a for a in audit_rows(db, "P001") if a.action == "accept"]
     assert [(a.account, uid in a.what) for a in rows] == [("anna", True)]
+
+
+def test_a_change_of_a_games_limits_on_the_menu_is_audited_with_the_therapist_and_the_values(clinic):
+    """Issue 28: who changed a patient's game limits, when and to what, is in the audit record."""
+    from game.input import Action, Press
+    from game.scenes.game_menu import ChooseGameScene
+
+    class FakeApp:
+        def push(self, scene):
+            pass
+
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: None, db_path=clinic, account="anna")
+    menu.app = FakeApp()
+    menu.handle(Press(Action.SELECT, True))     # the first game's column
+    menu.handle(Press(Action.DOWN, True))       # Play -> the first limit (the lowest level)
+    menu.handle(Press(Action.RIGHT, True))      # one step up
+    with Database(clinic) as db:
+        rows = [r for r in audit_rows(db, "P001") if r.action == "limits"]
+    assert len(rows) == 1 and rows[0].account == "anna" and rows[0].patient_id == "P001"
+    game = menu.games[0]
+    level = 1 + round(menu.limits[game.name].min_level * 9)
+    assert rows[0].what == f"{game.name}: Lowest level: level {level}"

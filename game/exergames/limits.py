@@ -75,6 +75,13 @@ def describe(spec: GameSpec, limits: TherapistLimits, key: str) -> str:
     return text
 
 
+def describe_all(spec: GameSpec, limits: TherapistLimits) -> str:
+    """Every limit set for the patient in words ("Highest level: level 7; Longest hold: 2.0 s"), for
+    the audit; "the game's own limits" when none is set."""
+    set_keys = [k for k in LIMIT_KEYS if getattr(limits, k) is not None]
+    return "; ".join(f"{LABELS[k]}: {describe(spec, limits, k)}" for k in set_keys) or "the game's own limits"
+
+
 def whose(limits: TherapistLimits, key: str) -> str:
     """Whose the limit's value is: ``the game's own`` (unset: what the game's difficulty reaches;
     the menu said "no limit", read as if nothing bounded the game) or ``set for this patient``."""
@@ -101,10 +108,14 @@ def load_limits(db_path: Path, patient_id: str, specs) -> dict[str, TherapistLim
             for spec in specs}
 
 
-def save_limits(db_path: Path, patient_id: str, spec: GameSpec, limits: TherapistLimits) -> None:
-    """Store the limits of one game for a patient (all keys, unset ones as null)."""
+def save_limits(db_path: Path, patient_id: str, spec: GameSpec, limits: TherapistLimits, *,
+                account: str = "") -> None:
+    """Store the limits of one game for a patient (all keys, unset ones as null) and audit who set
+    them (``account``: the signed-in therapist, "" without accounts)."""
     from game.db import Database
+    from game.db.accounts import record
 
     check_limits(spec, limits)
     with Database(db_path) as db:
         db.set_game_limits(patient_id, spec.name, limits.model_dump_json())
+        record(db, account, "limits", patient_id, f"{spec.name}: {describe_all(spec, limits)}")

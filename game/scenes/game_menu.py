@@ -44,12 +44,14 @@ class ChooseGameScene(BaseScene):
         games: the games offered (default: every built-in game).
         max_level: the therapist's highest level, 1..10, for every game (None: the stored or the game's own).
         db_path: where the limits are read and stored per patient (None: only for this menu's sessions).
+        account: the signed-in therapist ("" without accounts), audited with each change of a limit.
     """
 
     def __init__(self, patient_id: str, open_game: Callable[..., BaseScene], *, side: str = "right",
                  games: Sequence[GameSpec] | None = None, max_level: int | None = None,
-                 db_path: Path | None = None) -> None:
+                 db_path: Path | None = None, account: str = "") -> None:
         self.patient_id = patient_id
+        self.account = account
         self.open_game = open_game
         self.side = side
         self.games = list(games) if games is not None else load_all_games()
@@ -93,7 +95,7 @@ class ChooseGameScene(BaseScene):
         self.limits[g.name] = step_limit(g, self.limits[g.name], key, direction)
         if self.db_path is not None:
             try:
-                save_limits(self.db_path, self.patient_id, g, self.limits[g.name])
+                save_limits(self.db_path, self.patient_id, g, self.limits[g.name], account=self.account)
                 self.error = ""
             except RehabError as exc:
                 self.error = str(exc)
