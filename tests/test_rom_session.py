@@ -167,6 +167,9 @@ def test_estimated_markers_at_the_maximum_are_reported():
     feed_for(s, p, t, 4.0, hide_elbow_at_top)
     assert s.result.estimated_markers == ("MRE2",)  # MLW1 is not used by right shoulder flexion
     assert "estimated markers MRE2" in s.result.line()
+    r = s.result   # issue 25: the range from the start is explained by what the start position read
+    assert f"moved {r.range_deg:.1f} from the start position, which read {r.start_deg:.1f}" in r.line()
+    assert abs(r.max_deg - r.start_deg - r.range_deg) < 0.05
 
 
 def test_discard_repeats_and_accept_needs_a_finished_attempt():

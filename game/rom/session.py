@@ -165,8 +165,9 @@ class RomResult:
         """One line for a therapist."""
         ref = f"{self.standard.upper()} normal {self.reference_deg:g}" if self.reference_deg is not None \
             else f"no {self.standard.upper()} normal for this position"
-        text = (f"{self.title}, {self.side}: {self.rounded_deg} deg (raw {self.max_deg:.1f}, range from start "
-                f"{self.range_deg:.1f}), active ROM, {self.position_words.rstrip('.')}; {ref}")
+        text = (f"{self.title}, {self.side}: {self.rounded_deg} deg (raw {self.max_deg:.1f}; moved "
+                f"{self.range_deg:.1f} from the start position, which read {self.start_deg:.1f}), active ROM, "
+                f"{self.position_words.rstrip('.')}; {ref}")
         if self.estimated:
             text += f"; relied on estimated markers {', '.join(self.estimated_markers)}"
         if self.compensated:
