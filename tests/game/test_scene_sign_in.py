@@ -150,3 +150,17 @@ def test_sign_in_text_fits(open_headless, clinic, size):
         assert_text_fits(frame_texts(app), size)
     finally:
         app.close()
+
+
+def test_typed_text_and_key_names_come_from_the_keyboard(monkeypatch):
+    import pygame
+
+    from game.input import InputMapper
+
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    E = pygame.event.Event
+    out = InputMapper((800, 400)).map([E(pygame.KEYDOWN, key=pygame.K_BACKSPACE), E(pygame.KEYUP, key=pygame.K_BACKSPACE),
+                                       E(pygame.KEYDOWN, key=pygame.K_w),
+                                       E(pygame.TEXTINPUT, text="w"), E(pygame.KEYDOWN, key=pygame.K_ESCAPE)])
+    assert out == [Press(Action.BACK), Press(Action.BACK, False), Press(Action.UP), Typed("w"), Press(Action.BACK)]
+    assert [getattr(e, "key", None) for e in out] == ["backspace", "backspace", "w", None, "escape"]
