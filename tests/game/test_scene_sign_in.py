@@ -81,7 +81,14 @@ def test_a_wrong_pin_is_one_line_then_the_therapist_reaches_home(open_headless, 
         assert scene.message == WRONG
         _type(app, "anna", "4711")
         assert isinstance(app.scene, HomeScene) and scene.fields == ["", ""]
-        assert "ROM test" in [e.label for e in app.scene.entries]
+        entries = {e.label: e for e in app.scene.entries}
+        # the signed-in name is what is audited: ROM results accepted, limits changed on the game menu
+        rom = entries["ROM test"].open().then("P002")
+        games = entries["Games"].open().then("P002")
+        try:
+            assert rom.visit.accepted_by == "anna" and games.account == "anna" and games.may_change_limits
+        finally:
+            rom.visit.close()
         app.dispatch(Press(Action.BACK, key="escape"))   # home: Esc twice quits, as without accounts
         app.dispatch(Press(Action.BACK, key="escape"))
         assert not app.running
