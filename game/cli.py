@@ -480,11 +480,14 @@ def _cmd_play(args) -> int:
     )
     from dataclasses import replace
 
-    from game.play import check_account
+    from game.play import check_account, needs_sign_in
 
-    account = check_account(options)   # where the database has accounts: may this account open this screen
-    options = replace(options, user=account.name if account else None)
-    if options.scene in ("rom", "progress", "game"):
+    if needs_sign_in(options):   # accounts, and no account or PIN given: the application's sign-in screen
+        options = replace(options, sign_in=True, user=options.user or os.environ.get("REHAB_USER", "").strip() or None)
+    else:
+        account = check_account(options)   # where the database has accounts: may this account open this screen
+        options = replace(options, user=account.name if account else None)
+    if options.scene in ("rom", "progress", "game") and not (options.sign_in and not options.patient):
         from game.play import check_scene_options
 
         check_scene_options(options)   # one line before anything starts

@@ -9,7 +9,7 @@ arrow keys navigate menus and lean the simulated patient's trunk in the live vie
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Iterable, Mapping
 
@@ -67,6 +67,16 @@ class Press:
 
     action: Action
     down: bool = True
+    #: the key's name ("escape", "backspace", "w"; "" from tests and scripts), for text entry, where
+    #: Backspace erases and a letter is typed rather than an action (not compared)
+    key: str = field(default="", compare=False)
+
+
+@dataclass(frozen=True, slots=True)
+class Typed:
+    """Text typed on the keyboard (pygame's TEXTINPUT), for the scenes that take text (sign-in)."""
+
+    text: str
 
 
 class PointerKind(enum.Enum):
@@ -95,7 +105,7 @@ class Pointer:
     wheel: float = 0.0
 
 
-InputEvent = Press | Pointer
+InputEvent = Press | Pointer | Typed
 
 
 class InputMapper:
@@ -129,7 +139,9 @@ class InputMapper:
                 if down and action in self.held:
                     continue  # key repeat
                 (self.held.add if down else self.held.discard)(action)
-                out.append(Press(action, down))
+                out.append(Press(action, down, pygame.key.name(ev.key)))
+            elif ev.type == pygame.TEXTINPUT:
+                out.append(Typed(ev.text))
             elif ev.type == pygame.MOUSEMOTION:
                 self.pointer = self._norm(ev.pos)
                 out.append(Pointer(PointerKind.MOVE, *self.pointer))

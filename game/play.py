@@ -89,6 +89,7 @@ class PlayOptions:
     wait_for_tracker: bool = False
     stream: object = None
     user: str | None = None   # the signed-in account (check_account), audited with accepted ROM results
+    sign_in: bool = False     # open on the sign-in screen (accounts, and no account or PIN given: needs_sign_in)
 
 
 def make_avatar(ctx, marker_names):
@@ -177,35 +178,86 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         MenuEntry("Calibrate cameras", "Lenses, camera positions and the floor, step by step", open_calibrate),
         MenuEntry("Quit", "", None),
     ], status=link.summary)
-    app.push(home)
-    if options.scene == "live":
-        app.push(open_live())
-    elif options.scene == "cameras":
-        app.push(open_monitor())
-    elif options.scene == "calibrate":
-        app.push(open_calibrate())
-    elif options.scene == "game" or options.game:
-        from game.exergames.spec import load_game
+    def open_start():
+        """The home screen and the first screen asked for (``--scene``, ``--game``)."""
+        app.push(home)
+        if options.scene == "live":
+            app.push(open_live())
+        elif options.scene == "cameras":
+            app.push(open_monitor())
+        elif options.scene == "calibrate":
+            app.push(open_calibrate())
+        elif options.scene == "game" or options.game:
+            from game.exergames.spec import load_game
 
-        spec = load_game(options.game or DEFAULT_GAME)
-        check_scene_options(replace(options, scene="game"))
-        app.push(open_game(spec, options.patient))
-    elif options.scene in ("rom", "progress"):
-        check_scene_options(options)
-        if options.scene == "progress":
-            app.push(ProgressScene(db_path, options.patient, standard=options.standard))
-        else:
-            from game.rom.spec import load_rom_test
+            spec = load_game(options.game or DEFAULT_GAME)
+            check_scene_options(replace(options, scene="game"))
+            app.push(open_game(spec, options.patient))
+        elif options.scene in ("rom", "progress"):
+            check_scene_options(options)
+            if options.scene == "progress":
+                app.push(ProgressScene(db_path, options.patient, standard=options.standard))
+            else:
+                from game.rom.spec import load_rom_test
 
-            test = load_rom_test(options.test or DEFAULT_ROM_TEST)
-            visit = RomVisit(db_path, options.patient, options.standard, source_kind, accepted_by=options.user or "")
-            app.push(ChooseTestScene(visit, open_test, side=options.side))
-            app.push(open_test(visit, test, options.side, demo=True))
+                test = load_rom_test(options.test or DEFAULT_ROM_TEST)
+                visit = RomVisit(db_path, options.patient, options.standard, source_kind, accepted_by=options.user or "")
+                app.push(ChooseTestScene(visit, open_test, side=options.side))
+                app.push(open_test(visit, test, options.side, demo=True))
+
+    def signed_in(account):
+        """After the sign-in screen: what ``account`` may open (as :func:`check_account`), audited as it."""
+        nonlocal options
+        own_games = account.role == "patient" and (options.game or options.scene in (None, "home", "game"))
+        account.require("play" if own_games else SCENE_ACTIONS.get(options.scene, "patients"), options.patient)
+        options = replace(options, user=account.name)
+        if account.role == "therapist":
+            return open_start()
+        from game.scenes.game_menu import ChooseGameScene
+
+        own = account.patient_id
+        app.push(ChooseGameScene(own, open_game, side=options.side, max_level=options.max_level, db_path=db_path,
+                                 account=account.name, may_change_limits=False))
+        if options.game or options.scene == "game":
+            from game.exergames.spec import load_game
+
+            app.push(open_game(load_game(options.game or DEFAULT_GAME), own))
+
+    if options.sign_in:
+        from game.scenes.sign_in import SignInScene
+
+        app.push(SignInScene(db_path, signed_in, name=options.user or ""))
+    else:
+        open_start()
     return app
 
 
 #: the first screen -> what the account must be allowed (game.db.accounts.PERMISSIONS)
 SCENE_ACTIONS = {"game": "play", "rom": "rom_test", "progress": "progress"}
+
+
+def needs_sign_in(options: PlayOptions) -> bool:
+    """Whether the application opens on its sign-in screen: the database has accounts, and no account
+    was given (``--user``, ``REHAB_USER``) or no secret for it (``REHAB_PIN``) without a terminal to ask
+    it on (a desktop launcher). ``--user`` with ``REHAB_PIN``, or on a terminal, signs in as before."""
+    import os
+    import sys
+
+    from game.db import Database, DatabaseError, DatabaseUnreachable, db_location
+    from game.db.accounts import accounts_in_use
+
+    location = db_location(options.db_path)
+    if isinstance(location, Path) and not location.is_file():
+        return False
+    try:
+        with Database(location) as db:
+            if not accounts_in_use(db):
+                return False
+    except (DatabaseUnreachable, DatabaseError):
+        return False
+    if not (options.user or os.environ.get("REHAB_USER", "").strip()):
+        return True
+    return os.environ.get("REHAB_PIN") is None and not sys.stdin.isatty()
 
 
 def check_account(options: PlayOptions):

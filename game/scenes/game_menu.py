@@ -45,13 +45,15 @@ class ChooseGameScene(BaseScene):
         max_level: the therapist's highest level, 1..10, for every game (None: the stored or the game's own).
         db_path: where the limits are read and stored per patient (None: only for this menu's sessions).
         account: the signed-in therapist ("" without accounts), audited with each change of a limit.
+        may_change_limits: False for a patient's own account: the limits are shown, only a therapist changes them.
     """
 
     def __init__(self, patient_id: str, open_game: Callable[..., BaseScene], *, side: str = "right",
                  games: Sequence[GameSpec] | None = None, max_level: int | None = None,
-                 db_path: Path | None = None, account: str = "") -> None:
+                 db_path: Path | None = None, account: str = "", may_change_limits: bool = True) -> None:
         self.patient_id = patient_id
         self.account = account
+        self.may_change_limits = may_change_limits
         self.open_game = open_game
         self.side = side
         self.games = list(games) if games is not None else load_all_games()
@@ -91,6 +93,9 @@ class ChooseGameScene(BaseScene):
         """Step one limit of the chosen game and store it for the patient."""
         g = self.game
         if g is None:
+            return
+        if not self.may_change_limits:
+            self.error = "Only a therapist changes the limits"
             return
         self.limits[g.name] = step_limit(g, self.limits[g.name], key, direction)
         if self.db_path is not None:
