@@ -3,8 +3,8 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it uses no CPU time: a
-process that a loaded machine merely slows down is not replaced) and replaces it without
+that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it neither uses CPU time nor
+waits for a CPU: a process that a loaded machine merely slows down or starves is not replaced) and replaces it without
 waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
@@ -42,8 +42,8 @@ log = logging.getLogger(__name__)
 
 #: Prefix of every shared-memory block of the live tracker.
 BLOCK_PREFIX = "rehab_live_"
-#: A running process whose heartbeat is older than this, and which has used no CPU time for as
-#: long, is taken as hung and restarted.
+#: A running process whose heartbeat is older than this, and which has neither used CPU time nor
+#: waited for a CPU for as long, is taken as hung and restarted.
 STALE_HEARTBEAT_S = 1.0
 #: A process whose heartbeat is older than this is taken as hung even if it uses CPU time (a loop
 #: that never returns to the heartbeat); a loaded machine slows a loop turn by a second or two,
@@ -130,6 +130,19 @@ def process_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def process_activity_s(pid: int) -> float:
+    """Seconds a process has run (all threads) or waited for a CPU (its main thread, runnable but
+    not scheduled) so far; NaN if unknown. A process whose figure does not grow is blocked or
+    stopped; one that a loaded machine starves of CPU keeps waiting to run, and is not hung."""
+    cpu_s = process_cpu_s(pid)
+    try:
+        with open(f"/proc/{pid}/schedstat") as f:
+            wait_s = int(f.read().split()[1]) * 1e-9
+    except (OSError, IndexError, ValueError):
+        wait_s = 0.0   # no scheduler statistics (a kernel without them): CPU time alone
+    return cpu_s + wait_s
+
+
 def _check_motion(name: str | None) -> None:
     """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
     if name is None:
@@ -162,9 +175,10 @@ class _Child:
         return self.proc.pid
 
     def idle_for_s(self, now: float) -> float:
-        """Seconds since this process last used CPU time, as far as these calls saw (call it often);
-        infinite where the system does not tell (the heartbeat then decides alone)."""
-        cpu_s = process_cpu_s(self.proc.pid)
+        """Seconds since this process last used CPU time or waited for a CPU (:func:`process_activity_s`),
+        as far as these calls saw (call it often); infinite where the system does not tell (the
+        heartbeat then decides alone)."""
+        cpu_s = process_activity_s(self.proc.pid)
         if math.isnan(cpu_s):
             return math.inf
         if cpu_s != self._cpu_seen_s:
@@ -453,8 +467,9 @@ class LiveTracker:
         return min(RETRY_MAX_S, RETRY_AFTER_S * 2.0 ** max(0, n - 1))
 
     def _hung(self, child: _Child, now: float) -> bool:
-        """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and no CPU time
-        used for as long (stopped, or blocked), or no heartbeat for ``SLOW_HEARTBEAT_S``."""
+        """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and for as long
+        neither CPU time used nor a wait for a CPU (stopped, or blocked), or no heartbeat for
+        ``SLOW_HEARTBEAT_S``."""
         idle_s = child.idle_for_s(now)
         if int(self._reader.header["state"]) not in (ProcessState.RUNNING, ProcessState.PAUSED):
             return False
