@@ -160,7 +160,8 @@ class LiveLink:
         if self.state is LinkState.FAILED:
             return f"The tracker is not running: {self.error}", True
         if self.state is LinkState.RESTARTING:
-            return "The tracker stopped: restarting...", False
+            # what happened (killed, no heartbeat, cannot start: ...) so the therapist knows why
+            return "The tracker stopped: restarting..." + (f" ({self.error})" if self.error else ""), False
         if self.state is LinkState.CLOSED:
             return "The tracker is off", True
         return None

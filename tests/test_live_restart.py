@@ -39,3 +39,71 @@ def test_a_process_starved_of_cpu_is_active_a_stopped_one_is_not():
         for p in procs:
             p.kill()
             p.wait()
+
+
+SIZE = (320, 240)
+
+
+def _wait(predicate, timeout_s: float, poll_s: float = 0.02):
+    deadline = time.perf_counter() + timeout_s
+    while time.perf_counter() < deadline:
+        got = predicate()
+        if got:
+            return got
+        time.sleep(poll_s)
+    return predicate()
+
+
+def test_the_tracker_and_its_standby_killed_together_are_replaced():
+    """The out-of-memory killer's case: no standby to take over, a new process starts at once."""
+    from tracking.live import LiveTracker, SourceConfig
+
+    with LiveTracker(SourceConfig(size=SIZE, fps=15.0, motion="reference"), ring_size=32) as live:
+        assert _wait(lambda: live.status() and live.standby_ready, 120.0), "no standby process"
+        live.poll()
+        old, spare = live.pid, live._spare.pid
+        t0 = time.perf_counter()
+        os.kill(old, signal.SIGKILL)
+        os.kill(spare, signal.SIGKILL)
+        resumed = _wait(lambda: live.status() and [s for s in live.poll() if s.t_frame_ready_s > t0], 120.0)
+        assert resumed, live.status()
+        print(f"the tracker and its standby killed: a new sample after {resumed[0].t_published_s - t0:.2f} s")
+        status = live.status()
+        assert status.alive and live.pid not in (old, spare)
+        assert "killed (SIGKILL)" in status.last_error
+        assert not os.path.exists(f"/proc/{old}") and not os.path.exists(f"/proc/{spare}")
+
+
+def failing_source(config):
+    """The simulated patient, in a tracker process that cannot start the first few times
+    (counted in the file named by REHAB_TEST_STARTS; a ``kind="module:function"`` source)."""
+    from calibration.errors import RehabError
+    from tracking.live.source import SimSource
+
+    path = os.environ["REHAB_TEST_STARTS"]
+    with open(path, "a+") as f:
+        f.write("x")
+        f.seek(0)
+        n = len(f.read())
+    if n <= 6:
+        raise RehabError(f"injected start failure {n}")
+    return SimSource(config)
+
+
+def test_a_process_that_cannot_start_is_tried_again_for_as_long_as_it_takes(tmp_path, monkeypatch):
+    """It gave up for good after 4 failed starts; now it keeps trying, with a growing wait."""
+    from tracking.live import LiveTracker, SourceConfig, client
+
+    monkeypatch.setattr(client, "RETRY_AFTER_S", 0.05)
+    monkeypatch.setattr(client, "RETRY_MAX_S", 0.2)
+    monkeypatch.setenv("REHAB_TEST_STARTS", str(tmp_path / "starts"))
+    config = SourceConfig(kind=f"{__name__}:failing_source", size=SIZE, fps=15.0, motion="reference")
+    live = LiveTracker(config, ring_size=16, warm_standby=False)
+    live.start(wait=False)
+    try:
+        assert _wait(lambda: live.status() and live.gave_up, 120.0), live.status()
+        assert "injected start failure" in live.status().last_error
+        assert _wait(lambda: live.status() and live.ready and live.poll(), 180.0, 0.05), live.status()
+        assert len((tmp_path / "starts").read_text()) == 7
+    finally:
+        live.close()

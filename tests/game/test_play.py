@@ -129,7 +129,7 @@ def test_the_mouse_moves_the_hand_and_killing_the_tracker_keeps_the_window_drawi
         print(f"a killed tracker process: samples resumed after {recovered_s:.2f} s")
         assert recovered_s < 10.0, f"samples resumed only after {recovered_s:.2f} s"
         if recovered_s > 0.2:  # a handover slower than a few frames is shown while it happens
-            assert "The tracker stopped: restarting..." in banners
+            assert any(b.startswith("The tracker stopped: restarting...") for b in banners)
         assert link.samples_received > received
         gaps = np.diff([killed_s, *frame_times])
         # the window never froze while the process was replaced (generous for a loaded machine)

@@ -59,7 +59,8 @@ STOP_TIMEOUT_S = 2.0
 #: the tracker (a killed process dies within milliseconds on an idle machine; a loaded one may
 #: take a second or more to schedule it).
 REAP_TIMEOUT_S = 10.0
-#: A process that reports it cannot start is tried again this many times (the cause may pass).
+#: A process that reports it cannot start this many times more in a row makes :attr:`LiveTracker.gave_up`
+#: true (a game still starting may then say why); it is tried again all the same (the cause may pass).
 MAX_START_RETRIES = 3
 #: A new standby process is started this long after the running one became ready, so that its
 #: start-up does not compete with a process that is just taking over.
@@ -425,8 +426,8 @@ class LiveTracker:
         self._reap_stopped(0.0)
         self._tend_spare(now)
         child = self._child
-        if child is None:  # an earlier start failed: try again later, a few times
-            if self.auto_restart and now >= self._retry_at and self._failed_starts <= MAX_START_RETRIES:
+        if child is None:  # an earlier start failed: try again later, with a growing wait, for as long as it takes
+            if self.auto_restart and now >= self._retry_at:
                 self._restart("")
             return
         if not child.ready:
@@ -520,7 +521,7 @@ class LiveTracker:
         if reason:
             self._last_error = f"{reason}; restarted"
         spare, self._spare = self._spare, None
-        if spare is not None and spare.send(Activate(self._motion, self._input, self._paused)):
+        if spare is not None and spare.proc.is_alive() and spare.send(Activate(self._motion, self._input, self._paused)):
             self._reader.header["state"] = ProcessState.STARTING
             spare.ready = False  # until it reports ready as the running process
             spare.standby = False
@@ -534,7 +535,9 @@ class LiveTracker:
 
     @property
     def gave_up(self) -> bool:
-        """Every start failed (the first and its retries): the reason is ``status().last_error``."""
+        """Every start failed (the first and ``MAX_START_RETRIES`` more): the reason is
+        ``status().last_error``. The tracker still tries again (every ``RETRY_MAX_S`` at most);
+        a game that never had samples may stop waiting and say why."""
         return self._child is None and self._failed_starts > MAX_START_RETRIES
 
     @property
