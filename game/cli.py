@@ -150,7 +150,7 @@ def _cmd_track(args) -> int:
                          "--detections, --points)")
     # before the work, not after minutes of tracking
     check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
-                   "--points": args.points})
+                   "--mot": args.mot, "--bvh": args.bvh, "--detections": args.detections, "--points": args.points})
     report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,
