@@ -220,6 +220,8 @@ class RunSummary:
         interval_p99_ms, interval_max_ms: the 99th percentile and the longest time between the
             starts of two frames (a stall the patient sees).
         slowest: where the longest frame spent its time (stage: ms, ...).
+        problem: what went wrong with the measurement during the run, in one line ("" if
+            nothing): the source ended early or warned, the tracker failed (set by ``run_play``).
     """
 
     frames: int
@@ -231,6 +233,7 @@ class RunSummary:
     interval_p99_ms: float = math.nan
     interval_max_ms: float = math.nan
     slowest: str = ""
+    problem: str = ""
 
     @property
     def fps(self) -> float:

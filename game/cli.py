@@ -443,6 +443,9 @@ def _cmd_play(args) -> int:
         check_scene_options(options)   # one line before anything starts
     summary = run_play(options)
     print(f"rehab play: {summary.line()}")
+    if options.headless and summary.problem:
+        # nobody watched the window: a source that ended early or failed must not pass as a good run
+        raise RehabError(summary.problem)
     return 0
 
 

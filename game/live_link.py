@@ -166,6 +166,18 @@ class LiveLink:
             return "The tracker is off", True
         return None
 
+    def run_problem(self) -> str:
+        """At the end of a run: what kept the measurement from being whole, in one line ("" if
+        nothing): the tracker not running, its errors, the source's warning (a camera or a
+        recording that ended early)."""
+        problem = self.problem()
+        if problem is not None and self.state is not LinkState.CLOSED:
+            return problem[0]
+        status = self.status
+        if status is not None and getattr(status, "errors", 0):
+            return f"the tracker reported {status.errors} error(s), the last: {status.last_error}"
+        return self.warning
+
     def summary(self) -> str:
         """One line for the home screen."""
         if self.state is LinkState.RUNNING:
