@@ -168,6 +168,7 @@ class _Child:
         self.ready = False  # reported ready (a standby: prepared and waiting)
         self.failed = ""  # why it could not start
         self.released = False  # joined and closed: the process is gone
+        self.activated = False  # a standby told to take over (its start was done before)
         self._cpu_seen_s = math.nan  # its CPU time at the last look, and when that last grew
         self._cpu_grew_at = self.started_at
 
@@ -454,9 +455,14 @@ class LiveTracker:
         self._last_error = reason
         self._drop(child)
         self._child = None
-        if not child.ready:
+        if not child.ready and child.activated:
+            # a standby that died before it could take over (killed together with the running one,
+            # as the out-of-memory killer does): a new process at once, no wait
+            if self.auto_restart:
+                self._restart("")
+        elif not child.ready:
             # it died or hung before it ran (killed, out of memory): retry later with a growing wait,
-            # for as long as it takes; only a process that reports it cannot start is given up on
+            # for as long as it takes
             self._lost_starts += 1
             self._retry_at = now + self._backoff_s()
         elif self.auto_restart:
@@ -525,6 +531,7 @@ class LiveTracker:
             self._reader.header["state"] = ProcessState.STARTING
             spare.ready = False  # until it reports ready as the running process
             spare.standby = False
+            spare.activated = True
             spare.started_at = spare.progress_at = time.perf_counter()
             self._child = spare
             log.info("standby tracker process %d takes over", spare.pid)
