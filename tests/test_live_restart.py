@@ -9,6 +9,7 @@ import time
 
 import pytest
 
+from tests.test_live_process import _wait
 from tracking.live.client import process_activity_s, process_cpu_s
 
 pytestmark = pytest.mark.skipif(not os.path.exists("/proc/self/schedstat"), reason="needs Linux scheduler statistics")
@@ -42,17 +43,6 @@ def test_a_process_starved_of_cpu_is_active_a_stopped_one_is_not():
 
 
 SIZE = (320, 240)
-
-
-def _wait(predicate, timeout_s: float, poll_s: float = 0.02):
-    deadline = time.perf_counter() + timeout_s
-    while time.perf_counter() < deadline:
-        got = predicate()
-        if got:
-            return got
-        time.sleep(poll_s)
-    return predicate()
-
 
 def test_the_tracker_and_its_standby_killed_together_are_replaced():
     """The out-of-memory killer's case: no standby to take over, a new process starts at once."""
