@@ -13,6 +13,14 @@ from tracking.sources.base import SourceError, SourceFrameSet
 
 log = logging.getLogger(__name__)
 
+#: The words of a recording's normal end (all cameras to the end meta.yaml gives): no problem.
+NORMAL_END = "ended after"
+
+
+def is_normal_end(line: str) -> bool:
+    """``line`` (a source's warning line) says only that a recording ended normally."""
+    return line.startswith("the recording ") and f" {NORMAL_END} " in line and "; " not in line
+
 
 class RecordingSource:
     """Reads a recording folder frame set by frame set (videos or numbered image folders).
@@ -62,7 +70,7 @@ class RecordingSource:
         ended = np.array([img is None for img in images])
         if ended.all():
             if not self._short():  # the normal end
-                self._end = f"the recording {self.folder} ended after {self._index} frame sets"
+                self._end = f"the recording {self.folder} {NORMAL_END} {self._index} frame sets"
                 log.info("%s", self._end)
                 return None
             self._end = self._ending(ended)
