@@ -144,6 +144,31 @@ def process_activity_s(pid: int) -> float:
     return cpu_s + wait_s
 
 
+_PF_EXITING = 0x4  # the kernel's task flag of a process that is ending (/proc/PID/stat, field 9)
+
+
+def process_exiting(pid: int) -> bool:
+    """The process is ending (killed, or returned from main) but not yet gone: a killed process
+    with hundreds of megabytes and a GL context takes a noticeable time to be torn down. False
+    where unknown (not Linux)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return False
+    return fields[0] in ("Z", "X") or bool(int(fields[6]) & _PF_EXITING)
+
+
+def _ending_reason(pid: int) -> str:
+    """Why an ending process ends, as far as /proc tells: a pending SIGKILL, else "is ending"."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            pending = [int(line.split()[1], 16) for line in f if line.startswith(("SigPnd:", "ShdPnd:"))]
+    except (OSError, ValueError, IndexError):
+        pending = []
+    return "was killed (SIGKILL)" if any(p & (1 << 8) for p in pending) else "is ending"
+
+
 def _check_motion(name: str | None) -> None:
     """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
     if name is None:
@@ -442,13 +467,20 @@ class LiveTracker:
                 return
             if child.ready:
                 self._failed_starts = self._lost_starts = 0
-        alive = child.proc.is_alive()
+        ending = child.proc.is_alive() and process_exiting(child.pid)   # a dying process is dead already
+        alive = child.proc.is_alive() and not ending
         if alive and child.ready:
             if not self._hung(child, now):
                 return
         elif alive and now - child.progress_at < START_TIMEOUT_S:
             return  # still starting
-        reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
+        if ending:
+            child.proc.join(0.05)   # usually gone by then: its exit code says why
+        if ending and child.proc.exitcode is None:
+            why = _ending_reason(child.pid)
+        else:
+            why = _exit_reason(None if alive else child.proc.exitcode)
+        reason = f"the tracker process {why}"
         if not child.ready:
             reason += " while starting"
         log.error("%s", reason)
@@ -506,9 +538,10 @@ class LiveTracker:
         spare = self._spare
         if spare is not None:
             spare.receive()
-            if spare.failed or not spare.proc.is_alive():
+            if spare.failed or not spare.proc.is_alive() or process_exiting(spare.pid):
                 log.warning("the standby tracker process %d ended: %s", spare.pid,
-                            spare.failed or _exit_reason(spare.proc.exitcode))
+                            spare.failed or (_exit_reason(spare.proc.exitcode) if spare.proc.exitcode is not None
+                                             else _ending_reason(spare.pid)))
                 self._drop(spare)
                 self._spare = None
         elif self._standby_allowed() and self._child is not None and self._child.ready:
@@ -527,7 +560,7 @@ class LiveTracker:
         if reason:
             self._last_error = f"{reason}; restarted"
         spare, self._spare = self._spare, None
-        if spare is not None and spare.proc.is_alive() and spare.send(Activate(self._motion, self._input, self._paused)):
+        if spare is not None and spare.proc.is_alive() and not process_exiting(spare.pid) and spare.send(Activate(self._motion, self._input, self._paused)):
             self._reader.header["state"] = ProcessState.STARTING
             spare.ready = False  # until it reports ready as the running process
             spare.standby = False
