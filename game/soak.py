@@ -222,6 +222,9 @@ def report(r: SoakResult, max_growth_mb: float) -> tuple[list[str], bool]:
         f"  processes: {len(r.processes_seen)} started under the game, {len(r.processes_left)} left behind"
         + (f" ({', '.join(f'{p.pid} {p.name}' for p in r.processes_left)})" if r.processes_left else ""),
     ]
+    said = [line for line in r.output_tail.splitlines() if line.startswith("rehab play:")]
+    if said:   # its frames, frame rate and stalls
+        lines.append(f"  the session: {said[-1][len('rehab play: '):]}")
     ok = r.exit_code == 0 and growth_mb < max_growth_mb and not r.blocks_left and not r.processes_left
     if r.exit_code != 0:
         lines.append("  the session failed; its last lines:\n" + r.output_tail)
