@@ -231,6 +231,8 @@ class RunSummary:
             longest time between the ends of two frames (a stall the patient sees).
         slowest: where the longest frame spent its time (stage: ms, ...).
         scale_mean, scale_min: the 3D views' render scale over the frames (1.0: full resolution).
+        problem: what went wrong with the measurement during the run, in one line ("" if
+            nothing): the source ended early or warned, the tracker failed (set by ``run_play``).
     """
 
     frames: int
@@ -245,6 +247,7 @@ class RunSummary:
     interval_p50_ms: float = math.nan
     scale_mean: float = 1.0
     scale_min: float = 1.0
+    problem: str = ""
 
     @property
     def fps(self) -> float:

@@ -176,7 +176,7 @@ def _cmd_track(args) -> int:
                          "--detections, --points)")
     # before the work, not after minutes of tracking
     check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
-                   "--points": args.points})
+                   "--mot": args.mot, "--bvh": args.bvh, "--detections": args.detections, "--points": args.points})
     report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,
@@ -493,6 +493,9 @@ def _cmd_play(args) -> int:
         check_scene_options(options)   # one line before anything starts
     summary = run_play(options)
     print(f"rehab play: {summary.line()}")
+    if options.headless and summary.problem:
+        # nobody watched the window: a source that ended early or failed must not pass as a good run
+        raise RehabError(summary.problem)
     return 0
 
 

@@ -160,10 +160,25 @@ class LiveLink:
         if self.state is LinkState.FAILED:
             return f"The tracker is not running: {self.error}", True
         if self.state is LinkState.RESTARTING:
-            return "The tracker stopped: restarting...", False
+            # what happened (killed, no heartbeat, cannot start: ...) so the therapist knows why
+            return "The tracker stopped: restarting..." + (f" ({self.error})" if self.error else ""), False
         if self.state is LinkState.CLOSED:
             return "The tracker is off", True
         return None
+
+    def run_problem(self) -> str:
+        """At the end of a run: what kept the measurement from being whole, in one line ("" if
+        nothing): the tracker not running, its errors, the source's warning (a camera that ended
+        or stopped, a recording cut short; a recording played to its end is no problem)."""
+        problem = self.problem()
+        if problem is not None and self.state is not LinkState.CLOSED:
+            return problem[0]
+        status = self.status
+        if status is not None and getattr(status, "errors", 0):
+            return f"the tracker reported {status.errors} error(s), the last: {status.last_error}"
+        from tracking.sources.recording import is_normal_end
+
+        return "" if is_normal_end(self.warning) else self.warning
 
     def summary(self) -> str:
         """One line for the home screen."""

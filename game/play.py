@@ -328,7 +328,9 @@ def run_play(options: PlayOptions, *, clock: Callable[[], float] = time.perf_cou
             if not link.wait_ready(options.start_timeout_s):
                 raise RehabError(link.error or "the tracker did not start")
         app = build_app(screen, options, link, clock=clock, sleep=sleep)
-        return app.run(seconds=options.seconds, screenshot=options.screenshot)
+        summary = app.run(seconds=options.seconds, screenshot=options.screenshot)
+        link.tick()
+        return replace(summary, problem=link.run_problem())
     finally:
         if app is not None:
             app.close()

@@ -155,18 +155,23 @@ def test_one_image_of_another_size_is_one_line(tmp_path):
         list(rec)
 
 
-@pytest.mark.parametrize("option", ["--out", "--angles", "--points"])
+@pytest.mark.parametrize("option", ["--out", "--status", "--angles", "--c3d", "--mot", "--bvh", "--detections",
+                                    "--points"])
 def test_track_refuses_an_impossible_output_before_the_work(tmp_path, capsys, monkeypatch, option):
+    """A folder given as the file, a folder under a regular file, a folder that takes no files
+    (/proc refuses new files even to root, as a read-only disk does): one line naming the
+    option and the path, before any tracking."""
     import tracking.offline
     from game.cli import main
 
     _recording(tmp_path / "rec")
     monkeypatch.setattr(tracking.offline, "track_recording", lambda *a, **k: pytest.fail("the work began"))
     (tmp_path / "file").write_text("x")
-    for target, words in [(tmp_path / "rec", "is a folder"), (tmp_path / "file" / "out.trc", "cannot write in")]:
+    for target, words in [(tmp_path / "rec", "is a folder"), (tmp_path / "file" / "out.trc", "cannot write in"),
+                          (Path("/proc/rehab-test-out.trc"), "cannot write in /proc")]:
         code = main(["track", str(tmp_path / "rec"), option, str(target)])
         err = capsys.readouterr().err
-        assert code == 1 and words in err and err.count("\n") == 1, err
+        assert code == 1 and words in err and option in err and str(target) in err and err.count("\n") == 1, err
 
 
 def test_the_same_file_for_two_outputs_is_refused(tmp_path, capsys):

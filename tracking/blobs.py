@@ -71,6 +71,7 @@ stops short of a bright one. On rendered balls 10-35 % hidden the median error f
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 from dataclasses import dataclass
 from typing import Sequence
@@ -86,6 +87,15 @@ DEFAULT_MAX_AREA_PX = 5000
 """More than a disc of radius 40 px: a coloured garment or object, not a 40 mm ball."""
 DEFAULT_MIN_ROUNDNESS = 0.7
 """Minor/major axis ratio: single balls measure >= 0.95 (>= 0.79 binary), two touching ones ~0.45."""
+
+DEFAULT_MAX_PER_COLOUR = 32
+"""Regions of one colour measured in one image at most. A marker set has a few markers of a colour
+(the upper-limb set at most 4); sensor noise, JPEG blocks or a patterned garment of a marker
+colour can make thousands, which would cost seconds per image here and gigabytes in the
+matching across cameras. Beyond it the largest, roundest regions are measured (a warning says so)."""
+
+log = logging.getLogger(__name__)
+_capped_images = 0  # images whose regions were capped, for the warning's count
 
 _MARGIN_PX = 3  # patch margin: 1 px coverage ring + 2 px background annulus
 _BG_WINDOW_PX = 5  # window of the local background mean
@@ -154,6 +164,7 @@ def find_blobs(
     min_roundness: float = DEFAULT_MIN_ROUNDNESS,
     offset_px: tuple[float, float] = (0.0, 0.0),
     colours: Sequence[int] | None = None,
+    max_per_colour: int | None = DEFAULT_MAX_PER_COLOUR,
 ) -> Blobs:
     """Find the 8-connected regions of each colour label and measure them.
 
@@ -170,6 +181,9 @@ def find_blobs(
             of a window, so that centroids land in full-image coordinates.
         colours: palette indices to look for (default: all ``n_colours``); the blobs of a colour do
             not depend on the others, so this only saves time.
+        max_per_colour: measure at most this many regions of each colour (None: all), the largest
+            and roundest by their outline (:func:`_cap_regions`), so that time and memory stay
+            bounded whatever the image; a warning says when regions were left out.
 
     Returns:
         The accepted :class:`Blobs`.
@@ -190,6 +204,8 @@ def find_blobs(
         # the outer contours of the 8-connected regions: ~50x faster than connectedComponentsWithStats
         # on sparse masks, and filling one gives its region with the holes filled
         contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if max_per_colour is not None and len(contours) > max_per_colour:
+            contours = _cap_regions(contours, k, max_per_colour, min_area_px, max_area_px)
         for contour in contours:
             x, y, w, h = cv2.boundingRect(contour)
             if w * h < min_area_px:
@@ -211,6 +227,26 @@ def find_blobs(
         roundness=arr[:, 3].copy(),
         radius_px=np.sqrt(area / np.pi),
     )
+
+
+def _cap_regions(contours, colour: int, cap: int, min_area_px: float, max_area_px: float) -> list:
+    """The ``cap`` regions most like a marker among ``contours`` (more than ``cap``): in the area
+    range by their outline, the largest and roundest first (outline area times roundness)."""
+    global _capped_images
+    scores = np.full(len(contours), -1.0)
+    for i, contour in enumerate(contours):
+        mom = cv2.moments(contour)
+        area = mom["m00"]   # the outline's area: a little under the pixel count
+        if 0.5 * min_area_px <= area <= max_area_px:
+            scores[i] = area * binary_roundness(area, mom["m10"], mom["m01"], mom["m20"], mom["m02"], mom["m11"])
+    keep = np.argsort(-scores, kind="stable")[:cap]
+    keep = np.sort(keep[scores[keep] >= 0])
+    _capped_images += 1
+    if _capped_images == 1 or _capped_images % 1000 == 0:
+        log.warning("an image has %d regions of marker colour %d (noise, compression blocks or a garment of "
+                    "that colour?): only the %d most marker-like are measured (%d such images so far)",
+                    len(contours), colour, cap, _capped_images)
+    return [contours[i] for i in keep]
 
 
 def _measure(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import logging
 from dataclasses import dataclass
@@ -11,6 +12,7 @@ from typing import Sequence
 import numpy as np
 from tqdm import tqdm
 
+from calibration.atomic import written_via_temp
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet, load_markerset, parse_rgb
 from tracking.measure import FrameMeasurer
@@ -74,8 +76,12 @@ def track_recording(
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
         measurer = FrameMeasurer(rec.cameras, table, ms.radius_m)
         n_points = n_frames = 0
-        out = open(points_csv, "w", newline="", encoding="utf-8") if points_csv else None
-        try:
+        with contextlib.ExitStack() as temp:
+            out = None
+            if points_csv:
+                Path(points_csv).parent.mkdir(parents=True, exist_ok=True)
+                out = open(temp.enter_context(written_via_temp(points_csv)), "w", newline="", encoding="utf-8")
+                temp.callback(out.close)   # closed before the rename (or the removal) of the temporary file
             writer = csv.writer(out) if out else None
             if writer:
                 writer.writerow(["frame", "time", "x_mm", "y_mm", "z_mm", "n_cameras", "reproj_px"])
@@ -92,9 +98,6 @@ def track_recording(
                             f"{p_mm[k, 0]:.2f}", f"{p_mm[k, 1]:.2f}", f"{p_mm[k, 2]:.2f}",
                             int(pts.n_cameras[k]), f"{pts.reproj_px[k]:.3f}",
                         ])
-        finally:
-            if out:
-                out.close()
     per = measurer.times.per_frame_ms()
     timing = ", ".join(f"{k} {v:.1f} ms" for k, v in per.items())
     return f"{n_frames} frame sets, {n_points / max(n_frames, 1):.1f} points per frame ({timing})"
@@ -319,33 +322,42 @@ def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_cs
     for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
+    # each file through a temporary file beside it, renamed when whole: a kill or a failure
+    # half-way never leaves half a file under the asked name
     if trc:
-        # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
-        write_trc(trc, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1, times_s=run.times_s)
+        with written_via_temp(trc) as tmp:
+            # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
+            write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
+                      times_s=run.times_s)
     if status_csv:
-        write_status_csv(status_csv, run.frames, run.times_s, run.names, run.positions_mm, run.status)
+        with written_via_temp(status_csv) as tmp:
+            write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
     if angles_csv:
         # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
         # without a supination whose elbow axis is a guess
-        write_angles_csv(angles_csv, run.frames, run.times_s, run.angles_deg)
+        with written_via_temp(angles_csv) as tmp:
+            write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
     if c3d:
-        _write_c3d(c3d, run)
+        with written_via_temp(c3d) as tmp:
+            _write_c3d(tmp, run)
     if mot:
         from tracking.opensim_mot import write_mot
 
-        write_mot(mot, run.times_s, run.angles_deg, name=Path(mot).stem)
+        with written_via_temp(mot) as tmp:
+            write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
     if bvh:
         from tracking.bvh import BvhSkeleton, write_bvh
         from tracking.status import MarkerStatus
 
         # segment lengths from the measured positions only (an estimate must not teach them)
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
-        write_bvh(bvh, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
+        with written_via_temp(bvh) as tmp:
+            write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
     if detections:
         from tracking.detections import write_detections_csv
 
-        write_detections_csv(detections, run.frames, run.times_s, [c.name for c in run.cameras], run.names,
-                             run.uv_px)
+        with written_via_temp(detections) as tmp:
+            write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras], run.names, run.uv_px)
 
 
 def _write_c3d(path, run: TrackedRecording) -> None:

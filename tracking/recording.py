@@ -248,9 +248,10 @@ class Recording:
             self.close()
             raise
         counts = [r.n_frames for r in readers if r.n_frames is not None]
-        self.n_frames = min(counts) if counts else self.meta.n_frames
+        self.n_frames = max(counts) if counts else self.meta.n_frames
+        self._ended: set[int] = set()   # cameras whose video or folder ended while others go on
         if counts and max(counts) != min(counts):
-            log.warning("cameras have different frame counts %s; tracking stops at the shortest", counts)
+            log.info("cameras have different frame counts %s; the longest are tracked to their end", counts)
 
     @property
     def fps(self) -> float:
@@ -265,17 +266,39 @@ class Recording:
         """The next image of every camera, calibration order; None where its video or folder ended."""
         return [r.read() for r in self._readers]
 
+    def go_on_without_ended(self, images: list[np.ndarray | None], index: int) -> tuple[list[np.ndarray], str]:
+        """``images`` (from :meth:`read_images`) with a black image for each camera whose video or
+        folder has ended while others go on, so that tracking goes on with the others; and the
+        line saying so when a camera has just ended ("" otherwise). Raises nothing: call it only
+        when some camera still delivers."""
+        ended_now = [k for k, img in enumerate(images) if img is None and k not in self._ended]
+        self._ended.update(ended_now)
+        line = ""
+        if ended_now:
+            left = [r.path.name for k, r in enumerate(self._readers) if k not in self._ended]
+            line = (f"{', '.join(self._readers[k].path.name for k in ended_now)} ended at frame {index} while the "
+                    f"other cameras go on: tracking goes on with {', '.join(left)}")
+        out = [img if img is not None else np.zeros((r.size[1], r.size[0], 3), np.uint8)
+               for r, img in zip(self._readers, images)]
+        return out, line
+
+    @property
+    def ended_cameras(self) -> tuple[str, ...]:
+        """The video or folder names of the cameras that ended before the others."""
+        return tuple(self._readers[k].path.name for k in sorted(self._ended))
+
     def __iter__(self) -> Iterator[FrameSet]:
+        """Every frame set; a camera that ends before the others gives black images from then on
+        (said once, as a warning), the recording ends with its longest camera."""
         index = 0
         while True:
             images = self.read_images()
-            if any(img is None for img in images):
-                ended = [r.path.name for r, img in zip(self._readers, images) if img is None]
-                if len(ended) < len(images):
-                    log.warning(
-                        "%s ended at frame %d while the other cameras go on; stopping there", ", ".join(ended), index
-                    )
+            if all(img is None for img in images):
                 return
+            if any(img is None for img in images):
+                images, line = self.go_on_without_ended(images, index)
+                if line:
+                    log.warning("%s", line)
             yield FrameSet(index, index / self.meta.fps, tuple(images))
             index += 1
 

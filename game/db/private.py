@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 from pathlib import Path
 from typing import IO, Iterator
 
+from calibration.atomic import FILE_MODE, commit_temp, fsync_dir, temp_path_beside  # noqa: F401 (used by the database)
 from calibration.errors import RehabError
 
-FILE_MODE = 0o600
 DIR_MODE = 0o700
 
 
@@ -51,40 +50,6 @@ def make_private(path: str | Path, mode: int = FILE_MODE) -> None:
         st = os.stat(path)
         if hasattr(os, "getuid") and st.st_uid == os.getuid() and st.st_mode & 0o077:
             os.chmod(path, mode)
-
-
-def fsync_dir(folder: str | Path) -> None:
-    """Make a rename in ``folder`` durable (no-op where folders cannot be opened, e.g. Windows)."""
-    with contextlib.suppress(OSError):
-        fd = os.open(folder, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-
-
-def temp_path_beside(path: str | Path) -> Path:
-    """A new empty private file in ``path``'s folder, named after it (for writing then renaming)."""
-    path = Path(path)
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
-    os.close(fd)
-    os.chmod(name, FILE_MODE)
-    return Path(name)
-
-
-def commit_temp(tmp: Path, path: Path, *, overwrite: bool = True) -> None:
-    """Flush ``tmp`` to disk and rename it to ``path`` (refusing an existing ``path`` unless ``overwrite``)."""
-    fd = os.open(tmp, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-    if overwrite:
-        os.replace(tmp, path)
-    else:
-        os.link(tmp, path)   # fails if path exists: never replaces a file the user has
-        os.unlink(tmp)
-    fsync_dir(path.parent)
 
 
 @contextlib.contextmanager

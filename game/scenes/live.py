@@ -48,6 +48,8 @@ MIN_KNOWN_MARKERS = 4
 INPUT_PERIOD_S = 1.0 / 60.0
 #: A sample older than this while the process runs means the source has stalled.
 STALE_SAMPLE_S = 1.0
+#: Said over the angles while they are hidden (no live sample).
+PAUSED_LINE = "Angles paused: no live measurement"
 
 #: Why the rest pose reads below zero (docs/SIMULATOR.md, "At rest"): the spec's trunk axis runs from the
 #: lower to the upper sternum marker, and the chest's front slopes back towards the top.
@@ -423,7 +425,13 @@ class LiveScene(BaseScene):
         title, title_size = c.fit(title, round(theme.LARGE * s), right - x)
         c.text(title, (x, y), title_size, theme.TEXT)
         y += 58 * s
-        c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
+        live = self.sample_is_live(sample)
+        if sample is not None and not live:
+            # the tracker is restarting or the samples stopped: the last angles are not the patient's now
+            mode, size = c.fit(PAUSED_LINE, round(theme.SMALL * s), right - x)
+            c.text(mode, (x, y), size, theme.ATTENTION)
+        else:
+            c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
         sides = (self.control.side,) if side else ("right", "left")
         rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
@@ -439,7 +447,7 @@ class LiveScene(BaseScene):
         size = round((theme.BODY if row_h >= 60 * s else theme.SMALL) * s)
         value_size = round((theme.MEDIUM if row_h >= 60 * s else theme.BODY) * s)
         for name, label, (lo, hi) in rows:
-            value = self._angle(sample, name)
+            value = self._angle(sample, name) if live else math.nan
             c.text(label, (x, y + 4 * s), size, theme.TEXT_DIM)
             c.text(format_angle(value), (right, y), value_size, theme.TEXT, anchor="topright")
             bar_y = y + row_h - 22 * s
@@ -480,6 +488,13 @@ class LiveScene(BaseScene):
             text, size = c.fit(f"Simulated patient: measured markers {error_mm:.1f} mm from the truth (RMS)",
                                round(theme.SMALL * 0.8 * s), right - pos[0])
             c.text(text, (pos[0], pos[1] + 34 * s), size, theme.TEXT_FAINT)
+
+    def sample_is_live(self, sample) -> bool:
+        """The sample shows the patient now: the tracker runs and it is newer than ``STALE_SAMPLE_S``
+        (while the tracker restarts, its last angles are hidden, not shown as live)."""
+        if sample is None or self.link.problem() is not None:
+            return False
+        return not (math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S)
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""

@@ -248,6 +248,10 @@ def test_banners_say_what_the_tracker_is_doing(screen):
     link.state = LinkState.RESTARTING
     text, colour = scene.banner(link.latest)
     assert text == "The tracker stopped: restarting..."
+    link.error = "the tracker process was killed (SIGKILL); restarted"
+    assert scene.banner(link.latest)[0] == ("The tracker stopped: restarting... (the tracker process was killed "
+                                            "(SIGKILL); restarted)")
+    link.error = ""
     link.state = LinkState.STARTING
     assert scene.banner(None)[0] == "Starting the tracker..."
     link.state, link.error = LinkState.FAILED, "no camera"
@@ -258,6 +262,50 @@ def test_banners_say_what_the_tracker_is_doing(screen):
     rgb = app.screen.read_rgb()
     top = rgb[15:60, 20: int(live_layout(SIZE).view.w) - 20]
     assert (top.max(axis=2) > 200).sum() > 100
+
+
+def test_angles_are_hidden_while_the_tracker_restarts(screen, monkeypatch):
+    """A restart (the tracker and its standby killed together) takes seconds: the last sample's
+    angles are not shown as the patient's, the panel says they are paused, the banner why."""
+    from game.gfx.canvas import Canvas
+    from game.scenes.live import PAUSED_LINE
+
+    drawn: list[str] = []
+    text = Canvas.text
+
+    def record(self, words, *args, **kwargs):
+        drawn.append(words)
+        return text(self, words, *args, **kwargs)
+
+    banner = Canvas.banner
+
+    def record_banner(self, words, *args, **kwargs):
+        drawn.append(words)
+        return banner(self, words, *args, **kwargs)
+
+    monkeypatch.setattr(Canvas, "text", record)
+    monkeypatch.setattr(Canvas, "banner", record_banner)
+    app, scene, link, clock = make_app(screen, avatar=False)
+    pose = reference_pose()
+    link.feed(pose)
+    run_frames(app, clock, 2)
+    degrees = [t for t in drawn if t.endswith("\N{DEGREE SIGN}")]
+    assert degrees and PAUSED_LINE not in drawn                # live: the angles are shown
+    drawn.clear()
+    link.state, link.error = LinkState.RESTARTING, "the tracker process was killed (SIGKILL); restarted"
+    run_frames(app, clock, 2)
+    assert PAUSED_LINE in drawn
+    assert not [t for t in drawn if t.endswith("\N{DEGREE SIGN}")]   # no stale angle shown as live
+    assert any("killed (SIGKILL)" in t for t in drawn)       # the banner says what happened
+    drawn.clear()
+    link.state, link.error = LinkState.RUNNING, ""
+    clock.now_s += 2.0                                         # running again but no new sample yet: still paused
+    run_frames(app, clock, 1)
+    assert PAUSED_LINE in drawn and not [t for t in drawn if t.endswith("\N{DEGREE SIGN}")]
+    drawn.clear()
+    link.feed(pose)
+    run_frames(app, clock, 2)
+    assert PAUSED_LINE not in drawn and [t for t in drawn if t.endswith("\N{DEGREE SIGN}")]
 
 
 def test_marker_counts_and_estimated_markers_are_drawn(screen):

@@ -70,12 +70,14 @@ def test_frame_size_mismatch(tmp_path, capsys):
     assert "cam2" in err and "160x120" in err and "320x240" in err
 
 
-def test_video_that_ends_early_keeps_what_was_read(tmp_path, caplog):
+def test_a_video_that_ends_early_leaves_the_others_tracked_to_their_end(tmp_path, caplog):
     make_recording(tmp_path, images=True, n_frames=4)
     sorted((tmp_path / "cam1").iterdir())[-1].unlink()
     with Recording(tmp_path) as rec:
-        assert len(list(rec)) == 3
-    assert "stops at the shortest" in caplog.text or "ended at frame" in caplog.text
+        sets = list(rec)
+        assert rec.ended_cameras == ("cam1",)
+    assert len(sets) == 4 and not sets[3].images[0].any()   # cam1's last image black, said once
+    assert caplog.text.count("cam1 ended at frame 3 while the other cameras go on") == 1
 
 
 def test_missing_meta(tmp_path, capsys):

@@ -138,3 +138,52 @@ def test_track_without_folder_is_one_line(capsys):
     assert main(["track", "--out", "m.trc"]) == 1
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert err.startswith("rehab: error:") and "recording folder" in err
+
+
+@pytest.fixture(scope="module")
+def small_recording(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("rec") / "rec"
+    write_recording(folder, [reference_pose()] * 3)
+    return folder
+
+
+def test_outputs_in_a_missing_folder_are_written_there(small_recording, tmp_path):
+    out = tmp_path / "new" / "folder"
+    assert main(["track", str(small_recording), "--out", str(out / "m.trc"), "--mot", str(out / "a.mot")]) == 0
+    assert read_trc(out / "m.trc").n_frames == 3 and (out / "a.mot").stat().st_size > 0
+    assert sorted(p.name for p in out.iterdir()) == ["a.mot", "m.trc"]   # no temporary file left
+
+
+@pytest.mark.parametrize("writer, option, name", [
+    ("tracking.opensim_mot.write_mot", "--mot", "a.mot"),
+    ("tracking.trc.write_trc", "--out", "m.trc"),
+    ("tracking.c3d_io.write_c3d", "--c3d", "m.c3d"),
+    ("tracking.bvh.write_bvh", "--bvh", "a.bvh"),
+])
+def test_a_failure_half_way_through_a_file_leaves_no_half_file(small_recording, tmp_path, monkeypatch, capsys,
+                                                               writer, option, name):
+    """The writer dies after writing part of the file (a full disk, a kill): the asked name keeps
+    what it held before (here an older result), no half file and no temporary file is left."""
+    import importlib
+
+    module_name, fn = writer.rsplit(".", 1)
+    module = importlib.import_module(module_name)
+    real = getattr(module, fn)
+
+    def fails_half_way(path, *args, **kwargs):
+        real(path, *args, **kwargs)
+        with open(path, "r+b") as fh:
+            fh.truncate(max(1, fh.seek(0, 2) // 2))
+        raise OSError(28, "No space left on device", str(path))
+
+    monkeypatch.setattr(module, fn, fails_half_way)
+    if fn == "write_trc":   # offline imports it by name when it writes
+        import tracking.offline  # noqa: F401
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / name).write_text("an older result\n")
+    code = main(["track", str(small_recording), option, str(out / name)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 1 and err.startswith("rehab: error:") and "No space left" in err, err
+    assert (out / name).read_text() == "an older result\n"
+    assert sorted(p.name for p in out.iterdir()) == [name]

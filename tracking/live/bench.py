@@ -12,7 +12,8 @@ reads its samples in a tight loop and reports, per sample:
   render and tracker step times (on a shared machine these depend on the load: it is reported).
 
 ``python -m tracking.live.bench`` prints the figures for 320x240 and 640x480;
-``rehab bench`` calls :func:`measure_latency` as well.
+``rehab bench`` calls :func:`measure_latency` as well. ``--kill-both N`` instead times the
+restart after the tracker and its warm standby are killed together (:func:`measure_kill_both`).
 """
 
 from __future__ import annotations
@@ -227,6 +228,39 @@ def format_result(r: dict) -> str:
             f"(publish p99 {r['publish_ms']['p99']:.3f} ms, transport p99 {r['transport_ms']['p99']:.3f} ms)")
 
 
+def measure_kill_both(n: int = 10, size: tuple[int, int] = (320, 240), *, log=print) -> list[float]:
+    """Kill the running tracker process and its warm standby together (SIGKILL, as the
+    out-of-memory killer may) ``n`` times; returns the seconds from the kills to the first new
+    sample published (``status()`` and ``poll()`` called every 5 ms, as a game would each frame)."""
+    import signal
+
+    times = []
+    with LiveTracker(SourceConfig(size=size, motion="shoulder_flexion")) as live:
+        for i in range(n):
+            deadline = time.perf_counter() + 120.0
+            while not (live.status().alive and live.standby_ready) and time.perf_counter() < deadline:
+                live.poll()
+                time.sleep(0.02)
+            time.sleep(0.5)
+            live.poll()
+            running, standby = live.pid, live._spare.pid
+            t0 = time.perf_counter()
+            os.kill(running, signal.SIGKILL)
+            os.kill(standby, signal.SIGKILL)
+            got = None
+            while got is None and time.perf_counter() - t0 < 120.0:
+                live.status()
+                new = [s for s in live.poll() if s.t_frame_ready_s > t0]
+                if new:
+                    got = new[0].t_published_s - t0
+                time.sleep(0.005)
+            if got is None:
+                raise RuntimeError(f"no sample within 120 s of kill {i + 1}: {live.status()}")
+            times.append(got)
+            log(f"  kill {i + 1}: first new sample after {got:.2f} s")
+    return times
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m tracking.live.bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="measuring time per size (default 10)")
@@ -236,7 +270,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--motion", default="shoulder_flexion", help="scripted motion (default shoulder_flexion)")
     parser.add_argument("--reader", choices=("wait", "spin", "frame"), default="wait",
                         help="how the reader waits for samples (default wait: blocks on the new-sample pipe)")
+    parser.add_argument("--kill-both", type=int, default=0, metavar="N",
+                        help="instead: kill the tracker and its standby together N times, time the first new sample")
     args = parser.parse_args(argv)
+    if args.kill_both > 0:
+        t = sorted(measure_kill_both(args.kill_both))
+        print(f"tracker and standby killed together, n={len(t)}: median {np.median(t):.2f} s, worst {t[-1]:.2f} s, "
+              f"best {t[0]:.2f} s (load average {os.getloadavg()[0]:.1f})")
+        return 0
     sizes = args.size or ["320x240", "640x480"]
     for text in sizes:
         try:

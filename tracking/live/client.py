@@ -3,8 +3,8 @@
 It creates the shared memory (so that it can release it whatever happens to the process),
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
-that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it uses no CPU time: a
-process that a loaded machine merely slows down is not replaced) and replaces it without
+that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it neither uses CPU time nor
+waits for a CPU: a process that a loaded machine merely slows down or starves is not replaced) and replaces it without
 waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
@@ -42,8 +42,8 @@ log = logging.getLogger(__name__)
 
 #: Prefix of every shared-memory block of the live tracker.
 BLOCK_PREFIX = "rehab_live_"
-#: A running process whose heartbeat is older than this, and which has used no CPU time for as
-#: long, is taken as hung and restarted.
+#: A running process whose heartbeat is older than this, and which has neither used CPU time nor
+#: waited for a CPU for as long, is taken as hung and restarted.
 STALE_HEARTBEAT_S = 1.0
 #: A process whose heartbeat is older than this is taken as hung even if it uses CPU time (a loop
 #: that never returns to the heartbeat); a loaded machine slows a loop turn by a second or two,
@@ -59,7 +59,8 @@ STOP_TIMEOUT_S = 2.0
 #: the tracker (a killed process dies within milliseconds on an idle machine; a loaded one may
 #: take a second or more to schedule it).
 REAP_TIMEOUT_S = 10.0
-#: A process that reports it cannot start is tried again this many times (the cause may pass).
+#: A process that reports it cannot start this many times more in a row makes :attr:`LiveTracker.gave_up`
+#: true (a game still starting may then say why); it is tried again all the same (the cause may pass).
 MAX_START_RETRIES = 3
 #: A new standby process is started this long after the running one became ready, so that its
 #: start-up does not compete with a process that is just taking over.
@@ -130,6 +131,44 @@ def process_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def process_activity_s(pid: int) -> float:
+    """Seconds a process has run (all threads) or waited for a CPU (its main thread, runnable but
+    not scheduled) so far; NaN if unknown. A process whose figure does not grow is blocked or
+    stopped; one that a loaded machine starves of CPU keeps waiting to run, and is not hung."""
+    cpu_s = process_cpu_s(pid)
+    try:
+        with open(f"/proc/{pid}/schedstat") as f:
+            wait_s = int(f.read().split()[1]) * 1e-9
+    except (OSError, IndexError, ValueError):
+        wait_s = 0.0   # no scheduler statistics (a kernel without them): CPU time alone
+    return cpu_s + wait_s
+
+
+_PF_EXITING = 0x4  # the kernel's task flag of a process that is ending (/proc/PID/stat, field 9)
+
+
+def process_exiting(pid: int) -> bool:
+    """The process is ending (killed, or returned from main) but not yet gone: a killed process
+    with hundreds of megabytes and a GL context takes a noticeable time to be torn down. False
+    where unknown (not Linux)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return False
+    return fields[0] in ("Z", "X") or bool(int(fields[6]) & _PF_EXITING)
+
+
+def _ending_reason(pid: int) -> str:
+    """Why an ending process ends, as far as /proc tells: a pending SIGKILL, else "is ending"."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            pending = [int(line.split()[1], 16) for line in f if line.startswith(("SigPnd:", "ShdPnd:"))]
+    except (OSError, ValueError, IndexError):
+        pending = []
+    return "was killed (SIGKILL)" if any(p & (1 << 8) for p in pending) else "is ending"
+
+
 def _check_motion(name: str | None) -> None:
     """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
     if name is None:
@@ -154,6 +193,7 @@ class _Child:
         self.ready = False  # reported ready (a standby: prepared and waiting)
         self.failed = ""  # why it could not start
         self.released = False  # joined and closed: the process is gone
+        self.activated = False  # a standby told to take over (its start was done before)
         self._cpu_seen_s = math.nan  # its CPU time at the last look, and when that last grew
         self._cpu_grew_at = self.started_at
 
@@ -162,9 +202,10 @@ class _Child:
         return self.proc.pid
 
     def idle_for_s(self, now: float) -> float:
-        """Seconds since this process last used CPU time, as far as these calls saw (call it often);
-        infinite where the system does not tell (the heartbeat then decides alone)."""
-        cpu_s = process_cpu_s(self.proc.pid)
+        """Seconds since this process last used CPU time or waited for a CPU (:func:`process_activity_s`),
+        as far as these calls saw (call it often); infinite where the system does not tell (the
+        heartbeat then decides alone)."""
+        cpu_s = process_activity_s(self.proc.pid)
         if math.isnan(cpu_s):
             return math.inf
         if cpu_s != self._cpu_seen_s:
@@ -411,8 +452,8 @@ class LiveTracker:
         self._reap_stopped(0.0)
         self._tend_spare(now)
         child = self._child
-        if child is None:  # an earlier start failed: try again later, a few times
-            if self.auto_restart and now >= self._retry_at and self._failed_starts <= MAX_START_RETRIES:
+        if child is None:  # an earlier start failed: try again later, with a growing wait, for as long as it takes
+            if self.auto_restart and now >= self._retry_at:
                 self._restart("")
             return
         if not child.ready:
@@ -426,22 +467,34 @@ class LiveTracker:
                 return
             if child.ready:
                 self._failed_starts = self._lost_starts = 0
-        alive = child.proc.is_alive()
+        ending = child.proc.is_alive() and process_exiting(child.pid)   # a dying process is dead already
+        alive = child.proc.is_alive() and not ending
         if alive and child.ready:
             if not self._hung(child, now):
                 return
         elif alive and now - child.progress_at < START_TIMEOUT_S:
             return  # still starting
-        reason = f"the tracker process {_exit_reason(None if alive else child.proc.exitcode)}"
+        if ending:
+            child.proc.join(0.05)   # usually gone by then: its exit code says why
+        if ending and child.proc.exitcode is None:
+            why = _ending_reason(child.pid)
+        else:
+            why = _exit_reason(None if alive else child.proc.exitcode)
+        reason = f"the tracker process {why}"
         if not child.ready:
             reason += " while starting"
         log.error("%s", reason)
         self._last_error = reason
         self._drop(child)
         self._child = None
-        if not child.ready:
+        if not child.ready and child.activated:
+            # a standby that died before it could take over (killed together with the running one,
+            # as the out-of-memory killer does): a new process at once, no wait
+            if self.auto_restart:
+                self._restart("")
+        elif not child.ready:
             # it died or hung before it ran (killed, out of memory): retry later with a growing wait,
-            # for as long as it takes; only a process that reports it cannot start is given up on
+            # for as long as it takes
             self._lost_starts += 1
             self._retry_at = now + self._backoff_s()
         elif self.auto_restart:
@@ -453,8 +506,9 @@ class LiveTracker:
         return min(RETRY_MAX_S, RETRY_AFTER_S * 2.0 ** max(0, n - 1))
 
     def _hung(self, child: _Child, now: float) -> bool:
-        """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and no CPU time
-        used for as long (stopped, or blocked), or no heartbeat for ``SLOW_HEARTBEAT_S``."""
+        """A ready process stopped beating: no heartbeat for ``STALE_HEARTBEAT_S`` and for as long
+        neither CPU time used nor a wait for a CPU (stopped, or blocked), or no heartbeat for
+        ``SLOW_HEARTBEAT_S``."""
         idle_s = child.idle_for_s(now)
         if int(self._reader.header["state"]) not in (ProcessState.RUNNING, ProcessState.PAUSED):
             return False
@@ -484,9 +538,10 @@ class LiveTracker:
         spare = self._spare
         if spare is not None:
             spare.receive()
-            if spare.failed or not spare.proc.is_alive():
+            if spare.failed or not spare.proc.is_alive() or process_exiting(spare.pid):
                 log.warning("the standby tracker process %d ended: %s", spare.pid,
-                            spare.failed or _exit_reason(spare.proc.exitcode))
+                            spare.failed or (_exit_reason(spare.proc.exitcode) if spare.proc.exitcode is not None
+                                             else _ending_reason(spare.pid)))
                 self._drop(spare)
                 self._spare = None
         elif self._standby_allowed() and self._child is not None and self._child.ready:
@@ -505,10 +560,11 @@ class LiveTracker:
         if reason:
             self._last_error = f"{reason}; restarted"
         spare, self._spare = self._spare, None
-        if spare is not None and spare.send(Activate(self._motion, self._input, self._paused)):
+        if spare is not None and spare.proc.is_alive() and not process_exiting(spare.pid) and spare.send(Activate(self._motion, self._input, self._paused)):
             self._reader.header["state"] = ProcessState.STARTING
             spare.ready = False  # until it reports ready as the running process
             spare.standby = False
+            spare.activated = True
             spare.started_at = spare.progress_at = time.perf_counter()
             self._child = spare
             log.info("standby tracker process %d takes over", spare.pid)
@@ -519,7 +575,9 @@ class LiveTracker:
 
     @property
     def gave_up(self) -> bool:
-        """Every start failed (the first and its retries): the reason is ``status().last_error``."""
+        """Every start failed (the first and ``MAX_START_RETRIES`` more): the reason is
+        ``status().last_error``. The tracker still tries again (every ``RETRY_MAX_S`` at most);
+        a game that never had samples may stop waiting and say why."""
         return self._child is None and self._failed_starts > MAX_START_RETRIES
 
     @property

@@ -302,10 +302,10 @@ class DeviceSource:
         return frame
 
     def warnings(self) -> tuple[str, ...]:
-        """The source's current problems, one line each; once it ended, why (that line only)."""
-        if self._ended:
-            return (self._ended,)
-        return tuple(self.source.warnings())
+        """The source's current problems, one line each; once it ended, why, after what it said
+        before (e.g. a camera that ended before the others)."""
+        said = tuple(w for w in self.source.warnings() if w != self._ended)
+        return (*said, self._ended) if self._ended else said
 
     def handle(self, command: object) -> None:
         if isinstance(command, SetMotion) and command.name is not None:
