@@ -1,7 +1,7 @@
 """Fuzz every kind of file rehab reads: success or one line, never a traceback, a hang or garbage.
 
 Valid seed files of each kind (content YAML of every kind, calibration TOML and OpenCV YAML,
-meta.yaml, TRC, C3D, the CSV folder of an import, the joint-angles CSV, the database file) are
+meta.yaml, timestamps.csv, TRC, C3D, the CSV folder of an import, the joint-angles CSV, the database file) are
 mutated with a fixed seed: truncation, byte flips, a Latin-1 byte, lines deleted, duplicated or
 swapped, numbers replaced by nan/inf/huge/negative/fractional/text. Each mutated file is read by
 the same function the commands use, with a time bound. The outcome is one of:
@@ -210,7 +210,30 @@ def _recording_kinds(tmp: Path) -> list[Kind]:
             assert m.n_frames >= 0
         return m
 
-    return [Kind("recording meta.yaml", [seed], read, ".yaml")]
+    stamps_seed = tmp / "timestamps_seed.csv"
+    rng = np.random.default_rng(3)
+    phase = rng.uniform(-0.4, 0.4, 4) / 30.0
+    rows = ["frame,time,cam1,cam2,cam3,cam4"] + [
+        f"{k},{k / 30:.6f}," + ",".join(f"{k / 30 + p + rng.normal(0, 2e-4):.6f}" for p in phase) for k in range(30)]
+    stamps_seed.write_text("\n".join(rows) + "\n", encoding="utf-8")
+
+    def read_stamps(p):
+        from tracking.offline import check_skews
+        from tracking.recording import read_timestamps
+
+        folder = p.parent / (p.stem + "_rec")
+        folder.mkdir()
+        shutil.copy(p, folder / "timestamps.csv")
+        times, stamps = read_timestamps(folder, ["cam1", "cam2", "cam3", "cam4"])
+        skew = stamps - times[:, None]
+        check_skews(folder / "timestamps.csv", times, skew, 30.0)
+        assert np.isfinite(times).all() and (np.diff(times) > 0).all(), times
+        assert stamps.shape == (len(times), 4) and not np.isinf(stamps).any()
+        assert (np.abs(np.nan_to_num(skew)) <= 1 / 30).all(), skew
+        return times, stamps
+
+    return [Kind("recording meta.yaml", [seed], read, ".yaml"),
+            Kind("recording timestamps.csv", [stamps_seed], read_stamps, ".csv")]
 
 
 def _trc_kinds(tmp: Path) -> list[Kind]:
@@ -457,5 +480,5 @@ def test_every_mutated_input_is_read_or_refused_in_one_line(tmp_path):
     print(f"\n{summary(cases)}\nwall {wall:.1f} s")
     bad = [c for c in cases if c[2] not in ("accepted", "refused")]
     assert not bad, "\n".join(f"{k} / {op}: {outcome}: {detail}" for k, op, outcome, detail in bad[:30])
-    assert len(cases) == 13 * PER_KIND and len(cases) >= 200 and {c[0] for c in cases} >= {"TRC", "C3D", "CSV import", "calibration TOML"}
+    assert len(cases) == 14 * PER_KIND and len(cases) >= 200 and {c[0] for c in cases} >= {"TRC", "C3D", "CSV import", "calibration TOML"}
     assert sum(c[2] == "refused" for c in cases) >= 50   # the mutations do reach the checks

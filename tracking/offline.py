@@ -162,6 +162,23 @@ class TrackedRecording:
 SYNC_MODES = ("auto", "stamps", "none")
 
 
+def check_skews(path: Path, times: np.ndarray, skew: np.ndarray, fps: float, names=None) -> None:
+    """Stamps the tracker can use: frame-set instants that increase, and every image within one
+    frame period of its set's instant. A set joins each camera's image nearest its instant, so an
+    image stamped further away belongs to another set (or the stamps are wrong): bringing it to
+    this set's instant would extrapolate the motion over the gap. One-line :class:`RecordingError`."""
+    fix = "fix it, or track with --sync none (the cameras taken as synchronized)"
+    back = np.flatnonzero(np.diff(times) <= 0)
+    if back.size:
+        raise RecordingError(f"{path} line {int(back[0]) + 3}: the frame sets' times must increase: {fix}")
+    far = np.abs(np.nan_to_num(skew)) > 1.0 / fps
+    if far.any():
+        f, c = (int(v) for v in np.argwhere(far)[0])
+        name = names[c] if names is not None else f"camera {c + 1}"
+        raise RecordingError(f"{path} line {f + 2}: {name}'s image is {1000 * skew[f, c]:+.1f} ms from its "
+                             f"frame set's instant, more than one frame period ({1000 / fps:.1f} ms): {fix}")
+
+
 def image_skews(rec: Recording, sync: str = "auto") -> tuple[np.ndarray | None, str]:
     """Each image's instant minus its frame set's, from the recording's ``timestamps.csv``.
 
@@ -181,6 +198,7 @@ def image_skews(rec: Recording, sync: str = "auto") -> tuple[np.ndarray | None, 
         return None, "; ".join(x for x in (what, shutter) if x)
     times, stamps = read
     skew = stamps - times[:, None]
+    check_skews(rec.folder / "timestamps.csv", times, skew, rec.fps, [c.name for c in rec.cameras])
     worst = float(np.nanmax(np.abs(skew))) if np.isfinite(skew).any() else 0.0
     line = f"image time stamps from timestamps.csv (up to {1000 * worst:.1f} ms from their frame sets' instants)"
     if len(times) < (rec.n_frames or 0):
