@@ -283,7 +283,11 @@ class TrackerLoop:
 
     def _warn(self, warnings) -> None:
         """Publish the source's current warnings when they change."""
-        line = "; ".join(warnings)
+        from tracking.sources.cameras import is_pace_warning
+
+        # failures first: the published line has a length limit, and what it cuts must be the
+        # pace warnings (frames dropped on a busy machine), never a stopped camera
+        line = "; ".join(sorted(warnings, key=is_pace_warning))
         if line != self._warning:
             self._warning = line
             self.writer.set_warning(line)

@@ -22,6 +22,7 @@ condition is logged once.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from collections import deque
@@ -67,6 +68,18 @@ def is_file_device(device: str) -> bool:
     """A video file or image sequence (``cam1.avi``, ``cam1/%06d.png``), not a device index or URL."""
     return not device.isdigit() and "://" not in device
 
+
+
+#: How the pace warnings begin (frames dropped or left out while every camera delivers): the
+#: machine or the cameras could not keep up, a weaker measurement but not a failed one. Matched
+#: at the start, since a published warning line may be cut at its end.
+_PACE = re.compile(r"camera .+? (dropped \d+ frames|is out of step with the others)")
+
+
+def is_pace_warning(line: str) -> bool:
+    """``line`` (one warning of :meth:`CameraSource.warnings`, perhaps cut short) says only that
+    frames were dropped or left out of step, not that a camera stopped."""
+    return _PACE.match(line) is not None
 
 class PacedCapture:
     """A capture that delivers at most ``fps`` frames per second, as a camera does.
