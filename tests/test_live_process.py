@@ -198,11 +198,11 @@ def faulty_source(config):
 
     step = Tracker.step
 
-    def failing_step(self, images, time_s=None):
+    def failing_step(self, images, time_s=None, stamps_s=None):
         if self.frame_count % 7 == 3:
             self.frame_count += 1
             raise ValueError("injected tracker failure\n(second line)")
-        return step(self, images, time_s)
+        return step(self, images, time_s, stamps_s)
 
     Tracker.step = failing_step
     return SimSource(config)
