@@ -637,11 +637,8 @@ def main(argv: list[str] | None = None) -> int:
         format="rehab: %(levelname)s: %(message)s",
         stream=sys.stderr,
     )
-    from tqdm.contrib.logging import logging_redirect_tqdm
-
     try:
-        with logging_redirect_tqdm():   # a warning during a progress bar gets a line of its own
-            code = int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
         sys.stdout.flush()   # a closed pipe shows here, inside the handler, not at exit
         return code
     except RehabError as exc:
