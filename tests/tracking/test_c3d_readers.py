@@ -238,6 +238,10 @@ def test_qualisys_file_shows_which_byte_is_the_residual():
     valid = res >= 0
     assert scale == pytest.approx(-0.0762, abs=1e-4)
     assert len(np.unique(res[valid])) == 64 and 3.0 < res[valid].max() < 6.0 and (cams[valid] == 0).all()
+    from importlib.metadata import version
+
+    if tuple(int(v) for v in version("ezc3d").split(".")[:2]) < (1, 7):
+        return   # older ezc3d releases decode the fourth word otherwise; the swap checked is 1.7's
     e = ezc3d.c3d(str(path))
     swapped = np.asarray(e["data"]["meta_points"]["residuals"])[0].T
     masks = np.asarray(e["data"]["meta_points"]["camera_masks"]).transpose(2, 1, 0) @ (1 << np.arange(7))
