@@ -186,6 +186,7 @@ class TrackerLoop:
         self._last_ready = math.nan
         self._error_counts: dict[str, int] = {}
         self._warning = ""
+        self._raw_warnings: tuple[str, ...] = ()
         last = writer.latest_frame_index()
         self.frame_index = 0 if last is None else last + 1
         m, c = source.markerset.n_markers, len(source.cameras)
@@ -282,7 +283,12 @@ class TrackerLoop:
         return True
 
     def _warn(self, warnings) -> None:
-        """Publish the source's current warnings when they change."""
+        """Publish the source's current warnings when they change (compared as given, so the
+        frames without a change cost one tuple comparison)."""
+        warnings = tuple(warnings)
+        if warnings == self._raw_warnings:
+            return
+        self._raw_warnings = warnings
         from tracking.sources.cameras import is_pace_warning
 
         # failures first: the published line has a length limit, and what it cuts must be the
