@@ -37,7 +37,7 @@ from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_f
 from game.gfx import theme
 from game.gfx.view3d import Viewport, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
-from game.scenes.live import MIN_KNOWN_MARKERS
+from game.scenes.live_feed import LiveFeed
 from game.scenes.river_view import RiverView
 
 log = logging.getLogger(__name__)
@@ -45,9 +45,6 @@ log = logging.getLogger(__name__)
 VIEW_SHARE = 0.64
 #: The rotation game: the avatar's view, then the river up to this share of the width, then the panel.
 ROTATION_VIEW_SHARE, RIVER_END_SHARE = 0.36, 0.68
-INPUT_PERIOD_S = 1.0 / 60.0
-#: Samples stop for this long (the tracker publishes 30 a second): the game pauses rather than score an old pose.
-STALE_SAMPLE_S = 0.5
 #: How long a cue's flash stays on the screen.
 FLASH_S = 0.8
 GOOD = (120, 220, 120)
@@ -163,7 +160,7 @@ class GameScene(BaseScene):
         self.side = side
         self.db_path = db_location(db_path)
         self.patient_id = patient_id
-        self.make_avatar = make_avatar
+        self.feed = LiveFeed(link, make_avatar)
         self.auto = auto
         self.mute = mute
         self.source = source
@@ -171,13 +168,9 @@ class GameScene(BaseScene):
         self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
                                    level_high=level_high, therapist=therapist)
         self.player = AutoPlayer(self.session)
-        self.avatar = None
         self.sounds: Sounds | None = None
         self.stored_uid: str | None = None
         self.store_error = ""
-        self._sample_clock_s = math.nan
-        self._since_sent_s = 0.0
-        self._sent = None
         self._flash: tuple[str, tuple, float] | None = None
         self._frame_consumed = -1
         self._read = (None, (None, ""))   # (the sample read last, its (reading, reason))
@@ -211,9 +204,7 @@ class GameScene(BaseScene):
 
     def exit(self) -> None:
         self.save()
-        if self.avatar is not None:
-            self.avatar.release()
-            self.avatar = None
+        self.feed.release()
         if self.river_view is not None:
             self.river_view.release()
             self.river_view = None
@@ -296,31 +287,27 @@ class GameScene(BaseScene):
                                           FOREARM_LIMIT_DEG))
         if self._hand_target is None and self._pointer_px is not None and not self.auto:
             self._aim(*self._pointer_px)   # the pointer moved before the arm was seen: aim now
-        self._since_sent_s += dt_s
-        if self._since_sent_s < INPUT_PERIOD_S - 1e-9:
+        elapsed = self.feed.input_due(dt_s)
+        if elapsed is None:
             return
-        elapsed, self._since_sent_s = self._since_sent_s, 0.0
         if self.auto:
             value = self.player.patient_input(elapsed)
         else:
             from tracking.live import PatientInput
 
             value = PatientInput(side=self.side, hand_target_m=self._hand_target, forearm_rotation_deg=self._forearm_deg)
-        if value != self._sent:
-            self.link.set_patient_input(value)
-            self._sent = value
+        self.feed.send(value)
 
     # ------------------------------------------------------------------ samples -> session
+    @property
+    def avatar(self):
+        """The avatar (:class:`game.avatar.live.LiveAvatar`), made by the feed once the marker set is known."""
+        return self.feed.avatar
+
     def no_reading_reason(self) -> str:
         """Why there is no usable sample now ("" when samples flow)."""
-        problem = self.link.problem()
-        if problem is not None:
-            return problem[0]
-        if self.link.latest is None:
-            return "Waiting for the first images..."
-        if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:
-            return "No new images from the cameras..."
-        return ""
+        problem = self.feed.problem(self.app.clock())
+        return "" if problem is None else problem[0]
 
     def consume(self) -> None:
         """This frame's samples: the avatar, one reading, the session, the cues (once per frame)."""
@@ -328,17 +315,10 @@ class GameScene(BaseScene):
             return
         self._frame_consumed = self.app.frames
         now = self.app.clock()
-        samples = self.link.new_samples
+        samples = self.feed.take(self.app)   # the avatar moves with them
         markerset = self.link.markerset
-        if samples:
-            self._sample_clock_s = now
-        if self.avatar is None and self.make_avatar is not None and markerset is not None:
-            self.avatar = self.make_avatar(self.app.screen.ctx, markerset.names)
         reading, reason = None, self.no_reading_reason()
         if not reason and markerset is not None:
-            for sample in samples:
-                if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
-                    self.avatar.push_sample(sample)
             latest = samples[-1] if samples else self.link.latest
             if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
                 self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))

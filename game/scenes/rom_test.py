@@ -31,7 +31,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
@@ -41,7 +40,7 @@ from game.gfx.view3d import Viewport
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.rom.session import RomProgress, RomResult, RomState, RomTestSession, round_to_5
 from game.rom.spec import RomTest, load_all_rom_tests
-from game.scenes.live import MIN_KNOWN_MARKERS
+from game.scenes.live_feed import STOPPED_LINE, LiveFeed
 
 log = logging.getLogger(__name__)
 
@@ -323,12 +322,11 @@ class RomTestScene(BaseScene):
         self.visit = visit
         self.test = test
         self.side = side
-        self.make_avatar = make_avatar
+        self.feed = LiveFeed(link, make_avatar)
         self.demo_motion = test.simulated_motion.get(side)
         self.demo = bool(demo and self.demo_motion and is_simulated(link))
         self.session: RomTestSession | None = None
         self.progress: RomProgress | None = None
-        self.avatar = None
         self.selected = 0
         self.notice = ("", theme.TEXT)
         self.previous: list = []
@@ -346,9 +344,12 @@ class RomTestScene(BaseScene):
             self.link.set_motion(self.demo_motion if self.demo else None)
 
     def exit(self) -> None:
-        if self.avatar is not None:
-            self.avatar.release()
-            self.avatar = None
+        self.feed.release()
+
+    @property
+    def avatar(self):
+        """The avatar (:class:`game.avatar.live.LiveAvatar`), made by the feed once the marker set is known."""
+        return self.feed.avatar
 
     def _load_previous(self) -> None:
         try:
@@ -367,19 +368,15 @@ class RomTestScene(BaseScene):
         if self._frame_consumed == self.app.frames:
             return
         self._frame_consumed = self.app.frames
+        samples = self.feed.take(self.app)   # the avatar moves with them
         markerset = self.link.markerset
         if markerset is None:
             return
         if self.session is None:
             self.session = RomTestSession(self.test, self.side, self.visit.standard, markerset.names)
-        if self.avatar is None and self.make_avatar is not None:
-            self.avatar = self.make_avatar(self.app.screen.ctx, markerset.names)
-        for sample in self.link.new_samples:
+        for sample in samples:
             was = self.session.state
             self.progress = self.session.feed(sample)
-            # a tracker still waiting for the reference pose knows too few markers to pose a body
-            if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
-                self.avatar.push_sample(sample)
             if was != RomState.DONE and self.session.state == RomState.DONE:
                 # compensation: the scene asks to repeat (Repeat is chosen first); else Accept
                 self.selected = 1 if self.session.result.compensated else 0
@@ -509,6 +506,8 @@ class RomTestScene(BaseScene):
             if r.compensated:
                 return "Compensation seen: please repeat the test.", theme.ATTENTION
             return "Done: accept or discard the result.", theme.ACCENT
+        if self.feed.stopped(self.app.clock()):   # the value shown is not the patient's now
+            return STOPPED_LINE, theme.ATTENTION
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT
