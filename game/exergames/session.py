@@ -18,7 +18,7 @@ reading (or None with the reason) per frame with the game clock:
    time is counted;
 4. **done** after ``duration_s`` of play.
 
-No I/O: the scene stores :meth:`GameSession.log` with :func:`store_log`.
+No I/O: the log is stored by :class:`game.exergames.visit.GameVisit`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ import enum
 import json
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -514,27 +513,3 @@ class GameSession:
         self.log.level_end = self.adapter.level
         self.target = None
         self.rest_s = REST_S
-
-
-# ============================================================================ storing
-def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wait_s: float = 3.0) -> str | None:
-    """Store a session's log as an exercise result of a new ``exercise`` session; returns its uid.
-
-    The session and its result are one transaction, its span on the wall clock: it ends now and
-    starts the log's duration earlier; a session the automatic demo played throughout is stored
-    with the source ``demo``. A database locked by another program is waited for ``wait_s``, then
-    the result is kept in a pending file that the next open stores
-    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost. Nothing
-    is stored for a session that never started playing (no active time).
-    """
-    from game.db import exercise_record
-    from game.db.database import utc_now
-    from game.db.pending import store_durably
-
-    if log.active_s <= 0.0:
-        return None
-    if log.demo_s >= log.active_s - 1e-9:
-        source = "demo"   # played by the automatic demo from start to end: not the patient's
-    record = exercise_record(patient_id, log.game, log.reached, log.duration_s, log.score, log.details_json(),
-                             source=source, started_utc=utc_now(ago_s=log.duration_s))
-    return store_durably(db_path, record, wait_s=wait_s).uid

@@ -24,16 +24,15 @@ from typing import Callable
 
 import numpy as np
 
-from calibration.errors import RehabError
 from game.app import BaseScene, Frame
-from game.db.location import db_location
 from game.exergames.audio import Sounds
 from game.exergames.autoplay import AutoPlayer
 from game.exergames.kinds import FOREARM_LIMIT_DEG, Aim, Framing
-from game.exergames.session import Cue, GameSession, Phase, read_sample, store_log
+from game.exergames.session import Cue, GameSession, Phase, read_sample
 from game.exergames.spec import GameSpec
+from game.exergames.visit import GameVisit
 from game.exergames.river import river_for
-from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
+from game.exergames.targets import elbow_at_side_hand_m
 from game.gfx import theme
 from game.gfx.view3d import Viewport, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
@@ -94,16 +93,6 @@ def game_camera(pose, aspect: float, framing: Framing, side: str) -> tuple[np.nd
     return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
 
 
-def load_limits(db_path: Path, patient_id: str, spec: GameSpec, side: str) -> RomLimits:
-    """The patient's latest stored ROM for the game (defaults where none is stored)."""
-    from game.db import Database
-
-    with Database(db_path) as db:
-        db.require_patient(patient_id)
-        rows = db.rom_results(patient_id)
-    return rom_limits_from_rows(spec, rows, side)
-
-
 def _rgb01(c) -> np.ndarray:
     return np.asarray(c[:3], np.float32) / 255.0
 
@@ -158,19 +147,16 @@ class GameScene(BaseScene):
         self.spec = spec
         self.kind = spec.game_kind
         self.side = side
-        self.db_path = db_location(db_path)
+        self.visit = GameVisit(db_path, patient_id, source)
         self.patient_id = patient_id
         self.feed = LiveFeed(link, make_avatar)
         self.auto = auto
         self.mute = mute
-        self.source = source
-        self.limits = load_limits(self.db_path, patient_id, spec, side)
+        self.limits = self.visit.rom_limits(spec, side)
         self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
                                    level_high=level_high, therapist=therapist)
         self.player = AutoPlayer(self.session)
         self.sounds: Sounds | None = None
-        self.stored_uid: str | None = None
-        self.store_error = ""
         self._flash: tuple[str, tuple, float] | None = None
         self._frame_consumed = -1
         self._read = (None, (None, ""))   # (the sample read last, its (reading, reason))
@@ -211,18 +197,15 @@ class GameScene(BaseScene):
 
     def save(self) -> str | None:
         """End the session and store its log (once; nothing for a session that never played)."""
-        if self.stored_uid is not None or self.store_error:
-            return self.stored_uid
-        log_ = self.session.finish()
-        try:
-            self.stored_uid = store_log(self.db_path, self.patient_id, log_, source=self.source)
-        except RehabError as exc:
-            self.store_error = str(exc)
-            log.error("game session not stored: %s", exc)
-        if self.stored_uid:
-            log.info("stored %s session %s for %s: %d reached, %d missed, %.0f s", self.spec.name, self.stored_uid,
-                     self.patient_id, log_.reached, log_.missed, log_.duration_s)
-        return self.stored_uid
+        return self.visit.store(self.session)
+
+    @property
+    def stored_uid(self) -> str | None:
+        return self.visit.stored_uid
+
+    @property
+    def store_error(self) -> str:
+        return self.visit.error
 
     # ------------------------------------------------------------------ input
     def handle(self, event: InputEvent) -> None:
