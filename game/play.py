@@ -119,7 +119,8 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
     from game.db import db_location
     from game.scenes.patients import PatientsScene
     from game.scenes.progress import ProgressScene
-    from game.scenes.rom_test import RomTestScene, RomVisit, ChooseTestScene
+    from game.rom.visit import RomVisit
+    from game.scenes.rom_test import ChooseTestScene, RomTestScene
 
     db_path = db_location(options.db_path)
     source_kind = getattr(options.source, "kind", "sim") or "sim"

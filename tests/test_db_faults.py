@@ -157,7 +157,8 @@ def test_rom_test_cli_waits_keeps_and_never_says_accepted_before_stored(tmp_path
 
 
 def test_the_game_scene_store_keeps_a_result_while_locked(tmp_path):
-    from game.exergames.session import GameLog, store_log
+    from game.exergames.session import GameLog
+    from game.exergames.visit import store_log
 
     path = new_db(tmp_path / "r.sqlite3")
     log = GameLog("reach", "right", level_start=1.0, level_end=1.5)

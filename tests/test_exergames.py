@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from game.db import Database
-from game.exergames.session import (READY_S, Cue, GameSession, LevelAdapter, Phase, Reading, read_sample,
-                                    store_log)
+from game.exergames.session import READY_S, Cue, GameSession, LevelAdapter, Phase, Reading, read_sample
 from game.exergames.spec import available_games, load_game
+from game.exergames.visit import store_log
+from game.exergames.kinds import place_target, target_hand_m
 from game.exergames.targets import (ArmFrame, RomLimits, elbow_at_side_hand_m, elevation_direction,
-                                    flexion_abduction_deg, place_target, rom_limits_from_rows, target_hand_m)
+                                    flexion_abduction_deg, rom_limits_from_rows)
 from tracking.errors import ContentError
 
 DT = 1.0 / 30.0

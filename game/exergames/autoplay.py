@@ -56,12 +56,22 @@ class AutoPlayer:
         if s.phase is not Phase.PLAYING or t is None or t.age_s < self.reaction_s:
             rest = elbow_at_side_hand_m(frame, 0.0)
             return PatientInput(side=s.side, hand_target_m=tuple(float(x) for x in rest))
-        kind = s.spec.kind
-        if kind == "reach":
-            return PatientInput(side=s.side, hand_target_m=tuple(float(x) for x in t.hand_m))
-        if kind == "forearm":
-            return PatientInput(side=s.side, hand_target_m=tuple(float(x) for x in t.hand_m),
-                                forearm_rotation_deg=float(t.target.value_deg))
+        return s.kind.auto_input(self, t, dt_s)
+
+    def hand_at(self, hand_m, forearm_rotation_deg: float = 0.0):
+        """The input that puts the hand at ``hand_m`` (and turns the forearm): what a game kind
+        whose target is a place asks for."""
+        from tracking.live import PatientInput
+
+        return PatientInput(side=self.session.side, hand_target_m=tuple(float(x) for x in hand_m),
+                            forearm_rotation_deg=forearm_rotation_deg)
+
+    def steer_by_measure(self, t, dt_s: float):
+        """The input that brings the *measured* rotation to the target's: the command integrates
+        the difference (the module's docstring), the elbow at the side."""
+        from tracking.live import PatientInput
+
+        s = self.session
         goal = t.target.value_deg
         if t is not self._target:
             self._target = t
@@ -72,5 +82,5 @@ class AutoPlayer:
             self._command_deg = min(max(self._command_deg, goal - MAX_CORRECTION_DEG), goal + MAX_CORRECTION_DEG)
             if abs(goal - measured) < t.size:
                 self.offset_deg = self._command_deg - goal
-        hand = elbow_at_side_hand_m(frame, self._command_deg)
+        hand = elbow_at_side_hand_m(s.frame if s.frame is not None else s.last.frame, self._command_deg)
         return PatientInput(side=s.side, hand_target_m=tuple(float(x) for x in hand))

@@ -40,7 +40,7 @@ def free_value(spec: GameSpec, key: str) -> float:
 
 
 def step_size(spec: GameSpec, key: str) -> float:
-    return {"min_level": 1.0 / 9.0, "max_level": 1.0 / 9.0, "max_range": 0.05, "min_size": 0.01 if spec.kind == "reach" else 1.0,
+    return {"min_level": 1.0 / 9.0, "max_level": 1.0 / 9.0, "max_range": 0.05, "min_size": spec.game_kind.size_step,
             "max_hold_s": 0.1, "min_time_s": 1.0}[key]
 
 
@@ -67,7 +67,7 @@ def describe(spec: GameSpec, limits: TherapistLimits, key: str) -> str:
     elif key == "max_range":
         text = f"{round(shown * 100)} % of the measured range"
     elif key == "min_size":
-        text = f"{shown * 100:.0f} cm" if spec.kind == "reach" else f"{shown:.0f}\N{DEGREE SIGN} either side"
+        text = spec.game_kind.size_words(shown)
     elif key == "max_hold_s":
         text = f"{shown:.1f} s"
     else:

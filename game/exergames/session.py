@@ -18,7 +18,7 @@ reading (or None with the reason) per frame with the game clock:
    time is counted;
 4. **done** after ``duration_s`` of play.
 
-No I/O: the scene stores :meth:`GameSession.log` with :func:`store_log`.
+No I/O: the log is stored by :class:`game.exergames.visit.GameVisit`.
 """
 
 from __future__ import annotations
@@ -27,12 +27,11 @@ import enum
 import json
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from game.exergames.spec import GameSpec, TherapistLimits
-from game.exergames.targets import ArmFrame, RomLimits, Target, arm_frame_from_markers, place_target, target_hand_m
+from game.exergames.targets import ArmFrame, RomLimits, Target, arm_frame_from_markers
 
 #: Tracker sample states (tracking.tracker.TrackingState) and marker status (tracking.status).
 TRACKING = 1
@@ -51,12 +50,6 @@ HYSTERESIS = 0.8
 ARM_ANGLES = ("shoulder_flexion", "shoulder_abduction", "shoulder_elevation", "elbow_flexion",
               "shoulder_external_rotation", "forearm_supination")
 TRUNK_ANGLES = ("trunk_forward_lean", "trunk_lateral_lean")
-#: Angles whose range used is logged, per game kind.
-LOGGED_ANGLES = {
-    "reach": ("shoulder_flexion", "shoulder_abduction", "shoulder_elevation", "elbow_flexion"),
-    "rotation": ("shoulder_external_rotation",),
-    "forearm": ("forearm_supination",),
-}
 
 
 # ============================================================================ readings
@@ -295,6 +288,7 @@ class GameSession:
                  level: float | None = None, level_low: float | None = None, level_high: float | None = None,
                  therapist: TherapistLimits | None = None) -> None:
         self.spec = spec
+        self.kind = spec.game_kind
         self.limits = limits
         self.side = side
         self.rng = np.random.default_rng(seed)
@@ -338,13 +332,11 @@ class GameSession:
         return max(0.0, self.spec.duration_s - self.log.active_s)
 
     def value_now(self) -> float:
-        """The controlled quantity now: reach: hand-to-target distance (m); else the angle (deg)."""
+        """The controlled quantity now (the kind's): reach: hand-to-target distance (m); else the angle (deg)."""
         r = self.last
         if r is None:
             return math.nan
-        if self.spec.kind == "reach":
-            return float(np.linalg.norm(r.hand_m - self.target.hand_m)) if self.target is not None else math.nan
-        return r.angles["shoulder_external_rotation" if self.spec.kind == "rotation" else "forearm_supination"]
+        return self.kind.value(r, self.target)
 
     # ------------------------------------------------------------------ feeding
     def update(self, now_s: float, reading: Reading | None, reason: str = "", *, demo: bool = False) -> None:
@@ -463,7 +455,7 @@ class GameSession:
             self.compensation = ""
 
     def _use_range(self, r: Reading) -> None:
-        for name in LOGGED_ANGLES[self.spec.kind]:
+        for name in self.kind.logged_angles:
             v = r.angles[name]
             if math.isfinite(v):
                 lo, hi = self.log.range_used.get(name, (v, v))
@@ -488,20 +480,15 @@ class GameSession:
             self._end_target(False)
 
     def _inside(self, r: Reading, t: ActiveTarget) -> bool:
-        if not t.arrived:
-            return False
-        if self.spec.kind == "reach":
-            return bool(np.linalg.norm(r.hand_m - t.hand_m) <= t.size)
-        v = self.value_now()
-        return math.isfinite(v) and abs(v - t.target.value_deg) <= t.size
+        return t.arrived and self.kind.inside(r, t)
 
     def _new_target(self) -> None:
         a, spec = self.adapter, self.spec
-        target = place_target(spec.kind, self.limits, spec.comfort_fraction, a.top_fraction, self.rng,
-                              direction=self._direction, planes_deg=spec.planes_deg,
-                              elbow_range_deg=spec.elbow_flexion_deg)
+        target = self.kind.place(self.limits, spec.comfort_fraction, a.top_fraction, self.rng,
+                                 direction=self._direction, planes_deg=spec.planes_deg,
+                                 elbow_range_deg=spec.elbow_flexion_deg)
         self._direction = -self._direction   # rotation games alternate out and in
-        self.target = ActiveTarget(target, target_hand_m(spec.kind, target, self.frame), a.size, a.hold_s,
+        self.target = ActiveTarget(target, self.kind.hand_m(target, self.frame), a.size, a.hold_s,
                                    a.time_limit_s, a.level, a.approach_s)
         self.cues.append(Cue.NEW_TARGET)
 
@@ -526,27 +513,3 @@ class GameSession:
         self.log.level_end = self.adapter.level
         self.target = None
         self.rest_s = REST_S
-
-
-# ============================================================================ storing
-def store_log(db_path: Path, patient_id: str, log: GameLog, source: str = "", wait_s: float = 3.0) -> str | None:
-    """Store a session's log as an exercise result of a new ``exercise`` session; returns its uid.
-
-    The session and its result are one transaction, its span on the wall clock: it ends now and
-    starts the log's duration earlier; a session the automatic demo played throughout is stored
-    with the source ``demo``. A database locked by another program is waited for ``wait_s``, then
-    the result is kept in a pending file that the next open stores
-    (:func:`game.db.pending.store_durably`): the uid is returned either way, never lost. Nothing
-    is stored for a session that never started playing (no active time).
-    """
-    from game.db import exercise_record
-    from game.db.database import utc_now
-    from game.db.pending import store_durably
-
-    if log.active_s <= 0.0:
-        return None
-    if log.demo_s >= log.active_s - 1e-9:
-        source = "demo"   # played by the automatic demo from start to end: not the patient's
-    record = exercise_record(patient_id, log.game, log.reached, log.duration_s, log.score, log.details_json(),
-                             source=source, started_utc=utc_now(ago_s=log.duration_s))
-    return store_durably(db_path, record, wait_s=wait_s).uid

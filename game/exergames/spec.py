@@ -1,35 +1,28 @@
 """Exercise games as content: ``content/games/<name>.yaml``, validated once at load.
 
-A game names the motion it exercises (``kind``), the stored ROM tests that bound its targets
+A game names the motion it exercises (``kind``, a registered :mod:`game.exergames.kinds` module), the stored ROM tests that bound its targets
 (with a cautious default for a patient who has none yet), where targets go inside that range
 (from ``comfort_fraction`` of the measured maximum up to a top that rises with the difficulty, at
 most ``stretch_fraction``: slightly beyond the maximum, the stretch goal), how difficulty adapts
 to the success rate between the therapist's limits, the posture the game needs, the compensation
 limits that pause scoring, and how long a session lasts.
 
-Kinds:
-
-- ``reach``: the hand touches targets in front of the patient; a target is a shoulder elevation in
-  a plane between the sagittal (flexion, 0 degrees) and the frontal (abduction, 90 degrees) plane,
-  with the elbow a little bent; it is collected by holding the wrist inside its sphere.
-- ``rotation``: shoulder external/internal rotation with the elbow at the side, bent 90 degrees;
-  the forearm steers a boat through gates placed inside the measured rotation range.
-- ``forearm``: pronation/supination with the elbow at the side: turn the key to the marked angle.
+Kinds (one module each in ``game/exergames/kinds/``): ``reach`` (the hand touches targets in
+front of the patient), ``rotation`` (shoulder rotation with the elbow at the side steers a boat
+through gates), ``forearm`` (pronation/supination: turn the key to the marked angle).
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
 from pathlib import Path
-from typing import Literal
 
 import pydantic
 
+from game.exergames.kinds import GameKind, game_kind
 from tracking.content import StrictModel, available, load_model, resolve
 
 KIND = "games"
-
-GameKind = Literal["reach", "rotation", "forearm"]
 
 
 class RomBound(StrictModel):
@@ -115,12 +108,12 @@ class GameSpec(StrictModel):
 
     name: str = pydantic.Field(pattern=r"^[a-z0-9_]+$")
     title: str = pydantic.Field(min_length=2)
-    kind: GameKind
+    kind: str = pydantic.Field(description="the game kind (game/exergames/kinds), e.g. reach, rotation, forearm")
     exercises: str = pydantic.Field(min_length=5, description="the motions exercised, in plain words")
     instructions: str = pydantic.Field(min_length=10, description="what the patient does, in plain words")
-    rom: dict[Literal["sagittal", "frontal", "positive", "negative"], RomBound] = pydantic.Field(
-        description="reach: the tests of the sagittal (flexion) and frontal (abduction) planes; rotation and "
-        "forearm: the tests of the positive (external rotation, supination) and negative direction")
+    rom: dict[str, RomBound] = pydantic.Field(
+        description="the kind's keys: reach: the tests of the sagittal (flexion) and frontal (abduction) planes; "
+        "rotation and forearm: the tests of the positive (external rotation, supination) and negative direction")
     elbow: RomBound | None = pydantic.Field(None, description="reach: the elbow flexion test (bends the arm)")
     comfort_fraction: float = pydantic.Field(0.5, gt=0, le=1, description="lowest target, fraction of the maximum")
     stretch_fraction: float = pydantic.Field(1.05, ge=1, le=1.3, description="highest target ever, fraction of the maximum")
@@ -134,6 +127,17 @@ class GameSpec(StrictModel):
     duration_s: float = pydantic.Field(90.0, gt=5, le=1800, description="active play time of a session")
     colour: tuple[int, int, int] = pydantic.Field((255, 196, 64), description="sRGB of the targets")
 
+    @pydantic.field_validator("kind")
+    @classmethod
+    def _known_kind(cls, value: str) -> str:
+        game_kind(value)   # ValueError naming the known kinds
+        return value
+
+    @property
+    def game_kind(self) -> GameKind:
+        """The registered kind of this game (:mod:`game.exergames.kinds`)."""
+        return game_kind(self.kind)
+
     @pydantic.model_validator(mode="after")
     def _consistent(self) -> "GameSpec":
         if self.comfort_fraction >= self.stretch_fraction:
@@ -141,26 +145,24 @@ class GameSpec(StrictModel):
         for ramp in (self.difficulty.top_fraction.easy, self.difficulty.top_fraction.hard):
             if not self.comfort_fraction < ramp <= self.stretch_fraction:
                 raise ValueError(f"difficulty.top_fraction {ramp} must lie in (comfort_fraction, stretch_fraction]")
-        d = self.difficulty
-        if (self.kind == "rotation") != (d.approach_share > 0):
-            raise ValueError("difficulty.approach_share (the gates drift down the river) is needed by a rotation game "
-                             "and only by it")
+        d, kind = self.difficulty, self.game_kind
+        if kind.river != (d.approach_share > 0):
+            raise ValueError("difficulty.approach_share (the gates drift down the river) is needed by a game whose "
+                             "gates drift down a river (rotation) and only by it")
         for end in ("easy", "hard"):
             moving = getattr(d.time_limit_s, end) * d.approach_share
             if getattr(d.time_limit_s, end) <= moving + getattr(d.hold_s, end):
                 raise ValueError(f"difficulty.time_limit_s.{end} leaves no time to hold the target "
                                  "(approach and hold take all of it)")
         check_limits(self, self.limits)
-        need = {"sagittal", "frontal"} if self.kind == "reach" else {"positive", "negative"}
+        need = set(kind.rom_keys)
         if set(self.rom) != need:
             raise ValueError(f"a {self.kind} game's rom needs exactly the keys {sorted(need)}")
-        if self.kind == "reach":
-            if self.elbow is None:
-                raise ValueError("a reach game needs 'elbow' (the elbow flexion test)")
-            if any(not 0 <= p <= 90 for p in self.planes_deg):
-                raise ValueError("planes_deg must lie in 0..90")
-        elif self.posture is None:
+        if kind.needs_elbow and self.elbow is None:
+            raise ValueError(f"a {self.kind} game needs 'elbow' (the elbow flexion test)")
+        if kind.needs_posture and self.posture is None:
             raise ValueError(f"a {self.kind} game needs 'posture' (elbow at the side)")
+        kind.check(self)
         return self
 
 

@@ -5,7 +5,8 @@ definitions), between ``comfort_fraction`` and the current top fraction of the p
 measured maximum in that direction (:class:`RomLimits`), then mapped to the world position of the
 wrist centre by the forward kinematics of the patient's own arm (:class:`ArmFrame`: the shoulder
 marker, the trunk axes and the measured upper-arm and forearm lengths, the same points the joint
-angles are computed from), so a target is reachable by construction within the range.
+angles are computed from), so a target is reachable by construction within the range. Each game
+kind (:mod:`game.exergames.kinds`) places its targets with these:
 
 - reach: the upper arm at elevation ``theta`` in a plane ``psi`` degrees from the sagittal plane
   towards the frontal plane (``psi`` 0: pure flexion, 90: pure abduction); the elbow bent by
@@ -56,7 +57,7 @@ def rom_limits_from_rows(spec, rows, side: str) -> RomLimits:
     for r in rows:
         if r.side == side:
             latest[r.test] = r   # rows come oldest first: the last one wins
-    keys = ("sagittal", "frontal") if spec.kind == "reach" else ("positive", "negative")
+    keys = spec.game_kind.rom_keys
     values, sources = [], []
     bounds = [(k, spec.rom[k]) for k in keys] + ([("elbow", spec.elbow)] if spec.elbow is not None else [])
     for key, bound in bounds:
@@ -179,36 +180,3 @@ def plane_limit_deg(limits: RomLimits, plane_deg: float) -> float:
     """The elevation maximum in a plane between sagittal (flexion) and frontal (abduction)."""
     c = math.cos(math.radians(plane_deg)) ** 2
     return c * limits.positive_deg + (1.0 - c) * limits.negative_deg
-
-
-def place_target(kind: str, limits: RomLimits, low_fraction: float, top_fraction: float, rng: np.random.Generator,
-                 *, direction: int = 1, planes_deg=(0.0,), elbow_range_deg=(20.0, 40.0)) -> Target:
-    """A target drawn uniformly between ``low_fraction`` and ``top_fraction`` of the maximum.
-
-    Args:
-        kind: ``reach``, ``rotation`` or ``forearm``.
-        limits: the patient's maxima.
-        low_fraction, top_fraction: the band, fractions of the maximum (low < top).
-        rng: the game's random generator (seeded: a session is reproducible).
-        direction: rotation/forearm: +1 (external rotation, supination) or -1.
-        planes_deg: reach: the planes to choose from.
-        elbow_range_deg: reach: the elbow bend range, capped by the elbow maximum.
-    """
-    fraction = float(rng.uniform(low_fraction, top_fraction))
-    if kind == "reach":
-        plane = float(rng.choice(np.asarray(planes_deg, dtype=np.float64)))
-        limit = plane_limit_deg(limits, plane)
-        lo, hi = elbow_range_deg
-        elbow = float(min(rng.uniform(lo, hi), limits.elbow_deg))
-        return Target(fraction * limit, limit, fraction, plane, elbow)
-    limit = limits.positive_deg if direction > 0 else limits.negative_deg
-    return Target(direction * fraction * limit, limit, fraction)
-
-
-def target_hand_m(kind: str, target: Target, frame: ArmFrame) -> np.ndarray:
-    """(3,) world position of the wrist centre at ``target`` for this arm."""
-    if kind == "reach":
-        return reach_hand_m(frame, target.value_deg, target.plane_deg, target.elbow_deg)
-    if kind == "rotation":
-        return elbow_at_side_hand_m(frame, target.value_deg)
-    return elbow_at_side_hand_m(frame, 0.0)

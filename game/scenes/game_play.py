@@ -24,19 +24,19 @@ from typing import Callable
 
 import numpy as np
 
-from calibration.errors import RehabError
 from game.app import BaseScene, Frame
-from game.db.location import db_location
 from game.exergames.audio import Sounds
 from game.exergames.autoplay import AutoPlayer
-from game.exergames.session import Cue, GameSession, Phase, read_sample, store_log
+from game.exergames.kinds import FOREARM_LIMIT_DEG, Aim, Framing
+from game.exergames.session import Cue, GameSession, Phase, read_sample
 from game.exergames.spec import GameSpec
+from game.exergames.visit import GameVisit
 from game.exergames.river import river_for
-from game.exergames.targets import RomLimits, elbow_at_side_hand_m, rom_limits_from_rows
+from game.exergames.targets import elbow_at_side_hand_m
 from game.gfx import theme
-from game.gfx.view3d import Viewport, intersect_plane, pointer_ray, project_px
+from game.gfx.view3d import Viewport, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
-from game.scenes.live import MIN_KNOWN_MARKERS
+from game.scenes.live_feed import LiveFeed
 from game.scenes.river_view import RiverView
 
 log = logging.getLogger(__name__)
@@ -44,16 +44,11 @@ log = logging.getLogger(__name__)
 VIEW_SHARE = 0.64
 #: The rotation game: the avatar's view, then the river up to this share of the width, then the panel.
 ROTATION_VIEW_SHARE, RIVER_END_SHARE = 0.36, 0.68
-INPUT_PERIOD_S = 1.0 / 60.0
-#: Samples stop for this long (the tracker publishes 30 a second): the game pauses rather than score an old pose.
-STALE_SAMPLE_S = 0.5
 #: How long a cue's flash stays on the screen.
 FLASH_S = 0.8
 GOOD = (120, 220, 120)
 #: The camera is re-aimed when the pelvis moved this far.
 CAMERA_REAIM_M = 0.08
-#: The forearm's rotation the keys and the mouse ask for stays within this (degrees either way).
-FOREARM_LIMIT_DEG = 85.0
 
 
 def level_shown(level: float) -> int:
@@ -66,14 +61,13 @@ def level_from_shown(shown: int) -> float:
     return (min(max(int(shown), 1), 10) - 1) / 9.0
 
 
-def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, np.ndarray]:
+def game_camera(pose, aspect: float, framing: Framing, side: str) -> tuple[np.ndarray, np.ndarray]:
     """(view, mirrored projection) framing the upper body and the game's targets.
 
-    Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body):
-    reach frames from the hips to a hand raised above the head, turned 25 degrees towards the active
-    side so forward reaches show their depth; the rotation games frame the trunk and the forearm
-    in front of it, turned 15 degrees; the shoulder rotation game from higher up and a little
-    towards the active side (the forearm swings out in a horizontal plane).
+    Closer than the live mirror (:func:`game.avatar.renderer.mirror_view`, the whole seated body),
+    as the game kind's :class:`~game.exergames.kinds.Framing` says: e.g. reach from the hips to a
+    hand raised above the head, turned 25 degrees towards the active side so forward reaches show
+    their depth; the rotation games the trunk and the forearm in front of it, turned 15 degrees.
     """
     from game.avatar.renderer import look_at, perspective
 
@@ -82,37 +76,21 @@ def game_camera(pose, aspect: float, kind: str, side: str) -> tuple[np.ndarray, 
     fwd[1] = 0.0
     fwd /= max(float(np.linalg.norm(fwd)), 1e-9)
     right = np.array([-fwd[2], 0.0, fwd[0]])
-    yaw = math.radians((25.0 if kind == "reach" else 15.0) * (1.0 if side == "right" else -1.0))
+    sign = 1.0 if side == "right" else -1.0
+    yaw = math.radians(framing.yaw_deg * sign)
     direction = math.cos(yaw) * fwd + math.sin(yaw) * right
     shoulders = (pose.joint("right_acromion") + pose.joint("left_acromion")) / 2.0
     pelvis = pose.joint("pelvis")
-    if kind == "reach":
-        target = shoulders + np.array([0.0, 0.10, 0.0]) + 0.12 * fwd
-        half = 0.80
-    else:
-        sign = 1.0 if side == "right" else -1.0
-        shift = 0.10 if kind == "rotation" else 0.0
-        target = (shoulders + pelvis) / 2.0 + np.array([0.0, 0.05, 0.0]) + 0.10 * fwd + shift * sign * right
-        # the key game's view is wide: framed from the head to the knees (a closer view filled it
-        # with the trunk, and llvmpipe pays per pixel: 0.52 m cost ~7 ms more CPU per frame)
-        half = 0.52 if kind == "rotation" else 0.66
-    half = max(half, half * 0.9 / aspect)
+    k = framing.trunk_share
+    target = ((1.0 - k) * shoulders + k * pelvis + np.array([0.0, framing.up_m, 0.0]) + framing.forward_m * fwd
+              + framing.aside_m * sign * right)
+    half = max(framing.half_m, framing.half_m * 0.9 / aspect)
     fov = 30.0
     distance = half / math.tan(math.radians(fov) / 2.0)
-    pitch = math.radians(28.0 if kind == "rotation" else 10.0)
+    pitch = math.radians(framing.pitch_deg)
     eye = target + distance * (math.cos(pitch) * direction + math.sin(pitch) * np.array([0.0, 1.0, 0.0]))
     proj = perspective(fov, aspect, near_m=0.1, far_m=distance + 6.0)
     return look_at(eye, target), proj @ np.diag([-1.0, 1.0, 1.0, 1.0])
-
-
-def load_limits(db_path: Path, patient_id: str, spec: GameSpec, side: str) -> RomLimits:
-    """The patient's latest stored ROM for the game (defaults where none is stored)."""
-    from game.db import Database
-
-    with Database(db_path) as db:
-        db.require_patient(patient_id)
-        rows = db.rom_results(patient_id)
-    return rom_limits_from_rows(spec, rows, side)
 
 
 def _rgb01(c) -> np.ndarray:
@@ -126,41 +104,20 @@ def target_shapes(shapes, spec: GameSpec, session: GameSession):
     t, frame = session.target, session.frame
     if t is None or frame is None:
         return shapes
+    solid = session.kind.solid(t, frame)   # e.g. the rotation game's gates are on the river instead
+    if solid is None:
+        return shapes
+    centre, axes = solid
     colour = _rgb01(spec.colour)
     glow = np.clip(colour + (1.0 - colour) * 0.6 * t.hold_fraction, 0, 1)   # whitens as it fills
-    e_c, e_a, e_rgb, c_p0, c_p1, c_r = [], [], [], [], [], []
-    if spec.kind == "reach":
-        e_c.append(t.hand_m)
-        e_a.append(np.eye(3) * t.size * 0.7)
-        e_rgb.append(glow)
-    elif spec.kind == "rotation":
-        return shapes   # the gates are on the river beside the avatar (game.scenes.river_view)
-    else:  # the lock: a flat disc beside the hand, on the side the key must turn to
-        out = frame.out
-        e_c.append(t.hand_m + 0.10 * frame.trunk[:, 1] + 0.02 * out)
-        e_a.append(np.stack([0.05 * out, 0.05 * frame.trunk[:, 1], 0.015 * frame.trunk[:, 2]], axis=1))
-        e_rgb.append(glow)
-    n_e, n_c = len(e_c), len(c_p0)
-    out = replace(
+    return replace(
         shapes,
-        ellipsoid_centre_m=np.concatenate([shapes.ellipsoid_centre_m, np.array(e_c).reshape(-1, 3)]),
-        ellipsoid_axes_m=np.concatenate([shapes.ellipsoid_axes_m, np.array(e_a).reshape(-1, 3, 3)]),
-        ellipsoid_rgb=np.concatenate([shapes.ellipsoid_rgb, np.array(e_rgb, np.float32).reshape(-1, 3)]),
-        ellipsoid_part=np.concatenate([shapes.ellipsoid_part, np.full(n_e, PART_CHAIR, np.int32)]),
-        ellipsoid_fine=np.concatenate([shapes.ellipsoid_fine, np.ones(n_e, bool)]),
+        ellipsoid_centre_m=np.concatenate([shapes.ellipsoid_centre_m, np.asarray(centre).reshape(-1, 3)]),
+        ellipsoid_axes_m=np.concatenate([shapes.ellipsoid_axes_m, np.asarray(axes).reshape(-1, 3, 3)]),
+        ellipsoid_rgb=np.concatenate([shapes.ellipsoid_rgb, np.asarray(glow, np.float32).reshape(-1, 3)]),
+        ellipsoid_part=np.concatenate([shapes.ellipsoid_part, np.full(1, PART_CHAIR, np.int32)]),
+        ellipsoid_fine=np.concatenate([shapes.ellipsoid_fine, np.ones(1, bool)]),
     )
-    if n_c:
-        out = replace(
-            out,
-            capsule_p0_m=np.concatenate([shapes.capsule_p0_m, np.array(c_p0)]),
-            capsule_p1_m=np.concatenate([shapes.capsule_p1_m, np.array(c_p1)]),
-            capsule_r0_m=np.concatenate([shapes.capsule_r0_m, np.array(c_r)]),
-            capsule_r1_m=np.concatenate([shapes.capsule_r1_m, np.array(c_r)]),
-            capsule_rgb=np.concatenate([shapes.capsule_rgb, np.tile(np.float32([0.95, 0.95, 0.98]), (n_c, 1))]),
-            capsule_part=np.concatenate([shapes.capsule_part, np.full(n_c, PART_CHAIR, np.int32)]),
-            capsule_caps=np.concatenate([shapes.capsule_caps, np.ones((n_c, 2), bool)]),
-        )
-    return out
 
 
 class GameScene(BaseScene):
@@ -188,24 +145,18 @@ class GameScene(BaseScene):
                  therapist=None, source: str = "sim") -> None:
         self.link = link
         self.spec = spec
+        self.kind = spec.game_kind
         self.side = side
-        self.db_path = db_location(db_path)
+        self.visit = GameVisit(db_path, patient_id, source)
         self.patient_id = patient_id
-        self.make_avatar = make_avatar
+        self.feed = LiveFeed(link, make_avatar)
         self.auto = auto
         self.mute = mute
-        self.source = source
-        self.limits = load_limits(self.db_path, patient_id, spec, side)
+        self.limits = self.visit.rom_limits(spec, side)
         self.session = GameSession(spec, self.limits, side, seed=seed, level=level, level_low=level_low,
                                    level_high=level_high, therapist=therapist)
         self.player = AutoPlayer(self.session)
-        self.avatar = None
         self.sounds: Sounds | None = None
-        self.stored_uid: str | None = None
-        self.store_error = ""
-        self._sample_clock_s = math.nan
-        self._since_sent_s = 0.0
-        self._sent = None
         self._flash: tuple[str, tuple, float] | None = None
         self._frame_consumed = -1
         self._read = (None, (None, ""))   # (the sample read last, its (reading, reason))
@@ -216,7 +167,7 @@ class GameScene(BaseScene):
         self.view_m = self.proj_m = None
         self._camera_pelvis = None
         self._prepared = None  # the avatar and targets of this frame (prepare -> render_3d)
-        self.river = river_for(self.limits, spec.stretch_fraction, side) if spec.kind == "rotation" else None
+        self.river = river_for(self.limits, spec.stretch_fraction, side) if self.kind.river else None
         self.river_view: RiverView | None = None
         self._river_clock_s = math.nan
 
@@ -239,27 +190,22 @@ class GameScene(BaseScene):
 
     def exit(self) -> None:
         self.save()
-        if self.avatar is not None:
-            self.avatar.release()
-            self.avatar = None
+        self.feed.release()
         if self.river_view is not None:
             self.river_view.release()
             self.river_view = None
 
     def save(self) -> str | None:
         """End the session and store its log (once; nothing for a session that never played)."""
-        if self.stored_uid is not None or self.store_error:
-            return self.stored_uid
-        log_ = self.session.finish()
-        try:
-            self.stored_uid = store_log(self.db_path, self.patient_id, log_, source=self.source)
-        except RehabError as exc:
-            self.store_error = str(exc)
-            log.error("game session not stored: %s", exc)
-        if self.stored_uid:
-            log.info("stored %s session %s for %s: %d reached, %d missed, %.0f s", self.spec.name, self.stored_uid,
-                     self.patient_id, log_.reached, log_.missed, log_.duration_s)
-        return self.stored_uid
+        return self.visit.store(self.session)
+
+    @property
+    def stored_uid(self) -> str | None:
+        return self.visit.stored_uid
+
+    @property
+    def store_error(self) -> str:
+        return self.visit.error
 
     # ------------------------------------------------------------------ input
     def handle(self, event: InputEvent) -> None:
@@ -312,58 +258,39 @@ class GameScene(BaseScene):
                 return
         if self.proj_m is None or not (v.x <= x_px < v.x + v.w):
             return
-        if self.spec.kind == "forearm":
-            across = (x_px - v.x) / v.w * 2.0 - 1.0          # -1 at the view's left edge .. +1 at its right
-            mirror = 1.0 if self.side == "right" else -1.0   # as the gauge: the right arm's palm up to the right
-            self._forearm_deg = float(np.clip(mirror * across * 90.0, -FOREARM_LIMIT_DEG, FOREARM_LIMIT_DEG))
-            self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(frame, 0.0))
-            return
-        if self.spec.kind == "rotation":
-            # the rotation (within the river's banks) whose hand is drawn nearest the pointer, across
-            rotations = np.arange(self.river.in_deg, self.river.out_deg + 0.5, 1.0)
-            hands = np.array([elbow_at_side_hand_m(frame, r) for r in rotations])
-            xs = project_px(hands, self.proj_m @ self.view_m, v)[:, 0]
-            if not np.isfinite(xs).any():
-                return
-            rotation = float(rotations[np.nanargmin(np.abs(xs - x_px))])
-            self._hand_target = tuple(float(x) for x in elbow_at_side_hand_m(frame, rotation))
-            return
-        origin, direction = pointer_ray(x_px, y_px, self.proj_m @ self.view_m, v)
-        anchor = s.target.hand_m if s.target is not None else elbow_at_side_hand_m(frame, 0.0)
-        hit = intersect_plane(origin, direction, anchor, frame.trunk[:, 2])
-        if hit is not None:
-            self._hand_target = tuple(float(x) for x in hit)
+        target = s.target.hand_m if s.target is not None else None
+        hand, forearm = self.kind.aim(Aim(v, self.proj_m @ self.view_m, frame, self.side, self.river, target), x_px, y_px)
+        if forearm is not None:
+            self._forearm_deg = forearm
+        if hand is not None:
+            self._hand_target = hand
 
     def update(self, dt_s: float) -> None:
         self._forearm_deg = float(np.clip(self._forearm_deg + self._turn * 90.0 * dt_s, -FOREARM_LIMIT_DEG,
                                           FOREARM_LIMIT_DEG))
         if self._hand_target is None and self._pointer_px is not None and not self.auto:
             self._aim(*self._pointer_px)   # the pointer moved before the arm was seen: aim now
-        self._since_sent_s += dt_s
-        if self._since_sent_s < INPUT_PERIOD_S - 1e-9:
+        elapsed = self.feed.input_due(dt_s)
+        if elapsed is None:
             return
-        elapsed, self._since_sent_s = self._since_sent_s, 0.0
         if self.auto:
             value = self.player.patient_input(elapsed)
         else:
             from tracking.live import PatientInput
 
             value = PatientInput(side=self.side, hand_target_m=self._hand_target, forearm_rotation_deg=self._forearm_deg)
-        if value != self._sent:
-            self.link.set_patient_input(value)
-            self._sent = value
+        self.feed.send(value)
 
     # ------------------------------------------------------------------ samples -> session
+    @property
+    def avatar(self):
+        """The avatar (:class:`game.avatar.live.LiveAvatar`), made by the feed once the marker set is known."""
+        return self.feed.avatar
+
     def no_reading_reason(self) -> str:
         """Why there is no usable sample now ("" when samples flow)."""
-        problem = self.link.problem()
-        if problem is not None:
-            return problem[0]
-        if self.link.latest is None:
-            return "Waiting for the first images..."
-        if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:
-            return "No new images from the cameras..."
-        return ""
+        problem = self.feed.problem(self.app.clock())
+        return "" if problem is None else problem[0]
 
     def consume(self) -> None:
         """This frame's samples: the avatar, one reading, the session, the cues (once per frame)."""
@@ -371,17 +298,10 @@ class GameScene(BaseScene):
             return
         self._frame_consumed = self.app.frames
         now = self.app.clock()
-        samples = self.link.new_samples
+        samples = self.feed.take(self.app)   # the avatar moves with them
         markerset = self.link.markerset
-        if samples:
-            self._sample_clock_s = now
-        if self.avatar is None and self.make_avatar is not None and markerset is not None:
-            self.avatar = self.make_avatar(self.app.screen.ctx, markerset.names)
         reading, reason = None, self.no_reading_reason()
         if not reason and markerset is not None:
-            for sample in samples:
-                if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
-                    self.avatar.push_sample(sample)
             latest = samples[-1] if samples else self.link.latest
             if latest is not self._read[0]:   # frames outnumber samples: a sample is read once
                 self._read = (latest, read_sample(latest, markerset.names, self.link.angle_names, self.side))
@@ -425,7 +345,7 @@ class GameScene(BaseScene):
         if self.proj_m is None or self._camera_pelvis is None or \
                 np.linalg.norm(pose.joint("pelvis") - self._camera_pelvis) > CAMERA_REAIM_M:
             # a still camera: re-aimed only when the patient moves on the seat
-            self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.spec.kind, self.side)
+            self.view_m, self.proj_m = game_camera(pose, self.view.aspect, self.kind.framing, self.side)
             self._camera_pelvis = pose.joint("pelvis").copy()
         shapes = target_shapes(body_shapes(pose), self.spec, self.session)
         self._prepared = self.avatar.renderer.prepare(pose, self.view_m, self.proj_m, shapes=shapes,
@@ -466,7 +386,7 @@ class GameScene(BaseScene):
         centre = self._project(t.hand_m)
         if centre is None:
             return
-        edge = self._project(t.hand_m + (t.size if self.spec.kind == "reach" else 0.06) * sess.frame.trunk[:, 1])
+        edge = self._project(t.hand_m + self.kind.ring_m(t) * sess.frame.trunk[:, 1])
         r = max(22 * s, abs(edge[1] - centre[1]) if edge is not None else 30 * s) + 8 * s
         colour = tuple(self.spec.colour)
         dim = sess.paused
@@ -511,14 +431,7 @@ class GameScene(BaseScene):
         c.rect((x, y, right - x, 12 * s), (255, 255, 255, 30), radius=6 * s)
         c.rect((x, y, (right - x) * frac, 12 * s), theme.ACCENT, radius=6 * s)
         y += 36 * s
-        if self.spec.kind == "forearm":
-            y = self._draw_gauge(c, x, y, right)
-        elif self.spec.kind == "rotation":
-            v = sess.value_now()
-            if math.isfinite(v):
-                words = "out" if v >= 0 else "in"
-                c.text(f"Turned {abs(round(v)):d}\N{DEGREE SIGN} {words}", (x, y), round(theme.BODY * s), theme.TEXT)
-            y += 50 * s
+        y = self.kind.draw_readout(self, c, x, y, right)
         size = round(theme.SMALL * s)
         for line in c.wrap(self.spec.instructions, size, right - x)[:4]:
             c.text(line, (x, y), size, theme.TEXT_DIM)
@@ -530,8 +443,9 @@ class GameScene(BaseScene):
             c.text(line.strip(), (x, h - 20 * s - k * (keys_size + 6 * s)), keys_size, theme.TEXT_FAINT,
                    anchor="bottomleft")
 
-    def _draw_gauge(self, c, x: float, y: float, right: float) -> float:
-        """The rotation range as a half dial: the measured range, the target, the arm now."""
+    def draw_gauge(self, c, x: float, y: float, right: float) -> float:
+        """The rotation range as a half dial: the measured range, the target, the arm now (a game
+        kind's readout, e.g. the key's); returns the next y."""
         sess, s = self.session, self.scale
         r = min((right - x) / 2 - 10 * s, 120 * s)
         cx, cy = (x + right) / 2, y + r + 10 * s
@@ -560,7 +474,7 @@ class GameScene(BaseScene):
             c.circle(at(needle, r), 12 * s,
                      GOOD if (t is not None and abs(v - t.target.value_deg) <= t.size) else theme.TEXT)
             c.text(f"{round(v):d}\N{DEGREE SIGN}", (cx, cy + 6 * s), round(theme.BODY * s), theme.TEXT, anchor="midtop")
-        words = ("in", "out") if sess.spec.kind == "rotation" else ("palm down", "palm up")
+        words = self.kind.direction_words
         for v_end, word in ((lo, words[0]), (hi, words[1])):   # under the dial's ends, clear of its dots
             ex, ey = at(v_end, r)
             c.text(word, (ex, max(ey, cy) + 14 * s), round(theme.SMALL * 0.8 * s), theme.TEXT_FAINT, anchor="midtop")

@@ -31,6 +31,7 @@ from game.gfx import theme
 from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspective, pointer_ray, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
+from game.scenes.live_feed import WAITING_LINE, LiveFeed
 from tracking.angles import joint_angles
 
 log = logging.getLogger(__name__)
@@ -42,12 +43,6 @@ FOVY_DEG = 34.0
 NEAR_M, FAR_M = 0.1, 20.0
 #: Share of the window's width the 3D view takes (the panel takes the rest).
 VIEW_SHARE = 0.62
-#: A sample with fewer known markers (the tracker waiting for the reference pose) moves no avatar.
-MIN_KNOWN_MARKERS = 4
-#: Shortest interval between two patient inputs sent to the tracker process.
-INPUT_PERIOD_S = 1.0 / 60.0
-#: A sample older than this while the process runs means the source has stalled.
-STALE_SAMPLE_S = 1.0
 #: Said over the angles while they are hidden (no live sample).
 PAUSED_LINE = "Angles paused: no live measurement"
 
@@ -241,15 +236,11 @@ class LiveScene(BaseScene):
             self.motions.insert(0, motion)
         self.motion = motion
         self.open_monitor = open_monitor
-        self.make_avatar = make_avatar
+        self.feed = LiveFeed(link, make_avatar)
         self.show_markers = show_markers
         self.control = PatientControl()
-        self.avatar = None
-        self._sent_input = None
         self._shown_for = None  # the sample whose angles _shown holds
         self._shown: dict[str, float] = {}
-        self._sample_clock_s = math.nan   # app clock when the newest sample arrived
-        self._since_sent_s = 0.0
         self._last_shoulder_m: dict[str, np.ndarray] = {}   # per side
 
     # ------------------------------------------------------------------ life cycle
@@ -263,9 +254,12 @@ class LiveScene(BaseScene):
             self._send_input(force=True)
 
     def exit(self) -> None:
-        if self.avatar is not None:
-            self.avatar.release()
-            self.avatar = None
+        self.feed.release()
+
+    @property
+    def avatar(self):
+        """The avatar (:class:`game.avatar.live.LiveAvatar`), made by the feed once the marker set is known."""
+        return self.feed.avatar
 
     # ------------------------------------------------------------------ input
     @property
@@ -326,36 +320,19 @@ class LiveScene(BaseScene):
             self.control.aim(origin, direction, self._shoulder_m())
 
     def _send_input(self, force: bool = False) -> None:
-        value = self.control.patient_input()
-        if force or value != self._sent_input:
-            self.link.set_patient_input(value)
-            self._sent_input = value
+        self.feed.send(self.control.patient_input(), force=force)
 
     # ------------------------------------------------------------------ update
     def update(self, dt_s: float) -> None:
         self.control.update(dt_s)
-        self._since_sent_s += dt_s
-        # At most 60 messages a second to the tracker process (its camera runs at 30).
-        if self.interactive and self._since_sent_s >= INPUT_PERIOD_S - 1e-9:
-            self._since_sent_s = 0.0
+        # at most 60 messages a second to the tracker process (the feed's period)
+        if self.feed.input_due(dt_s) is not None and self.interactive:
             self._send_input()
-
-    def _consume_samples(self) -> None:
-        """Feed the samples that arrived this frame to the avatar (made once the marker set is known)."""
-        if self.link.new_samples:
-            self._sample_clock_s = self.app.clock()
-        if self.avatar is None and self.make_avatar is not None and self.link.markerset is not None:
-            self.avatar = self.make_avatar(self.app.screen.ctx, self.link.markerset.names)
-        if self.avatar is not None:
-            for sample in self.link.new_samples:
-                # A tracker still waiting for the reference pose knows too few markers to pose a body.
-                if np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
-                    self.avatar.push_sample(sample)
 
     # ------------------------------------------------------------------ drawing
     def prepare(self, frame: Frame) -> None:
         """This frame's samples into the avatar and its solids made (while the last frame rasterizes)."""
-        self._consume_samples()
+        self.feed.take(self.app)
         if self.avatar is not None:
             v = self.layout.view
             self.avatar.prepare((v.w, v.h), self.app.clock())
@@ -490,21 +467,18 @@ class LiveScene(BaseScene):
             c.text(text, (pos[0], pos[1] + 34 * s), size, theme.TEXT_FAINT)
 
     def sample_is_live(self, sample) -> bool:
-        """The sample shows the patient now: the tracker runs and it is newer than ``STALE_SAMPLE_S``
-        (while the tracker restarts, its last angles are hidden, not shown as live)."""
-        if sample is None or self.link.problem() is not None:
-            return False
-        return not (math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S)
+        """The sample shows the patient now: the tracker runs and the samples flow
+        (:meth:`game.scenes.live_feed.LiveFeed.is_live`; while the tracker restarts, its last angles
+        are hidden, not shown as live)."""
+        return sample is not None and self.feed.is_live(self.app.clock())
 
     def banner(self, sample) -> tuple[str, tuple] | None:
         """The line on top of the view and its colour (None: all is well)."""
-        problem = self.link.problem()
+        problem = self.feed.problem(self.app.clock())
         if problem is not None:
             return problem[0], theme.FAILURE if problem[1] else theme.ATTENTION
         if sample is None:
-            return "Waiting for the first images...", theme.ATTENTION
-        if math.isfinite(self._sample_clock_s) and self.app.clock() - self._sample_clock_s > STALE_SAMPLE_S:
-            return "No new images from the cameras...", theme.ATTENTION
+            return WAITING_LINE, theme.ATTENTION
         if sample.state != TRACKING:
             return sample.message or "Finding the markers...", theme.ATTENTION
         warning = getattr(self.link, "warning", "")

@@ -1,6 +1,7 @@
 """The ROM test: choose the test, then measure it live with the same logic as ``rehab rom-test``.
 
-Two scenes over one :class:`RomVisit` (the patient, the database, the standard):
+Two scenes over one :class:`game.rom.visit.RomVisit` (the patient, the database, the standard; it
+stores the accepted results, the scenes never write to the database themselves):
 
 - :class:`ChooseTestScene`: the tests of ``content/rom_tests`` for the chosen side, with the start
   position and the patient's instructions in large type, the normal value of the standard.
@@ -26,22 +27,19 @@ from __future__ import annotations
 
 import logging
 import math
-import uuid
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
-import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
-from game.db.location import db_location
 from game.gfx import theme
 from game.gfx.view3d import Viewport
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.rom.session import RomProgress, RomResult, RomState, RomTestSession, round_to_5
+from game.rom.session import RomProgress, RomState, RomTestSession, round_to_5
 from game.rom.spec import RomTest, load_all_rom_tests
-from game.scenes.live import MIN_KNOWN_MARKERS
+from game.rom.visit import RomVisit
+from game.scenes.live_feed import STOPPED_LINE, LiveFeed
 
 log = logging.getLogger(__name__)
 
@@ -65,74 +63,6 @@ def is_simulated(link) -> bool:
     """Whether the tracker measures the simulated patient (demo motions exist only there)."""
     source = getattr(getattr(link, "tracker", None), "source", None)
     return getattr(source, "kind", "sim") == "sim"
-
-
-# ============================================================================ the visit
-class RomVisit:
-    """One patient's ROM tests in this sitting: the database, the standard, one database session.
-
-    The database session (kind ``rom``) is stored with the first accepted result, in the same
-    transaction, and its end time follows each result; :meth:`close` sets the visit's end. A
-    database locked by another program does not lose a result: it waits briefly and then keeps it
-    in a pending file that the next open stores (:func:`game.db.pending.store_durably`).
-
-    Args:
-        db_path: the database file.
-        patient_id: a patient that exists in it.
-        standard: ``jarm`` or ``aaos``: every result of the visit is labelled with it.
-        source: what measured the results (stored with the session), e.g. ``sim`` or ``cameras``.
-        wait_s: how long a locked database is waited for before a result is kept aside.
-        accepted_by: the signed-in therapist account ("" = none): audited with each result.
-    """
-
-    def __init__(self, db_path: Path, patient_id: str, standard: str = "jarm", source: str = "sim",
-                 wait_s: float = 3.0, accepted_by: str = "") -> None:
-        self.db_path = db_location(db_path)
-        self.patient_id = patient_id
-        self.standard = standard
-        self.source = source
-        self.wait_s = wait_s
-        self.accepted_by = accepted_by
-        self.session_uid = uuid.uuid4().hex
-        self.session_started_utc: str | None = None
-        self.stored: list[str] = []
-        self.last_outcome = None
-
-    def previous(self, test: str, side: str) -> list:
-        """Stored results of this patient for ``test`` on ``side``, oldest first (:class:`game.db.RomRow`)."""
-        from game.db import Database
-
-        with Database(self.db_path) as db:
-            return [r for r in db.rom_results(self.patient_id) if r.test == test and r.side == side]
-
-    def store(self, result: RomResult, source: str | None = None) -> str:
-        """Store an accepted result; returns its uid once it is on disk (in the database or its pending file).
-
-        :attr:`last_outcome` says which (:class:`game.db.pending.StoreOutcome`).
-        """
-        from game.db import rom_record
-        from game.db.pending import store_durably
-
-        record = replace(rom_record(self.patient_id, result, session_uid=self.session_uid, source=source or self.source,
-                                    started_utc=self.session_started_utc), accepted_by=self.accepted_by)
-        self.session_started_utc = record.session_started_utc
-        self.last_outcome = store_durably(self.db_path, record, wait_s=self.wait_s)
-        self.stored.append(record.uid)
-        log.info("%s (%s %s %.1f deg) for %s", self.last_outcome.line(self.db_path), result.test, result.side,
-                 result.max_deg, self.patient_id)
-        return record.uid
-
-    def close(self) -> None:
-        """Set the session's end to now (if a result was stored; it already ends at its last result)."""
-        from game.db import Database
-
-        if self.session_started_utc is not None:
-            try:
-                with Database(self.db_path, busy_timeout_s=self.wait_s) as db:
-                    db.end_session_uid(self.session_uid)
-            except RehabError as exc:
-                log.warning("the ROM session's end time stays at its last result: %s", exc)
-            self.session_started_utc = None
 
 
 def range_words(result) -> tuple[str, str]:
@@ -323,12 +253,11 @@ class RomTestScene(BaseScene):
         self.visit = visit
         self.test = test
         self.side = side
-        self.make_avatar = make_avatar
+        self.feed = LiveFeed(link, make_avatar)
         self.demo_motion = test.simulated_motion.get(side)
         self.demo = bool(demo and self.demo_motion and is_simulated(link))
         self.session: RomTestSession | None = None
         self.progress: RomProgress | None = None
-        self.avatar = None
         self.selected = 0
         self.notice = ("", theme.TEXT)
         self.previous: list = []
@@ -346,9 +275,12 @@ class RomTestScene(BaseScene):
             self.link.set_motion(self.demo_motion if self.demo else None)
 
     def exit(self) -> None:
-        if self.avatar is not None:
-            self.avatar.release()
-            self.avatar = None
+        self.feed.release()
+
+    @property
+    def avatar(self):
+        """The avatar (:class:`game.avatar.live.LiveAvatar`), made by the feed once the marker set is known."""
+        return self.feed.avatar
 
     def _load_previous(self) -> None:
         try:
@@ -367,19 +299,15 @@ class RomTestScene(BaseScene):
         if self._frame_consumed == self.app.frames:
             return
         self._frame_consumed = self.app.frames
+        samples = self.feed.take(self.app)   # the avatar moves with them
         markerset = self.link.markerset
         if markerset is None:
             return
         if self.session is None:
             self.session = RomTestSession(self.test, self.side, self.visit.standard, markerset.names)
-        if self.avatar is None and self.make_avatar is not None:
-            self.avatar = self.make_avatar(self.app.screen.ctx, markerset.names)
-        for sample in self.link.new_samples:
+        for sample in samples:
             was = self.session.state
             self.progress = self.session.feed(sample)
-            # a tracker still waiting for the reference pose knows too few markers to pose a body
-            if self.avatar is not None and np.isfinite(sample.positions_m).all(axis=1).sum() >= MIN_KNOWN_MARKERS:
-                self.avatar.push_sample(sample)
             if was != RomState.DONE and self.session.state == RomState.DONE:
                 # compensation: the scene asks to repeat (Repeat is chosen first); else Accept
                 self.selected = 1 if self.session.result.compensated else 0
@@ -509,6 +437,8 @@ class RomTestScene(BaseScene):
             if r.compensated:
                 return "Compensation seen: please repeat the test.", theme.ATTENTION
             return "Done: accept or discard the result.", theme.ACCENT
+        if self.feed.stopped(self.app.clock()):   # the value shown is not the patient's now
+            return STOPPED_LINE, theme.ATTENTION
         if p.state == RomState.CHECKING_START:
             if p.hold_fraction > 0:
                 return "Hold still...", theme.ACCENT

@@ -7,12 +7,12 @@ values) and its games chart, and the key game's dial with the forearm turned pas
 from __future__ import annotations
 
 
-import numpy as np
 import pytest
 
 from game.app import App, BaseScene, Services, Settings
 from game.db import Database
-from game.exergames.session import GameLog, store_log
+from game.exergames.session import GameLog
+from game.exergames.visit import store_log
 from game.exergames.spec import load_game
 from game.rom.session import RomResult, RomState
 from game.rom.spec import load_rom_test
