@@ -31,7 +31,9 @@ class PaceLimits:
 
     Attributes:
         window: frames at the full rate over which misses are counted.
-        drop_misses: misses among the last ``window`` frames that halve the rate.
+        drop_misses: misses among the last ``window`` frames that halve the rate (12 of 60: one
+            frame in five skips a refresh, the full rate shows less than ~50 frames/s; with two
+            CPU burners the window showed 56-59 frames/s at 60 and stays there).
         miss_at: a frame misses when its interval exceeds this many full-rate periods.
         rise_after: frames at the half rate before the full rate is tried again (150: 5 s at 30
             frames/s).
@@ -39,7 +41,7 @@ class PaceLimits:
     """
 
     window: int = 60
-    drop_misses: int = 6
+    drop_misses: int = 12
     miss_at: float = 1.5
     rise_after: int = 150
     max_rise_after: int = 1200

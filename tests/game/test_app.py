@@ -387,6 +387,6 @@ def test_frames_that_keep_missing_the_rate_are_paced_at_half_of_it(screen):
         app.push(Slow())
         results[adaptive] = app.run(seconds=10.0)
     halved, free = results[True], results[False]
-    assert halved.half_rate_share > 0.8 and "paced at half the rate" in halved.line()
+    assert halved.half_rate_share > 0.7 and "paced at half the rate" in halved.line()
     assert halved.fps == pytest.approx(30.0, abs=2.0)
     assert free.half_rate_share == 0.0 and free.fps > 38.0

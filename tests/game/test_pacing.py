@@ -23,8 +23,8 @@ def _intervals(pacer: FramePacer, rng: np.random.Generator, miss_rate: float) ->
 def test_a_steady_machine_keeps_the_full_rate(seed):
     rng = np.random.default_rng(seed)
     pacer = FramePacer(60.0)
-    for _ in range(3000):   # 50 s; a rare skipped refresh (1 in 100) is no reason to halve
-        pacer.observe(_intervals(pacer, rng, 0.01))
+    for _ in range(3000):   # 50 s; a skipped refresh now and then (1 in 20) is no reason to halve
+        pacer.observe(_intervals(pacer, rng, 0.05))
     assert not pacer.halved and pacer.changes == 0
     assert pacer.period_s == pytest.approx(FULL_S)
 
@@ -37,11 +37,11 @@ def test_a_busy_machine_gets_the_half_rate_and_the_full_rate_comes_back_after(se
         pacer.observe(_intervals(pacer, rng, 0.0))
     assert not pacer.halved
     # busy: a third of the frames skip a refresh
-    for i in range(60):
+    for i in range(90):
         pacer.observe(_intervals(pacer, rng, 0.33))
         if pacer.halved:
             break
-    assert pacer.halved and i < 40, "halved within 40 frames of the load"
+    assert pacer.halved and i < 60, "halved within a second of the load"
     assert pacer.period_s == pytest.approx(2 * FULL_S)
     # 60 s of the same load: the full rate is tried now and then, each failed try waits twice as
     # long before the next, so the rate stays half nearly all the time
