@@ -103,3 +103,15 @@ def test_bad_limits_are_refused():
         PaceLimits(miss_at=0.9)
     with pytest.raises(ValueError):
         FramePacer(0.0)
+
+
+@pytest.mark.parametrize("flag, adaptive", [((), True), (("--fixed-rate",), False)])
+def test_rehab_play_halves_on_a_busy_machine_unless_told_to_keep_the_rate(monkeypatch, capsys, flag, adaptive):
+    import game.play
+    from game.app import RunSummary
+    from game.cli import main
+
+    seen = []
+    monkeypatch.setattr(game.play, "run_play", lambda options: seen.append(options) or RunSummary(1, 1, 1.0, 1.0))
+    assert main(["play", "--headless", "--seconds", "1", *flag]) == 0
+    assert seen[0].settings.adaptive_pace is adaptive
