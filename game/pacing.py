@@ -13,7 +13,7 @@ The controller judges what the patient sees, the frame intervals, not the time t
 frame *misses* when its interval exceeds ``miss_at`` full periods (a refresh skipped);
 ``drop_misses`` misses among the last ``window`` frames halve the rate. At the half rate nothing
 tells whether the full rate would hold again, so after ``rise_after`` frames it is tried: a
-return that misses again within ``window`` frames doubles the next wait (up to
+return that is halved again within ``hold`` frames doubles the next wait (up to
 ``max_rise_after``), so a machine at the edge does not flicker between the two rates; a return
 that holds resets it.
 """
@@ -38,6 +38,8 @@ class PaceLimits:
         rise_after: frames at the half rate before the full rate is tried again (150: 5 s at 30
             frames/s).
         max_rise_after: the longest that wait grows to after returns that did not hold (1200: 40 s).
+        hold: frames at the full rate after which a return has held (300: 5 s at 60; with four
+            CPU burners a return was halved again 1-2 s later, after the first window).
     """
 
     window: int = 60
@@ -45,11 +47,13 @@ class PaceLimits:
     miss_at: float = 1.5
     rise_after: int = 150
     max_rise_after: int = 1200
+    hold: int = 300
 
     def __post_init__(self) -> None:
-        if not (1 <= self.drop_misses <= self.window and self.miss_at > 1.0 and 1 <= self.rise_after <= self.max_rise_after):
+        if not (1 <= self.drop_misses <= self.window and self.miss_at > 1.0 and 1 <= self.rise_after <= self.max_rise_after
+                and self.hold >= self.window):
             raise ValueError("PaceLimits: need 1 <= drop_misses <= window, miss_at > 1, "
-                             "1 <= rise_after <= max_rise_after")
+                             "1 <= rise_after <= max_rise_after, hold >= window")
 
 
 class FramePacer:
@@ -94,14 +98,14 @@ class FramePacer:
             self._misses.append(interval_s > lim.miss_at * self.full_period_s)
             if sum(self._misses) >= lim.drop_misses:
                 # a return that did not hold: wait longer before the next one
-                if self._since_rise <= lim.window:
+                if self._since_rise <= lim.hold:
                     self._rise_after = min(2 * self._rise_after, lim.max_rise_after)
                 self._set(True)
         else:
             self._halved_for += 1
             if self._halved_for >= self._rise_after:
                 self._set(False)
-        if not self.halved and self._since_rise > lim.window:
+        if not self.halved and self._since_rise > lim.hold:
             self._rise_after = lim.rise_after   # the last return held
         return self.period_s
 
