@@ -11,15 +11,18 @@ smoother and leaves the tracker the CPU the extra frames cost. Pure logic, no cl
 The controller judges what the patient sees, the frame intervals, not the time to make a frame
 (a display's vsync makes that time look full even when the machine is idle). At the full rate a
 frame *misses* when its interval exceeds ``miss_at`` full periods (a refresh skipped);
-``drop_misses`` misses among the last ``window`` frames halve the rate. At the half rate nothing
-tells whether the full rate would hold again, so after ``rise_after`` frames it is tried: a
-return that is halved again within ``hold`` frames doubles the next wait (up to
+``drop_misses`` misses among the last ``window`` frames (3 s) halve the rate. At the half rate
+nothing tells whether the full rate would hold again, so after ``rise_after`` frames it is tried,
+and judged faster, since the machine was busy a moment ago: within ``hold`` frames of the
+return, ``probe_misses`` misses among the last ``probe`` frames (1 s) halve it again. A return
+halved again within ``hold`` frames doubles the next wait (up to
 ``max_rise_after``), so a machine at the edge does not flicker between the two rates; a return
 that holds resets it.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -30,30 +33,34 @@ class PaceLimits:
     """How :class:`FramePacer` moves between the full and the half rate.
 
     Attributes:
-        window: frames at the full rate over which misses are counted.
-        drop_misses: misses among the last ``window`` frames that halve the rate (12 of 60: one
-            frame in five skips a refresh, the full rate shows less than ~50 frames/s; with two
-            CPU burners the window showed 56-59 frames/s at 60 and stays there).
+        window: frames at the full rate over which misses are counted (180: 3 s at 60).
+        drop_misses: misses among the last ``window`` frames that halve the rate (36 of 180: one
+            frame in five skips a refresh over 3 s, the full rate shows less than ~50 frames/s;
+            a burst of a second, such as another process starting, is no reason to halve).
         miss_at: a frame misses when its interval exceeds this many full-rate periods.
         rise_after: frames at the half rate before the full rate is tried again (150: 5 s at 30
             frames/s).
         max_rise_after: the longest that wait grows to after returns that did not hold (1200: 40 s).
         hold: frames at the full rate after which a return has held (300: 5 s at 60; with four
             CPU burners a return was halved again 1-2 s later, after the first window).
+        probe, probe_misses: within ``hold`` frames of a return, this many misses among the
+            last ``probe`` frames halve the rate again (12 of 60: one in five over a second).
     """
 
-    window: int = 60
-    drop_misses: int = 12
+    window: int = 180
+    drop_misses: int = 36
     miss_at: float = 1.5
     rise_after: int = 150
     max_rise_after: int = 1200
     hold: int = 300
+    probe: int = 60
+    probe_misses: int = 12
 
     def __post_init__(self) -> None:
         if not (1 <= self.drop_misses <= self.window and self.miss_at > 1.0 and 1 <= self.rise_after <= self.max_rise_after
-                and self.hold >= self.window):
+                and self.hold >= self.window and 1 <= self.probe_misses <= self.probe <= self.window):
             raise ValueError("PaceLimits: need 1 <= drop_misses <= window, miss_at > 1, "
-                             "1 <= rise_after <= max_rise_after, hold >= window")
+                             "1 <= rise_after <= max_rise_after, hold >= window, 1 <= probe_misses <= probe <= window")
 
 
 class FramePacer:
@@ -96,7 +103,9 @@ class FramePacer:
         if not self.halved:
             self._since_rise += 1
             self._misses.append(interval_s > lim.miss_at * self.full_period_s)
-            if sum(self._misses) >= lim.drop_misses:
+            probing = self._since_rise <= lim.hold
+            recent = sum(itertools.islice(reversed(self._misses), lim.probe)) if probing else 0
+            if sum(self._misses) >= lim.drop_misses or recent >= lim.probe_misses:
                 # a return that did not hold: wait longer before the next one
                 if self._since_rise <= lim.hold:
                     self._rise_after = min(2 * self._rise_after, lim.max_rise_after)

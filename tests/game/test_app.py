@@ -385,8 +385,9 @@ def test_frames_that_keep_missing_the_rate_are_paced_at_half_of_it(screen):
         app = App(screen, Settings(max_fps=60, show_fps=False, adaptive_pace=adaptive), clock=clock,
                   sleep=clock.sleep, events=lambda: [])
         app.push(Slow())
-        results[adaptive] = app.run(seconds=10.0)
+        results[adaptive] = app.run(seconds=30.0)
     halved, free = results[True], results[False]
-    assert halved.half_rate_share > 0.7 and "paced at half the rate" in halved.line()
-    assert halved.fps == pytest.approx(30.0, abs=2.0)
+    # halved after ~3 s; the full rate tried after 5, 10 and 20 s at half, halved again within 1 s
+    assert halved.half_rate_share > 0.75 and "paced at half the rate" in halved.line()
+    assert halved.fps == pytest.approx(30.0, abs=3.0)
     assert free.half_rate_share == 0.0 and free.fps > 38.0

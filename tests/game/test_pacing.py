@@ -36,13 +36,17 @@ def test_a_busy_machine_gets_the_half_rate_and_the_full_rate_comes_back_after(se
     pacer = FramePacer(60.0)
     for _ in range(120):
         pacer.observe(_intervals(pacer, rng, 0.0))
+    for _ in range(60):   # a burst of a second: a third of the frames skip, then none
+        pacer.observe(_intervals(pacer, rng, 0.33))
+    for _ in range(300):
+        pacer.observe(_intervals(pacer, rng, 0.0))
     assert not pacer.halved
     # busy: a quarter to a half of the frames skip a refresh
-    for i in range(150):
+    for i in range(300):
         pacer.observe(_intervals(pacer, rng, miss_rate))
         if pacer.halved:
             break
-    assert pacer.halved and i < 120, "halved within two seconds of the load"
+    assert pacer.halved and i < 240, "halved within four seconds of the load"
     assert pacer.period_s == pytest.approx(2 * FULL_S)
     # 60 s of the same load: the full rate is tried now and then, each failed try waits twice as
     # long before the next, so the rate stays half nearly all the time
@@ -65,7 +69,7 @@ def test_a_busy_machine_gets_the_half_rate_and_the_full_rate_comes_back_after(se
 
 
 def test_a_return_that_holds_resets_the_wait():
-    pacer = FramePacer(60.0, limits=PaceLimits(window=10, drop_misses=2, rise_after=5, max_rise_after=40, hold=20))
+    pacer = FramePacer(60.0, limits=PaceLimits(window=10, drop_misses=2, rise_after=5, max_rise_after=40, hold=20, probe=10, probe_misses=2))
     slow, quick = 3 * FULL_S, FULL_S
     pacer.observe(slow), pacer.observe(slow)
     assert pacer.halved
