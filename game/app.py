@@ -37,6 +37,7 @@ from game.gfx.render_scale import RenderScaler
 from game.gfx.screen import Screen
 from game.gfx import theme
 from game.input import Action, InputEvent, InputMapper, Press
+from game.pacing import FramePacer
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +59,8 @@ class Settings:
         render_scale: a fixed scale (0 < s <= 1) of the 3D views' pixels along each axis; None:
             dynamic, lowered down to half when frames take longer than the frame budget
             (:mod:`game.gfx.render_scale`; on llvmpipe the upscale costs more than it saves).
+        adaptive_pace: halve the frame rate while frames keep missing ``max_fps`` (a busy
+            machine), trying the full rate again now and then (:mod:`game.pacing`).
     """
 
     window_px: tuple[int, int] = (1280, 720)
@@ -67,6 +70,7 @@ class Settings:
     show_fps: bool = True
     title: str = "rehab: motion capture for rehabilitation"
     render_scale: float | None = 1.0
+    adaptive_pace: bool = True
 
     def __post_init__(self) -> None:
         if self.update_hz <= 0 or self.max_fps < 0 or self.max_frame_s <= 0:
@@ -233,6 +237,7 @@ class RunSummary:
         scale_mean, scale_min: the 3D views' render scale over the frames (1.0: full resolution).
         problem: what went wrong with the measurement during the run, in one line ("" if
             nothing): the source ended early or warned, the tracker failed (set by ``run_play``).
+        half_rate_share: share of the frames paced at half ``max_fps`` (:mod:`game.pacing`).
     """
 
     frames: int
@@ -248,6 +253,7 @@ class RunSummary:
     scale_mean: float = 1.0
     scale_min: float = 1.0
     problem: str = ""
+    half_rate_share: float = 0.0
 
     @property
     def fps(self) -> float:
@@ -263,6 +269,8 @@ class RunSummary:
                       + (f" ({self.slowest})" if self.slowest else ""))
         if self.scale_min < 1.0:
             stalls += f"; 3D at {self.scale_mean:.2f} of full resolution on average, {self.scale_min:.2f} at least"
+        if self.half_rate_share > 0:
+            stalls += f"; {100 * self.half_rate_share:.0f} % of the frames paced at half the rate (a busy machine)"
         return (f"{self.frames} frames in {self.wall_s:.1f} s ({self.fps:.1f} frames/s shown; "
                 f"{self.work_ms:.1f} ms of work per frame = {capable:.0f} frames/s possible; "
                 f"{self.cpu_ms:.1f} ms CPU per frame{stalls}){shot}")
@@ -297,6 +305,8 @@ class App:
         self.rate = RateMeter()
         # the frame budget: the capped rate's period (uncapped: 60 frames/s)
         self.scaler = RenderScaler(1.0 / (settings.max_fps or 60.0), fixed=settings.render_scale)
+        # the pacing's period: 1 / max_fps, or twice that while frames miss it (None: uncapped)
+        self.pacer = FramePacer(settings.max_fps, adaptive=settings.adaptive_pace) if settings.max_fps > 0 else None
         self.frames = 0
         self._step = FixedStep(1.0 / settings.update_hz, settings.max_frame_s, clock())
         self._last_frame_s = clock()
@@ -307,6 +317,7 @@ class App:
         self.scales: deque[float] = deque(maxlen=100_000)      # the render scale of each frame
         self._slowest: tuple = (0.0, (), 0.0)   # the longest interval, its stages, the wait before it
         self._timed_from = 0                     # frames before this one are not searched for the slowest
+        self._halved_frames = 0                  # frames paced at the half rate (:class:`FramePacer`)
 
     # ------------------------------------------------------------------ scenes
     @property
@@ -415,6 +426,8 @@ class App:
         self.rate.add(end_s - self._last_frame_s, end_s - start_s)
         # the time to make the frame, waiting for the last one's pixels included (not the pacing sleep)
         self.scaler.observe(end_s - start_s)
+        if self.pacer is not None:
+            self.pacer.observe(interval_s)
         self._work_total_s += end_s - start_s
         self._last_frame_s = end_s
         self.frames += 1
@@ -479,7 +492,7 @@ class App:
         first_frame = self.frames
         self._slowest, self._timed_from = (0.0, (), 0.0), self.frames + 1   # the run's first frame: its start-up
         work_before_s = self._work_total_s
-        period_s = 1.0 / self.settings.max_fps if self.settings.max_fps > 0 else 0.0
+        halved_before = self._halved_frames
         # Frames are paced to deadlines one period apart, not to a period after each frame's start:
         # a sleep that overshoots or a slow frame is made up by the next wait, so the rate holds
         # max_fps on average (paced from each start, 60 became 55-57 frames/s on a busy machine).
@@ -492,6 +505,7 @@ class App:
             if (seconds is not None and elapsed_s >= seconds - 1e-9) or (frames is not None and done >= frames):
                 break
             # The last frame of the run is the one saved (read before the window swaps buffers).
+            period_s = self.pacer.period_s if self.pacer is not None else 0.0
             last = (frames is not None and done + 1 >= frames) or (
                 seconds is not None and elapsed_s + max(period_s, 1e-3) >= seconds - 1e-9)
             if screenshot is not None and last:
@@ -499,7 +513,9 @@ class App:
                     saved = screenshot
                 break
             self.frame()
-            if period_s:
+            if self.pacer is not None:
+                period_s = self.pacer.period_s
+                self._halved_frames += self.pacer.halved
                 deadline_s += period_s
                 now_s = self.clock()
                 if now_s < deadline_s:
@@ -526,7 +542,8 @@ class App:
         slowest = ", ".join(f"{k} {1000 * v:.0f}" for k, v in (("before", wait), *zip(names, parts)) if v > 0.002)
         scales = list(self.scales)[-n:] if n else [1.0]
         return RunSummary(n, self._step.total_steps, wall_s, work_ms, cpu_ms, screenshot, p99, worst, slowest, p50,
-                          sum(scales) / len(scales), min(scales))
+                          sum(scales) / len(scales), min(scales),
+                          half_rate_share=(self._halved_frames - halved_before) / n if n else 0.0)
 
     def close(self) -> None:
         """Exit every scene and release the canvas (the screen and services belong to the caller)."""

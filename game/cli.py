@@ -350,7 +350,11 @@ def _add_play(sub) -> None:
                    f"patient (headless: {_HEADLESS_MOTION})")
     p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
-                   help="frames drawn per second at most; 0 = as many as possible (default: %(default)s)")
+                   help="frames drawn per second at most; 0 = as many as possible; while a busy machine makes "
+                   "frames skip refreshes, half of it (tried again every few seconds; docs/APP.md) "
+                   "(default: %(default)s)")
+    p.add_argument("--fixed-rate", action="store_true",
+                   help="keep --max-fps even when frames miss it, instead of halving it on a busy machine")
     p.add_argument("--render-scale", type=_render_scale, default=1.0, metavar="auto|0.25..1",
                    help="share of the window's pixels (each axis) the 3D views render, upscaled; auto: from 1.0 "
                    "down to 0.5 while frames take longer than 1/--max-fps, then back up (for a GPU: on the software "
@@ -457,7 +461,7 @@ def _cmd_play(args) -> int:
     options = PlayOptions(
         # the frame rate is the engineer's (F shows it): in the corner it covered the scenes' own text
         settings=Settings(window_px=args.window, max_fps=args.max_fps, show_fps=False,
-                          render_scale=args.render_scale),
+                          render_scale=args.render_scale, adaptive_pace=not args.fixed_rate),
         source=source,
         headless=args.headless,
         seconds=seconds,

@@ -99,3 +99,39 @@ def test_a_process_that_cannot_start_is_tried_again_for_as_long_as_it_takes(tmp_
         assert len((tmp_path / "starts").read_text()) == 7
     finally:
         live.close()
+
+
+def test_a_start_slowed_by_a_busy_machine_is_not_taken_as_hung_a_stopped_one_is():
+    """Past the start timeout, a starting process that still runs or waits for a CPU (three busy
+    loops on one CPU) is left to finish its start (a busy machine gave it a share of a core and it
+    was killed as "stopped answering while starting", to start again from nothing); a stopped one
+    is hung a second later; past SLOW_START_S any start is."""
+    from tracking.live.client import SLOW_START_S, START_TIMEOUT_S, _Child
+
+    cpu = sorted(os.sched_getaffinity(0))[0]
+    procs = [subprocess.Popen([sys.executable, "-c", _BUSY, str(cpu)]) for _ in range(3)]
+    try:
+        children = []
+        for p in procs[:2]:
+            child = object.__new__(_Child)   # the start's bookkeeping only, on a busy process
+            child.proc = p
+            child.started_at = child.progress_at = time.perf_counter() - START_TIMEOUT_S - 5.0
+            child._cpu_seen_s, child._cpu_grew_at = float("nan"), child.started_at
+            children.append(child)
+        busy, stopped = children
+        os.kill(stopped.proc.pid, signal.SIGSTOP)
+        time.sleep(0.2)
+        assert not busy.start_hung(time.perf_counter()) and not stopped.start_hung(time.perf_counter())
+        for _ in range(15):   # the game looks every frame; here every 0.1 s for 1.5 s
+            time.sleep(0.1)
+            now = time.perf_counter()
+            assert not busy.start_hung(now)
+        assert stopped.start_hung(time.perf_counter())
+        busy.progress_at = time.perf_counter() - 10.0   # a progress message: a new start timeout
+        assert not busy.start_hung(time.perf_counter())
+        busy.progress_at = time.perf_counter() - SLOW_START_S - 1.0
+        assert busy.start_hung(time.perf_counter())
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()

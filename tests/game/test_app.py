@@ -123,7 +123,9 @@ def test_run_holds_max_fps_on_average_when_sleeps_wake_late_and_some_frames_are_
             Working.drawn += 1
             clock.now_s += 0.020 if Working.drawn % 7 == 0 else 0.008   # now and then slower than 1/60 s
 
-    app = App(screen, Settings(max_fps=60, show_fps=False), clock=clock, sleep=sleep, events=lambda: [])
+    # the deadlines alone (one frame in 7 skipping a refresh would halve the rate: test_pacing.py)
+    app = App(screen, Settings(max_fps=60, show_fps=False, adaptive_pace=False), clock=clock, sleep=sleep,
+              events=lambda: [])
     app.push(Working())
     summary = app.run(seconds=2.0)
     assert summary.frames == pytest.approx(120, abs=2)
@@ -365,3 +367,27 @@ def test_a_frame_clear_without_depth_keeps_the_depth(screen):
     ctx.disable(moderngl.DEPTH_TEST)
     quad.release()
     prog.release()
+
+
+def test_frames_that_keep_missing_the_rate_are_paced_at_half_of_it(screen):
+    """Frames that take 20-28 ms against 60 frames/s (a busy machine) are paced at 30 frames/s,
+    an even rate, and the run's summary says so; with the adaptation off they come as they can."""
+    results = {}
+    for adaptive in (True, False):
+        clock = FakeClock()
+        costs = itertools.cycle((0.020, 0.028, 0.024))
+
+        class Slow(Recorder):
+            def render_2d(self, frame: Frame):
+                super().render_2d(frame)
+                clock.now_s += next(costs)
+
+        app = App(screen, Settings(max_fps=60, show_fps=False, adaptive_pace=adaptive), clock=clock,
+                  sleep=clock.sleep, events=lambda: [])
+        app.push(Slow())
+        results[adaptive] = app.run(seconds=30.0)
+    halved, free = results[True], results[False]
+    # halved after ~3 s; the full rate tried after 5, 10 and 20 s at half, halved again within 1 s
+    assert halved.half_rate_share > 0.75 and "paced at half the rate" in halved.line()
+    assert halved.fps == pytest.approx(30.0, abs=3.0)
+    assert free.half_rate_share == 0.0 and free.fps > 38.0

@@ -53,6 +53,11 @@ SLOW_HEARTBEAT_S = 10.0
 #: reports the progress of a long stage (the first compilation of the tracker's loops), this long
 #: again from then.
 START_TIMEOUT_S = 30.0
+#: A starting process that keeps working (using CPU time or waiting for a CPU) past
+#: ``START_TIMEOUT_S`` is given this long from its spawn or its last progress message before it is
+#: taken as hung: a start takes ~5 s of a core, and a machine whose cores other work takes may
+#: give the process a tenth of one (a start killed as hung then starts again from nothing).
+SLOW_START_S = 300.0
 #: Time a process gets to stop on request before it is killed.
 STOP_TIMEOUT_S = 2.0
 #: How long :meth:`LiveTracker.close` waits for killed processes to be gone, so that none outlives
@@ -211,6 +216,15 @@ class _Child:
         if cpu_s != self._cpu_seen_s:
             self._cpu_seen_s, self._cpu_grew_at = cpu_s, now
         return now - self._cpu_grew_at
+
+    def start_hung(self, now: float) -> bool:
+        """A start that is not going on: no progress for ``START_TIMEOUT_S`` and for
+        ``STALE_HEARTBEAT_S`` neither CPU time used nor a wait for a CPU (stopped, or blocked in a
+        driver), or no progress for ``SLOW_START_S`` whatever it does."""
+        since_s = now - self.progress_at
+        if since_s <= START_TIMEOUT_S:
+            return False
+        return since_s > SLOW_START_S or self.idle_for_s(now) > STALE_HEARTBEAT_S
 
     def receive(self) -> None:
         """Read its messages: ("ready" | "standby", pid), ("progress", what) or ("failed", line)."""
@@ -472,8 +486,8 @@ class LiveTracker:
         if alive and child.ready:
             if not self._hung(child, now):
                 return
-        elif alive and now - child.progress_at < START_TIMEOUT_S:
-            return  # still starting
+        elif alive and not child.start_hung(now):
+            return  # still starting (slowly on a busy machine)
         if ending:
             child.proc.join(0.05)   # usually gone by then: its exit code says why
         if ending and child.proc.exitcode is None:
