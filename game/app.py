@@ -18,6 +18,10 @@ samples, skeleton, interpolation, solids) runs while llvmpipe still rasterizes f
 frame k-1 is presented (the swap waits for it), frame k's drawing commands are issued and flushed,
 and the loop goes on. A frame is shown one frame period later than when drawn serially; the
 machine's cores work on the Python side and the pixels at the same time.
+
+:meth:`App.run` paces frames to deadlines one period apart: ``1 / max_fps``, doubled while a busy
+machine keeps frames late (:class:`game.pacing.FramePacer`): an even half rate rather than an
+uneven full one.
 """
 
 from __future__ import annotations

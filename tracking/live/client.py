@@ -4,7 +4,8 @@ It creates the shared memory (so that it can release it whatever happens to the 
 spawns the tracker process (:func:`tracking.live.process.tracker_main`), sends it commands and
 reads its samples. :meth:`LiveTracker.status`, called by the game every frame, notices a process
 that died or hangs (heartbeat older than ``STALE_HEARTBEAT_S`` while it neither uses CPU time nor
-waits for a CPU: a process that a loaded machine merely slows down or starves is not replaced) and replaces it without
+waits for a CPU: a process that a loaded machine merely slows down or starves is not replaced; a
+start likewise, see ``SLOW_START_S``) and replaces it without
 waiting: a warm standby process (source and tracker already built) takes over, or a new
 process starts; the game keeps drawing, the samples resume when the new process is ready. The
 shared memory stays, so sample numbers and frame indices continue.
