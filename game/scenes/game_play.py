@@ -234,14 +234,10 @@ class GameScene(BaseScene):
         return s.last.frame if s.last is not None else None
 
     def _aim(self, x_px: float, y_px: float) -> None:
-        """The mouse moves the simulated hand.
-
-        Reach: on a vertical plane through the target (or the rest position). The games with a
-        posture (the elbow at the side, bent like an L) keep the arm in it wherever the pointer is:
-        in the rotation game the hand goes where the pointer is across the view, its forearm swinging
-        within the river's banks (the measured range and a little beyond, as the boat goes where
-        the pointer is on the river); in the key game
-        the pointer's position across the view turns the forearm (as Q/E do).
+        """The mouse moves the simulated hand: on the river the boat goes where the pointer is; in
+        the avatar's view as the game kind says (:meth:`game.exergames.kinds.GameKind.aim`: reach on a
+        vertical plane through the target, the rotation game's hand where the pointer is across the
+        view, the key game's forearm turned by the pointer's position across the view, as Q/E do).
         """
         self._pointer_px = (x_px, y_px)
         v = self.view
