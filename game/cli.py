@@ -14,27 +14,16 @@ from pathlib import Path
 
 from calibration.errors import RehabError
 from game.cli_options import (COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, check_outputs, handle_broken_pipe,
-                              number)
+                              number, size_px)
 
 log = logging.getLogger("rehab")
-
-
-def _size(text: str) -> tuple[int, int]:
-    try:
-        w, h = text.lower().split("x")
-        size = (int(w), int(h))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"size {text!r} must look like 640x480") from None
-    if min(size) < 16 or max(size) > 8192:
-        raise argparse.ArgumentTypeError(f"size {text!r} is out of range (16..8192 pixels)")
-    return size
 
 
 def _add_studio_options(p, *, size=(640, 480), fps=30.0) -> None:
     """Options shared by the commands that run the simulated studio."""
     p.add_argument("--rig", default="ring4", help="camera layout: built-in name or YAML file (default: %(default)s)")
     p.add_argument("--cameras", type=number(1, 64, integer=True), default=None, help="use the first N cameras of the rig")
-    p.add_argument("--size", type=_size, default=size, help=f"image size WxH (default: {size[0]}x{size[1]})")
+    p.add_argument("--size", type=size_px, default=size, help=f"image size WxH (default: {size[0]}x{size[1]})")
     p.add_argument("--fps", type=FPS, default=fps, help="frame rate (default: %(default)s)")
     p.add_argument("--seconds", type=SECONDS, default=None, help="cut the motion(s) to this length")
     p.add_argument("--percentile", type=number(5.0, 95.0), default=50.0, help="body size percentile 5..95 (default: %(default)s)")
@@ -304,9 +293,9 @@ def _validate_population(args) -> int:
 def add_tracker_source_options(p) -> None:
     """What the tracker process measures (``rehab play``, ``rehab stream``): the simulated studio
     (``--rig --size --fps --body``), ``--devices`` or ``--recording`` (and ``--calibration``), and
-    ``--adapt-colours``; read back by :func:`_play_source`."""
+    ``--adapt-colours``; read back by :func:`play_source`."""
     p.add_argument("--rig", default="ring4", help="camera layout of the simulated studio (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--size", type=size_px, default=(320, 240), help="camera image size WxH (default: 320x240)")
     p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
     p.add_argument("--body", default="p50_male",
                    help="simulated body as p<percentile>_<sex>, e.g. p5_female (default: %(default)s)")
@@ -348,7 +337,7 @@ def _add_play(sub) -> None:
     p.add_argument("--motion", default=None,
                    help="scripted motion to play (built-in name or motion YAML); default: the mouse moves the "
                    f"patient (headless: {_HEADLESS_MOTION})")
-    p.add_argument("--window", type=_size, default=(1280, 720), help="window size WxH (default: 1280x720)")
+    p.add_argument("--window", type=size_px, default=(1280, 720), help="window size WxH (default: 1280x720)")
     p.add_argument("--max-fps", type=number(0.0, 1000.0), default=60.0,
                    help="frames drawn per second at most; 0 = as many as possible; while a busy machine makes "
                    "frames skip refreshes, half of it (tried again every few seconds; docs/APP.md) "
@@ -400,7 +389,7 @@ def _add_play(sub) -> None:
 _HEADLESS_MOTION = "shoulder_abduction"
 
 
-def _play_source(args) -> dict:
+def play_source(args) -> dict:
     """The tracker process's source from ``--devices``/``--recording``/``--calibration``
     (nothing: the simulated patient). Missing files are one line here, before anything starts."""
     calibration = args.calibration
@@ -454,7 +443,7 @@ def _cmd_play(args) -> int:
         motion = None  # the cameras or the recording show the patient
     seconds = args.seconds if args.seconds is not None or not args.headless else 5.0
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,
-                          adapt_colours=args.adapt_colours, **_play_source(args))
+                          adapt_colours=args.adapt_colours, **play_source(args))
     from game.cli_calibrate import board_from_spec
     from game.cli_stream import stream_config
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from calibration.errors import RehabError
-from game.cli_options import FPS, number
+from game.cli_options import FPS, number, size_px
 
 
 def add_commands(sub) -> None:
@@ -94,12 +94,6 @@ def _tell(message: str) -> None:
     print(f"rehab: {message}", file=sys.stderr, flush=True)
 
 
-def _size(text: str) -> tuple[int, int]:
-    from game.cli import _size as parse
-
-    return parse(text)
-
-
 # --------------------------------------------------------------------------- rom-test
 def _add_rom_test(sub) -> None:
     p = sub.add_parser(
@@ -118,7 +112,7 @@ def _add_rom_test(sub) -> None:
     p.add_argument("--source", choices=("sim",), default="sim", help="where the samples come from (default: the simulated patient)")
     p.add_argument("--motion", default=None, help="simulated motion (default: the test's own motion for that side)")
     p.add_argument("--rig", default="ring4", help="camera layout of the simulator (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=(320, 240), help="camera image size WxH (default: 320x240)")
+    p.add_argument("--size", type=size_px, default=(320, 240), help="camera image size WxH (default: 320x240)")
     p.add_argument("--fps", type=FPS, default=30.0, help="camera frame rate (default: %(default)s)")
     p.add_argument("--attempts", type=number(1, 100, integer=True), default=1,
                    help="attempts: a compensated attempt is discarded and repeated up to this many (default: %(default)s)")
@@ -227,7 +221,7 @@ def _add_rom_accuracy(sub) -> None:
     )
     p.add_argument("--test", action="append", default=None, help="test name (repeat; default: all)")
     p.add_argument("--rig", default="ring4")
-    p.add_argument("--size", type=_size, default=(320, 240))
+    p.add_argument("--size", type=size_px, default=(320, 240))
     p.add_argument("--fps", type=FPS, default=30.0)
     p.set_defaults(func=_cmd_rom_accuracy)
 
@@ -287,7 +281,7 @@ def _add_rom_sdc(sub) -> None:
     p.add_argument("--first-seed", type=number(0, 2**31 - 1000, integer=True), default=REPORTED_SEEDS_FROM,
                    help="seed of the first session; the next ones count up (default: %(default)s)")
     p.add_argument("--rig", default="ring4")
-    p.add_argument("--size", type=_size, default=(320, 240))
+    p.add_argument("--size", type=size_px, default=(320, 240))
     p.add_argument("--fps", type=FPS, default=30.0)
     p.set_defaults(func=_cmd_rom_sdc)
 

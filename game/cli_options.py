@@ -20,6 +20,18 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def size_px(text: str) -> tuple[int, int]:
+    """An image or window size option ``WxH`` (16..8192 pixels each)."""
+    try:
+        w, h = text.lower().split("x")
+        size = (int(w), int(h))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size {text!r} must look like 640x480") from None
+    if min(size) < 16 or max(size) > 8192:
+        raise argparse.ArgumentTypeError(f"size {text!r} is out of range (16..8192 pixels)")
+    return size
+
+
 def number(low: float | None = None, high: float | None = None, *, integer: bool = False,
            above: bool = False):
     """An argparse type for a finite number in ``[low, high]`` (``(low, high]`` when ``above``).

@@ -12,8 +12,7 @@ import math
 from pathlib import Path
 
 from calibration.errors import RehabError
-from game.cli_options import FPS, NOISE, SECONDS, SEED
-from game.cli import _size
+from game.cli_options import FPS, NOISE, SECONDS, SEED, size_px
 
 
 def add_commands(sub) -> None:
@@ -35,7 +34,7 @@ def add_commands(sub) -> None:
     p.add_argument("--calibration", type=Path, default=None, help="calibration file of the cameras (TOML or OpenCV YAML)")
     p.add_argument("--seconds", type=SECONDS, default=10.0, help="length of the recording (default: %(default)s)")
     p.add_argument("--fps", type=FPS, default=30.0, help="frame rate (default: %(default)s)")
-    p.add_argument("--size", type=_size, default=None,
+    p.add_argument("--size", type=size_px, default=None,
                    help="image size WxH (cameras: must match the calibration; sim: default 640x480)")
     p.add_argument("--images", action="store_true", help="write PNG folders instead of lossless AVI videos")
     p.add_argument("--markerset", default="upper_limb_seated", help="marker set worn: name or YAML file")

@@ -60,13 +60,13 @@ def add_commands(sub) -> None:
 
 
 def _cmd_stream(args) -> int:
-    from game.cli import _play_source, check_motion
+    from game.cli import play_source, check_motion
     from tracking.live import LiveTracker, SourceConfig
 
     stream = stream_config(args)
     if stream is None:
         raise RehabError("nothing to stream: give --lsl and/or --osc HOST:PORT")
-    where = _play_source(args)
+    where = play_source(args)
     motion = None if where else args.motion
     check_motion(motion)
     source = SourceConfig(rig=args.rig, size=args.size, fps=args.fps, motion=motion, body=args.body,

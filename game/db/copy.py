@@ -11,7 +11,7 @@ duplicate uids, the schema version) and SQLite's own page-level check where it a
 
 from __future__ import annotations
 
-from game.db.database import _EXERCISE_COLUMNS, _LIMIT_COLUMNS, _ROM_COLUMNS, Database, insert_result_sql
+from game.db.database import EXERCISE_COLUMNS, LIMIT_COLUMNS, ROM_COLUMNS, Database, insert_result_sql
 from game.db.migrations import LATEST_VERSION
 
 #: table -> (columns compared and copied, the SELECT reading them by stable keys, in insertion order)
@@ -19,14 +19,14 @@ _SNAPSHOT = {
     "patients": ("id, created_utc, note", "SELECT id, created_utc, note FROM patients ORDER BY id"),
     "sessions": ("uid, patient_id, started_utc, ended_utc, kind, source, note",
                  "SELECT uid, patient_id, started_utc, ended_utc, kind, source, note FROM sessions ORDER BY id"),
-    "rom_results": ("session_uid, " + ", ".join(_ROM_COLUMNS),
-                    f"SELECT s.uid, {', '.join('r.' + c for c in _ROM_COLUMNS)} FROM rom_results r "
+    "rom_results": ("session_uid, " + ", ".join(ROM_COLUMNS),
+                    f"SELECT s.uid, {', '.join('r.' + c for c in ROM_COLUMNS)} FROM rom_results r "
                     f"JOIN sessions s ON r.session_id = s.id ORDER BY r.id"),
-    "exercise_results": ("session_uid, " + ", ".join(_EXERCISE_COLUMNS),
-                         f"SELECT s.uid, {', '.join('e.' + c for c in _EXERCISE_COLUMNS)} FROM exercise_results e "
+    "exercise_results": ("session_uid, " + ", ".join(EXERCISE_COLUMNS),
+                         f"SELECT s.uid, {', '.join('e.' + c for c in EXERCISE_COLUMNS)} FROM exercise_results e "
                          f"JOIN sessions s ON e.session_id = s.id ORDER BY e.id"),
-    "game_limits": (", ".join(_LIMIT_COLUMNS),
-                    f"SELECT {', '.join(_LIMIT_COLUMNS)} FROM game_limits ORDER BY patient_id, game"),
+    "game_limits": (", ".join(LIMIT_COLUMNS),
+                    f"SELECT {', '.join(LIMIT_COLUMNS)} FROM game_limits ORDER BY patient_id, game"),
     "accounts": ("name, role, patient_id, secret_hash, created_utc",
                  "SELECT name, role, patient_id, secret_hash, created_utc FROM accounts ORDER BY name"),
     "audit": ("uid, at_utc, account, action, patient_id, what",

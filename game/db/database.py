@@ -224,10 +224,10 @@ class ExerciseRow:
 
 
 # --------------------------------------------------------------------------------- a result to store
-_ROM_COLUMNS = ("uid", "test", "side", "angle", "mode", "position", "standard", "reference_deg", "value_deg",
+ROM_COLUMNS = ("uid", "test", "side", "angle", "mode", "position", "standard", "reference_deg", "value_deg",
                 "start_deg", "range_deg", "compensation", "estimated_markers", "duration_s", "recorded_utc")
-_EXERCISE_COLUMNS = ("uid", "game", "repetitions", "duration_s", "score", "details", "recorded_utc")
-_RESULT_COLUMNS = {"rom_results": _ROM_COLUMNS, "exercise_results": _EXERCISE_COLUMNS}
+EXERCISE_COLUMNS = ("uid", "game", "repetitions", "duration_s", "score", "details", "recorded_utc")
+_RESULT_COLUMNS = {"rom_results": ROM_COLUMNS, "exercise_results": EXERCISE_COLUMNS}
 
 
 def insert_result_sql(table: str) -> str:
@@ -249,7 +249,7 @@ class ResultRecord:
         session_uid, session_kind, session_source, session_started_utc: the session the result
             belongs to (created by the first of its results).
         table: ``rom_results`` or ``exercise_results``.
-        values: the result's columns (``_ROM_COLUMNS`` or ``_EXERCISE_COLUMNS``).
+        values: the result's columns (``ROM_COLUMNS`` or ``EXERCISE_COLUMNS``).
         accepted_by: the account that accepted it ("" = none signed in); stored as an audit row in
             the result's own transaction.
     """
@@ -728,9 +728,9 @@ class Database:
             "exercise_results": _write_csv(out / "exercise_results.csv", [f.name for f in fields(ExerciseRow)],
                                            [tuple(getattr(r, f.name) for f in fields(ExerciseRow))
                                             for r in self.exercise_results(patient_id)]),
-            "game_limits": _write_csv(out / "game_limits.csv", _LIMIT_COLUMNS, [
+            "game_limits": _write_csv(out / "game_limits.csv", LIMIT_COLUMNS, [
                 row for p in pats for row in self.conn.execute(
-                    f"SELECT {', '.join(_LIMIT_COLUMNS)} FROM game_limits WHERE patient_id = ? ORDER BY game", (p.id,))]),
+                    f"SELECT {', '.join(LIMIT_COLUMNS)} FROM game_limits WHERE patient_id = ? ORDER BY game", (p.id,))]),
         }
         return counts
 
@@ -750,7 +750,7 @@ class Database:
         roms = _read_csv(src / "rom_results.csv", [f.name for f in fields(RomRow)])
         exes = _read_csv(src / "exercise_results.csv", [f.name for f in fields(ExerciseRow)])
         # exports of schema 2 have no game limits
-        lims = _read_csv(src / "game_limits.csv", _LIMIT_COLUMNS) if (src / "game_limits.csv").is_file() else []
+        lims = _read_csv(src / "game_limits.csv", LIMIT_COLUMNS) if (src / "game_limits.csv").is_file() else []
         added = {"patients": 0, "sessions": 0, "rom_results": 0, "exercise_results": 0, "game_limits": 0}
         c = self.conn
         with self._transaction():
@@ -798,11 +798,11 @@ class Database:
                 added["game_limits"] += c.execute(
                     "INSERT INTO game_limits (patient_id, game, limits, updated_utc) VALUES (?, ?, ?, ?) "
                     "ON CONFLICT DO NOTHING",
-                    tuple(g[k] for k in _LIMIT_COLUMNS)).rowcount
+                    tuple(g[k] for k in LIMIT_COLUMNS)).rowcount
         return added
 
 
-_LIMIT_COLUMNS = ("patient_id", "game", "limits", "updated_utc")
+LIMIT_COLUMNS = ("patient_id", "game", "limits", "updated_utc")
 
 
 def _no_constant(name: str):

@@ -19,6 +19,7 @@ import math
 
 from game.exergames.session import GameSession, Phase
 from game.exergames.targets import elbow_at_side_hand_m
+from tracking.live import PatientInput
 
 #: Seconds between a target appearing and the hand starting to move.
 REACTION_S = 0.35
@@ -45,8 +46,6 @@ class AutoPlayer:
 
     def patient_input(self, dt_s: float = 0.0):
         """The :class:`tracking.live.PatientInput` for the game's current state, ``dt_s`` after the last call."""
-        from tracking.live import PatientInput
-
         s = self.session
         frame = s.frame if s.frame is not None else (s.last.frame if s.last is not None else None)
         if frame is None:
@@ -61,16 +60,12 @@ class AutoPlayer:
     def hand_at(self, hand_m, forearm_rotation_deg: float = 0.0):
         """The input that puts the hand at ``hand_m`` (and turns the forearm): what a game kind
         whose target is a place asks for."""
-        from tracking.live import PatientInput
-
         return PatientInput(side=self.session.side, hand_target_m=tuple(float(x) for x in hand_m),
                             forearm_rotation_deg=forearm_rotation_deg)
 
     def steer_by_measure(self, t, dt_s: float):
         """The input that brings the *measured* rotation to the target's: the command integrates
         the difference (the module's docstring), the elbow at the side."""
-        from tracking.live import PatientInput
-
         s = self.session
         goal = t.target.value_deg
         if t is not self._target:

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pydantic
 
+from game.db import Database
+from game.db.accounts import record
 from game.exergames.spec import GameSpec, TherapistLimits, check_limits, limit_bounds
 
 log = logging.getLogger(__name__)
@@ -100,8 +102,6 @@ def parse_limits(spec: GameSpec, text: str) -> TherapistLimits:
 
 def load_limits(db_path: Path, patient_id: str, specs) -> dict[str, TherapistLimits]:
     """The therapist's limits of each game for a patient: the stored ones, else the game's own."""
-    from game.db import Database
-
     with Database(db_path) as db:
         stored = db.game_limits(patient_id)
     return {spec.name: parse_limits(spec, stored[spec.name]) if spec.name in stored else spec.limits
@@ -112,9 +112,6 @@ def save_limits(db_path: Path, patient_id: str, spec: GameSpec, limits: Therapis
                 account: str = "") -> None:
     """Store the limits of one game for a patient (all keys, unset ones as null) and audit who set
     them (``account``: the signed-in therapist, "" without accounts)."""
-    from game.db import Database
-    from game.db.accounts import record
-
     check_limits(spec, limits)
     with Database(db_path) as db:
         db.set_game_limits(patient_id, spec.name, limits.model_dump_json())

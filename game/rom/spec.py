@@ -21,6 +21,7 @@ from typing import Literal
 
 import pydantic
 
+from calibration.errors import RehabError
 from tracking.angles import ARM_ANGLES, SIDES
 from tracking.content import StrictModel, available, load_model, resolve
 
@@ -289,15 +290,11 @@ def load_all_rom_tests() -> list[RomTest]:
 
 def check_side(test: RomTest, side: str) -> None:
     """Raise a one-line RehabError if ``side`` is not one of the test's sides."""
-    from calibration.errors import RehabError
-
     if side not in SIDES or side not in test.sides:
         raise RehabError(f"side {side!r}: the test {test.name} is defined for {', '.join(test.sides)}")
 
 
 def check_standard(standard: str) -> None:
     """Raise a one-line RehabError if ``standard`` is not a known standard."""
-    from calibration.errors import RehabError
-
     if standard not in STANDARDS:
         raise RehabError(f"standard {standard!r}: choose one of {', '.join(STANDARDS)}")

@@ -25,6 +25,8 @@ from typing import Callable
 import numpy as np
 
 from game.app import BaseScene, Frame
+from game.avatar.renderer import look_at, perspective
+from game.avatar.shapes import PART_CHAIR, body_shapes
 from game.exergames.audio import Sounds
 from game.exergames.autoplay import AutoPlayer
 from game.exergames.kinds import FOREARM_LIMIT_DEG, Aim, Framing
@@ -38,6 +40,7 @@ from game.gfx.view3d import Viewport, project_px
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.scenes.live_feed import LiveFeed
 from game.scenes.river_view import RiverView
+from tracking.live import PatientInput
 
 log = logging.getLogger(__name__)
 
@@ -69,8 +72,6 @@ def game_camera(pose, aspect: float, framing: Framing, side: str) -> tuple[np.nd
     hand raised above the head, turned 25 degrees towards the active side so forward reaches show
     their depth; the rotation games the trunk and the forearm in front of it, turned 15 degrees.
     """
-    from game.avatar.renderer import look_at, perspective
-
     rp = pose.frame("pelvis")
     fwd = -rp[:, 2].copy()
     fwd[1] = 0.0
@@ -99,8 +100,6 @@ def _rgb01(c) -> np.ndarray:
 
 def target_shapes(shapes, spec: GameSpec, session: GameSession):
     """The avatar's solids plus the current target's (BodyShapes with rows appended)."""
-    from game.avatar.shapes import PART_CHAIR
-
     t, frame = session.target, session.frame
     if t is None or frame is None:
         return shapes
@@ -235,14 +234,10 @@ class GameScene(BaseScene):
         return s.last.frame if s.last is not None else None
 
     def _aim(self, x_px: float, y_px: float) -> None:
-        """The mouse moves the simulated hand.
-
-        Reach: on a vertical plane through the target (or the rest position). The games with a
-        posture (the elbow at the side, bent like an L) keep the arm in it wherever the pointer is:
-        in the rotation game the hand goes where the pointer is across the view, its forearm swinging
-        within the river's banks (the measured range and a little beyond, as the boat goes where
-        the pointer is on the river); in the key game
-        the pointer's position across the view turns the forearm (as Q/E do).
+        """The mouse moves the simulated hand: on the river the boat goes where the pointer is; in
+        the avatar's view as the game kind says (:meth:`game.exergames.kinds.GameKind.aim`: reach on a
+        vertical plane through the target, the rotation game's hand where the pointer is across the
+        view, the key game's forearm turned by the pointer's position across the view, as Q/E do).
         """
         self._pointer_px = (x_px, y_px)
         v = self.view
@@ -276,8 +271,6 @@ class GameScene(BaseScene):
         if self.auto:
             value = self.player.patient_input(elapsed)
         else:
-            from tracking.live import PatientInput
-
             value = PatientInput(side=self.side, hand_target_m=self._hand_target, forearm_rotation_deg=self._forearm_deg)
         self.feed.send(value)
 
@@ -336,8 +329,6 @@ class GameScene(BaseScene):
         self._prepared = None
         if self.avatar is None:
             return
-        from game.avatar.shapes import body_shapes
-
         now = self.app.clock()
         pose = self.avatar.interpolator.sample(now)
         if pose is None:

@@ -33,6 +33,7 @@ from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
 from game.scenes.live_feed import WAITING_LINE, LiveFeed
 from tracking.angles import joint_angles
+from tracking.live import PatientInput
 
 log = logging.getLogger(__name__)
 
@@ -177,8 +178,6 @@ class PatientControl:
 
     def patient_input(self):
         """The :class:`tracking.live.PatientInput` for the current state."""
-        from tracking.live import PatientInput
-
         return PatientInput(side=self.side, hand_target_m=self.hand_target_m, forearm_rotation_deg=self.forearm_deg,
                             trunk_forward_lean_deg=self.forward_lean_deg,
                             trunk_lateral_lean_deg=self.lateral_lean_deg)

@@ -20,8 +20,8 @@ MIN_KNOWN_MARKERS = 4
 #: Shortest interval between two patient inputs sent to the tracker process (its camera runs at 30).
 INPUT_PERIOD_S = 1.0 / 60.0
 #: No new sample for this long while the tracker runs: the samples have stopped (the mirror hides
-#: its angles, a game pauses, the ROM test says so). The tracker publishes ~30 a second, so this is
-#: ~15 samples missed, and a game never credits a hold (0.3 s at the shortest) to a pose this old;
+#: its angles, a game pauses, the ROM test says so). The tracker publishes 19-30 a second, so this
+#: is 9-15 samples missed, and a game never credits a hold (0.3 s at the shortest) to a pose this old;
 #: docs/APP.md "The live feed" says why one rule and this one.
 STALE_SAMPLE_S = 0.5
 #: What the scenes say while there is no sample yet, and once the samples stopped.

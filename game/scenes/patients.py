@@ -17,7 +17,9 @@ import re
 from pathlib import Path
 from typing import Callable, Sequence
 
+from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db import Database
 from game.db.location import db_location
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
@@ -90,9 +92,6 @@ class PatientsScene(BaseScene):
         self.reload()
 
     def reload(self) -> None:
-        from game.db import Database
-        from calibration.errors import RehabError
-
         try:
             with Database(self.db_path) as db:
                 self.patients = db.patients()
@@ -111,8 +110,6 @@ class PatientsScene(BaseScene):
 
     def add_patient(self) -> str:
         """Add the next free ID to the database; returns it."""
-        from game.db import Database
-
         with Database(self.db_path) as db:
             patient_id = next_patient_id([p.id for p in db.patients()])
             db.add_patient(patient_id)

@@ -13,6 +13,8 @@ Plots are drawn by matplotlib (Agg, no pyplot state) into an RGB array once per 
 uploaded as one texture; the scene's colours match the application's theme. **Export report**
 (the button, or Enter) writes what ``rehab report`` writes (HTML with the plots and the table, CSV
 beside it) into ``reports/`` beside the database, readable by the user only, and says where.
+matplotlib is imported where a plot is drawn, not with the scene: the application imports the
+scene at its start, and matplotlib's import took 3-6 s on the loaded 2-core machine.
 """
 
 from __future__ import annotations
@@ -25,11 +27,16 @@ import numpy as np
 
 from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db import Database
+from game.db.database import utc_now
 from game.db.location import db_location, local_folder
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
-from game.report import HistoryLook, change_line, latest_changes, plot_games, plot_rom_history, sdc_words, session_order
+from game.report import (HistoryLook, change_line, latest_changes, plot_games, plot_rom_history, sdc_words,
+                         session_order, write_report)
 from game.rom.session import round_to_5
+from game.rom.spec import load_rom_test
+from tracking.errors import ContentError
 
 #: Height of the change lines under the plot (at 1280x720).
 CHANGE_LINES_H = 56
@@ -145,9 +152,6 @@ def _inside(rect, x: float, y: float) -> bool:
 
 def test_info(test: str, standard: str) -> TestInfo:
     """What the content says about a stored test (a test this installation lacks keeps its name)."""
-    from game.rom.spec import load_rom_test
-    from tracking.errors import ContentError
-
     try:
         t = load_rom_test(test)
     except ContentError:
@@ -190,8 +194,6 @@ class ProgressScene(BaseScene):
             self._ensure_plots(plot, games)
 
     def load(self) -> None:
-        from game.db import Database
-
         try:
             with Database(self.db_path) as db:
                 db.require_patient(self.patient_id)
@@ -247,10 +249,6 @@ class ProgressScene(BaseScene):
 
     def export(self) -> Path | None:
         """Write the report (HTML and CSV) into ``reports/`` beside the database; says where."""
-        from game.db import Database
-        from game.report import write_report
-        from game.db.database import utc_now
-
         folder = local_folder(self.db_path) / "reports"
         out = folder / f"{self.patient_id}_{utc_now()[:10]}.html"
         try:

@@ -20,6 +20,7 @@ import numpy as np
 import pygame
 
 from game.exergames.river import River, gate_distance
+from game.gfx.canvas import surface_to_texture
 from game.gfx import theme
 
 GOOD = (120, 220, 120)
@@ -122,8 +123,6 @@ class RiverView:
     """
 
     def __init__(self, ctx, rect, scale: float, colour) -> None:
-        from game.gfx.canvas import surface_to_texture
-
         self.rect = tuple(float(v) for v in rect)
         self.scale = scale
         self.colour = tuple(colour)

@@ -17,7 +17,12 @@ import time
 from pathlib import Path
 from typing import Callable
 
+import pygame
+
+from calibration.errors import RehabError
 from game.app import BaseScene, Frame
+from game.db import Database
+from game.db.accounts import AccessDenied, authenticate
 from game.db.location import db_location
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press, Typed
@@ -54,18 +59,12 @@ class SignInScene(BaseScene):
     def enter(self, app) -> None:
         super().enter(app)
         try:
-            import pygame
-
             pygame.key.start_text_input()
         except Exception:   # pragma: no cover - no keyboard text input on this display
             pass
 
     # ------------------------------------------------------------------ sign in
     def sign_in(self) -> None:
-        from calibration.errors import RehabError
-        from game.db import Database
-        from game.db.accounts import AccessDenied, authenticate
-
         now = self.clock()
         if now < self.wait_until:
             self.message = f"Too many wrong tries: wait {self.wait_until - now:.0f} s"
