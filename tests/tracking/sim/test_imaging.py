@@ -178,3 +178,13 @@ def test_simulate_writes_the_webcam_and_its_gains(tmp_path):
     simulate_recording(plain, SimulationSettings(motion="reference", size_px=(160, 120), seconds=0.2))
     assert "webcam" not in yaml.safe_load((plain / "meta.yaml").read_text())
     assert not (plain / "truth_camera_gains.csv").exists()
+
+
+def test_population_draws_their_imaging_from_a_stream_of_their_own():
+    from tracking.sim.population import draw_imaging
+
+    a, b = draw_imaging(100_123, 30), draw_imaging(100_123, 30)
+    assert a == b and a != draw_imaging(100_124, 30)
+    assert a.light(0)["exposure"] == 1.0 and a.light(0)["colour_cast"] == (1.0, 1.0, 1.0)
+    assert a.light(29)["exposure"] == pytest.approx(1.0 + a.brightness_change)
+    assert all(1.5 <= draw_imaging(s, 30).noise_sigma <= 4.0 for s in range(50))
