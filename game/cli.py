@@ -72,6 +72,8 @@ def _add_simulate(sub) -> None:
     p.add_argument("--jpeg-quality", type=number(1, 100, integer=True), default=None, metavar="Q",
                    help="MJPEG: each image JPEG-compressed at quality Q (1..100), as webcams send it; the videos stay "
                         "lossless (default: none)")
+    p.add_argument("--jpeg-chroma", choices=("422", "420", "444"), default="422",
+                   help="with --jpeg-quality: chroma subsampling, 4:2:2 as most webcams' MJPEG (default), 4:2:0 or 4:4:4")
     p.add_argument("--exposure-ms", type=number(0.0, 1000.0), default=0.0, metavar="MS",
                    help="shutter time: a moving ball is smeared along its image motion over MS ms, e.g. 20 "
                         "(default: 0, no motion blur)")
@@ -108,6 +110,7 @@ def _cmd_simulate(args) -> int:
         clock_drift=args.clock_drift,
         rolling_shutter_s=args.rolling_shutter_ms / 1000.0,
         jpeg_quality=args.jpeg_quality,
+        jpeg_chroma=args.jpeg_chroma,
         exposure_s=args.exposure_ms / 1000.0,
         auto_exposure=args.auto_exposure,
         auto_white_balance=args.auto_white_balance,

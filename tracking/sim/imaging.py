@@ -10,8 +10,9 @@ sensor noise, lighting drift and a colour cast. A USB webcam adds, in this order
   image's mean brightness and its grey-world colour balance where they were when the camera
   settled, reacting with a lag of a few frames; when the patient moves (or the light drifts) the
   mean changes, the loop corrects late and overshoots: it hunts;
-- **MJPEG** (:func:`jpeg_roundtrip`): each image JPEG-compressed at a quality, chroma at half
-  resolution, as the camera sends it over USB.
+- **MJPEG** (:func:`jpeg_roundtrip`): each image JPEG-compressed at a quality, its chroma at half
+  resolution across (4:2:2, what UVC webcams' MJPEG streams mostly carry) or across and down
+  (4:2:0), as the camera sends it over USB.
 
 All functions are pure numpy/OpenCV on (H, W, 3) uint8 BGR images, seeded where random.
 """
@@ -36,6 +37,7 @@ class Webcam:
 
     Attributes:
         jpeg_quality: MJPEG quality 1..100 (None: lossless).
+        jpeg_chroma: chroma subsampling of the MJPEG, ``"422"``, ``"420"`` or ``"444"``.
         exposure_s: shutter time, seconds (0: an instant, no motion blur).
         auto_exposure: the brightness loop of :class:`AutoCamera`.
         auto_white_balance: the colour loop of :class:`AutoCamera`.
@@ -45,6 +47,7 @@ class Webcam:
     """
 
     jpeg_quality: int | None = None
+    jpeg_chroma: str = "422"
     exposure_s: float = 0.0
     auto_exposure: bool = False
     auto_white_balance: bool = False
@@ -54,6 +57,8 @@ class Webcam:
     def __post_init__(self) -> None:
         if self.jpeg_quality is not None and not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality {self.jpeg_quality}: give 1..100")
+        if self.jpeg_chroma not in CHROMA_SUBSAMPLING:
+            raise ValueError(f"jpeg_chroma {self.jpeg_chroma!r}: give one of {', '.join(CHROMA_SUBSAMPLING)}")
         if not 0.0 <= self.exposure_s <= 1.0:
             raise ValueError(f"exposure_s {self.exposure_s}: give 0..1 s")
         if self.lag_frames < 0 or not 0.0 < self.loop_gain <= 1.0:
@@ -72,6 +77,7 @@ class Webcam:
     def as_meta(self) -> dict:
         """The parameters for meta.yaml."""
         out: dict = {"jpeg_quality": self.jpeg_quality, "exposure_s": self.exposure_s,
+                     **({"jpeg_chroma": self.jpeg_chroma} if self.jpeg_quality is not None else {}),
                      "auto_exposure": self.auto_exposure, "auto_white_balance": self.auto_white_balance}
         if self.auto:
             out.update(lag_frames=self.lag_frames, loop_gain=self.loop_gain)
@@ -80,12 +86,14 @@ class Webcam:
 
 def drawn_webcam(rng: np.random.Generator) -> Webcam:
     """A random cheap webcam (the validation population's draws): MJPEG quality 50-95 in 80 % of
-    draws, exposure 0-33 ms, auto exposure and white balance each on in half the draws with a lag of
+    draws (chroma 4:2:2, in a quarter of them 4:2:0), exposure 0-33 ms, auto exposure and white balance each on in half the draws with a lag of
     2-4 frames and a loop gain from well damped to hunting."""
     lag = int(rng.integers(2, 5))
+    chroma = "420" if rng.random() < 0.25 else "422"
     limit = 2.0 * math.sin(math.pi / (2 * (2 * lag + 1)))
     return Webcam(
         jpeg_quality=int(rng.integers(50, 96)) if rng.random() < 0.8 else None,
+        jpeg_chroma=chroma,
         exposure_s=float(rng.uniform(0.0, 1.0 / 30.0)),
         auto_exposure=bool(rng.random() < 0.5),
         auto_white_balance=bool(rng.random() < 0.5),
@@ -94,9 +102,16 @@ def drawn_webcam(rng: np.random.Generator) -> Webcam:
     )
 
 
-def jpeg_roundtrip(image: np.ndarray, quality: int) -> np.ndarray:
-    """``image`` (H, W, 3) uint8 BGR as a JPEG of ``quality`` (1..100) decodes (4:2:0 chroma)."""
-    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+CHROMA_SUBSAMPLING = {"422": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_422, "420": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_420,
+                      "444": cv2.IMWRITE_JPEG_SAMPLING_FACTOR_444}
+"""OpenCV's JPEG chroma sampling factors by their usual names."""
+
+
+def jpeg_roundtrip(image: np.ndarray, quality: int, chroma: str = "422") -> np.ndarray:
+    """``image`` (H, W, 3) uint8 BGR as a JPEG of ``quality`` (1..100) and ``chroma`` subsampling
+    (:data:`CHROMA_SUBSAMPLING`) decodes."""
+    ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, int(quality),
+                                           cv2.IMWRITE_JPEG_SAMPLING_FACTOR, CHROMA_SUBSAMPLING[chroma]])
     if not ok:  # pragma: no cover - OpenCV encodes every uint8 BGR image
         raise RuntimeError("OpenCV could not JPEG-encode an image")
     return cv2.imdecode(buf, cv2.IMREAD_COLOR)
@@ -194,5 +209,5 @@ class WebcamPipeline:
             gains = np.stack([cam.gains_rgb for cam in self.cameras])
             images = [cam.apply(img) for cam, img in zip(self.cameras, images)]
         if self.webcam.jpeg_quality is not None:
-            images = [jpeg_roundtrip(img, self.webcam.jpeg_quality) for img in images]
+            images = [jpeg_roundtrip(img, self.webcam.jpeg_quality, self.webcam.jpeg_chroma) for img in images]
         return tuple(images), gains

@@ -58,6 +58,7 @@ class SimulationSettings:
     clock_drift: float = 0.0
     rolling_shutter_s: float = 0.0
     jpeg_quality: int | None = None
+    jpeg_chroma: str = "422"
     exposure_s: float = 0.0
     auto_exposure: bool = False
     auto_white_balance: bool = False
@@ -65,7 +66,7 @@ class SimulationSettings:
     @property
     def webcam(self) -> Webcam:
         """The webcam effects (:mod:`tracking.sim.imaging`) these settings ask for."""
-        return Webcam(jpeg_quality=self.jpeg_quality, exposure_s=self.exposure_s,
+        return Webcam(jpeg_quality=self.jpeg_quality, jpeg_chroma=self.jpeg_chroma, exposure_s=self.exposure_s,
                       auto_exposure=self.auto_exposure, auto_white_balance=self.auto_white_balance)
 
     def clocks(self, n_cameras: int) -> CameraClocks | None:

@@ -31,6 +31,9 @@ def test_jpeg_quality_lowers_psnr_monotonically():
     values = [psnr(img, jpeg_roundtrip(img, q)) for q in (95, 85, 70, 50, 30, 15)]
     assert all(a > b for a, b in zip(values, values[1:])), values
     assert values[0] > 35 and values[-1] < 32
+    # chroma at half resolution across and down loses more than across only, full resolution least
+    by_chroma = [psnr(img, jpeg_roundtrip(img, 75, c)) for c in ("444", "422", "420")]
+    assert by_chroma[0] > by_chroma[1] > by_chroma[2], by_chroma
 
 
 def disc_at(cx, h=64, w=160, r=5.0):
@@ -103,7 +106,7 @@ def test_pipeline_is_identity_when_ideal_and_records_gains():
     assert gains is None and all(np.array_equal(a, b) for a, b in zip(out, imgs))
     out, gains = WebcamPipeline(Webcam(jpeg_quality=70, auto_exposure=True), 3).apply(imgs)
     assert gains.shape == (3, 3) and np.allclose(gains, 1.0)
-    assert all(np.array_equal(a, jpeg_roundtrip(b, 70)) for a, b in zip(out, imgs))
+    assert all(np.array_equal(a, jpeg_roundtrip(b, 70, "422")) for a, b in zip(out, imgs))
 
 
 def test_drawn_webcams_follow_the_seed_and_stay_stable():
