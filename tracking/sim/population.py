@@ -344,7 +344,7 @@ def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -
     if tracked:
         lines.append(f"rendered and tracked ({len(tracked)} draws, still reference pose, layouts of 2-4 cameras "
                      "incl. random placements; drawn webcams: sensor noise 1.5-4, light -20..+10 % and a cast over "
-                     "the draw, auto exposure / white balance, MJPEG quality 50-95):")
+                     "the draw, auto exposure / white balance, MJPEG quality 50-95, chroma 4:2:2 or 4:2:0):")
         for one in (True, False):
             r = [x for x in tracked if x.one_colour == one]
             if not r:
