@@ -1,6 +1,9 @@
 """``rehab bench``: speed figures measured in one run, so that their ratios are meaningful.
 
-All timings are medians over frame sets of the simulated patient (4 cameras, a real motion).
+All timings are medians over frame sets of the simulated patient (4 cameras, a real motion), with
+the worst frame set of each pass beside them (a frame set must finish within its budget, not on
+average); a last line times the same frame sets as a cheap webcam delivers them
+(:func:`webcam_frames`: noise, drifting light, auto exposure / white balance, MJPEG).
 The per-frame pipeline (full-frame measurement, steady-state tracking) is measured pinned to one
 CPU core with OpenCV on one thread, as one tracker process would run beside the game, in
 alternating passes; the simulator (GPU rendering) is not pinned. Machines are noisy: quote the
