@@ -58,6 +58,19 @@ def _add_simulate(sub) -> None:
     p.add_argument("--rolling-shutter-ms", type=number(0.0, 200.0), default=0.0, metavar="MS",
                    help="rolling-shutter readout, first row to last, e.g. 25; written to calibration.toml "
                         "(default: 0, global shutter)")
+    p.add_argument("--jpeg-quality", type=number(1, 100, integer=True), default=None, metavar="Q",
+                   help="MJPEG: each image JPEG-compressed at quality Q (1..100), as webcams send it; the videos stay "
+                        "lossless (default: none)")
+    p.add_argument("--jpeg-chroma", choices=("422", "420", "444"), default="422",
+                   help="with --jpeg-quality: chroma subsampling, 4:2:2 as most webcams' MJPEG (default), 4:2:0 or 4:4:4")
+    p.add_argument("--exposure-ms", type=number(0.0, 1000.0), default=0.0, metavar="MS",
+                   help="shutter time: a moving ball is smeared along its image motion over MS ms, e.g. 20 "
+                        "(default: 0, no motion blur)")
+    p.add_argument("--auto-exposure", action="store_true",
+                   help="each camera keeps its image's mean brightness with a lagging control loop that hunts when "
+                        "the patient moves or the light drifts; its gains go to truth_camera_gains.csv")
+    p.add_argument("--auto-white-balance", action="store_true",
+                   help="the same loop for the colour balance (grey world)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -85,6 +98,11 @@ def _cmd_simulate(args) -> int:
         camera_offsets=offsets,
         clock_drift=args.clock_drift,
         rolling_shutter_s=args.rolling_shutter_ms / 1000.0,
+        jpeg_quality=args.jpeg_quality,
+        jpeg_chroma=args.jpeg_chroma,
+        exposure_s=args.exposure_ms / 1000.0,
+        auto_exposure=args.auto_exposure,
+        auto_white_balance=args.auto_white_balance,
         motion=args.motion,
         rig=args.rig,
         n_cameras=args.cameras,

@@ -77,6 +77,9 @@ def _accepts(action, text) -> bool:
     ["simulate", "out", "--noise", "-5"],
     ["record", "out", "--seconds", "nan"],
     ["simulate", "out", "--drift", "nan"],
+    ["simulate", "out", "--jpeg-quality", "0"],
+    ["simulate", "out", "--exposure-ms", "nan"],
+    ["simulate", "out", "--jpeg-quality", "50", "--jpeg-chroma", "411"],
     ["play", "--max-fps", "nan"],
 ])
 def test_the_reported_hangs_and_tracebacks_are_one_line_before_any_work(argv, capsys):

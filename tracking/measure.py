@@ -15,7 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.blobs import Blobs, find_blobs
+from tracking.blobs import DEFAULT_MAX_PER_COLOUR, Blobs, find_blobs
 from tracking.colour_table import ColourTable
 from tracking.reconstruction import (
     CameraObservations,
@@ -79,6 +79,13 @@ class StageTimes:
         return {k: 1000.0 * v / n for k, v in self.seconds.items()}
 
 
+def regions_cap(n_markers: int) -> int:
+    """Regions of a colour worth measuring in one image when ``n_markers`` wear it: each marker's
+    region, as many again (a partly hidden ball split in two, a marker-coloured object) and 4 spare;
+    never more than :data:`tracking.blobs.DEFAULT_MAX_PER_COLOUR`."""
+    return min(2 * int(n_markers) + 4, DEFAULT_MAX_PER_COLOUR)
+
+
 @dataclass
 class FrameMeasurer:
     """Measures unlabelled marker points from full images of every camera.
@@ -88,12 +95,18 @@ class FrameMeasurer:
         table: colour lookup table of the marker palette.
         marker_radius_m: radius of the marker balls.
         params: reconstruction gates.
+        markers_per_colour: (K,) how many markers wear each palette colour. Given, each image's
+            regions of a colour are capped at :func:`regions_cap` of it (the most marker-like kept)
+            instead of :data:`tracking.blobs.DEFAULT_MAX_PER_COLOUR`: sensor noise or MJPEG blocks
+            of a marker colour make hundreds of regions, and every one kept costs in the matching
+            across cameras.
     """
 
     cameras: Sequence[Camera]
     table: ColourTable
     marker_radius_m: float
     params: ReconstructionParams | None = None
+    markers_per_colour: Sequence[int] | None = None
     times: StageTimes = field(default_factory=lambda: StageTimes(("colour table", "centroids", "triangulation")))
 
     def __post_init__(self) -> None:
@@ -101,6 +114,8 @@ class FrameMeasurer:
         self.gates = [blob_gates(c, self.marker_radius_m) for c in self.cameras]
         if self.params is None:
             self.params = ReconstructionParams(marker_radius_m=self.marker_radius_m)
+        self._cap = (DEFAULT_MAX_PER_COLOUR if self.markers_per_colour is None
+                     else [regions_cap(n) for n in self.markers_per_colour])
 
     def blobs(self, images: Sequence[np.ndarray]) -> list[Blobs]:
         """Centroids of marker-coloured regions in each whole image."""
@@ -117,6 +132,7 @@ class FrameMeasurer:
                     max_area_px=gate.max_area_px,
                     min_roundness=gate.min_roundness,
                     image_bgr=img,
+                    max_per_colour=self._cap,
                 )
             )
             t2 = time.perf_counter()

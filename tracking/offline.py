@@ -74,7 +74,8 @@ def track_recording(
     with Recording(folder, calibration) as rec:
         ms = markerset_for(rec, markerset, marker_colours)
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
-        measurer = FrameMeasurer(rec.cameras, table, ms.radius_m)
+        measurer = FrameMeasurer(rec.cameras, table, ms.radius_m,
+                                 markers_per_colour=np.bincount(ms.colour_index, minlength=table.n_colours))
         n_points = n_frames = 0
         with contextlib.ExitStack() as temp:
             out = None

@@ -300,7 +300,8 @@ class Tracker:
         self.params = params
         self.fps = float(fps)
         self.table = table or ColourTable.build(markerset.palette)
-        self.measurer = FrameMeasurer(self.cameras, self.table, markerset.radius_m)
+        self.measurer = FrameMeasurer(self.cameras, self.table, markerset.radius_m, markers_per_colour=np.bincount(
+            markerset.colour_index, minlength=self.table.n_colours))
         self.geometry: RigGeometry = self.measurer.geometry
         self.gates = [blob_gates(c, markerset.radius_m) for c in self.cameras]
         self._stack = CameraStack(self.cameras)

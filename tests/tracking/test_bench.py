@@ -22,3 +22,5 @@ def test_bench_reports_each_pass_and_the_best():
     assert sum("speed target" in line for line in lines) == 3
     worst = re.search(r"worst frame set of each pass: ([\d.]+) ([\d.]+) ms", text)
     assert worst and float(worst[1]) >= t1 and float(worst[2]) >= t2  # the slowest is not below the median
+    webcam = re.search(r"webcam images .*full-frame measurement median ([\d.]+) ms, worst ([\d.]+) ms", text)
+    assert webcam and float(webcam[2]) >= float(webcam[1]), text

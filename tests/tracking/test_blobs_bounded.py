@@ -72,3 +72,27 @@ def test_the_full_frame_search_on_noise_images_stays_bounded():
 def _noise_image(rng, w=320, h=240, block=3):
     small = rng.integers(0, 256, (h // block, w // block, 3), dtype=np.uint8)
     return cv2.resize(small, (w, h), interpolation=cv2.INTER_NEAREST)
+
+
+def test_a_cap_per_colour_from_the_marker_set():
+    """The measurer caps each colour's regions at twice its markers + 4 (tracking.measure.regions_cap):
+    on a clean render the points are exactly those of the global cap; on noise fewer regions."""
+    from tracking.measure import FrameMeasurer, regions_cap
+    from tracking.sim.studio import SimulationSettings, studio_from_settings
+
+    assert [regions_cap(n) for n in (1, 3, 4, 14, 40)] == [6, 10, 12, 32, DEFAULT_MAX_PER_COLOUR]
+    studio, motion = studio_from_settings(SimulationSettings(motion="reference", size_px=(320, 240), fps=15.0))
+    with studio:
+        images = studio.render(motion.pose_at(0.0), 0, 0.0, noise_sigma=1.5, with_visibility=False).frames.images
+        ms, cams = studio.markerset, studio.cameras
+    from tracking.colour_table import ColourTable
+
+    table = ColourTable.build(ms.palette)
+    per_colour = np.bincount(ms.colour_index)
+    plain, capped = FrameMeasurer(cams, table, ms.radius_m), FrameMeasurer(cams, table, ms.radius_m, markers_per_colour=per_colour)
+    a, b = plain.measure(images), capped.measure(images)
+    assert len(a) == ms.n_markers and np.array_equal(a.p_world_m, b.p_world_m)
+    rng = np.random.default_rng(4)
+    noise = [_noise_image(rng) for _ in cams]
+    for blobs in capped.blobs(noise):
+        assert np.all(np.bincount(blobs.colour, minlength=len(per_colour)) <= [regions_cap(n) for n in per_colour])

@@ -6,7 +6,8 @@ reference pose varied within its tolerances (each arm 5-40 degrees from the body
 extended up to 10 degrees, the upper arm turned from 60 degrees in to 15 degrees out, the elbow
 flexed up to 30 degrees, the thumb within 30 degrees of forward; the trunk leaning forward,
 sideways and turned up to 15 degrees each; the chair turned up to 20 degrees), one colour for
-all markers or the marker set's four, and 0-2 markers seen by fewer than two cameras.
+all markers or the marker set's four, and 0-2 markers seen by fewer than two cameras. Rendered
+draws are also imaged by a drawn cheap webcam (:func:`draw_imaging`).
 
 Seeds below :data:`REPORTED_SEEDS_FROM` are for tuning (the tests use them); reported figures
 come from seeds from there on only, so that nothing reported was looked at while tuning.
@@ -27,6 +28,7 @@ import numpy as np
 
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, axis_angle_matrix
+from tracking.sim.imaging import Webcam, WebcamPipeline, drawn_webcam
 
 #: seeds from here on are reported; below are for tuning
 REPORTED_SEEDS_FROM = 100_000
@@ -226,9 +228,13 @@ class TrackResult:
 
 def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), fps: float = 30.0,
                 seconds: float = 1.0, noise_sigma: float = 1.5, markerset: MarkerSet | None = None,
-                progress: bool = False) -> list[TrackResult]:
+                webcams: bool = True, progress: bool = False) -> list[TrackResult]:
     """Render each draw's reference pose (still, ``seconds`` long, sensor noise) in a layout of
-    :data:`LAYOUTS` drawn from the seed, and track it from the first frame set."""
+    :data:`LAYOUTS` drawn from the seed, and track it from the first frame set.
+
+    ``webcams``: the images are also what a drawn cheap webcam delivers (:func:`draw_imaging`:
+    sensor noise, lighting drift, auto exposure / white balance, MJPEG) instead of ``noise_sigma``
+    alone."""
     from tqdm import tqdm
 
     from tracking.sim.studio import Studio
@@ -248,12 +254,16 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
             studio.body = BodyModel(d.dims, ms, d.offsets_m)
             tracker = Tracker(cams, ms, fps=fps, params=TrackerParams(identify_hold_s=HOLD_S))
             n = max(int(round(seconds * fps)), tracker.hold_frames + 2)
+            imaging = draw_imaging(seed, n, noise_sigma) if webcams else None
+            camera = WebcamPipeline(imaging.webcam if imaging else Webcam(), len(cams))
             times, sq, wrong = [], [], 0
             named_at, named, message = -1, 0, ""
             for k in range(n):
-                sf = studio.render(d.pose, k, k / fps, noise_sigma=noise_sigma, seed=seed * 7 + k, with_visibility=False)
+                light = imaging.light(k) if imaging else {"noise_sigma": noise_sigma}
+                sf = studio.render(d.pose, k, k / fps, seed=seed * 7 + k, with_visibility=False, **light)
+                images, _ = camera.apply(sf.frames.images)
                 t0 = time.perf_counter()
-                s = tracker.step(sf.frames.images, k / fps)
+                s = tracker.step(images, k / fps)
                 times.append(time.perf_counter() - t0)
                 if s.state != TrackingState.TRACKING:
                     message = s.message
@@ -271,6 +281,41 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
                                named, 1000 * math.sqrt(np.mean(sq)) if sq else math.nan, 1000 * max(times),
                                1000 * float(np.median(times)), message))
     return out
+
+
+@dataclass(frozen=True, slots=True)
+class DrawnImaging:
+    """How one rendered draw is imaged: the webcam, sensor noise and a lighting drift over its frames.
+
+    Attributes:
+        webcam: auto exposure / white balance, MJPEG, exposure time (a still pose shows no blur).
+        noise_sigma: sensor noise, 8-bit units.
+        brightness_change: the light's change over the draw's frames (-0.1: 10 % darker).
+        colour_cast: (3,) R, G, B gains the light reaches at the last frame.
+        n_frames: the frames the drift runs over.
+    """
+
+    webcam: Webcam
+    noise_sigma: float
+    brightness_change: float
+    colour_cast: tuple[float, float, float]
+    n_frames: int
+
+    def light(self, k: int) -> dict:
+        """The renderer's light and noise at frame ``k`` (linear drift from the first frame)."""
+        frac = k / max(self.n_frames - 1, 1)
+        return {"exposure": 1.0 + self.brightness_change * frac, "noise_sigma": self.noise_sigma,
+                "colour_cast": tuple(1.0 + (g - 1.0) * frac for g in self.colour_cast)}
+
+
+def draw_imaging(seed: int, n_frames: int, noise_sigma: float = 1.5) -> DrawnImaging:
+    """The imaging of draw ``seed`` (a generator of its own: the draw and its layout stay as they were):
+    a webcam of :func:`tracking.sim.imaging.drawn_webcam`, sensor noise ``noise_sigma`` to 4, the light
+    20 % darker to 10 % brighter and a cast of up to 8 % per channel over the frames."""
+    rng = np.random.default_rng((seed, 31_337))
+    return DrawnImaging(drawn_webcam(rng), float(rng.uniform(noise_sigma, max(noise_sigma, 4.0))),
+                        float(rng.uniform(-0.2, 0.1)), tuple(float(g) for g in 1.0 + rng.uniform(-0.08, 0.08, 3)),
+                        n_frames)
 
 
 def _spread(values: list[float], unit: str, digits: int = 0) -> str:
@@ -298,7 +343,8 @@ def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -
                              + _spread([1000 * x.time_s for x in r], "ms"))
     if tracked:
         lines.append(f"rendered and tracked ({len(tracked)} draws, still reference pose, layouts of 2-4 cameras "
-                     "incl. random placements):")
+                     "incl. random placements; drawn webcams: sensor noise 1.5-4, light -20..+10 % and a cast over "
+                     "the draw, auto exposure / white balance, MJPEG quality 50-95, chroma 4:2:2 or 4:2:0):")
         for one in (True, False):
             r = [x for x in tracked if x.one_colour == one]
             if not r:

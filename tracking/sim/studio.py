@@ -1,8 +1,9 @@
 """The simulated studio: a body moving through a motion, imaged by virtual cameras.
 
 It joins the body model (:mod:`tracking.sim.body`), a motion (:mod:`tracking.sim.motions`) and the
-renderer (:mod:`tracking.sim.renderer`), adds lighting drift, colour cast and sensor noise, and
-keeps the ground truth (marker centres, per-camera visibility, joint angles). The tracker never
+renderer (:mod:`tracking.sim.renderer`), adds lighting drift, colour cast and sensor noise, what a
+webcam does to the image (:mod:`tracking.sim.imaging`: motion blur, auto exposure / white balance,
+MJPEG), and keeps the ground truth (marker centres, per-camera visibility, joint angles). The tracker never
 sees the truth: it gets only the images, as from real cameras.
 """
 
@@ -24,6 +25,7 @@ from calibration.files import save_calibration_toml
 from tracking.recording import FrameSet, RecordingWriter, write_timestamps
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
 from tracking.sim.clocks import CameraClocks, rolling_marker_positions
+from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise, exposure_offsets_s, integrate_exposure
 from tracking.sim.motions import Motion, load_motion
 from tracking.sim.renderer import StudioRenderer
 from tracking.sim.rigs import load_rig
@@ -55,6 +57,17 @@ class SimulationSettings:
     camera_offsets: tuple[float, ...] | str | None = None
     clock_drift: float = 0.0
     rolling_shutter_s: float = 0.0
+    jpeg_quality: int | None = None
+    jpeg_chroma: str = "422"
+    exposure_s: float = 0.0
+    auto_exposure: bool = False
+    auto_white_balance: bool = False
+
+    @property
+    def webcam(self) -> Webcam:
+        """The webcam effects (:mod:`tracking.sim.imaging`) these settings ask for."""
+        return Webcam(jpeg_quality=self.jpeg_quality, jpeg_chroma=self.jpeg_chroma, exposure_s=self.exposure_s,
+                      auto_exposure=self.auto_exposure, auto_white_balance=self.auto_white_balance)
 
     def clocks(self, n_cameras: int) -> CameraClocks | None:
         """The cameras' timing (:mod:`tracking.sim.clocks`): ``camera_offsets`` one phase per
@@ -88,6 +101,8 @@ class SimFrame:
             without visibility.
         stamps_s: (C,) instant of each camera's image (its first row's), seconds; None when all
             cameras imaged the frame set's instant (``frames.time_s``, where ``markers_m`` are).
+        camera_gains: (C, 3) R, G, B gains of the cameras' auto exposure / white balance applied
+            to these images (:class:`tracking.sim.imaging.AutoCamera`); None without them.
     """
 
     frames: FrameSet
@@ -96,6 +111,7 @@ class SimFrame:
     visible_fraction: np.ndarray
     merged: np.ndarray | None
     stamps_s: np.ndarray | None = None
+    camera_gains: np.ndarray | None = None
 
 
 def merged_markers(cameras: Sequence[Camera], markers_m: np.ndarray, radius_m: float, colour_index: np.ndarray) -> np.ndarray:
@@ -174,13 +190,13 @@ class Studio:
         stamps = None if camera_scenes is None else np.asarray(camera_scenes[2], dtype=np.float64)
         return SimFrame(FrameSet(index, time_s, res.images), pose, markers, vis, merged, stamps)
 
-    def timed_scenes(self, motion: Motion, index: int, fps: float, clocks: CameraClocks
+    def timed_scenes(self, motion: Motion, index: int, fps: float, clocks: CameraClocks, shift_s: float = 0.0
                      ) -> tuple[list[SceneFrame], np.ndarray, np.ndarray]:
         """Each camera's scene of frame set ``index`` on free-running clocks with rolling shutters
         (:mod:`tracking.sim.clocks`): the body at the instant of the camera's middle row, each
-        marker ball at the instant of its own row. Returns (scenes, (C, M, 3) drawn marker centres,
-        (C,) stamps: each camera's first-row instant)."""
-        stamps = clocks.capture_times(index, fps)
+        marker ball at the instant of its own row (``shift_s`` later: an instant of the exposure).
+        Returns (scenes, (C, M, 3) drawn marker centres, (C,) stamps: each camera's first-row instant)."""
+        stamps = clocks.capture_times(index, fps) + shift_s
         readout = np.asarray(clocks.readout_s)
         markers = rolling_marker_positions(self.cameras, lambda t: self.body.markers_m(motion.pose_at(t)),
                                            stamps, readout)
@@ -197,14 +213,17 @@ class Studio:
     def play(self, motion: Motion, fps: float, *, seconds: float | None = None, noise_sigma: float = 0.0,
              brightness_drop: float = 0.0, colour_cast: Sequence[float] | None = None, seed: int = 0,
              with_visibility: bool = True, drift_start_s: float = 0.0, drift_s: float | None = None,
-             clocks: CameraClocks | None = None) -> Iterator[SimFrame]:
+             clocks: CameraClocks | None = None, webcam: Webcam | None = None) -> Iterator[SimFrame]:
         """Render a motion frame by frame (``clocks``: cameras on free-running clocks and rolling
         shutters, :meth:`timed_scenes`; the truth stays at the frame sets' nominal instants).
 
         Lighting drifts linearly from full exposure and no cast at ``drift_start_s`` to
         ``1 - brightness_drop`` and ``colour_cast`` ``drift_s`` seconds later (default: over the
-        whole motion), then stays there.
+        whole motion), then stays there. ``webcam``: what the cameras do to the images
+        (:mod:`tracking.sim.imaging`); a SimFrame's ``camera_gains`` are their auto loops' gains.
         """
+        webcam = webcam or Webcam()
+        pipeline = WebcamPipeline(webcam, len(self.cameras))
         duration = motion.duration_s if seconds is None else min(seconds, motion.duration_s)
         n = int(np.floor(duration * fps + 1e-9)) + 1
         cast_end = np.asarray(colour_cast if colour_cast is not None else (1.0, 1.0, 1.0), dtype=float)
@@ -213,14 +232,32 @@ class Studio:
             t = i / fps
             frac = float(np.clip((t - drift_start_s) / ramp_s, 0.0, 1.0)) if ramp_s > 0 else float(t >= drift_start_s)
             timed = None if clocks is None or clocks.synchronous else self.timed_scenes(motion, i, fps, clocks)
-            yield self.render(
-                motion.pose_at(t), i, t, camera_scenes=timed,
-                exposure=1.0 - brightness_drop * frac,
-                colour_cast=tuple(1.0 + (cast_end - 1.0) * frac),
-                noise_sigma=noise_sigma,
-                seed=seed * 1_000_003 + i,
-                with_visibility=with_visibility,
-            )
+            light = dict(exposure=1.0 - brightness_drop * frac, colour_cast=tuple(1.0 + (cast_end - 1.0) * frac))
+            blur = webcam.exposure_s > 0.0
+            sf = self.render(motion.pose_at(t), i, t, camera_scenes=timed, noise_sigma=0.0 if blur else noise_sigma,
+                             seed=seed * 1_000_003 + i, with_visibility=with_visibility, **light)
+            if blur:  # the shutter open around the instant: the mean of its instants, then the noise once
+                shots = [sf.frames.images]
+                for dt in self._exposure_offsets(motion, t, webcam.exposure_s):
+                    if dt != 0.0:
+                        scenes = None if timed is None else self.timed_scenes(motion, i, fps, clocks, dt)
+                        shots.append(self.render(motion.pose_at(t + dt), i, t + dt, camera_scenes=scenes,
+                                                 with_visibility=False, **light).frames.images)
+                rng = np.random.default_rng((seed, i))
+                sf = dataclasses.replace(sf, frames=dataclasses.replace(sf.frames, images=tuple(
+                    add_sensor_noise(integrate_exposure(per_cam), noise_sigma, rng) for per_cam in zip(*shots))))
+            if not webcam.ideal:
+                images, gains = pipeline.apply(sf.frames.images)
+                sf = dataclasses.replace(sf, frames=dataclasses.replace(sf.frames, images=images), camera_gains=gains)
+            yield sf
+
+    def _exposure_offsets(self, motion: Motion, t: float, exposure_s: float) -> np.ndarray:
+        """Instants of an exposure around ``t`` (:func:`tracking.sim.imaging.exposure_offsets_s`),
+        dense enough for the fastest ball's image motion in any camera."""
+        ends = [self.body.markers_m(motion.pose_at(t + s * exposure_s / 2)) for s in (-1.0, 1.0)]
+        motion_px = max(float(np.max(np.linalg.norm(cam.project(ends[1]) - cam.project(ends[0]), axis=1)))
+                        for cam in self.cameras)
+        return exposure_offsets_s(exposure_s, motion_px)
 
     def n_frames(self, motion: Motion, fps: float, seconds: float | None = None) -> int:
         duration = motion.duration_s if seconds is None else min(seconds, motion.duration_s)
@@ -267,14 +304,16 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
         frames = studio.play(motion, settings.fps, seconds=settings.seconds, noise_sigma=settings.noise_sigma,
                              brightness_drop=settings.brightness_drop, colour_cast=settings.colour_cast,
                              seed=settings.seed, drift_start_s=settings.drift_start_s, drift_s=settings.drift_s,
-                             clocks=clocks)
-        stamps = []
+                             clocks=clocks, webcam=settings.webcam)
+        stamps, gains = [], []
         try:
             for sf in tqdm(frames, total=n, unit="frame", desc="simulating", disable=not progress):
                 writer.write(sf.frames.images)
                 truth.append(sf.markers_m)
                 vis_rows.append(sf.visible_fraction)
                 stamps.append(np.full(len(studio.cameras), sf.frames.time_s) if sf.stamps_s is None else sf.stamps_s)
+                if sf.camera_gains is not None:
+                    gains.append(sf.camera_gains)
         finally:
             writer.close()
         ms = studio.markerset
@@ -286,6 +325,10 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
             if any(clocks.readout_s):  # the calibration says what the cameras do (docs/FILES.md)
                 save_calibration_toml(out_dir / "calibration.toml", [
                     dataclasses.replace(c, rolling_shutter_s=r) for c, r in zip(studio.cameras, clocks.readout_s)])
+        if not settings.webcam.ideal:
+            timing["webcam"] = settings.webcam.as_meta()
+        if gains:
+            write_camera_gains_csv(out_dir / "truth_camera_gains.csv", [c.name for c in studio.cameras], np.stack(gains))
         writer.write_meta(
             ms.name, ms.rgb,
             source="simulator",
@@ -318,6 +361,17 @@ def write_visibility_csv(path: Path, camera_names: Sequence[str], marker_names: 
         for i, per_frame in enumerate(fraction):
             for m, name in enumerate(marker_names):
                 w.writerow([i, name, *(f"{v:.3f}" for v in per_frame[:, m])])
+
+
+def write_camera_gains_csv(path: Path, camera_names: Sequence[str], gains: np.ndarray) -> None:
+    """``frame,camera,gain_r,gain_g,gain_b``: the (T, C, 3) gains the cameras' auto exposure and
+    white balance applied to each image (1: as the light came)."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["frame", "camera", "gain_r", "gain_g", "gain_b"])
+        for i, per_frame in enumerate(gains):
+            for name, g in zip(camera_names, per_frame):
+                w.writerow([i, name, *(f"{v:.4f}" for v in g)])
 
 
 def read_visibility_csv(path: Path, marker_names: Sequence[str]) -> np.ndarray:
