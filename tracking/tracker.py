@@ -346,12 +346,12 @@ class Tracker:
         self.state = TrackingState.WAITING
         self.positions = np.full((m, 3), np.nan)
         self.velocity = np.zeros((m, 3))
-        # images off the frame set's instant: each marker's views as seen in the last frame set
-        # (normalized x, y and the view's instant, NaN where not used) and the velocity per frame
-        # set that brings this set's views to its instant, from each view's image motion since
-        # then (free of its own correction, which fed back into the corrected positions' velocity
-        # and oscillated under a rolling shutter)
-        self._seen_pos = np.full((m, len(self.cameras), 3), np.nan)
+        # images off the frame set's instant: each marker's views as seen in the last two frame sets
+        # (normalized x, y and the view's instant of the last, then of the one before; NaN where not
+        # used) and the velocity per frame set that brings this set's views to its instant, from
+        # each view's image motion since then (free of its own correction, which fed back into the
+        # corrected positions' velocity and oscillated under a rolling shutter)
+        self._seen_pos = np.full((m, len(self.cameras), 6), np.nan)
         self._seen_velocity = np.zeros((m, 3))
         self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
         self.frames_unmeasured = np.zeros(m, dtype=np.int64)
@@ -643,7 +643,8 @@ class Tracker:
         if self._skew_s is not None:
             self._seen_velocity = np.where((measured & np.isfinite(self._seen_now).all(axis=1))[:, None],
                                            self._seen_now, self.velocity)
-            self._seen_pos = np.where(measured[:, None, None], self._seen_views, np.nan)
+            self._seen_pos = np.concatenate([np.where(measured[:, None, None], self._seen_views, np.nan),
+                                             self._seen_pos[..., :3]], axis=2)
         else:
             self._seen_pos[:] = np.nan
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
@@ -1026,7 +1027,12 @@ class Tracker:
             use = seen & measured[:, None]
             at = self._set_time_s + self._skew_s + self._row_s * uv[..., 1]
             self._seen_views = np.concatenate([np.where(use[..., None], xn_seen, np.nan), at[..., None]], axis=2)
-            self._seen_now = self._image_velocity(self._seen_views, self._seen_pos) / self.fps
+            # over the last period and the last two: twice the one minus the other is the velocity at
+            # the views' instants for a steady acceleration (the last period's alone lagged by half
+            # a period: a swing's acceleration times 16 ms, ~0.1 m/s)
+            last = self._image_velocity(self._seen_views, self._seen_pos[..., :3])
+            two = self._image_velocity(self._seen_views, self._seen_pos[..., 3:])
+            self._seen_now = np.where(np.isfinite(two), 2.0 * last - two, last) / self.fps
             if measured.any():
                 velocity = np.where(np.isfinite(self._seen_now), self._seen_now, self._seen_velocity)
                 moving = self._stack.rotate_to_cameras(velocity * self.fps)
