@@ -758,12 +758,14 @@ class Tracker:
             x = cam[..., :2] / cam[..., 2:]
             rot = self._stack.rotation  # (C, 3, 3) world -> camera
             jac = (rot[None, :, :2, :] - x[..., :, None] * rot[None, :, 2:3, :]) / cam[..., 2, None, None]
-        a = np.nan_to_num(jac) * np.where(ok[rows], dt[rows], 0.0)[..., None, None]  # (K, C, 2, 3)
-        b = np.where(ok[rows][..., None], dx[rows], 0.0)  # (K, C, 2)
-        normal = np.einsum("kcij,kcil->kjl", a, a)
-        rhs = np.einsum("kcij,kci->kj", a, b)
-        good = np.linalg.cond(normal) < 1e8
-        v[rows[good]] = np.linalg.solve(normal[good], rhs[good][..., None])[..., 0]
+        a = (np.nan_to_num(jac) * np.where(ok[rows], dt[rows], 0.0)[..., None, None]).reshape(rows.size, -1, 3)
+        b = np.where(ok[rows][..., None], dx[rows], 0.0).reshape(rows.size, -1, 1)  # (K, 2C, 1)
+        at = a.transpose(0, 2, 1)
+        normal = at @ a  # (K, 3, 3)
+        # (two cameras seeing the marker along nearly one line leave a direction unknown)
+        scale = np.trace(normal, axis1=1, axis2=2)
+        good = np.linalg.det(normal) > 1e-9 * scale**3
+        v[rows[good]] = np.linalg.solve(normal[good], (at @ b)[good])[..., 0]
         return v
 
     def _one_ball_one_marker(self, uv, sigma_px, r_px, uv_out, rad_out) -> None:
