@@ -347,11 +347,12 @@ class Tracker:
         self.state = TrackingState.WAITING
         self.positions = np.full((m, 3), np.nan)
         self.velocity = np.zeros((m, 3))
-        # images off the frame set's instant: each marker's point triangulated from its centroids as
-        # seen (not brought to the set's instant) and its change per frame set, the velocity that
-        # brings them there (free of its own correction, which fed back into the corrected
-        # positions' velocity and oscillated under a rolling shutter)
-        self._seen_pos = np.full((m, 3), np.nan)
+        # images off the frame set's instant: each marker's views as seen in the last two frame sets
+        # (normalized x, y and the view's instant of the last, then of the one before; NaN where not
+        # used) and the velocity per frame set that brings this set's views to its instant, from
+        # each view's image motion since then (free of its own correction, which fed back into the
+        # corrected positions' velocity and oscillated under a rolling shutter)
+        self._seen_pos = np.full((m, len(self.cameras), 6), np.nan)
         self._seen_velocity = np.zeros((m, 3))
         self.status = np.full(m, MarkerStatus.LOST, dtype=np.uint8)
         self.frames_unmeasured = np.zeros(m, dtype=np.int64)
@@ -420,6 +421,7 @@ class Tracker:
         index = self.frame_count
         self.frame_count += 1
         t = index / self.fps if time_s is None else float(time_s)
+        self._set_time_s = t
         self._skew_s = None
         if stamps_s is not None:
             skew = np.nan_to_num(np.asarray(stamps_s, dtype=np.float64).reshape(-1) - t)  # (unknown: 0)
@@ -640,10 +642,10 @@ class Tracker:
         # a marker found again far from its estimate: the jump is the estimate's error, not motion
         self.velocity = np.where((has & ~found)[:, None], est_pos - prev, 0.0)
         if self._skew_s is not None:
-            seen_now = np.where(measured[:, None], self._seen_now, np.nan)
-            both = np.isfinite(seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
-            self._seen_velocity = np.where(both[:, None], seen_now - self._seen_pos, self.velocity)
-            self._seen_pos = seen_now
+            self._seen_velocity = np.where((measured & np.isfinite(self._seen_now).all(axis=1))[:, None],
+                                           self._seen_now, self.velocity)
+            self._seen_pos = np.concatenate([np.where(measured[:, None, None], self._seen_views, np.nan),
+                                             self._seen_pos[..., :3]], axis=2)
         else:
             self._seen_pos[:] = np.nan
         self.frames_unmeasured = np.where(measured, 0, self.frames_unmeasured + 1)
@@ -735,6 +737,37 @@ class Tracker:
         then = cam + (self._moving_cam if moving is None else moving) * dt[..., None]
         with np.errstate(invalid="ignore"):  # (NaN for unknown markers: not seen)
             return xn + cam[..., :2] / cam[..., 2:] - then[..., :2] / then[..., 2:]
+
+    def _image_velocity(self, now: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """(M, 3) each marker's velocity (m/s, NaN where fewer than two cameras saw it in both frame
+        sets) from its views' image motion: ``now`` and ``before`` (M, C, 3) the views as seen
+        (normalized x, y, instant). Each camera's displacement ``dx_c`` over its own interval
+        ``dt_c`` is ``J_c v dt_c`` (``J_c`` the projection's derivative at the prediction), solved
+        for ``v`` by least squares over the cameras that saw the marker twice: a view that joins or
+        leaves the set, or two cameras' instants far apart, do not move the point as a point
+        triangulated from changing views did (that made single frame sets 10-16 mm off), and a
+        camera whose phase wrapped (an interval of a few milliseconds) weighs by its interval."""
+        dt = now[..., 2] - before[..., 2]  # (M, C), NaN unless seen in both
+        dx = now[..., :2] - before[..., :2]
+        ok = np.isfinite(dt) & np.isfinite(dx).all(axis=2) & (dt > 0)
+        v = np.full((len(now), 3), np.nan)
+        rows = np.flatnonzero(ok.sum(axis=1) >= 2)
+        if rows.size == 0:
+            return v
+        cam = self._pred_cam[rows]  # (K, C, 3)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = cam[..., :2] / cam[..., 2:]
+            rot = self._stack.rotation  # (C, 3, 3) world -> camera
+            jac = (rot[None, :, :2, :] - x[..., :, None] * rot[None, :, 2:3, :]) / cam[..., 2, None, None]
+        a = (np.nan_to_num(jac) * np.where(ok[rows], dt[rows], 0.0)[..., None, None]).reshape(rows.size, -1, 3)
+        b = np.where(ok[rows][..., None], dx[rows], 0.0).reshape(rows.size, -1, 1)  # (K, 2C, 1)
+        at = a.transpose(0, 2, 1)
+        normal = at @ a  # (K, 3, 3)
+        # (two cameras seeing the marker along nearly one line leave a direction unknown)
+        scale = np.trace(normal, axis1=1, axis2=2)
+        good = np.linalg.det(normal) > 1e-9 * scale**3
+        v[rows[good]] = np.linalg.solve(normal[good], (at @ b)[good])[..., 0]
+        return v
 
     def _one_ball_one_marker(self, uv, sigma_px, r_px, uv_out, rad_out) -> None:
         """A ball that the windows of two markers of its colour both found (the same blob in one
@@ -990,21 +1023,26 @@ class Tracker:
         surprise = off_m / sigma  # distance to the prediction in sigmas
         measured &= self._segments_consistent(dist, new_pos, measured, np.nan_to_num(surprise))
         new_pos[~measured] = np.nan
-        if self._skew_s is not None and measured.any():
-            # the same views as seen: their change since the last frame set is the markers' velocity
-            # over the last period (not the prediction's, a period older: it lagged a fast swing's
-            # acceleration), which brings the views to the set's instant once more
+        if self._skew_s is not None:
+            # the views as seen, with their instants: their image motion since the last frame set is
+            # the markers' velocity over the last period (not the prediction's, a period older: it
+            # lagged a fast swing's acceleration), which brings the views to the set's instant once more
             use = seen & measured[:, None]
-            self._seen_now = triangulate(xn_seen, use)
-            both = np.isfinite(self._seen_now).all(axis=1) & np.isfinite(self._seen_pos).all(axis=1)
-            velocity = np.where(both[:, None], self._seen_now - self._seen_pos, self._seen_velocity)
-            moving = self._stack.rotate_to_cameras(velocity * self.fps)
-            redo = np.flatnonzero(measured)
-            xn_redo = self._to_set_instant(xn_seen[redo], uv[redo], moving[redo], self._pred_cam[redo])
-            new_pos[redo] = triangulate(xn_redo, use[redo])
-            xn[redo] = xn_redo
-        elif self._skew_s is not None:
-            self._seen_now = np.full((m_count, 3), np.nan)
+            at = self._set_time_s + self._skew_s + self._row_s * uv[..., 1]
+            self._seen_views = np.concatenate([np.where(use[..., None], xn_seen, np.nan), at[..., None]], axis=2)
+            # over the last period and the last two: twice the one minus the other is the velocity at
+            # the views' instants for a steady acceleration (the last period's alone lagged by half
+            # a period: a swing's acceleration times 16 ms, ~0.1 m/s)
+            last = self._image_velocity(self._seen_views, self._seen_pos[..., :3])
+            two = self._image_velocity(self._seen_views, self._seen_pos[..., 3:])
+            self._seen_now = np.where(np.isfinite(two), 2.0 * last - two, last) / self.fps
+            if measured.any():
+                velocity = np.where(np.isfinite(self._seen_now), self._seen_now, self._seen_velocity)
+                moving = self._stack.rotate_to_cameras(velocity * self.fps)
+                redo = np.flatnonzero(measured)
+                xn_redo = self._to_set_instant(xn_seen[redo], uv[redo], moving[redo], self._pred_cam[redo])
+                new_pos[redo] = triangulate(xn_redo, use[redo])
+                xn[redo] = xn_redo
         self._used_uv = np.where((seen & measured[:, None])[..., None], uv, np.nan)
         full = seen & ~measured[:, None] & params.full_view(ratio_pred)
         self._offer_views(xn, full)
