@@ -69,3 +69,64 @@ def test_population_report_pools_events_and_spreads_over_patients():
     assert "withheld 1 (33 %)" in gated and "pooled mean 3.0 mm" in gated
     wrists = [line for line in lines if line.strip().startswith("wrists")][0]
     assert "2 events, pooled mean 7.0 mm" in wrists
+
+
+def _moving_body(frames, step_m):
+    """The seed marker set on a body translating by ``step_m`` per frame (world metres)."""
+    from tracking.sim.body import BodyDimensions
+
+    ms = load_markerset()
+    dims = BodyDimensions.from_percentile(50, "female")
+    p0 = BodyModel(dims, ms).markers_m(load_motion("reference", dims).pose_at(0.0))
+    return ms, p0[None] + np.arange(frames)[:, None, None] * np.asarray(step_m)[None, None, :]
+
+
+def test_a_whole_arm_hidden_for_a_moment_coasts_then_is_withheld():
+    """All four chain markers of the right arm hidden: they keep their velocity (not left where
+    they were) while 0.5 a t^2 stays within max_extrapolation_m, then are withheld (LOST)."""
+    from tracking.hidden import Estimator, Method, estimator_config
+    from tracking.status import MarkerStatus
+
+    ms, truth = _moving_body(20, [0.01, 0.0, 0.0])  # 10 mm per frame, 0.3 m/s at 30 frames/s
+    chain = [ms.index(n) for n in ("MRE1", "MRE2", "MRW1", "MRW2")]
+    est = Estimator(**estimator_config(ms), fps=30.0)  # 3 m/s^2, 15 mm: 6.7 mm after 2 frames, 15 after 3
+    measured = np.ones(ms.n_markers, dtype=bool)
+    for t in range(10):
+        est.update(truth[t], measured)
+    measured[chain] = False
+    statuses = []
+    for t in range(10, 15):
+        p, s = est.update(np.where(measured[:, None], truth[t], np.nan), measured)
+        statuses.append(s[chain])
+        if t < 12:
+            assert (s[chain] == MarkerStatus.ESTIMATED).all()
+            assert (est.used[chain] == Method.CONSTANT_VELOCITY).all()
+            assert np.abs(p[chain] - truth[t, chain]).max() < 1e-6
+    assert (statuses[-1] == MarkerStatus.LOST).all()
+
+
+def test_the_flexion_speed_is_learned_through_fits_to_one_styloid():
+    """One styloid hidden while the arm moves: the fits to the other pin flexion, so the arm's
+    flexion speed is learned from them (steady-state Kalman gain) rather than decaying to 0."""
+    from tracking.hidden import Estimator, estimator_config
+
+    ms = load_markerset()
+    from tracking.sim.body import BodyDimensions
+
+    dims = BodyDimensions.from_percentile(50, "female")
+    body = BodyModel(dims, ms)
+    motion = load_motion("elbow_flexion_supination", dims)
+    fps = 30.0
+    w2 = ms.index("MRW2")
+    est = Estimator(**estimator_config(ms), fps=fps)
+    measured = np.ones(ms.n_markers, dtype=bool)
+    speeds = []
+    for i in range(60):
+        pose = motion.pose_at(1.0 + i / fps)
+        measured[w2] = i < 20
+        est.update(np.where(measured[:, None], body.markers_m(pose), np.nan), measured)
+        speeds.append(est.arm_velocity[0, 0] if est._arms[0][0] == ms.index("MRW1") else est.arm_velocity[1, 0])
+    speeds = np.abs(np.nan_to_num(np.array(speeds)))
+    # the speed while both styloids were measured is kept (not decayed to a tenth) through 40 fits
+    assert speeds[19] > 1e-3
+    assert speeds[59] > 0.3 * speeds[19]

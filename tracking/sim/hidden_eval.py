@@ -273,6 +273,7 @@ def make_estimator(markerset: MarkerSet, label: str, fps: float, *, gates: bool 
         cfg["max_hidden_s"] = np.inf
         cfg["max_unsupported_s"] = np.inf
         cfg["tolerance_m"] = np.inf
+        cfg["max_extrapolation_m"] = np.inf
     return Estimator(**cfg, fps=fps)
 
 
