@@ -35,6 +35,7 @@ import numpy as np
 
 from tracking.hidden import Estimator, Method, estimator_config
 from tracking.markerset import MarkerSet
+from tracking.sim.body import BodyDimensions, BodyModel, Pose
 from tracking.status import MarkerStatus
 
 log = logging.getLogger(__name__)
@@ -70,16 +71,103 @@ class OcclusionData:
         return replace(self, fps=self.fps / step, truth_m=self.truth_m[::step], measured=self.measured[::step])
 
 
+def _skin_bases(body: BodyModel, pose: Pose) -> np.ndarray:
+    """(M, 2, 3) two unit directions along the skin at each marker that move with its segment.
+
+    The first is the segment's long axis (trunk and shoulder: the trunk's up, upper arm: shoulder
+    to elbow, forearm: elbow to wrist, pelvis: up) made perpendicular to the marker's skin normal,
+    the second the normal cross the first.
+    """
+    _, normal = body.landmarks_m(pose)
+    up = body.trunk_rotation(pose)[:, 1]
+    centres = {side: body.joint_centres_m(pose, side) for side in ("right", "left")}
+    out = np.empty((len(normal), 2, 3))
+    for k, seg in enumerate(body.markerset.segments):
+        side, _, part = seg.partition("_")
+        if part == "upper_arm":
+            axis = centres[side]["elbow"] - centres[side]["gh"]
+        elif part == "forearm":
+            axis = centres[side]["wrist"] - centres[side]["elbow"]
+        elif seg == "pelvis":
+            axis = np.array([0.0, 1.0, 0.0])
+        else:
+            axis = up
+        t1 = axis - np.dot(axis, normal[k]) * normal[k]
+        t1 /= np.linalg.norm(t1)
+        out[k] = t1, np.cross(normal[k], t1)
+    return out
+
+
+class PlacedBody(BodyModel):
+    """A body whose markers sit off their landmarks by fixed amounts along the skin, following
+    their segments as the body moves (a placement error of a marker worn through a motion).
+
+    Args:
+        skin_offsets_m: (M, 2) each marker's offset along :func:`_skin_bases`, metres.
+    """
+
+    def __init__(self, dims: BodyDimensions, markerset: MarkerSet, skin_offsets_m: np.ndarray) -> None:
+        super().__init__(dims, markerset)
+        self._skin = np.asarray(skin_offsets_m, dtype=np.float64).reshape(markerset.n_markers, 2)
+
+    def _placed(self, pose: Pose) -> None:
+        self._offsets = np.einsum("mk,mkd->md", self._skin, _skin_bases(self, pose))
+
+    def markers_m(self, pose: Pose) -> np.ndarray:
+        self._placed(pose)
+        return super().markers_m(pose)
+
+    def scene(self, pose: Pose):
+        self._placed(pose)
+        return super().scene(pose)
+
+
+@dataclass(frozen=True, slots=True)
+class PopulationPatient:
+    """One patient of :mod:`tracking.sim.population` wearing the markers through a motion.
+
+    Attributes:
+        seed: the population draw's seed.
+        dims: its body (stature percentile 5-95, woman or man).
+        skin_offsets_m: (M, 2) its placement errors (up to 15 mm along the skin, drawn in its
+            reference pose) in the segment-fixed directions of :func:`_skin_bases`.
+    """
+
+    seed: int
+    dims: BodyDimensions
+    skin_offsets_m: np.ndarray
+
+    @classmethod
+    def draw(cls, seed: int, markerset: MarkerSet) -> "PopulationPatient":
+        from tracking.sim.population import draw
+
+        d = draw(seed, markerset)
+        bases = _skin_bases(BodyModel(d.dims, markerset), d.pose)
+        return cls(seed, d.dims, np.einsum("md,mkd->mk", d.offsets_m, bases))
+
+
 def occlusion_data(motion: str, *, fps: float = 30.0, size_px: tuple[int, int] = (320, 240), rig: str = "ring4",
-                   seen_fraction: float = 0.75, cache_dir: Path | None = None) -> OcclusionData:
+                   seen_fraction: float = 0.75, cache_dir: Path | None = None,
+                   patient: "PopulationPatient | None" = None) -> OcclusionData:
     """Render ``motion`` once per frame and return truth and which markers two cameras see.
 
-    The cache key hashes the true trajectories and the cameras, so a changed body, motion or rig
-    is rendered again.
+    ``patient``: a drawn body with its placement errors (default: the studio's 50th-percentile
+    female, markers on their landmarks). The cache key hashes the true trajectories and the
+    cameras, so a changed body, placement, motion or rig is rendered again.
     """
-    from tracking.sim.studio import SimulationSettings, studio_from_settings
+    from tracking.sim.motions import load_motion
+    from tracking.sim.studio import SimulationSettings, Studio, studio_from_settings
 
-    studio, mot = studio_from_settings(SimulationSettings(motion=motion, rig=rig, size_px=size_px, fps=fps))
+    if patient is None:
+        studio, mot = studio_from_settings(SimulationSettings(motion=motion, rig=rig, size_px=size_px, fps=fps))
+    else:
+        from tracking.markerset import load_markerset
+        from tracking.sim.rigs import load_rig
+
+        ms = load_markerset()
+        studio = Studio(load_rig(rig, size_px), ms, patient.dims)
+        studio.body = PlacedBody(patient.dims, ms, patient.skin_offsets_m)
+        mot = load_motion(motion, patient.dims)
     try:
         n = studio.n_frames(mot, fps)
         truth = np.stack([studio.body.markers_m(mot.pose_at(i / fps)) for i in range(n)])
@@ -185,6 +273,7 @@ def make_estimator(markerset: MarkerSet, label: str, fps: float, *, gates: bool 
         cfg["max_hidden_s"] = np.inf
         cfg["max_unsupported_s"] = np.inf
         cfg["tolerance_m"] = np.inf
+        cfg["max_extrapolation_m"] = np.inf
     return Estimator(**cfg, fps=fps)
 
 
@@ -293,6 +382,84 @@ def seed_markdown(rows: Sequence[dict], names: Sequence[str]) -> str:
     return "\n".join(lines)
 
 
+@dataclass(frozen=True, slots=True)
+class DrawScore:
+    """The recommended estimator on one population patient's seed experiment at one frame rate.
+
+    Attributes:
+        raw: without the drift and time gates (every reappearance has an estimate).
+        gated: with them, as the tracker runs it (NaN at a reappearance whose estimate was withheld).
+    """
+
+    seed: int
+    fps: float
+    raw: Score
+    gated: Score
+
+
+def population_scores(seeds: Sequence[int], markerset: MarkerSet, *, motion: str = "right_external_rotation",
+                      fps: Sequence[int] = (15, 30), noise_mm: float = 1.0, cache_dir: Path | None = None,
+                      progress: bool = False) -> list[DrawScore]:
+    """The seed's experiment on each drawn patient (body and placement errors of
+    :mod:`tracking.sim.population`), the recommended estimator with and without its gates."""
+    from tqdm import tqdm
+
+    label = "recommended (per marker)"
+    out = []
+    for seed in tqdm(list(seeds), unit="patient", desc="hidden markers", disable=not progress):
+        patient = PopulationPatient.draw(seed, markerset)
+        d30 = occlusion_data(motion, fps=30.0, cache_dir=cache_dir, patient=patient)
+        for f in sorted(fps):
+            data = d30.every(30 // f)
+            raw = run_estimator(data, make_estimator(markerset, label, data.fps), noise_mm=noise_mm, seed=seed)
+            gated = run_estimator(data, make_estimator(markerset, label, data.fps, gates=True), noise_mm=noise_mm,
+                                  seed=seed)
+            out.append(DrawScore(seed, data.fps, raw, gated))
+    return out
+
+
+def _spread_mm(values: Sequence[float]) -> str:
+    v = np.asarray([x for x in values if np.isfinite(x)], dtype=np.float64)
+    if not v.size:
+        return "-"
+    q = np.percentile(v, [5, 50, 95])
+    return f"median {q[1]:.1f} mm (5-95 %: {q[0]:.1f}-{q[2]:.1f}, worst {v.max():.1f})"
+
+
+def population_report(scores: Sequence[DrawScore], names: Sequence[str], *, motion: str = "right_external_rotation",
+                      noise_mm: float = 1.0) -> str:
+    """Error at reappearance per patient (mean over its events), its spread across the patients,
+    all events pooled, and per marker group; without gates and with them."""
+    seeds = sorted({s.seed for s in scores})
+    lines = [f"hidden markers at reappearance, {motion}, {len(seeds)} patients (seeds {seeds[0]}-{seeds[-1]}), "
+             f"{noise_mm:g} mm noise, recommended estimator:"]
+    groups = {"all markers": tuple(names), **GROUPS}
+    for f in sorted({s.fps for s in scores}):
+        rows = [s for s in scores if s.fps == f]
+        for kind in ("raw", "gated"):
+            lines.append(f"  {f:g} frames/s, {'no gates (raw accuracy)' if kind == 'raw' else 'with the gates (as the tracker runs it)'}:")
+            for group, members in groups.items():
+                idx = [list(names).index(n) for n in members if n in names]
+                per_draw, pooled, withheld = [], [], 0
+                for r in rows:
+                    sc = getattr(r, kind)
+                    e = sc.reappear_mm[np.isin(sc.event_markers, idx)]
+                    withheld += int(np.sum(~np.isfinite(e)))
+                    e = e[np.isfinite(e)]
+                    pooled.extend(e.tolist())
+                    if e.size:
+                        per_draw.append(float(e.mean()))
+                if not pooled and not withheld:
+                    continue
+                n_ev = len(pooled) + withheld
+                mean = f"{np.mean(pooled):.1f}" if pooled else "-"
+                worst = f"{np.max(pooled):.1f}" if pooled else "-"
+                lines.append(f"    {group:20s} {n_ev:4d} events, pooled mean {mean} mm, worst event {worst} mm; "
+                             f"per patient {_spread_mm(per_draw)}"
+                             + (f"; withheld {withheld} ({100 * withheld / n_ev:.0f} %)" if kind == "gated" else ""))
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> None:
     from tracking.markerset import load_markerset
 
@@ -303,9 +470,27 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--seeds", type=int, default=3, help="noise draws pooled per row")
     ap.add_argument("--noise-mm", type=float, default=1.0)
     ap.add_argument("--estimators", nargs="*", default=list(ESTIMATORS), help="labels of ESTIMATORS to compare")
+    ap.add_argument("--population", type=int, default=None, metavar="N",
+                    help="instead: the seed's experiment (right_external_rotation) on N patients of the "
+                         "population (body size, placement errors), the recommended estimator")
+    ap.add_argument("--first-seed", type=int, default=None,
+                    help="with --population: first draw (default: the first reported seed, 100000; "
+                         "seeds below are for tuning)")
     args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(message)s")
+    logging.basicConfig(level=logging.INFO if args.population is None else logging.WARNING, format="%(message)s")
     ms = load_markerset()
+    if args.population is not None:
+        from tracking.sim.population import REPORTED_SEEDS_FROM
+
+        first = REPORTED_SEEDS_FROM if args.first_seed is None else args.first_seed
+        if args.population < 1:
+            raise SystemExit("--population needs a number of patients >= 1")
+        t0 = time.perf_counter()
+        scores = population_scores(range(first, first + args.population), ms, fps=args.fps, noise_mm=args.noise_mm,
+                                   cache_dir=args.cache, progress=True)
+        print(population_report(scores, ms.names, noise_mm=args.noise_mm))
+        print(f"({time.perf_counter() - t0:.0f} s)")
+        return
     datasets = []
     for motion in args.motions:
         d30 = occlusion_data(motion, fps=30.0, cache_dir=args.cache)
