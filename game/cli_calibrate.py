@@ -812,6 +812,10 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
                          f"orientation max {a2.max():.3f} deg")
     for c, t in enumerate(truth):
         extra = "" if pos is None else f", position {pos[c]:.2f} mm, orientation {ang[c]:.3f} deg"
+        if pos is not None:   # the lens refined with the positions
+            K = ext.cameras[c].K
+            extra += (f"; refined lens: focal {100.0 * abs(K[0, 0] / t.K[0, 0] - 1.0):.3f} %, "
+                      f"image centre {float(np.linalg.norm(K[:2, 2] - t.K[:2, 2])):.2f} px")
         lines.append(f"  ChArUco {t.name}: focal {focal[c]:.3f} %, image centre {centre[c]:.2f} px{extra}")
     return lines
 

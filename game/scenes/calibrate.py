@@ -933,7 +933,8 @@ class CalibrateScene(BaseScene):
                 (x, y + 4 * s, side * 1.2, side))
         y += side + 14 * s
         n = len(self.rig_views.views)
-        c.text(f"{n} views" + ("   auto-capture on" if self.auto else ""), (x, y), round(theme.BODY * s), theme.TEXT)
+        c.text(f"{n} view{'' if n == 1 else 's'}" + ("   auto-capture on" if self.auto else ""), (x, y), round(theme.BODY * s),
+               theme.TEXT)
         y += 40 * s
         linked = self.rig_views.linked()
         y = self._side_text(c, [self.rig_views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if linked else theme.ATTENTION)
