@@ -12,7 +12,9 @@ Steps (:func:`calibrate_extrinsics`):
    a 1 px scale) over all camera poses but the first and all board poses; intrinsics stay as
    calibrated. Then again with each camera's view of each board weighed by its own corner
    scatter (:func:`view_sigmas_px`): an oblique board's corners in one camera can be several
-   times as scattered as in another, and the seat board alone sets the world frame.
+   times as scattered as in another, and the seat board alone sets the world frame. Given the
+   lens step's information matrices, this second pass also refines the lens data, the lens
+   step's estimate a prior of that weight (:class:`LensPrior`).
 5. The world frame of spec/INTERFACES.md from one board lying face up on the floor or the seat
    (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
    corners (the patient's right), corner 0 at ``origin_m``.
@@ -213,7 +215,7 @@ def calibrate_extrinsics(
 
     weights = np.ones(starts[-1])
     n_pose = 6 * (n - 1) + 6 * len(view_names)
-    prior = lens_prior(cameras, lens_information, sorted({c for c, _ in obs}), n_pose, int(starts[-1]))
+    prior = lens_prior(cameras, lens_information, sorted({c for c, _ in obs}), n_pose)
 
     def residuals(x: np.ndarray) -> np.ndarray:
         cams = [(np.eye(3), np.zeros(3))] + _unpack(x[: 6 * (n - 1)], n - 1)
@@ -286,8 +288,8 @@ class LensPrior:
 
     The lens parameters (fx, fy, cx, cy, distortions) of ``lens_cams`` follow the adjustment's
     ``n_base`` other parameters; the prior's residuals ``L.T @ (p - p0)`` (``L L.T`` = the lens
-    step's information matrix) follow its ``n_data`` data residuals, which must then be in units
-    of their scatter: the sum of squares is the lens step's and the rig's evidence together.
+    step's information matrix) follow its data residuals, which must then be in units of their
+    scatter: the sum of squares is the lens step's and the rig's evidence together.
     Freeing the lens without the prior let the principal points wander 3-7 px on ``corners4``
     (the held views do not pin them down, docs/CALIBRATION.md).
     """
@@ -297,7 +299,6 @@ class LensPrior:
     roots: dict
     x0: np.ndarray
     n_base: int
-    n_data: int
 
     def cameras(self, cameras: Sequence[Camera], x: np.ndarray) -> list[Camera]:
         """The cameras with the lens parameters of ``x``."""
@@ -334,7 +335,7 @@ class LensPrior:
 
 
 def lens_prior(cameras: Sequence[Camera], information: Sequence[np.ndarray | None] | None, seen: Sequence[int],
-               n_base: int, n_data: int) -> LensPrior:
+               n_base: int) -> LensPrior:
     """The :class:`LensPrior` of the cameras in ``seen`` with an information matrix (fisheye lenses
     keep theirs).
 
@@ -356,7 +357,7 @@ def lens_prior(cameras: Sequence[Camera], information: Sequence[np.ndarray | Non
         cols[c] = slice(col, col + p0.size)
         col += p0.size
         x0.append(p0)
-    return LensPrior(lens_cams, cols, roots, np.concatenate(x0) if x0 else np.zeros(0), n_base, n_data)
+    return LensPrior(lens_cams, cols, roots, np.concatenate(x0) if x0 else np.zeros(0), n_base)
 
 
 def view_sigmas_px(residuals: Sequence[np.ndarray]) -> np.ndarray:
