@@ -12,7 +12,9 @@ Steps (:func:`calibrate_extrinsics`):
    a 1 px scale) over all camera poses but the first and all board poses; intrinsics stay as
    calibrated. Then again with each camera's view of each board weighed by its own corner
    scatter (:func:`view_sigmas_px`): an oblique board's corners in one camera can be several
-   times as scattered as in another, and the seat board alone sets the world frame.
+   times as scattered as in another, and the seat board alone sets the world frame. Given the
+   lens step's information matrices, this second pass also refines the lens data, the lens
+   step's estimate a prior of that weight (:class:`LensPrior`).
 5. The world frame of spec/INTERFACES.md from one board lying face up on the floor or the seat
    (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
    corners (the patient's right), corner 0 at ``origin_m``.
@@ -163,6 +165,7 @@ def calibrate_extrinsics(
     turn_deg: float = 0.0,
     check_world: bool = True,
     weigh_views: bool = True,
+    lens_information: Sequence[np.ndarray | None] | None = None,
 ) -> ExtrinsicsResult:
     """Calibrate the cameras' poses from board views.
 
@@ -181,6 +184,10 @@ def calibrate_extrinsics(
         check_world: refuse a world frame no room has (:func:`check_world_frame`).
         weigh_views: weigh each camera's view of a board by its own corner scatter (see
             :func:`view_sigmas_px`); False: every corner alike.
+        lens_information: per camera, the information matrix of its lens step's estimate
+            (:attr:`calibration.intrinsics.IntrinsicsResult.information`) or None. Cameras with
+            one get their focal lengths, principal point and distortion refined together with
+            the poses, the lens step's estimate a prior of that weight; the others keep theirs.
     Raises:
         CalibrationError: a camera shares no view with the others, the floor view is missing, or
             the world frame it gives is not a room's.
@@ -207,17 +214,21 @@ def calibrate_extrinsics(
     starts = np.concatenate([[0], np.cumsum([2 * len(o) for o in objs])])  # residual rows of each observation
 
     weights = np.ones(starts[-1])
+    n_pose = 6 * (n - 1) + 6 * len(view_names)
+    prior = lens_prior(cameras, lens_information, sorted({c for c, _ in obs}), n_pose)
 
     def residuals(x: np.ndarray) -> np.ndarray:
         cams = [(np.eye(3), np.zeros(3))] + _unpack(x[: 6 * (n - 1)], n - 1)
-        boards = _unpack(x[6 * (n - 1):], len(view_names))
+        boards = _unpack(x[6 * (n - 1) : n_pose], len(view_names))
+        lens = prior.cameras(cameras, x) if x.size > n_pose else cameras
         out = np.empty(starts[-1])
         for k, (c, v) in enumerate(obs):
-            out[starts[k] : starts[k + 1]] = _reprojection(cameras[c], compose(cams[c], boards[v]),
+            out[starts[k] : starts[k + 1]] = _reprojection(lens[c], compose(cams[c], boards[v]),
                                                            views[view_names[v]][c], objs[k]).ravel()
-        return out * weights
+        out *= weights
+        return out if x.size == n_pose else np.concatenate([out, prior.residuals(x)])
 
-    sparsity = lil_matrix((int(starts[-1]), 6 * (n - 1) + 6 * len(view_names)), dtype=int)
+    sparsity = lil_matrix((int(starts[-1]), n_pose), dtype=int)
     for k, (c, v) in enumerate(obs):
         rows = slice(int(starts[k]), int(starts[k + 1]))
         if c > 0:
@@ -226,14 +237,23 @@ def calibrate_extrinsics(
     x0 = np.concatenate([_pack(cam_poses[1:]), _pack(board_poses)])
     sol = least_squares(residuals, x0, jac_sparsity=sparsity, loss="soft_l1", f_scale=1.0, x_scale="jac", method="trf",
                         xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
-    if weigh_views:  # again, each view weighed by its own scatter (in units of it: the loss scale 3 sigma)
+    if weigh_views or prior.lens_cams:  # again, each view weighed by its own scatter (in units of it: the loss scale 3 sigma)
         sigma = view_sigmas_px([sol.fun[starts[k] : starts[k + 1]] for k in range(len(obs))])
+        if not weigh_views:  # every view alike, in units of the pooled scatter (the lens prior's units)
+            sigma = np.full_like(sigma, np.sqrt(np.mean(sol.fun**2)))
         weights = np.repeat(1.0 / sigma, np.diff(starts))
-        sol = least_squares(residuals, sol.x, jac_sparsity=sparsity, loss="soft_l1", f_scale=3.0, x_scale="jac",
+        x0, jac = sol.x, sparsity
+        if prior.lens_cams:
+            x0 = np.concatenate([sol.x, prior.x0])
+            jac = prior.extend_sparsity(sparsity, [np.arange(starts[k], starts[k + 1]) for k in range(len(obs))],
+                                        [c for c, _ in obs])
+        sol = least_squares(residuals, x0, jac_sparsity=jac, loss="soft_l1", f_scale=3.0, x_scale="jac",
                             method="trf", xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=100)
-        sol.fun = sol.fun / weights   # back to pixels for the report
+        if prior.lens_cams:
+            cameras = prior.cameras(cameras, sol.x)
+        sol.fun = sol.fun[: int(starts[-1])] / weights   # back to pixels for the report
     cam_poses = [(np.eye(3), np.zeros(3))] + _unpack(sol.x[: 6 * (n - 1)], n - 1)
-    board_poses = _unpack(sol.x[6 * (n - 1):], len(view_names))
+    board_poses = _unpack(sol.x[6 * (n - 1) : n_pose], len(view_names))
     rms = np.full(n, np.nan)
     n_views = np.zeros(n, int)
     for c in range(n):
@@ -260,6 +280,84 @@ def calibrate_extrinsics(
     for w in warnings:  # returned for the caller to show; logged for the record
         log.info(w)
     return ExtrinsicsResult(out, rms, n_views, floor_view is not None, tuple(warnings))
+
+
+@dataclass(frozen=True)
+class LensPrior:
+    """Lens data refined in a bundle adjustment, the lens step's estimate a prior of its own weight.
+
+    The lens parameters (fx, fy, cx, cy, distortions) of ``lens_cams`` follow the adjustment's
+    ``n_base`` other parameters; the prior's residuals ``L.T @ (p - p0)`` (``L L.T`` = the lens
+    step's information matrix) follow its data residuals, which must then be in units of their
+    scatter: the sum of squares is the lens step's and the rig's evidence together.
+    Freeing the lens without the prior let the principal points wander 3-7 px on ``corners4``
+    (the held views do not pin them down, docs/CALIBRATION.md).
+    """
+
+    lens_cams: tuple[int, ...]
+    cols: dict
+    roots: dict
+    x0: np.ndarray
+    n_base: int
+
+    def cameras(self, cameras: Sequence[Camera], x: np.ndarray) -> list[Camera]:
+        """The cameras with the lens parameters of ``x``."""
+        out = list(cameras)
+        for c in self.lens_cams:
+            p = x[self.cols[c]]
+            cam = cameras[c]
+            K = np.array([[p[0], cam.K[0, 1], p[2]], [0.0, p[1], p[3]], [0.0, 0.0, 1.0]])
+            out[c] = Camera(cam.name, cam.size_px, K, p[4:], cam.rvec, cam.t_m, cam.fisheye, cam.rolling_shutter_s)
+        return out
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        p0 = self.x0
+        off = self.n_base
+        return np.concatenate([self.roots[c].T @ (x[self.cols[c]] - p0[self.cols[c].start - off : self.cols[c].stop - off])
+                               for c in self.lens_cams])
+
+    def extend_sparsity(self, sparsity, row_groups: Sequence[np.ndarray], group_cams: Sequence[int]):
+        """The adjustment's Jacobian pattern with the lens columns and the prior's rows added:
+        ``row_groups[k]`` are data rows of camera ``group_cams[k]``."""
+        from scipy.sparse import bmat
+
+        n_lens = self.x0.size
+        lens = lil_matrix((sparsity.shape[0], n_lens), dtype=int)
+        for rows, c in zip(row_groups, group_cams):
+            if c in self.cols:
+                sl = self.cols[c]
+                lens[np.asarray(rows)[:, None], np.arange(sl.start, sl.stop)[None, :] - self.n_base] = 1
+        own = lil_matrix((n_lens, n_lens), dtype=int)
+        for c in self.lens_cams:
+            sl = slice(self.cols[c].start - self.n_base, self.cols[c].stop - self.n_base)
+            own[sl, sl] = 1
+        return bmat([[sparsity, lens], [None, own]]).tocsr()
+
+
+def lens_prior(cameras: Sequence[Camera], information: Sequence[np.ndarray | None] | None, seen: Sequence[int],
+               n_base: int) -> LensPrior:
+    """The :class:`LensPrior` of the cameras in ``seen`` with an information matrix (fisheye lenses
+    keep theirs).
+
+    Raises:
+        CalibrationError: an information matrix that does not fit its camera's lens.
+    """
+    cols, roots, x0 = {}, {}, []
+    col = n_base
+    lens_cams = tuple(c for c in seen if information is not None and information[c] is not None and not cameras[c].fisheye)
+    for c in lens_cams:
+        K = cameras[c].K
+        p0 = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], cameras[c].dist])
+        info = np.asarray(information[c], float)
+        if info.shape != (p0.size, p0.size):
+            raise CalibrationError(f"{cameras[c].name}: lens information for {info.shape} parameters, "
+                                   f"the lens has {p0.size}: calibrate its lens again")
+        w, V = np.linalg.eigh(0.5 * (info + info.T))   # L L.T = info; directions of no information get none
+        roots[c] = V * np.sqrt(np.clip(w, 0.0, None))
+        cols[c] = slice(col, col + p0.size)
+        col += p0.size
+        x0.append(p0)
+    return LensPrior(lens_cams, cols, roots, np.concatenate(x0) if x0 else np.zeros(0), n_base)
 
 
 def view_sigmas_px(residuals: Sequence[np.ndarray]) -> np.ndarray:

@@ -76,6 +76,8 @@ __all__ = [
     "load_calibration",
     "read_metadata_section",
     "write_metadata_section",
+    "read_lens_information",
+    "write_lens_information",
     "save_calibration_toml",
     "save_calibration_opencv",
     "check_frame_sizes",
@@ -573,6 +575,48 @@ def write_metadata_section(path: str | os.PathLike, name: str, toml_text: str) -
     _write_atomically(path, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     if len(load_calibration(path, allow_fisheye=True)) != len(cameras):
         raise CalibrationError(f"{path}: adding [{prefix}] changed the cameras read from it")  # pragma: no cover - guarded above
+
+
+LENS_INFORMATION = "lens_information"
+
+
+def write_lens_information(path: str | os.PathLike, information: dict[str, np.ndarray]) -> None:
+    """Keep how exact each camera's lens data are in a TOML calibration file: the information
+    matrix (inverse covariance) of fx, fy, cx, cy and the distortion coefficients from the lens
+    step (:attr:`calibration.intrinsics.IntrinsicsResult.information`), as
+    ``[metadata.lens_information]`` with one ``"camera name" = [[...], ...]`` row list per camera.
+    The positions step then refines the lens data with this weight (docs/CALIBRATION.md).
+    """
+    rows = [f"[metadata.{LENS_INFORMATION}]"]
+    for name, info in information.items():
+        info = np.asarray(info, np.float64)
+        info = 0.5 * (info + info.T)
+        rows.append(f"{json.dumps(name, ensure_ascii=False)} = [ {' '.join(_toml_list(r) + ',' for r in info)}]")
+    write_metadata_section(path, LENS_INFORMATION, "\n".join(rows))
+
+
+def read_lens_information(path: str | os.PathLike, cameras: Sequence[Camera]) -> list[np.ndarray | None]:
+    """Each camera's lens information matrix from the file (:func:`write_lens_information`), None
+    for a camera without one (lens data from another tool, or written before it was kept).
+
+    Raises:
+        CalibrationError: an entry is not a symmetric square matrix of the camera's lens parameters.
+    """
+    section = read_metadata_section(path, LENS_INFORMATION) or {}
+    out: list[np.ndarray | None] = []
+    for cam in cameras:
+        value = section.get(cam.name)
+        if value is None:
+            out.append(None)
+            continue
+        where = f"{path}: [metadata.{LENS_INFORMATION}]"
+        n = 4 + cam.dist.size
+        info = _to_array(value, where, cam.name)
+        _check_shape(info, [(n, n)], where, cam.name, f"{n}x{n} numbers (fx, fy, cx, cy and the {cam.dist.size} distortions)")
+        if not np.all(np.isfinite(info)) or not np.allclose(info, info.T, rtol=1e-6, atol=0.0):
+            raise CalibrationError(f"{where}: {cam.name!r} must be a symmetric matrix: remove the section or calibrate the lens again")
+        out.append(info)
+    return out
 
 
 # ===================================================================== saving

@@ -36,6 +36,10 @@ class IntrinsicsResult:
         per_view_rms_px: (V,) RMS per used view, same order as the detections given.
         coverage: fraction 0..1 of the cells of an 8 x 6 grid over the image that hold a corner.
         warnings: one-line warnings (poor coverage, few views, a view with a large error).
+        information: (P, P) information matrix (inverse covariance) of the lens parameters
+            fx, fy, cx, cy and the distortion coefficients, in the order of ``camera.dist``
+            (:func:`lens_information`); None when not computed. A later step that refines the
+            lens (the rig's bundle adjustment) uses it as the weight of this step's estimate.
     """
 
     camera: Camera
@@ -43,6 +47,7 @@ class IntrinsicsResult:
     per_view_rms_px: np.ndarray
     coverage: float
     warnings: tuple[str, ...]
+    information: np.ndarray | None = None
 
 
 def coverage_of(detections: Sequence[Detection], size_px: tuple[int, int], grid: tuple[int, int] = COVERAGE_GRID) -> tuple[float, np.ndarray]:
@@ -123,6 +128,7 @@ def calibrate_intrinsics(
     for k, (det, obj, rvec, tvec) in enumerate(zip(detections, object_points, rvecs, tvecs)):
         proj, _ = cv2.projectPoints(obj.astype(np.float64), rvec, tvec, K, dist)
         per_view[k] = np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - det.uv_px) ** 2, axis=1)))
+    info = lens_information(object_points, image_points, rvecs, tvecs, K, dist, float(rms))
     coverage, hit = coverage_of(detections, size)
     warnings = []
     if coverage < COVERAGE_WARN:
@@ -137,4 +143,24 @@ def calibrate_intrinsics(
         )
     for w in warnings:  # returned for the caller to show; logged for the record
         log.info(w)
-    return IntrinsicsResult(cam, float(rms), per_view, coverage, tuple(warnings))
+    return IntrinsicsResult(cam, float(rms), per_view, coverage, tuple(warnings), info)
+
+
+def lens_information(object_points, image_points, rvecs, tvecs, K: np.ndarray, dist: np.ndarray, rms_px: float) -> np.ndarray:
+    """Information matrix of fx, fy, cx, cy and the distortion coefficients from a lens calibration.
+
+    The Gauss-Newton normal matrix of the calibration's reprojection residuals with every view's
+    pose eliminated (Schur complement), divided by the residual variance: the inverse of the
+    estimate's covariance, correlations included (the focal lengths with the radial distortion,
+    the principal point with the tangential one). ``cv2.projectPoints`` gives the derivatives.
+    """
+    n_par = 4 + dist.size
+    info = np.zeros((n_par, n_par))
+    for obj, rvec, tvec in zip(object_points, rvecs, tvecs):
+        _, jac = cv2.projectPoints(np.asarray(obj, np.float64), rvec, tvec, K, dist)
+        B, A = jac[:, :6], jac[:, 6 : 6 + n_par]  # the view's pose, the lens
+        BtB = B.T @ B
+        BtA = B.T @ A
+        info += A.T @ A - BtA.T @ np.linalg.solve(BtB, BtA)
+    sigma2 = max(rms_px, 0.05) ** 2 / 2.0  # rms is over both coordinates of a corner; floor: no infinite weight
+    return info / sigma2

@@ -393,6 +393,9 @@ def _add_play(sub) -> None:
     p.add_argument("--calibration-board", default=None, metavar="SPEC",
                    help="board of the calibration scene: COLSxROWS:SQUARE_MM (inner corners), or "
                    "charuco:COLSxROWS:SQUARE_MM[:MARKER_MM] (squares); default 9x6:60")
+    p.add_argument("--calibration-lenses", type=Path, default=None, metavar="FILE",
+                   help="the calibration scene reuses the lens data of this file (from 'rehab calibrate intrinsics' or "
+                   "an earlier calibration, cameras by name) and opens at step 2, where the cameras stand")
     p.add_argument("--headless", action="store_true", help="run offscreen without a window (tests, screenshots)")
     p.add_argument("--seconds", type=SECONDS, default=None,
                    help="stop after this many seconds (default: until quit; 5 with --headless)")
@@ -486,6 +489,7 @@ def _cmd_play(args) -> int:
         max_level=args.max_level,
         calibrate_devices=tuple(d.strip() for d in (args.calibrate_cameras or "").split(",") if d.strip()),
         calibration_board=board_from_spec(args.calibration_board) if args.calibration_board else None,
+        calibration_lenses=args.calibration_lenses,
         stream=stream_config(args),
         user=args.user,
     )

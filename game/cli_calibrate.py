@@ -71,6 +71,10 @@ def add_commands(sub) -> None:
                    help="folder with one sub-folder per camera holding the floor board's image (named as --floor); "
                    "default: the views folder")
     q.add_argument("--list-skipped", action="store_true", help="name every image without a usable board")
+    q.add_argument("--refine-lenses", action="store_true",
+                   help="refine the lens data together with the positions, weighted by how exact the lens step found "
+                   "them (kept in the intrinsics file by 'rehab calibrate intrinsics'); for ChArUco lens data from "
+                   "15 or more images and several views per camera pair (docs/CALIBRATION.md)")
     q.add_argument("--floor-board", default=None, metavar="SPEC",
                    help="another board on the floor or seat than the shared views': 9x6:60 (checkerboard inner "
                    "corners : square mm) or charuco:10x7:40[:30]; --origin and --board-centre then refer to it")
@@ -363,6 +367,9 @@ def _cmd_intrinsics(args) -> int:
         raise RehabError("give one folder of board images per camera, or --live DEVICE per camera")
     worst = max(r.rms_px for r in results)
     _save(args, [r.camera for r in results], worst)
+    from calibration.files import write_lens_information
+
+    write_lens_information(args.out, {r.camera.name: r.information for r in results if r.information is not None})
     print(f"wrote the intrinsics of {len(results)} cameras to {args.out}")
     return 0
 
@@ -492,11 +499,13 @@ def _check_floor_view(folder: Path, cameras, floor: str | None) -> None:
 
 def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin_m, turn_deg: float, verbose: bool = True,
                    floor_views: Path | None = None, list_skipped: bool = False, check_world: bool = True,
-                   floor_board=None):
+                   floor_board=None, lens_information=None):
     """Board extrinsics from shared views; the floor board's view from ``floor_views`` when given
     (a folder with one sub-folder per camera), else from ``views_dir``. With ``floor_board`` (another
     board than the shared views', e.g. a checkerboard on the seat after ChArUco views) the rig is
-    solved from the shared views alone and then set in the floor board's world frame."""
+    solved from the shared views alone and then set in the floor board's world frame.
+    ``lens_information``: per camera the lens step's information matrix or None
+    (:func:`calibration.extrinsics.calibrate_extrinsics`); the lens data are refined with it."""
     from dataclasses import replace
 
     from calibration.extrinsics import calibrate_extrinsics, world_from_floor_board
@@ -510,16 +519,17 @@ def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin
         skipped.update({f"{where}{k}": v for k, v in floor_skipped.items()})
     if floor_board is not None and floor is not None:
         floor_row = views.pop(floor)
-        res = calibrate_extrinsics(cameras, board, views, floor_view=None)
+        res = calibrate_extrinsics(cameras, board, views, floor_view=None, lens_information=lens_information)
         placed, _ = world_from_floor_board(res.cameras, floor_row, floor_board, origin_m=origin_m, turn_deg=turn_deg,
                                            check_world=check_world)
         res = replace(res, cameras=placed, world_set=True, warnings=tuple(w for w in res.warnings if "floor" not in w))
     else:
         res = calibrate_extrinsics(cameras, board, views, floor_view=floor, origin_m=origin_m, turn_deg=turn_deg,
-                                   check_world=check_world)
+                                   check_world=check_world, lens_information=lens_information)
     if verbose:
-        for cam, rms, n in zip(res.cameras, res.rms_px, res.n_views):
-            print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) m")
+        for cam, given, rms, n in zip(res.cameras, cameras, res.rms_px, res.n_views):
+            print(f"{cam.name}: {n} board views, reprojection {rms:.3f} px, at ({', '.join(f'{v:.3f}' for v in cam.centre_m)}) "
+                  f"m{lens_change(cam, given)}")
         if skipped:
             _report_skipped(skipped, every=list_skipped, head=f"  {len(skipped)} camera images without a usable board "
                             "(normal for cameras that do not face it)")
@@ -528,15 +538,28 @@ def run_extrinsics(views_dir: Path, cameras, board, *, floor: str | None, origin
     return res
 
 
+def lens_change(cam, given) -> str:
+    """", lens refined (...)" when the positions step refined a camera's lens data, else ""."""
+    if np.array_equal(cam.K, given.K) and np.array_equal(cam.dist, given.dist):
+        return ""
+    df = 100 * (cam.K[0, 0] / given.K[0, 0] - 1)
+    dc = np.linalg.norm(cam.K[:2, 2] - given.K[:2, 2])
+    return f", lens refined (focal {df:+.3f} %, centre moved {dc:.2f} px)"
+
+
 def _cmd_extrinsics(args) -> int:
-    from calibration.files import load_calibration
+    from calibration.files import load_calibration, read_lens_information
 
     board = board_from_args(args)
     floor_board = board_from_spec(args.floor_board) if args.floor_board else None
     cameras = load_calibration(args.intrinsics)
+    info = read_lens_information(args.intrinsics, cameras) if args.refine_lenses else None
+    if args.refine_lenses and all(i is None for i in info):
+        raise RehabError(f"--refine-lenses: {args.intrinsics} does not say how exact its lens data are: make it with "
+                         "'rehab calibrate intrinsics' (or leave the option out)")
     res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, floor_board or board),
                          turn_deg=args.turn_deg, floor_views=args.floor_views, list_skipped=args.list_skipped,
-                         check_world=not args.no_world_check, floor_board=floor_board)
+                         check_world=not args.no_world_check, floor_board=floor_board, lens_information=info)
     _save(args, res.cameras, float(np.nanmax(res.rms_px)))
     print(f"wrote the calibration of {len(res.cameras)} cameras to {args.out}")
     return 0
@@ -770,8 +793,9 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
     spec = material.get("charuco_extrinsics")
     if spec is not None and (folder / "extrinsics_charuco").is_dir():
         board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
+        info = [r.information for r in res]   # as 'rehab calibrate extrinsics --refine-lenses' does
         ext = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
-                             origin_m=tuple(spec["seat_origin_m"]), turn_deg=0.0, verbose=False)
+                             origin_m=tuple(spec["seat_origin_m"]), turn_deg=0.0, verbose=False, lens_information=info)
         pos, ang = rig_errors(ext.cameras, truth)
         lines.append(f"ChArUco extrinsics: position error max {pos.max():.2f} mm, orientation max {ang.max():.3f} deg, "
                      f"reprojection max {np.nanmax(ext.rms_px):.3f} px")
@@ -782,12 +806,16 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
             cb = Checkerboard.parse(floor_board["pattern"], floor_board["square_mm"])
             mixed = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
                                    origin_m=tuple(material["seat_board"]["origin_m"]), turn_deg=0.0, verbose=False,
-                                   floor_views=folder / "extrinsics", floor_board=cb)
+                                   floor_views=folder / "extrinsics", floor_board=cb, lens_information=info)
             p2, a2 = rig_errors(mixed.cameras, truth)
             lines.append(f"ChArUco extrinsics, checkerboard on the seat: position error max {p2.max():.2f} mm, "
                          f"orientation max {a2.max():.3f} deg")
     for c, t in enumerate(truth):
         extra = "" if pos is None else f", position {pos[c]:.2f} mm, orientation {ang[c]:.3f} deg"
+        if pos is not None:   # the lens refined with the positions
+            K = ext.cameras[c].K
+            extra += (f"; refined lens: focal {100.0 * abs(K[0, 0] / t.K[0, 0] - 1.0):.3f} %, "
+                      f"image centre {float(np.linalg.norm(K[:2, 2] - t.K[:2, 2])):.2f} px")
         lines.append(f"  ChArUco {t.name}: focal {focal[c]:.3f} %, image centre {centre[c]:.2f} px{extra}")
     return lines
 

@@ -60,6 +60,8 @@ class PlayOptions:
             shows, named cam1, cam2, ...; () : the simulated studio's.
         calibration_board: the board held up in the calibration scene (a Checkerboard or
             CharucoBoard; None: the simulator's 9 x 6 checkerboard of 60 mm squares).
+        calibration_lenses: a calibration file whose lens data the calibration scene reuses
+            (it opens at step 2; None: the lens step first).
         wait_for_tracker: the run's ``seconds`` begin once the tracker is ready, in a window too
             (headless runs always wait; ``rehab bench`` measures the window with the avatar moving).
         stream: a :class:`tracking.live.stream.StreamConfig`: the tracker process also streams
@@ -86,6 +88,7 @@ class PlayOptions:
     calibration_path: Path | None = None
     calibrate_devices: tuple[str, ...] = ()
     calibration_board: object = None
+    calibration_lenses: Path | None = None
     wait_for_tracker: bool = False
     stream: object = None
     user: str | None = None   # the signed-in account (check_account), audited with accepted ROM results
@@ -159,7 +162,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
                              title="Games: choose the patient")
 
     def open_calibrate():
-        from game.scenes.calibrate import CalibrateScene, camera_feeds, sim_feeds
+        from game.scenes.calibrate import CalibrateScene, camera_feeds, lenses_for_feeds, sim_feeds
         from tracking.sim.calibration_material import DEFAULT_BOARD
 
         board = options.calibration_board or DEFAULT_BOARD
@@ -168,7 +171,15 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
         else:
             rig = getattr(options.source, "rig", "ring4") or "ring4"
             feeds = sim_feeds(rig, (640, 480), board, ctx=app.screen.ctx)
-        return CalibrateScene(feeds, board, out_path=options.calibration_path, auto=options.headless)
+        lenses = None
+        if options.calibration_lenses is not None:
+            try:
+                lenses = lenses_for_feeds(options.calibration_lenses, feeds)
+            except Exception:
+                for feed in feeds:   # real cameras are released before the one-line error
+                    getattr(feed, "close", lambda: None)()
+                raise
+        return CalibrateScene(feeds, board, out_path=options.calibration_path, auto=options.headless, lenses=lenses)
 
     home = HomeScene([
         MenuEntry("Live avatar", "See yourself move, with your joint angles", open_live),

@@ -257,6 +257,32 @@ def camera_feeds(devices: Sequence[str], *, size_px: tuple[int, int] | None = No
     return feeds
 
 
+def lenses_for_feeds(path: Path, feeds: Sequence[BoardFeed]) -> list[Camera]:
+    """The lens data of the calibration file ``path`` for each feed, by camera name, at the feed's
+    image size (scaled when only the resolution differs, refused when the shape does).
+
+    Raises:
+        RehabError: a feed's camera is not in the file, or its pictures have another shape.
+    """
+    from calibration.files import load_calibration
+
+    cameras = load_calibration(path)
+    source = str(path)
+    by_name = {c.name: c for c in cameras}
+    out = []
+    for feed in feeds:
+        cam = by_name.get(feed.name)
+        if cam is None:
+            raise RehabError(f"{source}: no lens data for {feed.name} (it has {', '.join(by_name) or 'no camera'}); "
+                             "calibrate its lens first or give the file of these cameras")
+        (w, h), (fw, fh) = cam.size_px, feed.size_px
+        if abs(w * fh - h * fw) > max(w, h):   # another aspect ratio: another field of view, not another resolution
+            raise RehabError(f"{source}: {feed.name}'s lens data are for {w}x{h} pictures, the camera gives {fw}x{fh}: "
+                             "calibrate its lens again at this size")
+        out.append(cam if (w, h) == (fw, fh) else cam.with_size((fw, fh)))
+    return out
+
+
 def default_calibration_path() -> Path:
     """``calibration.toml`` in the user's data directory (beside the database)."""
     from game.db import default_db_path
@@ -503,7 +529,7 @@ class CalibrateScene(BaseScene):
     def save(self) -> Path | None:
         """Write the lens data of every calibrated camera (2 or more) to :meth:`lens_data_path`;
         returns the path written. The positions and the floor follow (Next step)."""
-        from calibration.files import save_calibration_toml
+        from calibration.files import save_calibration_toml, write_lens_information
 
         done = [p.result for p in self.progress if p.result is not None]
         if len(done) < 2:
@@ -515,6 +541,7 @@ class CalibrateScene(BaseScene):
             path.parent.mkdir(parents=True, exist_ok=True)
             rms = [r.rms_px for r in done if np.isfinite(r.rms_px)]   # lens data given (``lenses``) have none
             save_calibration_toml(path, [r.camera for r in done], error=float(np.mean(rms)) if rms else 0.0)
+            write_lens_information(path, {r.camera.name: r.information for r in done if r.information is not None})
         except (RehabError, OSError) as exc:
             self._say(f"Not saved: {exc}", theme.FAILURE)
             return None
@@ -745,6 +772,8 @@ class CalibrateScene(BaseScene):
 
     def enter(self, app) -> None:
         super().enter(app)
+        if self.stage == "lens" and self.rig_feed is None and all(p.result is not None for p in self.progress):
+            self.next_step()   # every lens known (lens data given): straight to where the cameras stand
         if self.threaded and self._thread is None:
             self._stop.clear()
             self._thread = threading.Thread(target=self._worker, name="rehab-calibration-feed", daemon=True)
@@ -904,7 +933,8 @@ class CalibrateScene(BaseScene):
                 (x, y + 4 * s, side * 1.2, side))
         y += side + 14 * s
         n = len(self.rig_views.views)
-        c.text(f"{n} views" + ("   auto-capture on" if self.auto else ""), (x, y), round(theme.BODY * s), theme.TEXT)
+        c.text(f"{n} view{'' if n == 1 else 's'}" + ("   auto-capture on" if self.auto else ""), (x, y), round(theme.BODY * s),
+               theme.TEXT)
         y += 40 * s
         linked = self.rig_views.linked()
         y = self._side_text(c, [self.rig_views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if linked else theme.ATTENTION)

@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from calibration.extrinsics import rig_errors
-from calibration.files import load_calibration
+from calibration.files import load_calibration, read_lens_information
 from game.cli import main
 
 
@@ -37,6 +37,8 @@ def test_simulated_material_calibrates_end_to_end(material, tmp_path, capsys):
     assert [c.name for c in cams] == ["cam1", "cam2", "cam3", "cam4"]
     assert all(abs(c.K[0, 0] / t.K[0, 0] - 1) < 0.01 for c, t in zip(cams, truth))  # 6 small images only
     assert len(load_calibration(tmp_path / "intrinsics.yaml")) == 4
+    info = read_lens_information(intr, cams)   # how exact each lens is, for extrinsics --refine-lenses
+    assert all(i is not None and i.shape == (8, 8) for i in info)
 
     board_calib = tmp_path / "board.toml"
     assert main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics", str(intr), "--board", "9x6",
@@ -80,6 +82,11 @@ def test_bad_board_and_output_names_give_one_line_errors(material, tmp_path, cap
                  str(material / "truth_calibration.toml"), "--board", "9x6", "--square-mm", "60", "--floor", "nope",
                  "--out", str(tmp_path / "x.toml")]) == 1
     assert "no image named 'nope'" in capsys.readouterr().err
+    assert main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics",
+                 str(material / "truth_calibration.toml"), "--board", "9x6", "--square-mm", "60", "--refine-lenses",
+                 "--out", str(tmp_path / "x.toml")]) == 1
+    err = capsys.readouterr().err
+    assert "does not say how exact its lens data are" in err and len(err.strip().splitlines()) == 1
 
 
 def _extrinsics(material, tmp_path, *extra):

@@ -261,3 +261,35 @@ def test_play_opens_the_scene_from_home_and_its_thread_stops_on_close(screen, tm
     finally:
         app.close()
     assert scene._thread is None
+
+
+def test_play_with_lens_data_from_a_file_opens_at_the_positions_step(screen, tmp_path):
+    """rehab play --scene calibrate --calibration-lenses FILE: the lens data reused by camera name,
+    the lens file written beside the calibration, the scene at step 2; a file without one of the
+    cameras is refused in one line."""
+    from calibration.camera import Camera
+    from calibration.errors import RehabError
+    from calibration.files import save_calibration_toml
+    from game.play import PlayOptions, build_app
+    from tracking.sim.rigs import load_rig
+
+    rig = [Camera(c.name, c.size_px, c.K, c.dist, np.zeros(3), np.zeros(3)) for c in load_rig("ring4", (640, 480))]
+    lenses = tmp_path / "lenses.toml"
+    save_calibration_toml(lenses, rig[::-1])   # another order than the feeds': matched by name
+    options = PlayOptions(settings=Settings(window_px=SIZE, max_fps=0, show_fps=False), scene="calibrate",
+                          calibration_path=tmp_path / "cal.toml", calibration_lenses=lenses)
+    app = build_app(screen, options, IdleLink())
+    scene = app.scene
+    try:
+        assert isinstance(scene, CalibrateScene) and scene.stage == "positions"
+        assert [p.result.camera.name for p in scene.progress] == ["cam1", "cam2", "cam3", "cam4"]
+        assert np.array_equal(scene.progress[2].result.camera.K, rig[2].K)
+        assert scene.lens_path is not None and scene.lens_path.is_file()
+    finally:
+        app.close()
+    short = tmp_path / "short.toml"
+    save_calibration_toml(short, rig[:2])
+    with pytest.raises(RehabError, match="no lens data for cam3") as exc:
+        build_app(screen, PlayOptions(settings=Settings(window_px=SIZE, max_fps=0, show_fps=False), scene="calibrate",
+                                      calibration_path=tmp_path / "cal2.toml", calibration_lenses=short), IdleLink())
+    assert "\n" not in str(exc.value)
