@@ -142,9 +142,33 @@ class LabelResult:
     worst: str
 
 
+def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Generator, *, noise_m: float = 0.0015,
+                       whole_share: float = 0.5):
+    """:class:`tracking.identify.Rays` of balls at ``p_m`` seen by one camera each: a camera 1.7-2.6 m
+    away in front of or beside the patient, 1.3-2.5 m high; the ray through the ball's centre
+    (``noise_m`` off it), its range the multiples of the blob-size distance of
+    :func:`tracking.identify.single_view_rays` (a blob round with probability ``whole_share``,
+    the distance from its size within 3 %; else partly hidden, 0.7-0.95 of the ball's size)."""
+    from tracking.identify import _RAY_FAR, _RAY_FAR_WHOLE, _RAY_NEAR, _RAY_NEAR_WHOLE, Rays
+
+    n = len(p_m)
+    az = rng.uniform(-100.0, 100.0, n)
+    dist, height = rng.uniform(1.7, 2.6, n), rng.uniform(1.3, 2.5, n)
+    origin = np.stack([dist * np.sin(np.radians(az)), height, -dist * np.cos(np.radians(az))], axis=1)
+    target = p_m + rng.normal(scale=noise_m, size=p_m.shape)
+    d = target - origin
+    true = np.linalg.norm(d, axis=1)
+    whole = rng.random(n) < whole_share
+    seen = true * np.where(whole, rng.uniform(0.97, 1.03, n), 1.0 / rng.uniform(0.7, 0.95, n))
+    rng_m = np.stack([np.where(whole, _RAY_NEAR_WHOLE, _RAY_NEAR) * seen, np.where(whole, _RAY_FAR_WHOLE, _RAY_FAR) * seen],
+                     axis=1)
+    return Rays(origin, d / true[:, None], np.asarray(colour, np.int64), rng_m, whole)
+
+
 def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bool | None = None,
-                markerset: MarkerSet | None = None) -> list[LabelResult]:
-    """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis)."""
+                markerset: MarkerSet | None = None, rays: bool = False) -> list[LabelResult]:
+    """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis); with
+    ``rays``, each marker without a point is seen by one camera (:func:`single_camera_rays`)."""
     from tracking.labelling import Labeller
 
     base = markerset or load_markerset()
@@ -158,7 +182,8 @@ def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bo
         order = rng.permutation(seen)
         labeller = Labeller.for_markerset(ms)
         t0 = time.perf_counter()
-        lab = labeller.label(p[order], ms.colour_index[order])
+        r = single_camera_rays(p[list(d.unseen)], ms.colour_index[list(d.unseen)], rng) if rays and d.unseen else None
+        lab = labeller.label(p[order], ms.colour_index[order], r)
         dt = time.perf_counter() - t0
         wrong = 0
         if lab.confident:
