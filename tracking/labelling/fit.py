@@ -43,6 +43,7 @@ _MAX_BALLS = 62
 # rays) are placed on the rays; at most this many assignments of markers to rays each; two
 # markers' samples are placed jointly up to this many pairs, more by this many sweeps
 _MAX_BOUNDS = 128
+_MAX_WAYS = 400
 _MAX_ASSIGN = 48
 _MAX_JOINT = 2500
 _SWEEPS = 2
@@ -188,7 +189,7 @@ class Labeller:
 
     def __init__(self, roles: BodyRoles, colour: np.ndarray, prior: bm.BodyPrior = bm.BodyPrior(), *,
                  max_score: float = 9.0, min_margin: float = 16.0, max_turn_deg: float = 30.0, max_unseen: int = 2,
-                 max_on_rays: int = 4, radius_m: float = 0.0125):
+                 max_on_rays: int = 6, radius_m: float = 0.0125):
         self.roles = roles
         self.colour = np.asarray(colour, dtype=np.int64)
         self.prior = prior
@@ -227,12 +228,17 @@ class Labeller:
     def takes(self, colour: np.ndarray, rays=None) -> bool:
         """Whether :meth:`label` searches these points at all: no colour with more points than
         markers, at most ``max_on_rays`` markers without a point, of them at most ``max_unseen``
-        without a ray of their colour (:func:`tracking.identify.single_view_rays`) either."""
+        without a ray of their colour (:func:`tracking.identify.single_view_rays`) either, and at
+        most ``_MAX_WAYS`` ways to choose which markers of a colour are the ones without a point
+        (one colour: at most 3 of 14; the search's cost grows with them)."""
         short = self._short(np.asarray(colour, dtype=np.int64).reshape(-1))
         if short is None:
             return False
         n_rays = self._ray_counts(rays)
-        return bool(short.sum() <= self.max_on_rays and np.maximum(short - n_rays, 0).sum() <= self.max_unseen)
+        want = np.bincount(self.colour, minlength=len(short))
+        ways = math.prod(math.comb(int(w), int(k)) for w, k in zip(want, short))
+        return bool(short.sum() <= self.max_on_rays and np.maximum(short - n_rays, 0).sum() <= self.max_unseen
+                    and ways <= _MAX_WAYS)
 
     def label(self, p_world_m: np.ndarray, colour: np.ndarray, rays=None) -> Labelling:
         """The best labelling of the finite points and its confidence.

@@ -140,6 +140,7 @@ class LabelResult:
     margin: float
     time_s: float
     worst: str
+    on_rays: bool = False  # the markers without a point are seen by one camera each (a ray)
 
 
 def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Generator, *, noise_m: float = 0.0015,
@@ -166,9 +167,10 @@ def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Gener
 
 
 def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bool | None = None,
-                markerset: MarkerSet | None = None, rays: bool = False) -> list[LabelResult]:
+                markerset: MarkerSet | None = None, rays: bool | None = False) -> list[LabelResult]:
     """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis); with
-    ``rays``, each marker without a point is seen by one camera (:func:`single_camera_rays`)."""
+    ``rays``, each marker without a point is seen by one camera (:func:`single_camera_rays`);
+    None: a draw with markers without a point is labelled both ways (two results)."""
     from tracking.labelling import Labeller
 
     base = markerset or load_markerset()
@@ -181,18 +183,20 @@ def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bo
         seen = np.setdiff1d(np.arange(ms.n_markers), d.unseen)
         order = rng.permutation(seen)
         labeller = Labeller.for_markerset(ms)
-        t0 = time.perf_counter()
-        r = single_camera_rays(p[list(d.unseen)], ms.colour_index[list(d.unseen)], rng) if rays and d.unseen else None
-        lab = labeller.label(p[order], ms.colour_index[order], r)
-        dt = time.perf_counter() - t0
-        wrong = 0
-        if lab.confident:
-            truth = np.full(ms.n_markers, -1)
-            truth[order] = np.arange(len(order))
-            wrong = int(np.sum((lab.index != truth) & (lab.index >= 0)))
-        worst = "" if lab.worst is None else f"{lab.worst[0]} {lab.worst[1]:.3g}"
-        out.append(LabelResult(seed, d.one_colour, len(d.unseen), lab.confident, wrong, lab.score, lab.margin, dt,
-                               worst))
+        r = single_camera_rays(p[list(d.unseen)], ms.colour_index[list(d.unseen)], rng) if d.unseen else None
+        ways = (False, True) if rays is None and d.unseen else (bool(rays and d.unseen),)
+        for on_rays in ways:
+            t0 = time.perf_counter()
+            lab = labeller.label(p[order], ms.colour_index[order], r if on_rays else None)
+            dt = time.perf_counter() - t0
+            wrong = 0
+            if lab.confident:
+                truth = np.full(ms.n_markers, -1)
+                truth[order] = np.arange(len(order))
+                wrong = int(np.sum((lab.index != truth) & (lab.index >= 0)))
+            worst = "" if lab.worst is None else f"{lab.worst[0]} {lab.worst[1]:.3g}"
+            out.append(LabelResult(seed, d.one_colour, len(d.unseen), lab.confident, wrong, lab.score, lab.margin, dt,
+                                   worst, on_rays))
     return out
 
 
@@ -311,14 +315,15 @@ def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -
     lines = []
     if labelled:
         lines.append(f"labelling of the points ({len(labelled)} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
-                     "1.5 mm noise, 0-2 markers without a point):")
+                     "1.5 mm noise, 0-2 markers without a point, seen by no camera or by one):")
         for one in (True, False):
-            for unseen in (0, 1, 2):
-                r = [x for x in labelled if x.one_colour == one and x.n_unseen == unseen]
+            for unseen, on_rays in ((0, False), (1, False), (1, True), (2, False), (2, True)):
+                r = [x for x in labelled if x.one_colour == one and x.n_unseen == unseen and x.on_rays == on_rays]
                 if not r:
                     continue
                 conf = sum(x.confident for x in r)
-                lines.append(f"  {'one colour ' if one else 'four colours'}, {unseen} without a point: labelled "
+                seen_by = (", each seen by one camera" if on_rays else ", seen by none") if unseen else ""
+                lines.append(f"  {'one colour ' if one else 'four colours'}, {unseen} without a point{seen_by}: labelled "
                              f"{conf}/{len(r)} ({100 * conf / len(r):.1f} %), swaps {sum(x.wrong for x in r)}, time "
                              + _spread([1000 * x.time_s for x in r], "ms"))
     if tracked:
