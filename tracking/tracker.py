@@ -293,7 +293,7 @@ class Tracker:
         from tracking.identify import Identifier
         from tracking.labelling import BodyRoles, Labeller
         from tracking.labelling.checks import SelfChecks
-        from tracking.labelling.still import Stillness
+        from tracking.labelling.still import Snapshot, Stillness
 
         self.cameras = tuple(cameras)
         self.markerset = markerset
@@ -318,6 +318,7 @@ class Tracker:
         self.labeller = Labeller.for_markerset(markerset) if roles is not None else None
         self.checks = SelfChecks(roles) if roles is not None else None
         self._stillness = Stillness(self.fps, params.identify_hold_s) if params.identify_hold_s > 0 else None
+        self._snapshot = Snapshot()
         self._last_message = ""
         self.times = StageTimes(STEP_STAGES)
         m = markerset.n_markers
@@ -362,6 +363,8 @@ class Tracker:
         self._exchanged_streak = 0
         if getattr(self, "_stillness", None) is not None:
             self._stillness.reset()
+        if getattr(self, "_snapshot", None) is not None:
+            self._snapshot.reset()
 
     @property
     def hold_frames(self) -> int:
@@ -518,6 +521,8 @@ class Tracker:
             if self._stillness is not None and (self._stillness.count - self._stillness.frames_needed) % 3 != 0:
                 return self._last_message  # (still and not confident: judged again every third frame set)
         rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
+        if self.labeller is not None and self._snapshot.same(points.p_world_m, points.colour, rays.colour):
+            return self._last_message  # (judged on these points already, not confident)
         if self.labeller is None or not self.labeller.takes(points.colour, rays):
             # more markers without a point (or without a ray) than the fit takes: the rules with
             # the single-camera rays name them, and the body model must find the names within its
@@ -548,8 +553,8 @@ class Tracker:
     def _not_confident(self, points: Points3D, views: Sequence[CameraObservations], lab, rays) -> str:
         """Why no labelling is confident: the point counts, else the marker set's rule that fails
         (the seed's ordering rules, in their plain words), else the fit's own words. The rules'
-        explanation is looked for with at most ``max_unseen`` markers without a point (with more,
-        and one colour, its search with stand-ins takes seconds)."""
+        explanation is not looked for with one colour and more than ``max_unseen`` markers without
+        a point (its search with stand-ins takes seconds): the counts, or the fit's words."""
         from tracking.identify import IdentificationError
 
         finite = np.isfinite(points.p_world_m).all(axis=1)
@@ -559,7 +564,9 @@ class Tracker:
                                                                          minlength=n_col)
         if np.any(short < 0):
             return self.identifier.count_problem(colour) or "waiting for the reference pose"
-        if short.sum() > self.labeller.max_unseen:
+        if short.sum() > self.labeller.max_unseen and len(self.identifier.words) == 1:
+            if lab.index is None:
+                return self.identifier.count_problem(colour) or self.labeller.advice(lab, self.markerset.names)
             return self.labeller.advice(lab, self.markerset.names)
         try:
             self.identifier.identify_with_unseen(points.p_world_m, points.colour, rays)

@@ -71,3 +71,21 @@ def test_a_moving_body_is_never_named():
             s = tracker.step(sf.frames.images, t)
             states.append(s.state)
             assert s.state == TrackingState.WAITING and s.message.startswith("hold the reference pose still"), s.message
+
+
+def test_the_fit_is_judged_once_per_pose():
+    """While the points stay within a few millimetres (and the rays' colours stay), the judgement
+    stands for up to max_age frame sets; a moved point, another count or ray judges again."""
+    from tracking.labelling.still import Snapshot
+
+    rng = np.random.default_rng(0)
+    p, c = rng.uniform(-0.5, 0.5, (12, 3)), np.arange(12) % 4
+    snap = Snapshot(step_m=0.004, max_age=5)
+    assert not snap.same(p, c, np.array([1]))
+    assert all(snap.same(p + rng.normal(scale=0.001, size=p.shape), c, np.array([1])) for _ in range(5))
+    assert not snap.same(p, c, np.array([1]))          # older than max_age: judged again
+    assert not snap.same(p, c, np.array([1, 2]))       # another ray
+    q = p.copy()
+    q[3] += 0.02
+    assert not snap.same(q, c, np.array([1, 2]))       # a point moved
+    assert not snap.same(q[:-1], c[:-1], np.array([1, 2]))  # a point fewer

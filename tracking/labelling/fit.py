@@ -45,7 +45,9 @@ _MAX_BALLS = 62
 _MAX_BOUNDS = 128
 _MAX_WAYS = 400
 _MAX_ASSIGN = 48
-_MAX_JOINT = 2500
+_MAX_JOINT = 6000
+# positions scored in one batch
+_BATCH = 20000
 _SWEEPS = 2
 # a labelling within this many degrees of yaw of the frame it was scored in is not scored again
 _YAW_SETTLED_DEG = 1.0
@@ -491,15 +493,32 @@ class Labeller:
             per_colour.append([(ms, pick) for pick in dict.fromkeys(permutations(rays_c, len(ms)))])
         best: tuple[float, np.ndarray] | None = None
         n_done = 0
+        grids = []  # the assignments of at most two markers on rays: every sample (pair), at once
+        everyone = [(m, -1) for m in without.tolist()]
         for combo in product(*per_colour):
             n_done += 1
             if n_done > _MAX_ASSIGN:
                 return lower, p
-            pos = p.copy()
             placed = [(m, r) for ms, pick in combo for m, r in zip(ms, pick) if r >= 0]
-            score, pos = self._best_samples(pos, placed, on)
+            size = math.prod(len(on[r]) for _, r in placed)
+            if len(placed) <= 2 and size <= _MAX_JOINT:
+                batch = np.repeat(p[None], size, axis=0)
+                if placed:
+                    grid = np.meshgrid(*(np.arange(len(on[r])) for _, r in placed), indexing="ij")
+                    for (m, r), g in zip(placed, grid):
+                        batch[:, m] = on[r][g.ravel()]
+                grids.append(batch)
+                continue
+            score, pos = self._best_samples(p.copy(), placed, on)
             if best is None or score < best[0]:
                 best = (score, pos)
+        if grids:
+            batch = np.concatenate(grids)
+            for k0 in range(0, len(batch), _BATCH):
+                sc = self._objective(batch[k0:k0 + _BATCH], everyone)
+                k = int(np.argmin(sc))
+                if best is None or sc[k] < best[0]:
+                    best = (float(sc[k]), batch[k0 + k])
         return best
 
     def _objective(self, p: np.ndarray, placed: list[tuple[int, int]]) -> np.ndarray:
@@ -514,7 +533,7 @@ class Labeller:
         if not len(colour):
             return score
         explained = np.repeat(by_point[None], len(p), axis=0)
-        for m, _ in placed:
+        for m, _ in placed:  # (a marker left unseen, NaN, explains nothing)
             rel = p[:, m, None, :] - origin[None]                       # (N, R, 3)
             along = np.einsum("nri,ri->nr", rel, direction)
             off = np.linalg.norm(rel - along[..., None] * direction[None], axis=-1)
