@@ -314,7 +314,7 @@ def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -
     """The figures of ``rehab validate --population``: per colour scheme, spread across the draws."""
     lines = []
     if labelled:
-        lines.append(f"labelling of the points ({len(labelled)} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
+        lines.append(f"labelling of the points ({len({x.seed for x in labelled})} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
                      "1.5 mm noise, 0-2 markers without a point, seen by no camera or by one):")
         for one in (True, False):
             for unseen, on_rays in ((0, False), (1, False), (1, True), (2, False), (2, True)):
