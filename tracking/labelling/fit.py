@@ -12,6 +12,11 @@ is >= 0 and a part's cost is a lower bound of the whole:
 3. trunk x right arm x left arm, in order of score, with the costs that link them, stopping as
    soon as a partial sum passes ``reach``.
 
+Markers without a point that a single camera sees lie on the rays of its blobs
+(:func:`tracking.identify.single_view_rays`): the labellings found with them unseen (a lower
+bound of their score) are then placed on the rays, best first (:meth:`Labeller._on_rays`), and a
+ray that no marker explains puts a labelling beyond reach.
+
 The patient's frame (+y up, their right +x) comes from the horizontal spread of the points
 (:func:`tracking.identify.yaw_from_points`), then from the best labelling's shoulders and hips;
 the search is repeated in that frame when it turned more than a degree.
