@@ -148,32 +148,23 @@ def _key(rows: np.ndarray, ball: np.ndarray, kind: np.ndarray) -> np.ndarray:
 def _ray_samples(pts: np.ndarray, short: np.ndarray, rays, radius_m: float
                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """The candidate places of the balls seen by one camera: each ray of a colour short of
-    points sampled every ``_RAY_STEP_M`` over the range its blob's size gives, near the seen
-    points and not inside a seen ball (as :meth:`tracking.identify.Identifier._identify_on_rays`).
+    points sampled over the range its blob's size gives (:func:`tracking.identify.sample_ray`).
 
     Returns:
         (each kept ray's (S, 3) samples, (R,) each kept ray's colour, (R, 3) its direction).
     """
-    from tracking.identify import _RAY_BOX_M, _RAY_STEP_M
+    from tracking.identify import sample_ray
 
     out, colours, dirs = [], [], []
-    if rays is None or not len(rays) or not len(pts):
-        return out, np.zeros(0, np.int64), np.zeros((0, 3))
-    lo, hi = pts.min(axis=0) - _RAY_BOX_M, pts.max(axis=0) + _RAY_BOX_M
-    gap = 2.0 * radius_m - _RAY_STEP_M  # two balls do not overlap
-    for k in range(len(rays)):
-        c = int(rays.colour[k])
-        if not 0 <= c < len(short) or short[c] <= 0:
-            continue
-        near, far = rays.range_m[k]
-        t = np.arange(near, far + 0.5 * _RAY_STEP_M, _RAY_STEP_M)
-        p = rays.origin_m[k] + t[:, None] * rays.direction[k]
-        ok = ((p >= lo) & (p <= hi)).all(axis=1)
-        ok &= np.linalg.norm(p[:, None, :] - pts[None], axis=-1).min(axis=1) > gap
-        if ok.any():
-            out.append(p[ok])
-            colours.append(c)
-            dirs.append(rays.direction[k])
+    if rays is not None and len(pts):
+        for k in range(len(rays)):
+            c = int(rays.colour[k])
+            if 0 <= c < len(short) and short[c] > 0:
+                p = sample_ray(rays, k, pts, radius_m)
+                if len(p):
+                    out.append(p)
+                    colours.append(c)
+                    dirs.append(rays.direction[k])
     return out, np.array(colours, np.int64), np.array(dirs, np.float64).reshape(-1, 3)
 
 
