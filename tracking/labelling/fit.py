@@ -50,9 +50,9 @@ _MAX_BALLS = 62
 _MAX_BOUNDS = 128
 _MAX_WAYS = 400
 _MAX_ASSIGN = 48
-_MAX_JOINT = 6000
-# positions scored in one batch
-_BATCH = 20000
+_MAX_JOINT = 1500
+# with a coarser grid of sample pairs, every sample around this many best is tried
+_REFINE = 3
 _SWEEPS = 2
 # a labelling within this many degrees of yaw of the frame it was scored in is not scored again
 _YAW_SETTLED_DEG = 1.0
@@ -475,7 +475,8 @@ class Labeller:
         ``without`` a point) with each of those markers on its own ray of its colour (or unseen,
         at most ``free`` of a colour), at the ray's sample that scores best: every assignment of
         markers to rays, the samples of two markers jointly, of more by turns (two sweeps from
-        each one's best alone). Returns (score, positions) or None. With more than
+        each one's best alone; two markers' pairs beyond ``_MAX_JOINT`` on a coarser grid first,
+        then every pair around the best few). Returns (score, positions) or None. With more than
         ``_MAX_ASSIGN`` assignments: ``lower`` (its score without them) and the positions
         without them, so that it counts as near as it might be."""
         from itertools import permutations, product
@@ -489,33 +490,59 @@ class Labeller:
             per_colour.append([(ms, pick) for pick in dict.fromkeys(permutations(rays_c, len(ms)))])
         best: tuple[float, np.ndarray] | None = None
         n_done = 0
-        grids = []  # the assignments of at most two markers on rays: every sample (pair), at once
+        # the assignments of at most two markers on rays: every sample (pair) in one batch, every
+        # ``stride``-th where the pairs are too many, then every sample around the best few
+        grids, where = [], []
         everyone = [(m, -1) for m in without.tolist()]
         for combo in product(*per_colour):
             n_done += 1
             if n_done > _MAX_ASSIGN:
                 return lower, p
             placed = [(m, r) for ms, pick in combo for m, r in zip(ms, pick) if r >= 0]
-            size = math.prod(len(on[r]) for _, r in placed)
-            if len(placed) <= 2 and size <= _MAX_JOINT:
-                batch = np.repeat(p[None], size, axis=0)
-                if placed:
-                    grid = np.meshgrid(*(np.arange(len(on[r])) for _, r in placed), indexing="ij")
-                    for (m, r), g in zip(placed, grid):
-                        batch[:, m] = on[r][g.ravel()]
-                grids.append(batch)
+            if len(placed) > 2:
+                score, pos = self._best_samples(p.copy(), placed, on)
+                if best is None or score < best[0]:
+                    best = (score, pos)
                 continue
-            score, pos = self._best_samples(p.copy(), placed, on)
-            if best is None or score < best[0]:
-                best = (score, pos)
+            size = math.prod(len(on[r]) for _, r in placed)
+            stride = max(1, math.ceil(math.sqrt(size / _MAX_JOINT))) if len(placed) == 2 else 1
+            idx = [np.arange(0, len(on[r]), stride) for _, r in placed]
+            grids.append(self._grid(p, placed, on, idx))
+            where.append((placed, stride, idx))
         if grids:
-            batch = np.concatenate(grids)
-            for k0 in range(0, len(batch), _BATCH):
-                sc = self._objective(batch[k0:k0 + _BATCH], everyone)
-                k = int(np.argmin(sc))
+            lens = [len(g) for g in grids]
+            sc = np.concatenate([self._objective(g, everyone) for g in grids])
+            starts = np.cumsum([0] + lens)
+            for k in np.argsort(sc)[:_REFINE].tolist():
+                g = int(np.searchsorted(starts, k, side="right") - 1)
                 if best is None or sc[k] < best[0]:
-                    best = (float(sc[k]), batch[k0 + k])
+                    best = (float(sc[k]), grids[g][k - starts[g]])
+                placed, stride, idx = where[g]
+                if stride == 1:
+                    continue
+                # (row k - start of the grid) -> the sample of each marker, then every sample near
+                at = np.unravel_index(k - starts[g], [len(i) for i in idx])
+                near = [np.arange(max(int(i[j]) - stride + 1, 0), min(int(i[j]) + stride, len(on[r])))
+                        for i, j, (_, r) in zip(idx, at, placed)]
+                fine = self._grid(p, placed, on, near)
+                fs = self._objective(fine, everyone)
+                j = int(np.argmin(fs))
+                if fs[j] < best[0]:
+                    best = (float(fs[j]), fine[j])
         return best
+
+    @staticmethod
+    def _grid(p: np.ndarray, placed: list[tuple[int, int]], on: list[np.ndarray], idx: list[np.ndarray]
+              ) -> np.ndarray:
+        """(N, M, 3) positions ``p`` with each marker placed at every combination of the samples
+        ``idx`` of its ray."""
+        size = math.prod(len(i) for i in idx)
+        batch = np.repeat(p[None], size, axis=0)
+        if placed:
+            grid = np.meshgrid(*idx, indexing="ij")
+            for (m, r), g in zip(placed, grid):
+                batch[:, m] = on[r][g.ravel()]
+        return batch
 
     def _objective(self, p: np.ndarray, placed: list[tuple[int, int]]) -> np.ndarray:
         """(N,) the scores of a batch of positions ((N, M, 3)) with markers ``placed`` on rays,
