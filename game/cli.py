@@ -301,7 +301,7 @@ def _validate_population(args) -> int:
     if n < 1 or rendered < 0:
         raise RehabError("--population needs a number of draws >= 1 (and --rendered >= 0)")
     first = REPORTED_SEEDS_FROM + 1000 * args.seed  # (--seed: another set of reported seeds)
-    labelled = label_draws(range(first, first + n))
+    labelled = label_draws(range(first, first + n), rays=None)
     tracked = track_draws(range(first, first + rendered), size_px=args.size, fps=args.fps, progress=True)
     print(population_report(labelled, tracked))
     return 0

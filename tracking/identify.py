@@ -194,6 +194,18 @@ def single_view_rays(cameras: Sequence[Camera], observations: Sequence[CameraObs
                 np.concatenate(rng), np.concatenate(whole))
 
 
+def sample_ray(rays: Rays, r: int, p_seen_m: np.ndarray, radius_m: float) -> np.ndarray:
+    """(S, 3) the places of ray ``r``'s ball to try: every ``_RAY_STEP_M`` over its range, within
+    ``_RAY_BOX_M`` of the seen points' box and not inside a seen ball (two balls do not overlap)."""
+    lo, hi = p_seen_m.min(axis=0) - _RAY_BOX_M, p_seen_m.max(axis=0) + _RAY_BOX_M
+    near, far = rays.range_m[r]
+    t = np.arange(near, far + 0.5 * _RAY_STEP_M, _RAY_STEP_M)
+    p = rays.origin_m[r] + t[:, None] * rays.direction[r]
+    ok = ((p >= lo) & (p <= hi)).all(axis=1)
+    ok &= np.linalg.norm(p[:, None, :] - p_seen_m[None], axis=-1).min(axis=1) > 2.0 * radius_m - _RAY_STEP_M
+    return p[ok]
+
+
 def colour_word(rgb: Iterable[int]) -> str:
     """A plain colour name for an sRGB colour (0-255), by hue: 'yellow', 'cyan', ..."""
     r, g, b = (float(c) / 255.0 for c in rgb)
@@ -759,20 +771,14 @@ class Identifier:
         """
         if len(p_seen_m) == 0:
             return None
-        lo, hi = p_seen_m.min(axis=0) - _RAY_BOX_M, p_seen_m.max(axis=0) + _RAY_BOX_M
-        gap = 2.0 * self.markerset.radius_m - _RAY_STEP_M  # two balls do not overlap
         samples, ray_col, ray_origin, ray_whole = [], [], [], []
         for r in range(len(rays)):
             c = int(rays.colour[r])
             if not 0 <= c < len(deficit) or deficit[c] <= 0:
                 continue
-            near, far = rays.range_m[r]
-            t = np.arange(near, far + 0.5 * _RAY_STEP_M, _RAY_STEP_M)
-            p = rays.origin_m[r] + t[:, None] * rays.direction[r]
-            ok = ((p >= lo) & (p <= hi)).all(axis=1)
-            ok &= np.linalg.norm(p[:, None, :] - p_seen_m[None], axis=-1).min(axis=1) > gap
-            if ok.any():
-                samples.append(p[ok])
+            p = sample_ray(rays, r, p_seen_m, self.markerset.radius_m)
+            if len(p):
+                samples.append(p)
                 ray_col.append(c)
                 ray_origin.append(rays.origin_m[r])
                 ray_whole.append(bool(rays.whole[r]) if rays.whole is not None else False)

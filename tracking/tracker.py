@@ -293,7 +293,7 @@ class Tracker:
         from tracking.identify import Identifier
         from tracking.labelling import BodyRoles, Labeller
         from tracking.labelling.checks import SelfChecks
-        from tracking.labelling.still import Stillness
+        from tracking.labelling.still import Snapshot, Stillness
 
         self.cameras = tuple(cameras)
         self.markerset = markerset
@@ -319,6 +319,7 @@ class Tracker:
         self.labeller = Labeller.for_markerset(markerset) if roles is not None else None
         self.checks = SelfChecks(roles) if roles is not None else None
         self._stillness = Stillness(self.fps, params.identify_hold_s) if params.identify_hold_s > 0 else None
+        self._snapshot = Snapshot()
         self._last_message = ""
         self.times = StageTimes(STEP_STAGES)
         m = markerset.n_markers
@@ -364,6 +365,8 @@ class Tracker:
         self._exchanged_streak = 0
         if getattr(self, "_stillness", None) is not None:
             self._stillness.reset()
+        if getattr(self, "_snapshot", None) is not None:
+            self._snapshot.reset()
 
     @property
     def hold_frames(self) -> int:
@@ -520,17 +523,19 @@ class Tracker:
                 return f"hold the reference pose still ({100 * held:.0f} %)"
             if self._stillness is not None and (self._stillness.count - self._stillness.frames_needed) % 3 != 0:
                 return self._last_message  # (still and not confident: judged again every third frame set)
-        if self.labeller is None or self._unseen(points) > self.labeller.max_unseen:
-            # more markers unseen than the fit takes: the rules with the single-camera rays
-            # name them, and the body model must find the names within its ranges; not with one
-            # colour for all markers (there the rules' search with many stand-ins takes seconds
-            # and is what named elbow pairs exchanged): the counts are reported
+        rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
+        if self.labeller is not None and self._snapshot.same(points.p_world_m, points.colour, rays.colour):
+            return self._last_message  # (judged on these points already, not confident)
+        if self.labeller is None or not self.labeller.takes(points.colour, rays):
+            # more markers without a point (or without a ray) than the fit takes: the rules with
+            # the single-camera rays name them, and the body model must find the names within its
+            # ranges; not with one colour for all markers (there the rules' search with many
+            # stand-ins takes seconds and is what named elbow pairs exchanged): the counts are reported
             if self.labeller is not None and len(self.identifier.words) == 1:
                 self._last_message = self.identifier.count_problem(np.asarray(points.colour)) or \
                     "waiting for the reference pose"
                 return self._last_message
             try:
-                rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
                 ident = try_identify(points, self.identifier, rays)
             except IdentificationError as exc:
                 self._last_message = str(exc)
@@ -541,35 +546,32 @@ class Tracker:
             self._last_message = (self.identifier.count_problem(np.asarray(points.colour))
                                   or "waiting for the reference pose")
             return self._last_message
-        lab = self.labeller.label(points.p_world_m, points.colour)
+        lab = self.labeller.label(points.p_world_m, points.colour, rays)
         if lab.confident:
             log.info("labelled with score %.1f, margin %.1f", lab.score, lab.margin)
             return self._start_tracking(points, np.asarray(lab.index), views)
-        self._last_message = self._not_confident(points, views, lab)
+        self._last_message = self._not_confident(points, views, lab, rays)
         return self._last_message
 
-    def _unseen(self, points: Points3D) -> int:
-        """Markers short of a point of their colour (0 when a colour has too many points)."""
-        finite = np.isfinite(points.p_world_m).all(axis=1)
-        colour = np.asarray(points.colour)[finite]
-        n_col = len(self.identifier.words)
-        have = np.bincount(colour[(colour >= 0) & (colour < n_col)], minlength=n_col)
-        return int(np.maximum(np.bincount(self.colour, minlength=n_col) - have, 0).sum())
-
-    def _not_confident(self, points: Points3D, views: Sequence[CameraObservations], lab) -> str:
+    def _not_confident(self, points: Points3D, views: Sequence[CameraObservations], lab, rays) -> str:
         """Why no labelling is confident: the point counts, else the marker set's rule that fails
-        (the seed's ordering rules, in their plain words), else the fit's own words."""
-        from tracking.identify import IdentificationError, single_view_rays
+        (the seed's ordering rules, in their plain words), else the fit's own words. The rules'
+        explanation is not looked for with one colour and more than ``max_unseen`` markers without
+        a point (its search with stand-ins takes seconds): the counts, or the fit's words."""
+        from tracking.identify import IdentificationError
 
         finite = np.isfinite(points.p_world_m).all(axis=1)
         colour = np.asarray(points.colour)[finite]
         n_col = len(self.identifier.words)
         short = np.bincount(self.colour, minlength=n_col) - np.bincount(colour[(colour >= 0) & (colour < n_col)],
                                                                          minlength=n_col)
-        if np.any(short < 0) or short.sum() > self.labeller.max_unseen:
+        if np.any(short < 0):
             return self.identifier.count_problem(colour) or "waiting for the reference pose"
+        if short.sum() > self.labeller.max_unseen and len(self.identifier.words) == 1:
+            if lab.index is None:
+                return self.identifier.count_problem(colour) or self.labeller.advice(lab, self.markerset.names)
+            return self.labeller.advice(lab, self.markerset.names)
         try:
-            rays = single_view_rays(self.cameras, views, points, self.markerset.radius_m)
             self.identifier.identify_with_unseen(points.p_world_m, points.colour, rays)
         except IdentificationError as exc:
             return str(exc)

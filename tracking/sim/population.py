@@ -142,11 +142,37 @@ class LabelResult:
     margin: float
     time_s: float
     worst: str
+    on_rays: bool = False  # the markers without a point are seen by one camera each (a ray)
+
+
+def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Generator, *, noise_m: float = 0.0015,
+                       whole_share: float = 0.5):
+    """:class:`tracking.identify.Rays` of balls at ``p_m`` seen by one camera each: a camera 1.7-2.6 m
+    away in front of or beside the patient, 1.3-2.5 m high; the ray through the ball's centre
+    (``noise_m`` off it), its range the multiples of the blob-size distance of
+    :func:`tracking.identify.single_view_rays` (a blob round with probability ``whole_share``,
+    the distance from its size within 3 %; else partly hidden, 0.7-0.95 of the ball's size)."""
+    from tracking.identify import _RAY_FAR, _RAY_FAR_WHOLE, _RAY_NEAR, _RAY_NEAR_WHOLE, Rays
+
+    n = len(p_m)
+    az = rng.uniform(-100.0, 100.0, n)
+    dist, height = rng.uniform(1.7, 2.6, n), rng.uniform(1.3, 2.5, n)
+    origin = np.stack([dist * np.sin(np.radians(az)), height, -dist * np.cos(np.radians(az))], axis=1)
+    target = p_m + rng.normal(scale=noise_m, size=p_m.shape)
+    d = target - origin
+    true = np.linalg.norm(d, axis=1)
+    whole = rng.random(n) < whole_share
+    seen = true * np.where(whole, rng.uniform(0.97, 1.03, n), 1.0 / rng.uniform(0.7, 0.95, n))
+    rng_m = np.stack([np.where(whole, _RAY_NEAR_WHOLE, _RAY_NEAR) * seen, np.where(whole, _RAY_FAR_WHOLE, _RAY_FAR) * seen],
+                     axis=1)
+    return Rays(origin, d / true[:, None], np.asarray(colour, np.int64), rng_m, whole)
 
 
 def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bool | None = None,
-                markerset: MarkerSet | None = None) -> list[LabelResult]:
-    """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis)."""
+                markerset: MarkerSet | None = None, rays: bool | None = False) -> list[LabelResult]:
+    """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis); with
+    ``rays``, each marker without a point is seen by one camera (:func:`single_camera_rays`);
+    None: a draw with markers without a point is labelled both ways (two results)."""
     from tracking.labelling import Labeller
 
     base = markerset or load_markerset()
@@ -159,17 +185,20 @@ def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bo
         seen = np.setdiff1d(np.arange(ms.n_markers), d.unseen)
         order = rng.permutation(seen)
         labeller = Labeller.for_markerset(ms)
-        t0 = time.perf_counter()
-        lab = labeller.label(p[order], ms.colour_index[order])
-        dt = time.perf_counter() - t0
-        wrong = 0
-        if lab.confident:
-            truth = np.full(ms.n_markers, -1)
-            truth[order] = np.arange(len(order))
-            wrong = int(np.sum((lab.index != truth) & (lab.index >= 0)))
-        worst = "" if lab.worst is None else f"{lab.worst[0]} {lab.worst[1]:.3g}"
-        out.append(LabelResult(seed, d.one_colour, len(d.unseen), lab.confident, wrong, lab.score, lab.margin, dt,
-                               worst))
+        r = single_camera_rays(p[list(d.unseen)], ms.colour_index[list(d.unseen)], rng) if d.unseen else None
+        ways = (False, True) if rays is None and d.unseen else (bool(rays and d.unseen),)
+        for on_rays in ways:
+            t0 = time.perf_counter()
+            lab = labeller.label(p[order], ms.colour_index[order], r if on_rays else None)
+            dt = time.perf_counter() - t0
+            wrong = 0
+            if lab.confident:
+                truth = np.full(ms.n_markers, -1)
+                truth[order] = np.arange(len(order))
+                wrong = int(np.sum((lab.index != truth) & (lab.index >= 0)))
+            worst = "" if lab.worst is None else f"{lab.worst[0]} {lab.worst[1]:.3g}"
+            out.append(LabelResult(seed, d.one_colour, len(d.unseen), lab.confident, wrong, lab.score, lab.margin, dt,
+                                   worst, on_rays))
     return out
 
 
@@ -330,15 +359,16 @@ def population_report(labelled: list[LabelResult], tracked: list[TrackResult]) -
     """The figures of ``rehab validate --population``: per colour scheme, spread across the draws."""
     lines = []
     if labelled:
-        lines.append(f"labelling of the points ({len(labelled)} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
-                     "1.5 mm noise, 0-2 markers without a point):")
+        lines.append(f"labelling of the points ({len({x.seed for x in labelled})} draws, seeds {labelled[0].seed}-{labelled[-1].seed}; "
+                     "1.5 mm noise, 0-2 markers without a point, seen by no camera or by one):")
         for one in (True, False):
-            for unseen in (0, 1, 2):
-                r = [x for x in labelled if x.one_colour == one and x.n_unseen == unseen]
+            for unseen, on_rays in ((0, False), (1, False), (1, True), (2, False), (2, True)):
+                r = [x for x in labelled if x.one_colour == one and x.n_unseen == unseen and x.on_rays == on_rays]
                 if not r:
                     continue
                 conf = sum(x.confident for x in r)
-                lines.append(f"  {'one colour ' if one else 'four colours'}, {unseen} without a point: labelled "
+                seen_by = (", each seen by one camera" if on_rays else ", seen by none") if unseen else ""
+                lines.append(f"  {'one colour ' if one else 'four colours'}, {unseen} without a point{seen_by}: labelled "
                              f"{conf}/{len(r)} ({100 * conf / len(r):.1f} %), swaps {sum(x.wrong for x in r)}, time "
                              + _spread([1000 * x.time_s for x in r], "ms"))
     if tracked:
