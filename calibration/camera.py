@@ -1,6 +1,6 @@
 """Pinhole camera with OpenCV distortion, as a validated value object.
 
-Conventions (spec/INTERFACES.md): world frame right-handed, metres, +Y up, patient faces -Z.
+Conventions (docs/INTERFACES.md): world frame right-handed, metres, +Y up, patient faces -Z.
 Extrinsics are world -> camera: ``x_cam = R @ x_world + t`` with ``R`` from the Rodrigues vector
 ``rvec``. The camera looks along its +Z axis, image x to the right, image y down (OpenCV).
 Distortion coefficients are in OpenCV order (k1, k2, p1, p2[, k3[, k4, k5, k6]]), or for a

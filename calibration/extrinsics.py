@@ -15,7 +15,7 @@ Steps (:func:`calibrate_extrinsics`):
    times as scattered as in another, and the seat board alone sets the world frame. Given the
    lens step's information matrices, this second pass also refines the lens data, the lens
    step's estimate a prior of that weight (:class:`LensPrior`).
-5. The world frame of spec/INTERFACES.md from one board lying face up on the floor or the seat
+5. The world frame of docs/INTERFACES.md from one board lying face up on the floor or the seat
    (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
    corners (the patient's right), corner 0 at ``origin_m``.
 

@@ -1,10 +1,10 @@
 """Calibration files: Pose2Sim/anipose TOML and OpenCV FileStorage YAML/XML.
 
 Both formats hold cameras in calibration order with extrinsics world -> camera
-(``x_cam = R @ x_world + t``, metres; world frame of spec/INTERFACES.md) and intrinsics in pixels
+(``x_cam = R @ x_world + t``, metres; world frame of docs/INTERFACES.md) and intrinsics in pixels
 with OpenCV distortion (k1, k2, p1, p2[, k3[, k4, k5, k6]]).
 
-TOML (``.toml``): exactly the "Camera calibration file" of spec/INTERFACES.md. One table per
+TOML (``.toml``): exactly the "Camera calibration file" of docs/INTERFACES.md. One table per
 camera in file order with the keys ``name``, ``size`` ([width, height] px), ``matrix`` (3x3 px),
 ``distortions``, ``rotation`` (Rodrigues vector, world -> camera), ``translation`` (metres) and
 ``fisheye`` (optional, as aniposelib omits it for pinhole cameras), then ``[metadata]`` with
@@ -627,7 +627,7 @@ def save_calibration_toml(
     adjusted: bool = False,
     error: float = 0.0,
 ) -> None:
-    """Write ``cameras`` as a Pose2Sim/anipose TOML calibration (spec/INTERFACES.md).
+    """Write ``cameras`` as a Pose2Sim/anipose TOML calibration (docs/INTERFACES.md).
 
     Tables ``[cam_1]``, ``[cam_2]``, ... in the given order, then ``[metadata]``. Numbers are
     written with Python's shortest round-trip repr, so reading the file back gives the same

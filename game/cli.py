@@ -36,7 +36,7 @@ def _add_simulate(sub) -> None:
     p = sub.add_parser(
         "simulate",
         help="render a synthetic recording of the simulated patient, with ground truth",
-        description="Render a recording folder (spec/INTERFACES.md) of the simulated patient seen by "
+        description="Render a recording folder (docs/INTERFACES.md) of the simulated patient seen by "
         "virtual cameras, with truth.trc and truth_angles.csv.",
     )
     p.add_argument("out_dir", type=Path, help="output recording folder (created)")
@@ -131,7 +131,7 @@ def _add_track(sub) -> None:
         description="Track a recording folder frame by frame (no look-ahead) and write the results.",
     )
     # (optional for argparse only: a recording written after --marker-color's colours is taken back below)
-    p.add_argument("recording", type=Path, nargs="?", default=None, help="recording folder (spec/INTERFACES.md)")
+    p.add_argument("recording", type=Path, nargs="?", default=None, help="recording folder (docs/INTERFACES.md)")
     p.add_argument("--calibration", type=Path, default=None, help="calibration file (default: RECORDING/calibration.toml)")
     p.add_argument("--markerset", default=None, help="marker set name or YAML file (default: from meta.yaml)")
     p.add_argument("--marker-color", action="extend", nargs="+", default=None, metavar="R,G,B",
@@ -142,7 +142,7 @@ def _add_track(sub) -> None:
     p.add_argument("--out", type=Path, default=None, help="labelled markers as an OpenSim TRC file (mm)")
     p.add_argument("--status", type=Path, default=None,
                    help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
-    p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (spec/JOINT_ANGLES.md)")
+    p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (docs/JOINT_ANGLES.md)")
     p.add_argument("--c3d", type=Path, default=None,
                    help="labelled markers and joint angles as a C3D file (residual > 0 measured, 0 estimated, -1 lost)")
     p.add_argument("--mot", type=Path, default=None, help="joint angles as an OpenSim motion file (.mot)")
@@ -222,7 +222,7 @@ def _writing(work, what: str):
 
 # --------------------------------------------------------------------------- angles
 def _add_angles(sub) -> None:
-    p = sub.add_parser("angles", help="joint angles from a TRC marker file (spec/JOINT_ANGLES.md)")
+    p = sub.add_parser("angles", help="joint angles from a TRC marker file (docs/JOINT_ANGLES.md)")
     p.add_argument("trc", type=Path, help="marker file with the marker set's names (mm)")
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
     p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",

@@ -8,7 +8,7 @@ Folders, as a clinic records them and as the simulator writes them (docs/CALIBRA
   the floor or seat in every camera that sees it (``cam*/seat.png``);
 - wand: a recording folder (one video or image folder per camera and meta.yaml).
 
-Every command writes the calibration as TOML (spec/INTERFACES.md) and, on request, OpenCV YAML.
+Every command writes the calibration as TOML (docs/INTERFACES.md) and, on request, OpenCV YAML.
 """
 
 from __future__ import annotations

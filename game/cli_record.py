@@ -21,7 +21,7 @@ def add_commands(sub) -> None:
         "record",
         help="save synchronized camera images as a recording folder, for offline tracking",
         description="Record live cameras (one OpenCV reader thread per camera, frames grouped by time stamp) or "
-        "the simulated cameras into a recording folder (spec/INTERFACES.md): calibration.toml, one lossless "
+        "the simulated cameras into a recording folder (docs/INTERFACES.md): calibration.toml, one lossless "
         "video per camera, meta.yaml, timestamps.csv. A camera that stops or drops frames is reported; its "
         "missing images are written black so that the cameras stay in step. Ctrl-C stops and keeps what was "
         "recorded.",

@@ -20,7 +20,7 @@ def body(p: float = 50, sex: str = "male") -> BodyModel:
 
 
 def elbow_90(supination_deg: float, external_rotation_deg: float = 0.0) -> ArmPose:
-    """Elbow at the side flexed 90 degrees, forearm forward (JOINT_ANGLES.md canonical poses)."""
+    """Elbow at the side flexed 90 degrees, forearm forward (docs/JOINT_ANGLES.md canonical poses)."""
     return ArmPose.clinical(elbow_flexion_deg=90.0, forearm_supination_deg=supination_deg,
                             external_rotation_deg=external_rotation_deg)
 
@@ -64,7 +64,7 @@ def test_frames_are_rotations_and_the_trunk_frame_is_the_angle_definition():
 @pytest.mark.parametrize("side", ["right", "left"])
 @pytest.mark.parametrize("supination, palm", [(90.0, (0, 1, 0)), (-90.0, (0, -1, 0))])
 def test_palm_faces_up_when_supinated_and_down_when_pronated(side, supination, palm):
-    """JOINT_ANGLES.md: elbow at the side flexed 90, forearm forward, palm up = supination 90."""
+    """docs/JOINT_ANGLES.md: elbow at the side flexed 90, forearm forward, palm up = supination 90."""
     pose = Pose().with_arm(side, elbow_90(supination))
     sk = SkeletonTracker(MS.names).update(body().markers_m(pose), MEASURED)
     assert sk.palm_normal(side) @ np.array(palm, float) > 0.99

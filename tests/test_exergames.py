@@ -93,7 +93,7 @@ def test_elevation_directions_read_back_as_flexion_and_abduction(theta):
 @pytest.mark.parametrize("side", ["right", "left"])
 @pytest.mark.parametrize("rotation", [-40.0, 0.0, 35.0])
 def test_elbow_at_side_hand_gives_the_external_rotation_of_the_spec(side, rotation):
-    """spec/JOINT_ANGLES.md: signed angle from -z_T to the forearm about u (about -u on the left)."""
+    """docs/JOINT_ANGLES.md: signed angle from -z_T to the forearm about u (about -u on the left)."""
     f = frame(side)
     hand = elbow_at_side_hand_m(f, rotation)
     elbow = f.shoulder_m - f.upper_arm_m * f.trunk[:, 1]

@@ -1,6 +1,6 @@
 """Joint angles of the seated upper body from the 14 ``upper_limb_seated`` markers.
 
-The definitions are those of ``spec/JOINT_ANGLES.md`` (clinical goniometry: 0 in the neutral
+The definitions are those of ``docs/JOINT_ANGLES.md`` (clinical goniometry: 0 in the neutral
 start position, positive in the named direction, degrees). They use marker positions alone, so
 any TRC with the marker names gives the same numbers, and they are vectorized over any leading
 (frame) axes: the live tracker calls :func:`joint_angles` with one (M, 3) frame, ``rehab angles``
@@ -146,7 +146,7 @@ NEAR_SINGULAR = ("spec", "withhold")
 
 
 def joint_angles(positions: np.ndarray, names: Sequence[str], *, near_singular: str = "spec") -> dict[str, np.ndarray]:
-    """Joint angles (degrees) of every frame, per ``spec/JOINT_ANGLES.md``.
+    """Joint angles (degrees) of every frame, per ``docs/JOINT_ANGLES.md``.
 
     Args:
         positions: (..., M, 3) float marker positions in the world frame (+Y up, the patient

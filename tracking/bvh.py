@@ -100,7 +100,7 @@ class BvhSkeleton:
 
 
 def trunk_rotation(forward_lean_deg: float, lateral_lean_deg: float) -> np.ndarray:
-    """(3, 3) trunk frame with these leans (spec/JOINT_ANGLES.md), hips along +X (no axial rotation):
+    """(3, 3) trunk frame with these leans (docs/JOINT_ANGLES.md), hips along +X (no axial rotation):
     columns x_T (world X made orthogonal to y_T), y_T, z_T = x_T x y_T, as the angles build it."""
     f, lat = math.radians(forward_lean_deg), math.radians(lateral_lean_deg)
     # y_T . -Z / y_T . Y = tan(forward), y_T . X / y_T . Y = tan(lateral): exact for both at once

@@ -1,6 +1,6 @@
 """Colour extraction with a lookup table: every pixel's bytes index a table of colour labels.
 
-The seed method (METHOD.md, "Colour extraction with a lookup table") fills a table indexed by a
+The seed method (docs/METHOD.md, "Colour extraction with a lookup table") fills a table indexed by a
 pixel's (R, G, B) bytes in advance, so that classifying a pixel is one memory read. Here the table
 holds 0 for background and ``k + 1`` for palette colour ``k``.
 

@@ -1,4 +1,4 @@
-"""Online estimation of hidden markers (METHOD.md 5.4), without look-ahead.
+"""Online estimation of hidden markers (docs/METHOD.md 5.4), without look-ahead.
 
 A marker that no camera pair measures in a frame is *estimated* from the past and from this
 frame's other markers, or reported *lost*. The estimators are pure functions on arrays; the
@@ -316,7 +316,7 @@ def _ema(old: np.ndarray, new: np.ndarray, rate: float) -> np.ndarray:
 def trunk_rotation(upper_m: np.ndarray, lower_m: np.ndarray, left_m: np.ndarray, right_m: np.ndarray) -> np.ndarray:
     """(3, 3) trunk -> world rotation, columns x (to the right), y (up the trunk), z (backwards).
 
-    The trunk frame of spec/JOINT_ANGLES.md: ``y = unit(upper - lower)``, ``x`` = ``right - left``
+    The trunk frame of docs/JOINT_ANGLES.md: ``y = unit(upper - lower)``, ``x`` = ``right - left``
     made orthogonal to y. (Plain floats: on 3-vectors they are several times faster than numpy.)
     A ValueError says which markers make the frame degenerate.
     """

@@ -1,6 +1,6 @@
 """Identification (labelling) of the markers on the first frame, from the marker set's rules.
 
-METHOD.md 5.2: the patient starts in a reference pose in which the markers keep known orderings
+docs/METHOD.md 5.2: the patient starts in a reference pose in which the markers keep known orderings
 along the axes of the patient's frame (the left arm left of the sternum, the elbow above the
 wrist, the thumb-side wrist marker in front of the little-finger-side one, ...). The seed sorts
 the 14 points by hand-written steps; here the orderings are data (``identification:`` in the

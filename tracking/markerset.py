@@ -1,6 +1,6 @@
 """Marker sets: names, colours and placements, loaded from content YAML.
 
-A marker set may also say how its markers are identified on the first frame (METHOD.md 5.2):
+A marker set may also say how its markers are identified on the first frame (docs/METHOD.md 5.2):
 the reference pose the patient takes, structure rules of that pose written as coordinate
 orderings in the patient's frame (:class:`OrderRule`), and distance ranges of markers on one
 rigid body part (:class:`DistanceRule`), each with a plain-words message for the therapist
@@ -274,7 +274,7 @@ class DistanceRule:
 
 @dataclass(frozen=True, slots=True)
 class IdentificationRules:
-    """How the markers are identified in the reference pose (METHOD.md 5.2).
+    """How the markers are identified in the reference pose (docs/METHOD.md 5.2).
 
     Attributes:
         reference_pose: the pose in plain words (shown to the patient and the therapist).

@@ -1,6 +1,6 @@
 """Full-frame measurement: images of all cameras -> unlabelled 3D marker points.
 
-The first half of the seed pipeline (METHOD.md sections 4 and 5.1): the colour lookup table over
+The first half of the seed pipeline (docs/METHOD.md sections 4 and 5.1): the colour lookup table over
 each whole image, connected regions to sub-pixel centroids gated by area and roundness, then
 cross-camera matching and triangulation. The tracker (search windows) reuses the same pieces;
 this module is also the full-frame baseline it is benchmarked against.

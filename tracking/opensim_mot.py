@@ -18,10 +18,10 @@ motion inputs) reads a ``.mot`` of ``version`` 1 or less with its legacy number-
 which stops at the first ``NaN`` (measured with opensim 4.6: a file cut after two rows); a higher
 version goes through the file adapters (``TimeSeriesTable``), which read ``NaN`` as a missing
 value, as OpenSim 4.6 itself writes it. Horizontal flexion and external rotation are undefined in
-many frames by definition (spec/JOINT_ANGLES.md), so the undefined angles stay ``NaN`` and the
+many frames by definition (docs/JOINT_ANGLES.md), so the undefined angles stay ``NaN`` and the
 version says how to read them.
 
-Columns are those of the angles CSV (``spec/JOINT_ANGLES.md``), times the recording's. These are
+Columns are those of the angles CSV (``docs/JOINT_ANGLES.md``), times the recording's. These are
 the project's clinical angles, not the coordinates of an OpenSim model: they plot and compare in
 OpenSim but do not drive a model's coordinates by name.
 """

@@ -1,4 +1,4 @@
-"""Recording folders (spec/INTERFACES.md): reading them frame by frame, and writing them.
+"""Recording folders (docs/INTERFACES.md): reading them frame by frame, and writing them.
 
 ```
 recording/

@@ -1,4 +1,4 @@
-"""CSV tables of ``spec/INTERFACES.md``: joint angles and per-marker status.
+"""CSV tables of ``docs/INTERFACES.md``: joint angles and per-marker status.
 
 Joint angles CSV (wide, one row per frame)::
 

@@ -1,6 +1,6 @@
 """The per-frame tracker: one object, ``step(images) -> TrackerSample``, for every driver.
 
-METHOD.md sections 5.2-5.4, online (no look-ahead):
+docs/METHOD.md sections 5.2-5.4, online (no look-ahead):
 
 1. **Identification** on the reference pose: full-frame measurement, then names from the
    marker set's rules (:mod:`tracking.identify`).
@@ -65,7 +65,7 @@ class TrackerSample:
         state: WAITING (no names yet) or TRACKING.
         positions_m: (M, 3) float64 marker positions, world metres; NaN where lost.
         status: (M,) uint8 :class:`MarkerStatus` per marker.
-        angles_deg: joint angles (spec/JOINT_ANGLES.md), NaN where undefined, and forearm
+        angles_deg: joint angles (docs/JOINT_ANGLES.md), NaN where undefined, and forearm
             supination NaN while an estimated elbow or wrist marker's axis is a guess
             (:attr:`tracking.hidden.Estimator.axis_guessed`).
         message: a one-line explanation while WAITING (e.g. which reference-pose rule fails); while

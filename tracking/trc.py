@@ -1,4 +1,4 @@
-"""OpenSim TRC marker files (``spec/INTERFACES.md``): write them as OpenSim does, read any.
+"""OpenSim TRC marker files (``docs/INTERFACES.md``): write them as OpenSim does, read any.
 
 Layout (tab-separated; OpenSim's ``TRCFileAdapter`` writes exactly this, trailing tabs included)::
 

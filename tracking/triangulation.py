@@ -6,7 +6,7 @@ the focal length: ``x = X_cam / Z_cam``), so every camera enters with the 3x4 ex
 
 The general method is linear least squares (DLT) over all cameras that see the point, with one
 reweighting by the projective depth so that each camera's residual approximates its image-plane
-error (the plain DLT weights far cameras less). The seed paper's two-camera formulas (METHOD.md
+error (the plain DLT weights far cameras less). The seed paper's two-camera formulas (docs/METHOD.md
 section 5.1, equations 2 and 3) are implemented as a documented reference in
 :func:`seed_parallel_stereo` and :func:`seed_cylinder_stereo`; for noise-free observations they give
 the same point as :func:`triangulate` (tests show it).

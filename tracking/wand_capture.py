@@ -1,6 +1,6 @@
 """Wand ball centroids from a wand recording, for :func:`calibration.wand.calibrate_wand`.
 
-A wand recording is a recording folder (spec/INTERFACES.md: one video or image folder per
+A wand recording is a recording folder (docs/INTERFACES.md: one video or image folder per
 camera, meta.yaml with the frame rate) of a wand with two balls of different marker colours.
 Each frame of each camera is classified with the colour table of the two colours and the blobs
 are found as for tracking; a ball counts in a frame only when exactly one blob of its colour

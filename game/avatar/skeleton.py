@@ -2,8 +2,8 @@
 
 :class:`SkeletonTracker` turns one frame of tracked markers (positions + :class:`MarkerStatus`)
 into a :class:`SkeletonPose`: joint centres, segment frames and a per-segment state, in the
-world frame of ``spec/INTERFACES.md`` (metres, +Y up, the patient faces -Z, the patient's right
-is +X). The frames follow ``spec/JOINT_ANGLES.md``::
+world frame of ``docs/INTERFACES.md`` (metres, +Y up, the patient faces -Z, the patient's right
+is +X). The frames follow ``docs/JOINT_ANGLES.md``::
 
     trunk      y = unit(MB - MP), x = MRH - MLH made orthogonal to y, z = x cross y (backwards)
     pelvis     x = unit(MRH - MLH), y = world up made orthogonal to x, z = x cross y

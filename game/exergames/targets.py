@@ -1,6 +1,6 @@
 """Where targets go: joint-angle space inside the measured range, then the hand's 3D position.
 
-Pure numpy. A target is first chosen in joint-angle space (``spec/JOINT_ANGLES.md``
+Pure numpy. A target is first chosen in joint-angle space (``docs/JOINT_ANGLES.md``
 definitions), between ``comfort_fraction`` and the current top fraction of the patient's latest
 measured maximum in that direction (:class:`RomLimits`), then mapped to the world position of the
 wrist centre by the forward kinematics of the patient's own arm (:class:`ArmFrame`: the shoulder
@@ -79,7 +79,7 @@ class ArmFrame:
     Attributes:
         shoulder_m: (3,) the shoulder (acromion) marker, the origin of the upper arm in the angles.
         trunk: (3, 3) columns ``x_T`` (towards the patient's right), ``y_T`` (up the trunk), ``z_T``
-            (backwards), spec/JOINT_ANGLES.md.
+            (backwards), docs/JOINT_ANGLES.md.
         upper_arm_m: shoulder marker -> elbow centre; forearm_m: elbow centre -> wrist centre.
         side: ``right`` or ``left``.
     """
@@ -149,7 +149,7 @@ def elbow_at_side_hand_m(frame: ArmFrame, rotation_deg: float) -> np.ndarray:
 
 
 def flexion_abduction_deg(direction: np.ndarray, frame: ArmFrame) -> tuple[float, float]:
-    """The (flexion, abduction) the angles of spec/JOINT_ANGLES.md give an upper arm along ``direction``."""
+    """The (flexion, abduction) the angles of docs/JOINT_ANGLES.md give an upper arm along ``direction``."""
     u = np.asarray(direction, dtype=np.float64)
     down, forward = -frame.trunk[:, 1], -frame.trunk[:, 2]
     return (math.degrees(math.atan2(u @ forward, u @ down)), math.degrees(math.atan2(u @ frame.out, u @ down)))

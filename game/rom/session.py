@@ -7,7 +7,7 @@
 - **Checking the start position**: the test's start angles (content) must be within their ranges
   for ``start_hold_s``, held still (the test value within ``START_STILL_DEG``); the medians over
   that hold are the start values that the range and the compensation checks are measured from
-  (spec/JOINT_ANGLES.md: compensation is judged as the change from the start position).
+  (docs/JOINT_ANGLES.md: compensation is judged as the change from the start position).
 - **Recording**: the test value (``direction * angle``, 3-sample median against single-frame
   spikes) is followed; its maximum, the range from the start and the compensations seen are kept.
   The recording ends when the value has come back at least half-way from its maximum towards the
@@ -39,7 +39,7 @@ from game.rom.spec import MODE_ACTIVE, Compensation, RomTest, check_side, check_
 from tracking.angles import joint_angles
 from tracking.status import MarkerStatus
 
-#: Markers each arm angle rests on (spec/JOINT_ANGLES.md); ``*`` is L or R. The trunk frame needs
+#: Markers each arm angle rests on (docs/JOINT_ANGLES.md); ``*`` is L or R. The trunk frame needs
 #: MB, MP and both hips.
 _TRUNK = ("MB", "MP", "MLH", "MRH")
 _ANGLE_MARKERS: dict[str, tuple[str, ...]] = {
@@ -112,7 +112,7 @@ class RomResult:
 
     Attributes:
         test, title, side: which test (content name), its title, the side.
-        angle: the column of spec/JOINT_ANGLES.md read (e.g. ``right_shoulder_flexion``).
+        angle: the column of docs/JOINT_ANGLES.md read (e.g. ``right_shoulder_flexion``).
         direction: +1 or -1 (the value is ``direction * angle``).
         mode: always ``active``.
         position: the test position id; position_words: in plain words.
@@ -288,7 +288,7 @@ class RomTestSession:
         The trunk frame needs both hip markers, and a hand in front of the hip (internal rotation)
         hides one: then every shoulder angle is undefined. The seated pelvis does not move during an
         upper-limb test, so a lost hip marker is held where it was last measured and the angles are
-        recomputed (spec/JOINT_ANGLES.md, :func:`tracking.angles.joint_angles`); the reading counts
+        recomputed (docs/JOINT_ANGLES.md, :func:`tracking.angles.joint_angles`); the reading counts
         as resting on an estimated marker.
         """
         p = np.asarray(sample.positions_m, dtype=np.float64)

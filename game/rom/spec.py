@@ -1,6 +1,6 @@
 """ROM tests as content: ``content/rom_tests/<name>.yaml``, validated once at load.
 
-A ROM test says which angle of ``spec/JOINT_ANGLES.md`` it reads (an arm angle; the side is
+A ROM test says which angle of ``docs/JOINT_ANGLES.md`` it reads (an arm angle; the side is
 chosen when the test runs) and in which direction, the start position in plain words and as angle
 ranges that the system checks, the instructions for the patient, the compensations to watch (and
 the ones the system checks itself), and the reference (normal) values of each standard, kept apart:
@@ -70,7 +70,7 @@ class _Compensation(StrictModel):
         if missing:
             raise ValueError(f"a {self.kind} compensation needs {', '.join(missing)}")
         if self.angle is not None and self.angle not in ARM_ANGLES:
-            raise ValueError(f"angle {self.angle!r} is not an arm angle of spec/JOINT_ANGLES.md: one of {list(ARM_ANGLES)}")
+            raise ValueError(f"angle {self.angle!r} is not an arm angle of docs/JOINT_ANGLES.md: one of {list(ARM_ANGLES)}")
         return self
 
 
@@ -84,7 +84,7 @@ class _Start(StrictModel):
     def _known_angles(cls, value):
         for name, (lo, hi) in value.items():
             if name not in ARM_ANGLES and name not in TRUNK_ANGLES:
-                raise ValueError(f"{name!r} is not an arm or trunk angle of spec/JOINT_ANGLES.md")
+                raise ValueError(f"{name!r} is not an arm or trunk angle of docs/JOINT_ANGLES.md")
             if lo >= hi:
                 raise ValueError(f"{name}: the range [{lo}, {hi}] is empty")
         return value
@@ -110,7 +110,7 @@ class _Sdc(StrictModel):
 
 class _RomTestSpec(StrictModel):
     title: str = pydantic.Field(min_length=3)
-    angle: str = pydantic.Field(description="the arm angle of spec/JOINT_ANGLES.md the test reads")
+    angle: str = pydantic.Field(description="the arm angle of docs/JOINT_ANGLES.md the test reads")
     direction: Literal[1, -1] = pydantic.Field(description="+1 reads the angle, -1 its negative (extension = -flexion)")
     sides: tuple[Literal["right", "left"], ...] = pydantic.Field(("right", "left"), min_length=1)
     position: _Position
@@ -130,7 +130,7 @@ class _RomTestSpec(StrictModel):
     @classmethod
     def _arm_angle(cls, value):
         if value not in ARM_ANGLES:
-            raise ValueError(f"{value!r} is not an arm angle of spec/JOINT_ANGLES.md: one of {list(ARM_ANGLES)}")
+            raise ValueError(f"{value!r} is not an arm angle of docs/JOINT_ANGLES.md: one of {list(ARM_ANGLES)}")
         return value
 
 
@@ -228,7 +228,7 @@ class RomTest:
     sdc_deg: float | None = None
 
     def angle_name(self, side: str) -> str:
-        """The column of spec/JOINT_ANGLES.md read on ``side``, e.g. ``right_shoulder_flexion``."""
+        """The column of docs/JOINT_ANGLES.md read on ``side``, e.g. ``right_shoulder_flexion``."""
         return f"{side}_{self.angle}"
 
     def reference(self, standard: str) -> Reference | None:

@@ -22,7 +22,7 @@ from calibration.files import (
     save_calibration_toml,
 )
 
-# The example of spec/INTERFACES.md, "Camera calibration file", verbatim.
+# The example of docs/INTERFACES.md, "Camera calibration file", verbatim.
 SPEC_EXAMPLE = """\
 [cam_1]
 name = "cam1"

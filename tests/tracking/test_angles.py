@@ -1,4 +1,4 @@
-"""Joint angles against spec/JOINT_ANGLES.md on exact synthetic markers.
+"""Joint angles against docs/JOINT_ANGLES.md on exact synthetic markers.
 
 The markers come from a small kinematic helper (trunk upright, shoulder at a point, upper-arm
 direction, humeral rotation, elbow flexion, forearm rotation; epicondyle and styloid pairs placed
@@ -326,7 +326,7 @@ def test_straight_up_reads_plus_180_not_minus_180():
 
 
 def test_canonical_markers_match_their_description():
-    """The helper puts the landmarks where the words of JOINT_ANGLES.md put them (right arm)."""
+    """The helper puts the landmarks where the words of docs/JOINT_ANGLES.md put them (right arm)."""
     n = REQUIRED_MARKERS
     p = body(right=HANGING)
     assert at(n, p, "MRW1")[2] < at(n, p, "MRW2")[2]  # thumb forward

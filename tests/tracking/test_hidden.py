@@ -633,7 +633,7 @@ def seed_experiment():
 
 
 def test_seed_experiment_mre2_reappears_within_5_mm(seed_experiment):
-    """METHOD.md 'Experiment': MRE2 hidden between elbow and trunk, then found again. The seed
+    """docs/METHOD.md 'Experiment': MRE2 hidden between elbow and trunk, then found again. The seed
     reports ~10 mm at reappearance; the recommended estimators must do 5 mm or better on average
     (over both occlusions and five noise draws), equation 6 as the paper writes it does not."""
     from tracking.sim.hidden_eval import make_estimator, run_estimator

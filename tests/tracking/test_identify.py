@@ -1,4 +1,4 @@
-"""Identification of the markers on the first frame from the marker set's rules (METHOD.md 5.2).
+"""Identification of the markers on the first frame from the marker set's rules (docs/METHOD.md 5.2).
 
 Rule language -> exact truth positions (bodies, arm perturbations, turned patient, moved origin,
 one colour) -> wrong poses and missing markers (one-line therapist messages) -> points measured
@@ -79,7 +79,7 @@ def test_the_default_marker_set_states_the_seed_rules():
     rules = MS.identification
     assert rules is not None and "thumbs pointing forward" in rules.reference_pose
     texts = {r.text for r in rules.rules}
-    # the seed's rules (METHOD.md 5.2), each side expanded from the '*' wildcard
+    # the seed's rules (docs/METHOD.md 5.2), each side expanded from the '*' wildcard
     for text in ("MB, MP < MLS, MLE1, MLE2, MLW1, MLW2, MLH along outward",
                  "MB, MP < MRS, MRE1, MRE2, MRW1, MRW2, MRH along outward",
                  "MLH < MLW1, MLW2 along outward", "MRH < MRW1, MRW2 along outward", "MP < MB along y",

@@ -108,7 +108,7 @@ def test_bad_options_are_one_line(tmp_path, capsys, argv_tail, needle):
 
 
 def test_marker_color_once_with_many_values_or_repeated(tmp_path, monkeypatch):
-    """`--marker-color R,G,B R,G,B ...` (spec/INTERFACES.md) and the repeated flag give the same colours,
+    """`--marker-color R,G,B R,G,B ...` (docs/INTERFACES.md) and the repeated flag give the same colours,
     also with the recording folder written after the colours."""
     import tracking.offline as offline
 

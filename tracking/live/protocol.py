@@ -110,7 +110,7 @@ class PatientInput:
     Attributes:
         side: the active arm, ``"right"`` or ``"left"``.
         hand_target_m: where the active hand (the wrist centre) should go, world metres
-            (spec/INTERFACES.md frame); None: the arm keeps its pose relative to the trunk.
+            (docs/INTERFACES.md frame); None: the arm keeps its pose relative to the trunk.
         forearm_rotation_deg: forearm supination (+, palm up) / pronation (-) of the active arm;
             0 = thumb up.
         trunk_forward_lean_deg: + leaning forward.

@@ -12,7 +12,7 @@ tracker never waits for a network). A thread sends from the queue:
     millimetres, world frame, NaN where lost; the description follows the XDF motion-capture
     meta-data (``channels/channel`` with ``label``, ``marker``, ``type`` PositionX/Y/Z, ``unit``
     millimeters; ``setup/markers/marker``; ``acquisition``) and names the marker set;
-  - ``<name> angles``, type ``Angles``: the joint angles in degrees (spec/JOINT_ANGLES.md), NaN
+  - ``<name> angles``, type ``Angles``: the joint angles in degrees (docs/JOINT_ANGLES.md), NaN
     where undefined;
   - ``<name> status``, type ``Status``: int16 channels ``state`` (0 waiting for the reference pose,
     1 tracking) and one per marker (0 lost, 1 measured, 2 estimated).
@@ -234,7 +234,7 @@ class LslOutput:
             channel = channels.append_child("channel")
             channel.append_child_value("label", angle)
             channel.append_child_value("unit", "degrees")
-        angles.desc().append_child_value("definition", "spec/JOINT_ANGLES.md of rehab-mocap; NaN where undefined")
+        angles.desc().append_child_value("definition", "docs/JOINT_ANGLES.md of rehab-mocap; NaN where undefined")
         status = pylsl.StreamInfo(f"{name} status", "Status", 1 + len(names), fps, "int16", f"{name}-status")
         channels = status.desc().append_child("channels")
         for label in ("state", *names):

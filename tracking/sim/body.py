@@ -1,6 +1,6 @@
 """The simulated seated patient: anthropometry, pose, marker positions and render primitives.
 
-Pure numpy, no GL. World frame (spec/INTERFACES.md): right-handed, metres, +Y up, floor at
+Pure numpy, no GL. World frame (docs/INTERFACES.md): right-handed, metres, +Y up, floor at
 ``y = 0``, the patient sits on a chair seat centred near ``x = 0, z = 0`` and faces -Z, so the
 patient's right is +X.
 
@@ -16,7 +16,7 @@ Kinematic chain (all rotations are 3x3 matrices acting on column vectors):
 - The humerus rotates about GH, the forearm about the epicondyle axis (elbow flexion) and about
   its own long axis (pronation/supination).
 
-Arm conventions are those of ``spec/JOINT_ANGLES.md`` and are written for the RIGHT arm; the left
+Arm conventions are those of ``docs/JOINT_ANGLES.md`` and are written for the RIGHT arm; the left
 arm uses the same numbers mirrored across the sagittal plane, so equal numbers mean the same
 motion on both sides. The humerus frame (right-side convention) has ``x_h`` = medial->lateral
 epicondyle axis, ``y_h`` = elbow->shoulder, ``z_h = x_h x y_h`` (posterior); the identity means
@@ -138,7 +138,7 @@ def direction_from_plane(plane_deg: float, elevation_deg: float) -> np.ndarray:
 def direction_from_clinical(flexion_deg: float = 0.0, abduction_deg: float = 0.0) -> np.ndarray:
     """Humerus direction whose sagittal and frontal projection angles are the clinical angles.
 
-    Matches the marker-based definitions of JOINT_ANGLES.md: flexion =
+    Matches the marker-based definitions of docs/JOINT_ANGLES.md: flexion =
     ``atan2(u . forward, u . down)``, abduction = ``atan2(u . out, u . down)``. One of the two may
     take any value; when both are non-zero both must lie in (-90, 90) (beyond that the two
     projections no longer define a direction: use :func:`direction_from_plane`).
@@ -459,7 +459,7 @@ def reference_pose(
     elbow_flexion_deg: float = REFERENCE_ELBOW_FLEXION_DEG,
     forearm_supination_deg: float = REFERENCE_SUPINATION_DEG,
 ) -> Pose:
-    """The seed's reference pose (METHOD.md 5.2), the same on both sides; arguments perturb it."""
+    """The seed's reference pose (docs/METHOD.md 5.2), the same on both sides; arguments perturb it."""
     arm = reference_arm(abduction_deg, flexion_deg, external_rotation_deg, elbow_flexion_deg, forearm_supination_deg)
     return Pose(right=arm, left=arm)
 

@@ -13,7 +13,7 @@ the patient's markers are, so the wand's centroids come from the same blob detec
 What is made (:func:`write_calibration_material`)::
 
     OUT/
-      truth_calibration.toml        the rig's true cameras (world frame of spec/INTERFACES.md)
+      truth_calibration.toml        the rig's true cameras (world frame of docs/INTERFACES.md)
       material.yaml                 board, seat-board origin, wand length and colours
       intrinsics/cam1/000.png ...   the board close to each camera, in many places and tilts
       intrinsics_charuco/cam1/...   on request: a ChArUco board likewise, some views partly out of the picture

@@ -3,7 +3,7 @@
 The capture's landmarks are mapped to our 14-marker set, turned into joint angles of our
 :class:`~tracking.sim.body.Pose`, and those angles drive OUR body model: the real motion's angles
 are reproduced, not the subject's segment lengths. Conversion per capture frame (all vectors in
-the capture's marker trunk frame of ``spec/JOINT_ANGLES.md``, the left arm mirrored into the
+the capture's marker trunk frame of ``docs/JOINT_ANGLES.md``, the left arm mirrored into the
 right-side convention):
 
 - trunk: forward and lateral lean of ``MB - MP`` in the world, and (when both acromions are
@@ -15,7 +15,7 @@ right-side convention):
   parallel to the capture's (solved through our GH joint, which lies below the acromion);
 - humerus axial rotation: from the epicondyle axis when the elbow is nearly straight and from the
   plane of the forearm when it is flexed (blended between 10 and 30 degrees of elbow flexion, so
-  that from 30 degrees on, where JOINT_ANGLES.md defines external rotation, it is reproduced);
+  that from 30 degrees on, where docs/JOINT_ANGLES.md defines external rotation, it is reproduced);
 - elbow flexion: the angle at which our model's marker-based elbow angle equals the capture's
   ``angle(E - S, W - E)``;
 - forearm supination: the capture's marker reading (styloid axis against the epicondyle axis
@@ -261,7 +261,7 @@ def _smoothstep(x: np.ndarray) -> np.ndarray:
 
 
 def marker_trunk_frame(mb: np.ndarray, mp: np.ndarray, lh: np.ndarray, rh: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) trunk frame of JOINT_ANGLES.md; columns x_T (right), y_T (up), z_T (back)."""
+    """(..., 3, 3) trunk frame of docs/JOINT_ANGLES.md; columns x_T (right), y_T (up), z_T (back)."""
     y = _unit(mb - mp)
     h = rh - lh
     x = _unit(h - _dot(h, y)[..., None] * y)
@@ -269,7 +269,7 @@ def marker_trunk_frame(mb: np.ndarray, mp: np.ndarray, lh: np.ndarray, rh: np.nd
 
 
 class CaptureAngles:
-    """Marker-based angles of a capture (JOINT_ANGLES.md definitions), per frame.
+    """Marker-based angles of a capture (docs/JOINT_ANGLES.md definitions), per frame.
 
     Attributes:
         trunk_forward_lean_deg, trunk_lateral_lean_deg: (F,).

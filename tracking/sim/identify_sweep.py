@@ -1,6 +1,6 @@
 """Identification sweep: the reference pose over body sizes, arm perturbations and camera layouts.
 
-``python -m tracking.sim.identify_sweep`` renders the reference pose (METHOD.md 5.2) for
+``python -m tracking.sim.identify_sweep`` renders the reference pose (docs/METHOD.md 5.2) for
 several bodies (5th percentile woman to 95th percentile man), each with the arms perturbed (each
 arm's shoulder flexion, abduction and axial rotation and the elbow flexion moved by up to +-10
 degrees: a few corner combinations and seeded random ones), in every camera layout of

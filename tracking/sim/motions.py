@@ -2,7 +2,7 @@
 
 A :class:`Motion` maps time (seconds from its start) to a :class:`~tracking.sim.body.Pose`. Every
 motion starts in the seed's reference pose and holds it for at least a second, because the
-tracker identifies the markers there (METHOD.md 5.2).
+tracker identifies the markers there (docs/METHOD.md 5.2).
 
 Motions are content YAML files in ``content/motions/`` (or a path), validated once at load:
 

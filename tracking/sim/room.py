@@ -1,6 +1,6 @@
 """A simple clinic room around the seated patient, as one static triangle mesh (pure numpy).
 
-World frame (spec/INTERFACES.md): metres, +Y up, the patient sits at x = 0, z = 0 facing -Z.
+World frame (docs/INTERFACES.md): metres, +Y up, the patient sits at x = 0, z = 0 facing -Z.
 The room spans x, z in [-3.5, 3.5] and y in [0, 2.8]: large enough for cameras 2-2.5 m from
 the patient. The chair's seat top is at y = 0.45 m, centred on x = 0, z = 0, with its backrest
 behind the patient (+Z).

@@ -1,7 +1,7 @@
 """Geometric primitives of one simulated frame: what the body model hands to the renderer.
 
 The renderer knows nothing of bodies: it draws spheres (markers, joints, head), tapered capsules
-(limb segments) and ellipsoids (trunk, pelvis, thighs) in world metres (spec/INTERFACES.md frame:
+(limb segments) and ellipsoids (trunk, pelvis, thighs) in world metres (docs/INTERFACES.md frame:
 +Y up, the patient faces -Z). Colours are linear-ish RGB in 0..1 (sRGB values / 255).
 A sphere with ``marker_index >= 0`` is a marker; the renderer reports how many of its pixels are
 visible in each camera so that the studio knows the ground-truth visibility.

@@ -1,7 +1,7 @@
 """Frame sources: where the synchronized camera images come from, behind one interface.
 
 - :class:`~tracking.sources.recording.RecordingSource`: a recording folder (videos or image
-  folders, spec/INTERFACES.md), read frame set by frame set;
+  folders, docs/INTERFACES.md), read frame set by frame set;
 - :class:`~tracking.sources.cameras.CameraSource`: live cameras through OpenCV, one reader thread
   per camera, frames grouped by their time stamps;
 - :class:`~tracking.sources.sim.SimulatedSource`: the simulated patient playing a scripted motion,

@@ -1,4 +1,4 @@
-"""Saving a frame source as a recording folder (spec/INTERFACES.md), for offline re-tracking."""
+"""Saving a frame source as a recording folder (docs/INTERFACES.md), for offline re-tracking."""
 
 from __future__ import annotations
 
@@ -59,7 +59,7 @@ def record(source: FrameSource, folder: str | Path, n_frames: int, markerset: Ma
            progress: bool = False, meta: dict | None = None) -> RecordSummary:
     """Write ``n_frames`` frame sets of ``source`` (fewer if it ends or on Ctrl-C) as a recording folder.
 
-    Besides the files of spec/INTERFACES.md (calibration.toml, one video or image folder per
+    Besides the files of docs/INTERFACES.md (calibration.toml, one video or image folder per
     camera, meta.yaml) it writes ``timestamps.csv`` (``frame,time,<cam1>,<cam2>...``: each
     camera's time stamp in seconds, empty where its image was missing) and, for a simulated
     source, ``truth.trc``. A missing image is written black, so every camera keeps the same

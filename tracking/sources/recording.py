@@ -1,4 +1,4 @@
-"""A recording folder (spec/INTERFACES.md) as a frame source."""
+"""A recording folder (docs/INTERFACES.md) as a frame source."""
 
 from __future__ import annotations
 

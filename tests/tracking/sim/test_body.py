@@ -52,7 +52,7 @@ def _eye(azimuth_deg: float, height_m: float, distance_m: float) -> np.ndarray:
 
 
 def structure_margins(p: np.ndarray) -> dict[str, float]:
-    """Every inequality of METHOD.md 5.2 as 'bigger minus smaller' (metres), keyed by the rule."""
+    """Every inequality of docs/METHOD.md 5.2 as 'bigger minus smaller' (metres), keyed by the rule."""
     g = {n: p[i] for i, n in enumerate(MARKERSET.names)}
     left = [n for n in g if n.startswith("ML")]
     right = [n for n in g if n.startswith("MR")]
@@ -158,7 +158,7 @@ def test_forearm_conventions_match_joint_angles_spec():
 
 @pytest.mark.parametrize("p, sex", BODIES)
 def test_reference_pose_structure_rules_with_margin(p, sex):
-    """METHOD.md 5.2 holds by >= 15 mm for every body and every +-10 degree arm perturbation."""
+    """docs/METHOD.md 5.2 holds by >= 15 mm for every body and every +-10 degree arm perturbation."""
     model = _model(p, sex)
     worst = (math.inf, "", None)
     for dv in itertools.product((-10.0, 0.0, 10.0), repeat=5):

@@ -38,7 +38,7 @@ def _eye(azimuth_deg: float, height_m: float = 1.5, distance_m: float = 2.2) -> 
 
 
 def _elbow_deg(p: np.ndarray, s: str) -> float:
-    """JOINT_ANGLES.md elbow flexion from marker centres (M, 3)."""
+    """docs/JOINT_ANGLES.md elbow flexion from marker centres (M, 3)."""
     g = {n: p[i] for i, n in enumerate(MARKERSET.names)}
     e = (g[f"M{s}E1"] + g[f"M{s}E2"]) / 2
     u, f = e - g[f"M{s}S"], (g[f"M{s}W1"] + g[f"M{s}W2"]) / 2 - e
@@ -233,7 +233,7 @@ def test_axes_mapping():
 
 @pytest.mark.parametrize("name", CAPTURES)
 def test_capture_replay_reproduces_the_elbow_flexion(name):
-    """The capture's elbow angle (from its landmarks, JOINT_ANGLES.md) is what our body shows."""
+    """The capture's elbow angle (from its landmarks, docs/JOINT_ANGLES.md) is what our body shows."""
     motion, model = _motion(name), _model()
     frames = np.arange(0, motion.landmarks_m.shape[0], 4)
     for side, s in (("right", "R"), ("left", "L")):
