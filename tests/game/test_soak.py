@@ -21,6 +21,11 @@ def test_descendants_and_their_memory_are_read_from_proc():
         child = int(parent.stdout.readline())
         found = {p.pid: p for p in descendants(parent.pid)}
         assert child in found and found[child].ppid == parent.pid
+        # the child has just been started: its interpreter maps its memory within a moment (right
+        # after the exec its resident set can read a few kB on a busy machine)
+        deadline = time.monotonic() + 10.0
+        while rss_kb(child) <= 1000 and time.monotonic() < deadline:
+            time.sleep(0.05)
         assert rss_kb(child) > 1000 and rss_kb(parent.pid) > 1000
         assert read_proc(child).start_ticks == found[child].start_ticks
     finally:
