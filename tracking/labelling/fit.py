@@ -492,7 +492,7 @@ class Labeller:
         n_done = 0
         # the assignments of at most two markers on rays: every sample (pair) in one batch, every
         # ``stride``-th where the pairs are too many, then every sample around the best few
-        grids, where = [], []
+        grids, where, many = [], [], []
         everyone = [(m, -1) for m in without.tolist()]
         for combo in product(*per_colour):
             n_done += 1
@@ -500,15 +500,17 @@ class Labeller:
                 return lower, p
             placed = [(m, r) for ms, pick in combo for m, r in zip(ms, pick) if r >= 0]
             if len(placed) > 2:
-                score, pos = self._best_samples(p.copy(), placed, on)
-                if best is None or score < best[0]:
-                    best = (score, pos)
+                many.append(placed)
                 continue
             size = math.prod(len(on[r]) for _, r in placed)
             stride = max(1, math.ceil(math.sqrt(size / _MAX_JOINT))) if len(placed) == 2 else 1
             idx = [np.arange(0, len(on[r]), stride) for _, r in placed]
             grids.append(self._grid(p, placed, on, idx))
             where.append((placed, stride, idx))
+        # more than two markers on rays: by turns, every assignment of the same markers in one batch
+        for score, pos in self._best_samples_many(p, many, on):
+            if best is None or score < best[0]:
+                best = (score, pos)
         if grids:
             lens = [len(g) for g in grids]
             sc = np.concatenate([self._objective(g, everyone) for g in grids])
@@ -563,36 +565,46 @@ class Labeller:
             explained |= (off < 2.0 * self.radius_m) & (colour[None] == self.colour[m])
         return score + self.reach * (~explained).sum(axis=1)
 
-    def _best_samples(self, pos: np.ndarray, placed: list[tuple[int, int]], on: list[np.ndarray]
-                      ) -> tuple[float, np.ndarray]:
-        """Markers ``placed`` (marker, ray) at their rays' best samples: one marker exactly, two
-        jointly when their samples are few, more by turns."""
-        if not placed:
-            return float(self._objective(pos[None], placed)[0]), pos
-        if len(placed) == 2 and len(on[placed[0][1]]) * len(on[placed[1][1]]) <= _MAX_JOINT:
-            (m1, r1), (m2, r2) = placed
-            a = np.repeat(np.arange(len(on[r1])), len(on[r2]))
-            b = np.tile(np.arange(len(on[r2])), len(on[r1]))
-            batch = np.repeat(pos[None], len(a), axis=0)
-            batch[:, m1], batch[:, m2] = on[r1][a], on[r2][b]
-            sc = self._objective(batch, placed)
-            k = int(np.argmin(sc))
-            return float(sc[k]), batch[k]
-        # each alone (the others without a point), then by turns
-        for m, r in placed:
-            batch = np.repeat(pos[None], len(on[r]), axis=0)
-            batch[:, m] = on[r]
-            sc = self._objective(batch, placed)
-            pos = batch[int(np.argmin(sc))]
-        score = float(self._objective(pos[None], placed)[0])
-        for _ in range(_SWEEPS if len(placed) > 1 else 0):
-            for m, r in placed:
-                batch = np.repeat(pos[None], len(on[r]), axis=0)
-                batch[:, m] = on[r]
-                sc = self._objective(batch, placed)
-                k = int(np.argmin(sc))
-                score, pos = float(sc[k]), batch[k]
-        return score, pos
+    def _best_samples_many(self, p: np.ndarray, many: list[list[tuple[int, int]]], on: list[np.ndarray]
+                           ) -> list[tuple[float, np.ndarray]]:
+        """The markers of each assignment in ``many`` (more than two markers on rays each, in their
+        order) at their rays' best samples: each alone (the others without a point), then by
+        turns (``_SWEEPS``): (score, positions) each. The assignments that place the same markers
+        go through their turns together, each turn one scoring batch for all of them (the scores
+        of a batch's rows are independent of each other), instead of one batch per assignment
+        and turn (thousands of small batches for four to six markers on rays, seconds per frame
+        set)."""
+        out: list[tuple[float, np.ndarray] | None] = [None] * len(many)
+        groups: dict[tuple[int, ...], list[int]] = {}
+        for i, placed in enumerate(many):
+            groups.setdefault(tuple(m for m, _ in placed), []).append(i)
+        for markers, items in groups.items():
+            placed0 = many[items[0]]
+            pos = np.repeat(p[None], len(items), axis=0)            # (A, M, 3) each assignment's
+            rays = np.array([[r for _, r in many[i]] for i in items])   # (A, k)
+
+            def turn(j: int) -> np.ndarray:
+                """Marker j of every assignment at its best sample, the others where they are;
+                (A,) the scores."""
+                m = markers[j]
+                lens = [len(on[r]) for r in rays[:, j]]
+                batch = np.repeat(pos, lens, axis=0)
+                batch[:, m] = np.concatenate([on[r] for r in rays[:, j]])
+                sc = self._objective(batch, placed0)
+                starts = np.concatenate([[0], np.cumsum(lens)[:-1]])
+                k = np.array([s0 + int(np.argmin(sc[s0:s0 + n])) for s0, n in zip(starts, lens)])
+                pos[:] = batch[k]
+                return sc[k]
+
+            for j in range(len(markers)):
+                turn(j)
+            score = self._objective(pos, placed0)
+            for _ in range(_SWEEPS):
+                for j in range(len(markers)):
+                    score = turn(j)
+            for a, i in enumerate(items):
+                out[i] = (float(score[a]), pos[a].copy())
+        return out
 
     def _arm(self, q: np.ndarray, cand: list[np.ndarray], arm: ArmRoles, ball: np.ndarray) -> _Part:
         """Candidates (shoulder, E1, E2, W1, W2) of one arm within reach."""
