@@ -531,7 +531,11 @@ class Tracker:
             # the single-camera rays name them, and the body model must find the names within its
             # ranges; not with one colour for all markers (there the rules' search with many
             # stand-ins takes seconds and is what named elbow pairs exchanged): the counts are reported
-            if self.labeller is not None and len(self.identifier.words) == 1:
+            # nor with more markers without a point than the fit ever places (its search on rays
+            # took 5-15 s per frame set with 12 of 14 markers seen by one camera or none, and
+            # could not name them with any confidence): the counts are reported
+            if self.labeller is not None and (len(self.identifier.words) == 1
+                                              or self._without_point(points).sum() > self.labeller.max_on_rays):
                 self._last_message = self.identifier.count_problem(np.asarray(points.colour)) or \
                     "waiting for the reference pose"
                 return self._last_message
@@ -560,11 +564,8 @@ class Tracker:
         a point (its search with stand-ins takes seconds): the counts, or the fit's words."""
         from tracking.identify import IdentificationError
 
-        finite = np.isfinite(points.p_world_m).all(axis=1)
-        colour = np.asarray(points.colour)[finite]
-        n_col = len(self.identifier.words)
-        short = np.bincount(self.colour, minlength=n_col) - np.bincount(colour[(colour >= 0) & (colour < n_col)],
-                                                                         minlength=n_col)
+        colour = np.asarray(points.colour)[np.isfinite(points.p_world_m).all(axis=1)]
+        short = self._without_point(points)
         if np.any(short < 0):
             return self.identifier.count_problem(colour) or "waiting for the reference pose"
         if short.sum() > self.labeller.max_unseen and len(self.identifier.words) == 1:
@@ -576,6 +577,13 @@ class Tracker:
         except IdentificationError as exc:
             return str(exc)
         return self.labeller.advice(lab, self.markerset.names)
+
+    def _without_point(self, points: Points3D) -> np.ndarray:
+        """(colours,) markers of each colour without a point (negative: more points than markers)."""
+        colour = np.asarray(points.colour)[np.isfinite(points.p_world_m).all(axis=1)]
+        n_col = len(self.identifier.words)
+        return np.bincount(self.colour, minlength=n_col) - np.bincount(colour[(colour >= 0) & (colour < n_col)],
+                                                                        minlength=n_col)
 
     def _start_tracking(self, points: Points3D, idx: np.ndarray, views: Sequence[CameraObservations]) -> str:
         """Start tracking with marker k at point ``idx[k]`` (-1: not seen yet, found later);

@@ -2,6 +2,8 @@
 named only once the patient has held still, the message shows the progress, a moving body is never
 named; the issue's arm with the elbow crease forward is named in one colour and in four."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -89,3 +91,21 @@ def test_the_fit_is_judged_once_per_pose():
     q[3] += 0.02
     assert not snap.same(q, c, np.array([1, 2]))       # a point moved
     assert not snap.same(q[:-1], c[:-1], np.array([1, 2]))  # a point fewer
+
+
+def test_more_markers_without_a_point_than_the_fit_places_get_the_counts_without_a_search(monkeypatch):
+    """Two cameras of front4 seeing 2 of 14 markers with four colours (reported-seed draw 100037, its
+    webcam images): more markers without a point than the fit ever places, so the rules' search on
+    the single-camera rays (5-15 s per frame set here, and no confident naming possible) is not run:
+    the message gives the counts at once."""
+    import tracking.identify
+    from tracking.sim.population import track_draws
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("the rules' search on rays ran")
+
+    monkeypatch.setattr(tracking.identify, "try_identify", no_search)
+    (result,) = track_draws([100037], size_px=(640, 480), fps=15.0, seconds=0.6)
+    assert result.layout == "front4:2" and not result.one_colour
+    assert math.isnan(result.identified_s)
+    assert "of the 4 yellow markers are seen" in result.message
