@@ -62,6 +62,7 @@ class ChooseGameScene(BaseScene):
         self.column = None         # None: the games; 0: Play; 1..: the limits
         self.auto = False
         self.error = ""
+        self._played: tuple[GameSpec, BaseScene] | None = None   # the game last opened from here
         self.limits: dict[str, TherapistLimits] = {g.name: g.limits for g in self.games}
         if self.db_path is not None:
             try:
@@ -87,7 +88,23 @@ class ChooseGameScene(BaseScene):
     def start(self) -> None:
         g = self.game
         if g is not None:
-            self.app.push(self.open_game(g, self.patient_id, side=self.side, auto=self.auto, limits=self.limits[g.name]))
+            scene = self.open_game(g, self.patient_id, side=self.side, auto=self.auto, limits=self.limits[g.name])
+            self._played = (g, scene)
+            self.app.push(scene)
+
+    def last_session(self) -> tuple[str, tuple[int, int, int]] | None:
+        """What became of the game last played from this menu, in one line, and its colour: stored
+        (with its count), or why not; None before a game or when it never started playing."""
+        if self._played is None:
+            return None
+        g, scene = self._played
+        error = getattr(scene, "store_error", "")
+        if error:
+            return f"{g.title}: not saved ({error})", theme.FAILURE
+        if getattr(scene, "stored_uid", None) is None:
+            return None
+        log = scene.session.log
+        return f"Saved: {g.title}, {log.reached} collected, {log.missed} missed", theme.ACCENT
 
     def change_limit(self, key: str, direction: int) -> None:
         """Step one limit of the chosen game and store it for the patient."""
@@ -201,6 +218,11 @@ class ChooseGameScene(BaseScene):
             size = round(theme.SMALL * s)
             line = c.wrap(g.exercises, size, rect[2] - 110 * s)[0]
             c.text(line, (rect[0] + 98 * s, rect[1] + 62 * s), size, theme.TEXT_DIM)
+        last = self.last_session()
+        if last is not None and games:
+            below = games[-1][1] + games[-1][3] + 24 * s
+            text, size = c.fit(last[0], round(theme.BODY * s), games[-1][2])
+            c.text(text, (games[-1][0], below), size, last[1])
         g = self.game
         if g is not None:
             x0 = limits[0][0]

@@ -6,6 +6,7 @@ values) and its games chart, and the key game's dial with the forearm turned pas
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 
 import pytest
 
@@ -272,5 +273,40 @@ def test_rom_test_list_titles_stay_inside_their_rows(open_headless, db_path, siz
                 assert drawn, test.title
                 for t, (x, y, tw, th) in drawn:
                     assert x + tw <= rx + rw - 8, (t, x + tw, rx + rw)
+    finally:
+        app.close()
+
+
+class _PlayedGame(BaseScene):
+    """A game scene as the menu sees it once it has ended: stored (an id) or not (the reason)."""
+
+    def __init__(self, stored_uid, store_error="", reached=3, missed=1) -> None:
+        super().__init__()
+        self.stored_uid, self.store_error = stored_uid, store_error
+        self.session = SimpleNamespace(log=SimpleNamespace(reached=reached, missed=missed))
+
+
+@pytest.mark.parametrize("size", SIZES)
+def test_game_menu_says_the_last_game_was_saved_or_why_not(open_headless, db_path, size):
+    """Back from a game (Esc: end and save), the menu says in a line that the session is stored,
+    with its count, or why it is not; nothing before a game or for one that never started."""
+    from game.scenes.game_menu import ChooseGameScene
+
+    app = App(open_headless(size), Settings(show_fps=False), clock=lambda: 0.0, events=lambda: [])
+    app.push(BaseScene())
+    outcomes = iter([_PlayedGame("uid-1"), _PlayedGame(None, "the database is read-only"), _PlayedGame(None)])
+    menu = ChooseGameScene("P001", lambda spec, pid, **kw: next(outcomes), db_path=db_path)
+    app.push(menu)
+    try:
+        assert not any(t.startswith("Saved") for t, _ in frame_texts(app).texts)
+        title = menu.game.title
+        expected = [f"Saved: {title}, 3 collected, 1 missed", f"{title}: not saved (the database is read-only)", None]
+        for want in expected:
+            menu.start()
+            app.pop()                                         # the game ends (Esc)
+            rec = frame_texts(app)
+            assert_text_fits(rec, size)
+            lines = [t for t, _ in rec.texts if t.startswith("Saved") or "not saved" in t]
+            assert lines == ([want] if want else [])
     finally:
         app.close()
