@@ -584,6 +584,8 @@ class LiveTracker:
             self._child = spare
             log.info("standby tracker process %d takes over", spare.pid)
         else:
+            if spare is not None:  # dying (killed together with the running one): reap it too
+                self._drop(spare)
             self._child = self._spawn(standby=False)
         if self._colours is not None:  # taught colours outlive the process (read after it is ready)
             self._child.send(self._colours)
