@@ -78,6 +78,7 @@ from typing import Sequence
 
 import cv2
 import numpy as np
+from scipy.special import erf as _erf
 
 from tracking.jit import compile_loop, plain_images
 
@@ -165,6 +166,7 @@ def find_blobs(
     offset_px: tuple[float, float] = (0.0, 0.0),
     colours: Sequence[int] | None = None,
     max_per_colour: int | Sequence[int] | None = DEFAULT_MAX_PER_COLOUR,
+    luma: bool = False,
 ) -> Blobs:
     """Find the 8-connected regions of each colour label and measure them.
 
@@ -185,6 +187,10 @@ def find_blobs(
             one bound per palette colour), the largest and roundest by their outline
             (:func:`_cap_regions`), so that time and memory stay bounded whatever the image; a
             warning says when regions were left out.
+        luma: with ``image_bgr``, check each refined centre against a fit of the ball in the
+            image's luma (:func:`luma_centre`) and take the fit's where they disagree by more than
+            ``LUMA_CONFIRM_PX`` (colour subsampled by MJPEG or YUYV moves the colour edge; the luma
+            is at full resolution). False: the colour centres alone.
 
     Returns:
         The accepted :class:`Blobs`.
@@ -212,7 +218,7 @@ def find_blobs(
             x, y, w, h = cv2.boundingRect(contour)
             if w * h < min_area_px:
                 continue
-            measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px)
+            measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px, luma)
             if measured is None or measured[3] < min_roundness:
                 continue
             first_x, first_y = (int(c) for c in contour[0, 0])
@@ -266,6 +272,7 @@ def _measure(
     h: int,
     min_area_px: float,
     max_area_px: float,
+    luma: bool = False,
 ) -> tuple[float, float, float, float] | None:
     """Centroid (u, v) in label-image pixels, area and roundness of the region inside ``contour``.
 
@@ -290,9 +297,215 @@ def _measure(
         return None
     if image_bgr is None:
         roundness = binary_roundness(total, mom["m10"], mom["m01"], mom["m20"], mom["m02"], mom["m11"])
-    else:
-        roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
-    return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
+        return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
+    roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
+    u, v = x0 + mom["m10"] / total, y0 + mom["m01"] / total
+    if luma:
+        fit = luma_centre(image_bgr, labels, colour, u, v, math.sqrt(total / math.pi))
+        if fit is not None and math.hypot(fit[0] - u, fit[1] - v) > LUMA_CONFIRM_PX:
+            u, v = fit
+    return u, v, float(total), roundness
+
+
+LUMA_CONFIRM_PX = 0.2
+"""The colour centre stands where the luma fit (:func:`luma_centre`) lands within this of it: with
+colour at full resolution the unmixing is the more exact (it tells shading from coverage, which
+brightness alone cannot); a larger disagreement is a colour edge moved by subsampled chroma."""
+LUMA_MAX_SE_PX = 0.1
+"""The luma fit is used only when it pins the centre to this standard error (px, from the fit's
+residuals and Jacobian): a ball whose brightness barely differs from its background's (a green
+ball on a mid-grey shirt) has a weak luma edge, and there the fit can wander to the background's
+own edges."""
+_LUMA_GROW_PX = 3.0  # pixels fitted: within the colour radius + this of the colour centre
+_LUMA_ITERATIONS = 8
+_LUMA_BGR = np.array([0.114, 0.587, 0.299])  # BT.601 luma, what JPEG keeps at full resolution
+_SQRT2 = math.sqrt(2.0)
+_INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
+
+
+def luma_centre(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float, v: float,
+                radius_px: float, *, compiled: bool = True) -> tuple[float, float] | None:
+    """The centre of a ball from its image's luma, by fitting a shaded disc over a background.
+
+    Model of each pixel's luma within ``radius_px + 3`` of the start (u, v), pixels of other marker
+    colours left out: ``Y = c S + (1 - c) B`` with ``c = Phi((r - d) / s)`` the disc's coverage (d
+    the distance to the centre, r the radius, s the edge's blur: pixel area, lens, anti-aliasing),
+    ``S`` the ball's shading as a quadratic in x, y (a matt ball under smooth light) and ``B`` the
+    background as a plane. Centre, radius, blur and the 9 linear coefficients are fitted together
+    by Gauss-Newton (the Jacobian exact: the polynomials are taken about the fixed start).
+
+    Why it is unbiased under MJPEG: JPEG keeps luma at full resolution and only the colour at half
+    (4:2:2, 4:2:0), so the luma edge is where the ball's edge is; the fit finds it for a ball
+    brighter or darker than its background alike (the step's height and sign are coefficients,
+    not assumptions), and the coverage model puts it at sub-pixel positions. What it cannot model:
+    a shadow boundary across the ball (a hard light from one side, where the quadratic shading
+    does not fit) and a background with edges of its own inside the fitted ring.
+
+    ``compiled``: one compiled loop (numba, where installed; :func:`_luma_fit_loop`) instead of
+    numpy: the same arithmetic, sums in another order (the centres agree to ~1e-9 px).
+
+    Returns:
+        (u, v) full-image pixels, or None where the fit is not sure (standard error above
+        ``LUMA_MAX_SE_PX``), fails, or wanders (radius or centre beyond half the radius).
+    """
+    h_img, w_img = labels.shape
+    reach = radius_px + _LUMA_GROW_PX
+    x0, y0 = max(int(u - reach), 0), max(int(v - reach), 0)
+    x1, y1 = min(int(u + reach) + 2, w_img), min(int(v + reach) + 2, h_img)
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return None
+    loop = _luma_loop() if compiled and plain_images([image_bgr]) and labels.flags.c_contiguous else None
+    if loop is not None:
+        out = np.zeros(2)
+        ok = loop(image_bgr, labels, colour + 1, x0, y0, x1, y1, float(u), float(v), float(radius_px), reach,
+                  _LUMA_ITERATIONS, LUMA_MAX_SE_PX, out)
+        return (u + out[0], v + out[1]) if ok else None
+    lab = labels[y0:y1, x0:x1]
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    near = ((xx - u) ** 2 + (yy - v) ** 2 <= reach * reach) & ((lab == 0) | (lab == colour + 1))
+    py, px = np.nonzero(near)
+    lum = image_bgr[y0:y1, x0:x1][py, px] @ _LUMA_BGR
+    gx = px + (x0 - u)  # pixel positions about the start
+    gy = py + (y0 - v)
+    n = gx.size
+    if n < 16:
+        return None
+    scale = 1.0 / max(radius_px, 1.0)
+    bx, by = gx * scale, gy * scale
+    one = np.ones(n)
+    shading = np.stack((one, bx, by, bx * bx, bx * by, by * by), axis=1)  # (n, 6)
+    plane = shading[:, :3]
+    cx = cy = 0.0
+    r, s = float(radius_px), 0.5
+    jac = np.empty((n, 13))
+    for _ in range(_LUMA_ITERATIONS):
+        dx, dy = gx - cx, gy - cy
+        d = np.sqrt(dx * dx + dy * dy) + 1e-9
+        z = (r - d) / s
+        cov = 0.5 * (1.0 + _erf(z / _SQRT2))
+        np.multiply(cov[:, None], shading, out=jac[:, 4:10])
+        np.multiply((1.0 - cov)[:, None], plane, out=jac[:, 10:13])
+        lin = jac[:, 4:]
+        try:
+            coef = np.linalg.solve(lin.T @ lin + 1e-9 * np.eye(9), lin.T @ lum)
+        except np.linalg.LinAlgError:
+            return None
+        res = lum - lin @ coef
+        contrast = shading @ coef[:6] - plane @ coef[6:]
+        dens = contrast * np.exp(-0.5 * z * z) * (_INV_SQRT_2PI / s)  # dY / d(r - d)
+        jac[:, 0] = dens * dx / d
+        jac[:, 1] = dens * dy / d
+        jac[:, 2] = dens
+        jac[:, 3] = -dens * z
+        normal = jac.T @ jac + 1e-9 * np.eye(13)
+        try:
+            step = np.linalg.solve(normal, jac.T @ res)
+        except np.linalg.LinAlgError:
+            return None
+        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        s = min(max(s + step[3], 0.2), 1.5)
+        if not (abs(r - radius_px) < 0.5 * radius_px and math.hypot(cx, cy) < 0.5 * radius_px):
+            return None
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3:
+            break
+    try:
+        var = np.linalg.inv(normal)[:2, :2] * (float(res @ res) / max(n - 13, 1))
+    except np.linalg.LinAlgError:
+        return None
+    if not var[0, 0] + var[1, 1] <= LUMA_MAX_SE_PX ** 2:
+        return None
+    return u + cx, v + cy
+
+
+def _luma_rows(gx, gy, lum, n, scale, cx, cy, r, s, coef, row, normal, rhs, nonlinear):
+    """Accumulate the Gauss-Newton normal equations of :func:`_luma_fit_loop` (upper triangle;
+    ``nonlinear`` False: the linear coefficients' alone, rows 4-12); returns the residuals' sum of
+    squares."""
+    normal[:, :] = 0.0
+    rhs[:] = 0.0
+    sse = 0.0
+    first = 0 if nonlinear else 4
+    for i in range(n):
+        dx, dy = gx[i] - cx, gy[i] - cy
+        d = math.sqrt(dx * dx + dy * dy) + 1e-9
+        z = (r - d) / s
+        cov = 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))
+        bx, by = gx[i] * scale, gy[i] * scale
+        sh = coef[0] + coef[1] * bx + coef[2] * by + coef[3] * bx * bx + coef[4] * bx * by + coef[5] * by * by
+        bg = coef[6] + coef[7] * bx + coef[8] * by
+        res = lum[i] - (cov * sh + (1.0 - cov) * bg)
+        sse += res * res
+        dens = (sh - bg) * math.exp(-0.5 * z * z) / (math.sqrt(2.0 * math.pi) * s)
+        row[0], row[1], row[2], row[3] = dens * dx / d, dens * dy / d, dens, -dens * z
+        row[4], row[5], row[6], row[7], row[8], row[9] = cov, cov * bx, cov * by, cov * bx * bx, cov * bx * by, cov * by * by
+        row[10], row[11], row[12] = 1.0 - cov, (1.0 - cov) * bx, (1.0 - cov) * by
+        for a in range(first, 13):
+            rhs[a] += row[a] * res
+            for b in range(a, 13):
+                normal[a, b] += row[a] * row[b]
+    for a in range(13):
+        normal[a, a] += 1e-9
+        for b in range(a):
+            normal[a, b] = normal[b, a]
+    return sse
+
+
+def _luma_fit_loop(img, labels, own, x0, y0, x1, y1, u, v, radius, reach, iterations, max_se, out):
+    """:func:`luma_centre`'s fit as loops over the pixels (compiled by numba; plain Python runs it
+    too): the same model, tests and start; all 13 parameters stepped together by Gauss-Newton
+    from a first linear solve (the numpy path solves the 9 linear ones anew each iteration: both
+    converge to the same least-squares fit). ``out`` receives the centre's offset from (u, v).
+    Returns whether the fit is sure."""
+    cap = (y1 - y0) * (x1 - x0)
+    gx = np.empty(cap)
+    gy = np.empty(cap)
+    lum = np.empty(cap)
+    n = 0
+    for y in range(y0, y1):
+        for x in range(x0, x1):
+            lab = labels[y, x]
+            if (x - u) ** 2 + (y - v) ** 2 <= reach * reach and (lab == 0 or lab == own):
+                gx[n] = x - u
+                gy[n] = y - v
+                lum[n] = 0.114 * img[y, x, 0] + 0.587 * img[y, x, 1] + 0.299 * img[y, x, 2]
+                n += 1
+    if n < 16:
+        return False
+    scale = 1.0 / max(radius, 1.0)
+    row = np.empty(13)
+    coef = np.zeros(9)
+    normal = np.zeros((13, 13))
+    rhs = np.zeros(13)
+    cx = 0.0
+    cy = 0.0
+    r = radius
+    s = 0.5
+    # the linear coefficients at the start (rows 4-12 with coef 0: residual = the luma itself)
+    _luma_rows(gx, gy, lum, n, scale, cx, cy, r, s, coef, row, normal, rhs, False)
+    coef[:] = np.linalg.solve(normal[4:, 4:], rhs[4:])
+    for _ in range(iterations):
+        sse = _luma_rows(gx, gy, lum, n, scale, cx, cy, r, s, coef, row, normal, rhs, True)
+        step = np.linalg.solve(normal, rhs)
+        cx += step[0]
+        cy += step[1]
+        r += step[2]
+        s = min(max(s + step[3], 0.2), 1.5)
+        coef += step[4:]
+        if not (abs(r - radius) < 0.5 * radius and math.sqrt(cx * cx + cy * cy) < 0.5 * radius):
+            return False
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3:
+            break
+    inv = np.linalg.inv(normal)
+    if not (inv[0, 0] + inv[1, 1]) * sse / max(n - 13, 1) <= max_se * max_se:
+        return False
+    out[0] = cx
+    out[1] = cy
+    return True
+
+
+def _luma_loop():
+    return compile_loop(_luma_fit_loop, helpers=(_luma_rows,))
+
 
 
 def binary_roundness(m00: float, m10: float, m01: float, m20: float, m02: float, m11: float) -> float:

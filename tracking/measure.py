@@ -100,6 +100,10 @@ class FrameMeasurer:
             instead of :data:`tracking.blobs.DEFAULT_MAX_PER_COLOUR`: sensor noise or MJPEG blocks
             of a marker colour make hundreds of regions, and every one kept costs in the matching
             across cameras.
+        luma_centres: check each ball's colour centre against a fit of it in the luma and take the
+            fit's where they disagree (``find_blobs(luma=True)``; docs/TRACKING.md, "Marker centres
+            from the luma"): webcams send colour at half resolution (MJPEG, YUYV), which moves the
+            colour edge by a third to half a pixel; the luma is at full resolution.
     """
 
     cameras: Sequence[Camera]
@@ -107,6 +111,7 @@ class FrameMeasurer:
     marker_radius_m: float
     params: ReconstructionParams | None = None
     markers_per_colour: Sequence[int] | None = None
+    luma_centres: bool = True
     times: StageTimes = field(default_factory=lambda: StageTimes(("colour table", "centroids", "triangulation")))
 
     def __post_init__(self) -> None:
@@ -133,6 +138,7 @@ class FrameMeasurer:
                     min_roundness=gate.min_roundness,
                     image_bgr=img,
                     max_per_colour=self._cap,
+                    luma=self.luma_centres,
                 )
             )
             t2 = time.perf_counter()
