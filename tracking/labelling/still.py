@@ -1,14 +1,23 @@
 """Whether the patient holds still: the labelling identifies only on a still reference pose.
 
-The unlabelled points of consecutive frame sets are compared: a frame set is still when nearly
-every point (``share``) has a point of its colour in the one before within ``step_m``, and
-nearly every point there one in this frame set (a point that flickers in and out, a ball seen by
-two cameras in one frame set and by one in the next, does not stop the hold; a moving arm does). The patient has held still for ``hold_s`` once that many seconds of
+A frame set is still when nearly every point of it (``share``) has a point of its colour within
+``step_m`` in one of the few frame sets before it (the hold's length, at least two). A point that
+flickers in and out (a ball seen by two cameras in one frame set and by one in the next, or its
+views failing the matching's gates now and then, as they do under MJPEG) finds itself in an
+earlier frame set and does not stop the hold; a moving arm's points find no earlier position
+within ``step_m`` and do. The patient has held still for ``hold_s`` once that many seconds of
 consecutive frame sets were still; :meth:`Stillness.update` returns the share of it done (the
 progress the therapist sees).
+
+(Until 2026-11-28 a frame set was compared with the one before alone, both ways: on the
+validation population's webcam images, where 5-10 of 14 points are made and their number
+changes from frame set to frame set, one point more or less failed the share, and 6 of 12 draws
+never saw the hold done although no point moved more than 2 mm; docs/TRACKING.md.)
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 
@@ -30,7 +39,7 @@ class Stillness:
         self.reset()
 
     def reset(self) -> None:
-        self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self._recent: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=max(self.frames_needed, 2))
         self.count = 0
 
     def update(self, p_world_m: np.ndarray, colour: np.ndarray) -> float:
@@ -39,21 +48,24 @@ class Stillness:
         colour = np.asarray(colour).reshape(-1)
         finite = np.isfinite(p_world_m).all(axis=1)
         p, c = p_world_m[finite], colour[finite]
-        if self._last is not None and self._same(p, c, *self._last):
+        if self._recent and self._still(p, c):
             self.count += 1
         else:
             self.count = 0
-        self._last = (p, c)
+        self._recent.append((p, c))
         return min(self.count / self.frames_needed, 1.0)
 
-    def _same(self, p: np.ndarray, c: np.ndarray, p0: np.ndarray, c0: np.ndarray) -> bool:
-        if len(p) == 0 or len(p0) == 0:
+    def _still(self, p: np.ndarray, c: np.ndarray) -> bool:
+        """Whether nearly every point has one of its colour within ``step_m`` in a recent frame set."""
+        if len(p) == 0:
             return False
-        same = np.asarray(c)[:, None] == np.asarray(c0)[None, :]
-        d = np.where(same, np.linalg.norm(p[:, None, :] - p0[None, :, :], axis=-1), np.inf)
-        now = np.mean(d.min(axis=1) <= self.step_m)
-        before = np.mean(d.min(axis=0) <= self.step_m)
-        return bool(now >= self.share and before >= self.share)
+        near = np.zeros(len(p), dtype=bool)
+        for p0, c0 in self._recent:
+            if len(p0):
+                same = c[:, None] == np.asarray(c0)[None, :]
+                d = np.where(same, np.linalg.norm(p[:, None, :] - p0[None, :, :], axis=-1), np.inf)
+                near |= d.min(axis=1) <= self.step_m
+        return bool(np.mean(near) >= self.share)
 
 
 class Snapshot:
