@@ -54,6 +54,15 @@ Refinement costs ~0.1-0.3 ms per blob (pure numpy/OpenCV on a patch around the b
 inside a region (a white specular highlight fails the saturation test) are filled before anything
 is measured, and left out of the interior colour.
 
+Colour at half resolution
+-------------------------
+Webcams send colour at half resolution (MJPEG 4:2:0 or 4:2:2, YUYV), which moves the colour edge,
+and with it the centroid above, by a third to half a pixel; their luma is at full resolution.
+With ``luma=True`` each refined centre is checked against a fit of the ball in the luma
+(:func:`luma_centre`: a shaded disc over a background plane) and the fit's is taken where the two
+disagree by more than ``LUMA_CONFIRM_PX`` and the fit pins the centre; the colour only names the
+ball then. Measurements and what else was tried: docs/TRACKING.md, "Marker centres from the luma".
+
 Partly hidden balls
 -------------------
 A ball partly hidden by something in front of it leaves a region whose centroid lies towards the
@@ -218,9 +227,13 @@ def find_blobs(
             x, y, w, h = cv2.boundingRect(contour)
             if w * h < min_area_px:
                 continue
-            measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px, luma)
+            measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px)
             if measured is None or measured[3] < min_roundness:
                 continue
+            if luma and image_bgr is not None:  # (only the regions that passed the gates pay for the fit)
+                fit = luma_centre(image_bgr, labels, k, measured[0], measured[1], math.sqrt(measured[2] / math.pi))
+                if fit is not None and math.hypot(fit[0] - measured[0], fit[1] - measured[1]) > LUMA_CONFIRM_PX:
+                    measured = (fit[0], fit[1], measured[2], measured[3])
             first_x, first_y = (int(c) for c in contour[0, 0])
             rows.append((k, first_y, first_x, measured[0] + ox, measured[1] + oy, measured[2], measured[3]))
     if not rows:
@@ -272,7 +285,6 @@ def _measure(
     h: int,
     min_area_px: float,
     max_area_px: float,
-    luma: bool = False,
 ) -> tuple[float, float, float, float] | None:
     """Centroid (u, v) in label-image pixels, area and roundness of the region inside ``contour``.
 
@@ -299,12 +311,7 @@ def _measure(
         roundness = binary_roundness(total, mom["m10"], mom["m01"], mom["m20"], mom["m02"], mom["m11"])
         return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
     roundness = float(axis_ratio(mom["mu20"] / total, mom["mu02"] / total, mom["mu11"] / total, PIXEL_MOMENT))
-    u, v = x0 + mom["m10"] / total, y0 + mom["m01"] / total
-    if luma:
-        fit = luma_centre(image_bgr, labels, colour, u, v, math.sqrt(total / math.pi))
-        if fit is not None and math.hypot(fit[0] - u, fit[1] - v) > LUMA_CONFIRM_PX:
-            u, v = fit
-    return u, v, float(total), roundness
+    return x0 + mom["m10"] / total, y0 + mom["m01"] / total, float(total), roundness
 
 
 LUMA_CONFIRM_PX = 0.2
