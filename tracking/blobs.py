@@ -324,7 +324,8 @@ residuals and Jacobian): a ball whose brightness barely differs from its backgro
 ball on a mid-grey shirt) has a weak luma edge, and there the fit can wander to the background's
 own edges."""
 _LUMA_GROW_PX = 3.0  # pixels fitted: within the colour radius + this of the colour centre
-_LUMA_ITERATIONS = 8
+_LUMA_ITERATIONS = 6
+_LUMA_STEP_DONE_PX = 0.005  # a step of centre and radius below this ends the iterations
 _LUMA_BGR = np.array([0.114, 0.587, 0.299])  # BT.601 luma, what JPEG keeps at full resolution
 _SQRT2 = math.sqrt(2.0)
 _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
@@ -413,7 +414,7 @@ def luma_centre(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float
         s = min(max(s + step[3], 0.2), 1.5)
         if not (abs(r - radius_px) < 0.5 * radius_px and math.hypot(cx, cy) < 0.5 * radius_px):
             return None
-        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3:
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < _LUMA_STEP_DONE_PX:
             break
     try:
         var = np.linalg.inv(normal)[:2, :2] * (float(res @ res) / max(n - 13, 1))
@@ -500,7 +501,7 @@ def _luma_fit_loop(img, labels, own, x0, y0, x1, y1, u, v, radius, reach, iterat
         coef += step[4:]
         if not (abs(r - radius) < 0.5 * radius and math.sqrt(cx * cx + cy * cy) < 0.5 * radius):
             return False
-        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3:
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < _LUMA_STEP_DONE_PX:
             break
     inv = np.linalg.inv(normal)
     if not (inv[0, 0] + inv[1, 1]) * sse / max(n - 13, 1) <= max_se * max_se:
