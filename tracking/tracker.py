@@ -144,11 +144,12 @@ class Tracker:
         self.geometry: RigGeometry = self.measurer.geometry
         # the hot loops compiled where numba is installed and imports (see ``compiled``)
         self.compiled = bool(compiled) and window_kernel.usable([])  # (imports numba once)
-        config = estimator_config(markerset)
-        self.setup = Setup.of(self.cameras, markerset, self.geometry, self.compiled, config["length_pairs"])
+        self.setup = Setup.of(self.cameras, markerset, self.geometry, self.compiled,
+                              estimator_config(markerset)["length_pairs"])
         self.gates = self.setup.gates
         self.colour = markerset.colour_index
-        self._estimator_factory = lambda: Estimator(**config, fps=self.fps)
+        # (a new configuration for each estimator: nothing of one run's can reach the next)
+        self._estimator_factory = lambda: Estimator(**estimator_config(markerset), fps=self.fps)
         self.naming = Naming(self.cameras, markerset, params, self.fps)
         self.identifier = self.naming.identifier
         self.labeller = self.naming.labeller
