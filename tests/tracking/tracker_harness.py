@@ -11,7 +11,8 @@ frame's state, positions, statuses, angles, windows, centroids, suspects, messag
     python tests/tracking/tracker_harness.py compare [BASE.npz]  # identical to 1e-9, or the first difference
 
 The rendered images are cached in ``$REHAB_HARNESS_CACHE`` (default: the system's temporary
-folder), so a compare after the first takes the tracking time only (about a minute on one core).
+folder), so a compare after the first takes the tracking time only (20-30 s on an idle machine;
+the first renders the runs, about a minute).
 The baseline belongs to the code it was recorded on: record it again on main after a change that
 is meant to change the tracker's results (e.g. the blobs' centroids).
 """

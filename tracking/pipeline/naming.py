@@ -9,6 +9,7 @@ from typing import Sequence
 
 import numpy as np
 
+from calibration.camera import Camera
 from tracking.identify import IdentificationError, Identifier, single_view_rays, try_identify
 from tracking.labelling import BodyRoles, Labeller
 from tracking.labelling.still import Snapshot, Stillness
@@ -31,7 +32,7 @@ class Naming:
         fps: frame rate (the hold's frame sets).
     """
 
-    def __init__(self, cameras: Sequence, markerset: MarkerSet, params: TrackerParams, fps: float):
+    def __init__(self, cameras: Sequence[Camera], markerset: MarkerSet, params: TrackerParams, fps: float):
         self.cameras = tuple(cameras)
         self.markerset = markerset
         self.rejudge_every = params.rejudge_every

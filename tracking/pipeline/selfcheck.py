@@ -1,5 +1,6 @@
 """The labelling's per-frame self-checks on the tracked markers (:mod:`tracking.labelling.checks`)
-and the joint angles they allow."""
+and the joint angles they allow. ``estimator``: the tracker's :class:`tracking.hidden.Estimator`
+(passed in: only ``tracking/tracker.py`` imports :mod:`tracking.hidden`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,8 @@
 """The end of a tracked frame set: the hidden-marker estimate of the markers not measured, then each
-marker's memory for the next frame set."""
+marker's memory for the next frame set.
+
+The estimator is :class:`tracking.hidden.Estimator`, passed in (only ``tracking/tracker.py`` imports
+:mod:`tracking.hidden`, so that its home can move with one line)."""
 
 from __future__ import annotations
 
