@@ -11,11 +11,11 @@ from tracking.angles import joint_angles
 from tracking.labelling.checks import SelfChecks
 from tracking.labelling.roles import BodyRoles
 from tracking.markerset import load_markerset
+from tracking.pipeline.selfcheck import exchange
 from tracking.sim.body import BodyDimensions, BodyModel
 from tracking.sim.motions import available_motions, load_motion
 from tracking.sim.population import draw, markers_m
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.pipeline.selfcheck import exchange
 from tracking.status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
 

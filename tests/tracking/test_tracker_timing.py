@@ -11,10 +11,10 @@ import pytest
 
 from game.cli import main as rehab
 from tracking.offline import track_frames_of
+from tracking.pipeline.timing import image_velocity
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.studio import SimulationSettings, simulate_recording
 from tracking.sim.timing_eval import measured_rmse_mm, render
-from tracking.pipeline.timing import image_velocity
 from tracking.tracker import Tracker
 
 # the arm lifts fast (~0.9 m/s) from 1.5 s on; 15 frames/s makes half a period 33 ms

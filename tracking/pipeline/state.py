@@ -63,7 +63,7 @@ class Setup:
 
     @classmethod
     def of(cls, cameras: Sequence[Camera], markerset: MarkerSet, geometry: RigGeometry, compiled: bool,
-           length_pairs: Sequence[tuple[int, int]]) -> "Setup":
+           length_pairs: Sequence[tuple[int, int]]) -> Setup:
         """The setup of ``cameras`` and ``markerset``; ``length_pairs`` the near-rigid pairs across
         a joint that the marker set names (hidden_markers.limits)."""
         cameras = tuple(cameras)
@@ -120,7 +120,7 @@ class MarkerMemory:
     exchanged_streak: int = 0
 
     @classmethod
-    def empty(cls, n_markers: int, n_cameras: int) -> "MarkerMemory":
+    def empty(cls, n_markers: int, n_cameras: int) -> MarkerMemory:
         """Nothing known: every marker lost."""
         m = n_markers
         return cls(positions=np.full((m, 3), np.nan), velocity=np.zeros((m, 3)),
