@@ -4,8 +4,9 @@ A renovation of ``tracking/tracker.py`` and ``tracking/pipeline/`` must leave ev
 tracker gives unchanged. This script tracks a fixed set of simulated runs (several motions and rigs
 at 320x240, one colour and four colours, free-running cameras with their stamps and rolling
 shutters, markers hidden, cameras blacked out so that markers are lost and found again, the hold
-of the reference pose before the names, the numpy paths beside the compiled ones) and writes every
-frame's state, positions, statuses, angles, windows, centroids, suspects, messages and point counts.
+of the reference pose before the names, the numpy paths beside the compiled ones, and a recording
+folder with its time stamps through ``rehab track``'s driver) and writes every frame's state,
+positions, statuses, angles, windows, centroids, suspects, messages and point counts.
 
     python tests/tracking/tracker_harness.py record [OUT.npz]    # the baseline (default below)
     python tests/tracking/tracker_harness.py compare [BASE.npz]  # identical to 1e-9, or the first difference
@@ -30,12 +31,13 @@ from pathlib import Path
 import numpy as np
 
 from tracking.markerset import load_markerset
+from tracking.offline import track_frames_of
 from tracking.sim.body import BodyDimensions
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.motions import load_motion
 from tracking.sim.population import ONE_COLOUR_RGB
 from tracking.sim.rigs import load_rig
-from tracking.sim.studio import Studio
+from tracking.sim.studio import SimulationSettings, Studio, simulate_recording
 from tracking.tracker import Tracker, TrackerParams
 
 BASELINE = Path(__file__).with_name("data") / "tracker_harness_baseline.npz"
@@ -156,8 +158,33 @@ def track(run: Run) -> dict[str, np.ndarray]:
     return out
 
 
+#: a recording folder written by ``rehab simulate`` with its cameras' time stamps, tracked by the
+#: offline driver (``rehab track``'s) through the recording reader
+RECORDED = SimulationSettings(motion="right_forearm_supination", size_px=SIZE_PX, fps=15.0, seconds=2.0, seed=5,
+                              images=True, camera_offsets=(0.0, 0.3, -0.2, 0.1))
+
+
+def track_recorded() -> dict[str, np.ndarray]:
+    """The recorded run's positions, statuses, angles and centroids (the folder written once, then cached)."""
+    key = hashlib.sha1(repr(RECORDED).encode()).hexdigest()[:12]
+    folder = _cache_dir() / f"recorded-{key}"
+    if not (folder / "meta.yaml").exists():
+        simulate_recording(folder, RECORDED)
+    rec = track_frames_of(folder)
+    out = {"recorded/positions_mm": rec.positions_mm, "recorded/status": rec.status.astype(np.float64),
+           "recorded/uv": rec.uv_px, "recorded/frames": rec.frames.astype(np.float64),
+           "recorded/timing": np.array([rec.timing], dtype=str)}
+    for name, v in rec.angles_deg.items():
+        out[f"recorded/angle/{name}"] = np.asarray(v, dtype=np.float64)
+    return out
+
+
 def track_all() -> dict[str, np.ndarray]:
     out = {}
+    t0 = time.perf_counter()
+    out.update(track_recorded())
+    print(f"  recorded folder: {len(out['recorded/frames'])} frame sets, {time.perf_counter() - t0:.1f} s",
+          file=sys.stderr)
     for run in RUNS:
         t0 = time.perf_counter()
         res = track(run)
@@ -203,14 +230,14 @@ def main(argv: list[str]) -> int:
     if argv[0] == "record":
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, **now)
-        print(f"recorded {len(RUNS)} runs to {path} ({time.perf_counter() - t0:.0f} s)")
+        print(f"recorded {len(RUNS) + 1} runs to {path} ({time.perf_counter() - t0:.0f} s)")
         return 0
     with np.load(path) as z:
         base = {k: z[k] for k in z.files}
     diff = first_difference(base, now)
     if diff is None:
-        print(f"identical to {TOL:g}: {len(RUNS)} runs, {sum(len(v) for k, v in now.items() if k.endswith('/state'))} "
-              f"frame sets ({time.perf_counter() - t0:.0f} s)")
+        n_sets = sum(len(v) for k, v in now.items() if k.endswith(("/state", "/frames")))
+        print(f"identical to {TOL:g}: {len(RUNS) + 1} runs, {n_sets} frame sets ({time.perf_counter() - t0:.0f} s)")
         return 0
     print(f"DIFFERENT: {diff}")
     return 1
