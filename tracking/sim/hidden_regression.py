@@ -25,8 +25,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from tracking.hidden import estimator_config
-from tracking.hidden import Estimator
+from tracking.hidden import Estimator, estimator_config
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.hidden_eval import ESTIMATORS, OcclusionData, make_estimator, occlusion_data
 
