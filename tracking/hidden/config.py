@@ -13,10 +13,9 @@ from tracking.errors import ContentError
 from tracking.hidden import registry
 from tracking.hidden.codes import Method
 from tracking.hidden.layout import Forearm, Hinge
-from tracking.markerset import MarkerSet, default_hidden
 
 
-def _method(name: "str | int | Method", markerset: MarkerSet) -> registry.HiddenMethod:
+def _method(name: "str | int | Method", markerset) -> registry.HiddenMethod:
     try:
         return registry.resolve(name)
     except ValueError as e:
@@ -24,7 +23,7 @@ def _method(name: "str | int | Method", markerset: MarkerSet) -> registry.Hidden
                            "tracking/hidden/methods/)") from None
 
 
-def estimator_config(markerset: MarkerSet, *, method: "Method | str | None" = None,
+def estimator_config(markerset, *, method: "Method | str | None" = None,
                      own_velocity: bool = False) -> dict:
     """Keyword arguments of :class:`~tracking.hidden.Estimator` from a marker set.
 
@@ -39,7 +38,7 @@ def estimator_config(markerset: MarkerSet, *, method: "Method | str | None" = No
     """
     names = list(markerset.names)
     index = {n: i for i, n in enumerate(names)}
-    cfg = markerset.hidden if markerset.hidden is not None else default_hidden(names, markerset.segments)
+    cfg = markerset.hidden
     m = len(names)
     weights = np.zeros((m, m))
     for name, row in cfg.weights.items():

@@ -64,14 +64,14 @@ def register(cls: type[HiddenMethod]) -> type[HiddenMethod]:
 
 def names() -> tuple[str, ...]:
     """The registered estimators' names."""
-    return tuple(_METHODS)
+    return tuple(sorted(_METHODS))
 
 
 def get(name: str) -> HiddenMethod:
     """The estimator called ``name`` (a ValueError lists the known ones)."""
     method = _METHODS.get(name.strip().lower())
     if method is None:
-        raise ValueError(f"estimator {name!r} is not one of {', '.join(_METHODS)}")
+        raise ValueError(f"estimator {name!r} is not one of {', '.join(names())}")
     return method
 
 
