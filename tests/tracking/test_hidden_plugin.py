@@ -30,6 +30,14 @@ class StayPut(HiddenMethod):
         return frame.base[k].copy()
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _forget_stay_put_afterwards():
+    from tracking.hidden import registry
+
+    yield
+    registry.unregister(StayPut.name)
+
+
 def _markerset(tmp_path, estimator="stay_put"):
     """The seated marker set with the inner elbow markers (M*E2) estimated by ``estimator``."""
     text = SEATED.read_text(encoding="utf-8")
@@ -83,3 +91,26 @@ def test_the_tracker_runs_the_registered_estimator(tmp_path):
                 stayed.append(np.allclose(sample.positions_m[k], before))
             before = sample.positions_m[k].copy()
     assert len(stayed) >= 3 and all(stayed), stayed
+
+
+def test_registry_names_codes_and_fallbacks():
+    from tracking.hidden import Method, registry
+
+    assert {"constant_velocity", "neighbours", "rigid", "hinge", "forearm", "stay_put"} <= set(registry.names())
+    codes = [registry.get(n).code for n in registry.names()]
+    assert len(set(codes)) == len(codes) and StayPut.code >= len(Method)
+    assert [m.name for m in registry.chain(registry.get("hinge"))] == ["hinge", "rigid", "neighbours"]
+    assert registry.resolve(Method.RIGID) is registry.get("rigid") and registry.resolve("stay_put").code == StayPut.code
+    with pytest.raises(ValueError, match="lower-case"):
+        register(type("Bad", (HiddenMethod,), {"name": "Bad Name"}))
+    register(type("LoopA", (HiddenMethod,), {"name": "loop_a", "fallback": "loop_b"}))
+    register(type("LoopB", (HiddenMethod,), {"name": "loop_b", "fallback": "loop_a"}))
+    try:
+        with pytest.raises(ValueError, match="circle"):
+            Estimator(["loop_a"], np.zeros((1, 1)))
+    finally:
+        registry.unregister("loop_a")
+        registry.unregister("loop_b")
+    assert "loop_a" not in registry.names()
+    with pytest.raises(ValueError, match="hinge estimator but has no hinge"):
+        Estimator(["hinge"], np.zeros((1, 1)))

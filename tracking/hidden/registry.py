@@ -62,6 +62,11 @@ def register(cls: type[HiddenMethod]) -> type[HiddenMethod]:
     return cls
 
 
+def unregister(name: str) -> None:
+    """Forget the estimator called ``name`` (tests that register their own)."""
+    _METHODS.pop(name, None)
+
+
 def names() -> tuple[str, ...]:
     """The registered estimators' names."""
     return tuple(sorted(_METHODS))
