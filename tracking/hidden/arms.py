@@ -114,9 +114,12 @@ class ArmTracker:
             square = noise / (noise + self.axis_model_sigma_rad ** 2) if noise > 0 else 0.0
         return elbow_frame(p[ea], p[eb], pivot, square)
 
-    def sigma(self, r: int, frames: float, speed_share: float = 0.3) -> np.ndarray:
+    def sigma(self, r: int, frames: float, speed_share: float | None = None) -> np.ndarray:
         """(2,) uncertainty (rad) of arm r's flexion and supination extrapolated ``frames`` ahead:
-        an unknown angular acceleration up to ``forearm_accel`` plus ``speed_share`` of the speed."""
+        an unknown angular acceleration up to ``forearm_accel`` plus ``speed_share`` (default:
+        the parameter's) of the speed."""
+        if speed_share is None:
+            speed_share = self.params.speed_share
         t = frames / self.fps
         speed = np.abs(np.nan_to_num(self.velocity[r])) * self.fps
         return 0.5 * self.accel_rad_s2 * t * t + speed_share * speed * t
@@ -139,7 +142,7 @@ class ArmTracker:
             return None
         measured = [(s, p[w]) for s, w in ((0, wa), (1, wb)) if ok[w]]
         age = int(self.age[r]) + 1  # frames since the angles were last known
-        pred = angles + np.nan_to_num(vel) * min(age, 2)
+        pred = angles + np.nan_to_num(vel) * min(age, self.params.forearm_prediction_frames)
         rays = self.views.nearest((wa, wb), ok, lambda: forearm_markers(frame, shape, float(pred[0]), float(pred[1])))
         evidence = bool(measured)
         theta = psi = math.nan
@@ -171,7 +174,7 @@ class ArmTracker:
         pinned = [False]
         info = [0.0, 0.0, 0.0]
         theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
-                                 float(sigma[0]), float(sigma[1]), pinned=pinned, rays=rays,
+                                 float(sigma[0]), float(sigma[1]), sigma_m=prm.forearm_fit_sigma_m, pinned=pinned, rays=rays,
                                  pin_sigma=prm.forearm_sigma_rad, info=info)
         # the data's own variance of each angle (the other one free): how far this fit's step
         # is evidence of the angle's speed (update)

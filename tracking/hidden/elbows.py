@@ -23,6 +23,7 @@ class ElbowState:
     def __init__(self, layout: Layout, params: EstimatorParams) -> None:
         self.layout = layout
         self.rate = params.rate(params.shape_memory_s)
+        self.bend_min_sine = float(params.bend_min_sine)
         self.reset()
 
     def reset(self) -> None:
@@ -90,11 +91,11 @@ class ElbowState:
         self.length[r] = length if first else old_l + rate * (length - old_l)
         self.fore[r] = fore if first else old_f + rate * (fore - old_f)
         # which way the axis runs relative to humerus x forearm (the elbow bends one way only):
-        # learned where the elbow is clearly flexed (sine of the angle > 0.3)
+        # learned where the elbow is clearly flexed (sine of the angle > bend_min_sine)
         hum = [0.5 * (pl[mk][i] + pl[pa][i]) - pl[sh][i] for i in range(3)]
         fa = [0.5 * (pl[wa][i] + pl[wb][i] - pl[mk][i] - pl[pa][i]) for i in range(3)]
         hx = [hum[1] * fa[2] - hum[2] * fa[1], hum[2] * fa[0] - hum[0] * fa[2], hum[0] * fa[1] - hum[1] * fa[0]]
         sense = n[0] * hx[0] + n[1] * hx[1] + n[2] * hx[2]
-        if abs(sense) > 0.3 * math.sqrt(sum(x * x for x in hum) * sum(x * x for x in fa)):
+        if abs(sense) > self.bend_min_sine * math.sqrt(sum(x * x for x in hum) * sum(x * x for x in fa)):
             self.sense[r] += rate * (math.copysign(1.0, sense) - self.sense[r])
         return n

@@ -76,6 +76,15 @@ class EstimatorParams:
         limb_accel_m_s2: the unknown acceleration of a coasting arm chain.
         max_extrapolation_m: a hidden arm chain coasts on its velocity while ``0.5 a t^2`` stays
             within this.
+        speed_share: share of an extrapolated turn's angular speed counted as its uncertainty
+            (the turn may slow down or speed up), beside the unknown acceleration.
+        forearm_prediction_frames: a forearm's predicted angles carry its angular velocities over
+            at most this many frames since they were last known.
+        forearm_fit_sigma_m: noise of a measured styloid marker in the forearm fit.
+        bend_min_sine: the side the elbow bends is learned where the elbow is clearly flexed (the
+            sine of its angle above this; near straight the side is noise).
+        bend_sense_min: the learned side picks between the hinge's mirror images once its running
+            mean passes this (before: the previous axis' side).
         arm_velocity_memory_s: memory of the forearm's angular velocities (0.1 s: a few frames).
         shape_memory_s: memory of the learned hinge lengths and forearm shapes (0.3 s).
         history_max_s: the longest stored past in which a rigid fit looks for its reference frame
@@ -113,6 +122,11 @@ class EstimatorParams:
     marker_sigma_m: float = 0.0015
     limb_accel_m_s2: float = 3.0
     max_extrapolation_m: float = 0.015
+    speed_share: float = 0.3
+    forearm_prediction_frames: int = 2
+    forearm_fit_sigma_m: float = 0.002
+    bend_min_sine: float = 0.3
+    bend_sense_min: float = 0.5
     arm_velocity_memory_s: float = 0.1
     shape_memory_s: float = 0.3
     history_max_s: float = 20.0

@@ -74,7 +74,7 @@ class HingeEstimator(HiddenMethod):
             rows.append(0.5 * (p[wa] + p[wb]) - p[h.partner])
             values.append(elbows.fore[r])
         side = prev_axis
-        if len(rows) == 2 and abs(elbows.sense[r]) > 0.5:
+        if len(rows) == 2 and abs(elbows.sense[r]) > state.params.bend_sense_min:
             # of the two mirror images the one on the side the elbow bends (anatomy), rather than
             # the previous axis' (which may itself be an extrapolation, or unknown after LOST)
             side = math.copysign(1.0, elbows.sense[r]) * unit(cross3(rows[0], rows[1]))
@@ -106,7 +106,7 @@ class HingeEstimator(HiddenMethod):
             speed = (abs(float(arms.velocity[arm][1])) * arms.fps
                      if arm is not None and np.isfinite(arms.velocity[arm][1]) else 0.0)
             t = free / arms.fps
-            if 0.5 * arms.accel_rad_s2 * t * t + 0.3 * speed * t > math.radians(prm.max_hinge_sigma_deg):
+            if 0.5 * arms.accel_rad_s2 * t * t + prm.speed_share * speed * t > math.radians(prm.max_hinge_sigma_deg):
                 return DROP
             state.elbows.free_now.add(r)
         return n
