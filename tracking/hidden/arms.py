@@ -174,8 +174,8 @@ class ArmTracker:
         pinned = [False]
         info = [0.0, 0.0, 0.0]
         theta, psi = fit_forearm(frame, shape, measured, float(pred[0]), float(pred[1]),
-                                 float(sigma[0]), float(sigma[1]), sigma_m=prm.forearm_fit_sigma_m, pinned=pinned, rays=rays,
-                                 pin_sigma=prm.forearm_sigma_rad, info=info)
+                                 float(sigma[0]), float(sigma[1]), sigma_m=prm.forearm_fit_sigma_m, pinned=pinned,
+                                 rays=rays, pin_sigma=prm.forearm_sigma_rad, info=info)
         # the data's own variance of each angle (the other one free): how far this fit's step
         # is evidence of the angle's speed (update)
         da, ab, db = info[0] - float(sigma[0]) ** -2, info[1], info[2] - float(sigma[1]) ** -2

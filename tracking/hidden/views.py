@@ -38,7 +38,7 @@ class ViewRays:
         self.by_marker = {}
 
     def nearest(self, markers: tuple[int, int], ok: np.ndarray,
-                predict: Callable[[], tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, list[float], list[float], float]]:
+                predict: Callable[[], tuple[np.ndarray, np.ndarray]]) -> list[tuple[int, list, list, float]]:
         """Of the views of the hidden ones of two markers (slots 0 and 1), per marker the one whose
         ray passes nearest its prediction (``predict()``: the two predicted positions), within the
         gate, as (slot, origin, direction, sigma_rad)."""

@@ -92,7 +92,8 @@ def _compare(before: dict[str, np.ndarray], name: str, arrays: dict[str, np.ndar
             return False
         if key == "positions":
             if not np.array_equal(np.isnan(old), np.isnan(now)):
-                print(f"DIFF {name} positions: NaN pattern differs in {int((np.isnan(old) != np.isnan(now)).sum())} values")
+                n = int((np.isnan(old) != np.isnan(now)).sum())
+                print(f"DIFF {name} positions: NaN pattern differs in {n} values")
                 same = False
                 continue
             diff = float(np.nanmax(np.abs(old - now))) if np.isfinite(old).any() else 0.0
