@@ -13,13 +13,14 @@ import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Sequence
+from typing import Annotated, Literal, Sequence
 
 import numpy as np
 import pydantic
 
 from tracking.content import StrictModel, load_model, resolve
 from tracking.errors import ContentError
+from tracking.hidden import registry as hidden_registry
 
 RGB = tuple[int, int, int]
 
@@ -135,8 +136,19 @@ class _IdentificationSpec(StrictModel):
     rules: list[_RuleSpec] = pydantic.Field(min_length=1)
 
 
+#: The built-in hidden-marker estimators; others are files in tracking/hidden/methods/, named by
+#: the same key (:func:`_known_estimator` checks the name against the registry).
 ESTIMATORS = ("constant_velocity", "neighbours", "rigid", "hinge", "forearm")
-_Estimator = Literal["constant_velocity", "neighbours", "rigid", "hinge", "forearm"]
+
+
+def _known_estimator(name: str) -> str:
+    if name not in hidden_registry.names():
+        raise ValueError(f"{name!r} is not one of {', '.join(hidden_registry.names())} "
+                         "(a new estimator is a file in tracking/hidden/methods/)")
+    return name
+
+
+_Estimator = Annotated[str, pydantic.AfterValidator(_known_estimator)]
 _PATTERN = r"^[A-Za-z*#][A-Za-z0-9_*#]*$"
 
 
@@ -299,7 +311,7 @@ class HiddenMarkerConfig:
     for every other marker of its body segment.
 
     Attributes:
-        estimators: (M,) estimator name of each marker, one of :data:`ESTIMATORS`.
+        estimators: (M,) estimator name of each marker (:data:`ESTIMATORS` or a registered one).
         weights: marker -> {neighbour: S}, the equation 6 weights.
         velocity_decay_s: (M,) time constant of the own relative velocity kept in free directions.
         rigid_groups: groups of markers treated as rigid, in the order a hidden marker tries them.
@@ -357,6 +369,10 @@ class MarkerSet:
     soft_tissue_m: float
     identification: IdentificationRules | None = None
     hidden: HiddenMarkerConfig | None = None
+
+    def __post_init__(self) -> None:
+        if self.hidden is None:  # every marker set has one (see ``hidden``)
+            object.__setattr__(self, "hidden", default_hidden(self.names, self.segments))
 
     @property
     def n_markers(self) -> int:

@@ -133,7 +133,7 @@ def test_the_flexion_speed_is_learned_through_fits_to_one_styloid():
         pose = motion.pose_at(1.0 + i / fps)
         measured[w2] = i < 20
         est.update(np.where(measured[:, None], body.markers_m(pose), np.nan), measured)
-        speeds.append(est.arm_velocity[0, 0] if est._arms[0][0] == ms.index("MRW1") else est.arm_velocity[1, 0])
+        speeds.append(est.arms.velocity[0, 0] if est.layout.arms[0][0] == ms.index("MRW1") else est.arms.velocity[1, 0])
     speeds = np.abs(np.nan_to_num(np.array(speeds)))
     # the speed while both styloids were measured is kept (not decayed to a tenth) through 40 fits
     assert speeds[19] > 1e-3
