@@ -541,7 +541,8 @@ class CalibrateScene(BaseScene):
             path.parent.mkdir(parents=True, exist_ok=True)
             rms = [r.rms_px for r in done if np.isfinite(r.rms_px)]   # lens data given (``lenses``) have none
             save_calibration_toml(path, [r.camera for r in done], error=float(np.mean(rms)) if rms else 0.0)
-            write_lens_information(path, {r.camera.name: r.information for r in done if r.information is not None})
+            write_lens_information(path, {r.camera.name: r.information for r in done if r.information is not None},
+                                   views={r.camera.name: len(r.per_view_rms_px) for r in done if r.information is not None})
         except (RehabError, OSError) as exc:
             self._say(f"Not saved: {exc}", theme.FAILURE)
             return None
