@@ -42,6 +42,7 @@ from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import RehabError
 from calibration.intrinsics import COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of
+from calibration.guided import GOOD_LENGTH_MM
 from calibration.view_selection import coverage_hint
 from game.app import BaseScene, Frame
 from game.gfx import theme
@@ -993,10 +994,14 @@ class CalibrateScene(BaseScene):
             fit = f"{what} {rep.rms_px[k]:.2f} px"
             if wand_px is not None and self.method != "wand" and np.isfinite(wand_px[k]):
                 fit += f", wand {wand_px[k]:.2f} px"
+            drifts = rep.wand is not None and k < rep.wand.edge_drift_px.size and np.isfinite(rep.wand.edge_drift_px[k])
+            if drifts:   # the lens near the picture's edge, as far as the balls went
+                fit += f", edge {rep.wand.edge_drift_px[k]:+.2f} px"
             extra = "" if pos is None else f"  (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg off)"
             worst = np.nanmax([rep.rms_px[k], -1.0 if wand_px is None else wand_px[k]])
+            off = drifts and rep.wand.drift_found(k) and rep.wand.edge_drift_mm(k) >= GOOD_LENGTH_MM
             c.text(f"{cam.name}: {fit}, at ({at}) m{extra}", (m, y), round(theme.SMALL * 0.9 * s),
-                   theme.TEXT if worst < 0.5 else theme.ATTENTION)
+                   theme.TEXT if worst < 0.5 and not off else theme.ATTENTION)
             y += 30 * s
         y += 8 * s
         y = self._side_text(c, list(rep.advice), m, y, s, w - 2 * m, theme.SMALL * 0.9, theme.ATTENTION)
