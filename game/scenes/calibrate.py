@@ -996,7 +996,7 @@ class CalibrateScene(BaseScene):
                 fit += f", wand {wand_px[k]:.2f} px"
             drifts = rep.wand is not None and k < rep.wand.edge_drift_px.size and np.isfinite(rep.wand.edge_drift_px[k])
             if drifts:   # the lens near the picture's edge, as far as the balls went
-                fit += f", edge {rep.wand.edge_drift_px[k]:+.2f} px"
+                fit += f", lens near the edge {rep.wand.edge_drift_px[k]:+.2f} px"
             extra = "" if pos is None else f"  (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg off)"
             worst = np.nanmax([rep.rms_px[k], -1.0 if wand_px is None else wand_px[k]])
             off = drifts and rep.wand.drift_found(k) and rep.wand.edge_drift_mm(k) >= GOOD_LENGTH_MM
