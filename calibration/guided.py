@@ -98,8 +98,10 @@ def link_advice(names: Sequence[str], counts: np.ndarray, min_count: int, doing:
 
 
 def solve_rig(cameras: Sequence[Camera], board, rig: RigViews, floor: Sequence[Detection | None], *,
-              origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0):
-    """The cameras' positions from the shared views, the world frame from the floor board.
+              origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0, lens_information=None):
+    """The cameras' positions from the shared views, the world frame from the floor board; the
+    lens data of cameras with an information matrix in ``lens_information`` refined with them
+    (:func:`calibration.extrinsics.calibrate_extrinsics`).
 
     Returns:
         :class:`calibration.extrinsics.ExtrinsicsResult`.
@@ -115,7 +117,8 @@ def solve_rig(cameras: Sequence[Camera], board, rig: RigViews, floor: Sequence[D
         raise CalibrationError("no camera sees the floor board: lay it face up on the seat, in view of the cameras")
     views = dict(rig.views)
     views["floor"] = list(floor)
-    return calibrate_extrinsics(cameras, board, views, floor_view="floor", origin_m=origin_m, turn_deg=turn_deg)
+    return calibrate_extrinsics(cameras, board, views, floor_view="floor", origin_m=origin_m, turn_deg=turn_deg,
+                                lens_information=lens_information)
 
 
 @dataclass

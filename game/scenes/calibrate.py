@@ -734,6 +734,15 @@ class CalibrateScene(BaseScene):
         target = np.asarray(self.board_centre_m if known is None else known, float)
         return tuple(float(v) for v in target - floor_board_centre_m(self.board))
 
+    def steady_lens_information(self) -> list:
+        """The information matrices of the lenses calibrated here from 10 views or more (the board
+        path refines them with the positions, as ``rehab calibrate extrinsics`` does); None for the
+        others and for lens data given from a file."""
+        from calibration.intrinsics import steady_lens_information
+
+        results = [p.result for p in self.progress]
+        return steady_lens_information([r.information for r in results], [len(r.per_view_rms_px) for r in results])
+
     def capture_floor(self) -> bool:
         """Solve the rig with the board on the seat, report its quality and save the calibration."""
         from calibration.files import save_calibration_toml
@@ -749,7 +758,8 @@ class CalibrateScene(BaseScene):
                                      origin_m=self.floor_origin_m())
                 self._report_views = {"floor": list(self.rig_detections)}
             else:
-                res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m())
+                res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m(),
+                                lens_information=self.steady_lens_information())
                 self._report_views = {**self.rig_views.views, "floor": list(self.rig_detections)}
         except RehabError as exc:
             self.auto = False   # a wrong floor board is said once, not at every frame
