@@ -21,7 +21,7 @@ import numpy as np
 from calibration.board import Detection
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
-from calibration.intrinsics import coverage_of, empty_regions
+from calibration.intrinsics import coverage_of
 
 MIN_SHARED_VIEWS = 3  # board views two cameras must share to count as linked
 GOOD_RMS_PX, USABLE_RMS_PX = 0.5, 1.0
@@ -210,27 +210,24 @@ class WandCheck:
         edge_drift_se_px: (C,) its standard error, pixels.
         drift_mm_per_px: (C,) what one pixel at that camera means in the volume (the balls'
             median distance over the focal length), mm.
-        coverage: (C,) share of the cells of an 8 x 6 grid over the picture that hold a ball.
-        empty: (C,) the parts of each picture no ball reached, in words ("" when none).
+        coverage: (C,) share of the cells of an 8 x 6 grid over the picture that hold a ball
+            (the lens is checked only where the balls went).
     """
 
     length_error_mm: np.ndarray
     rms_px: np.ndarray
-    edge_drift_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    edge_drift_se_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    drift_mm_per_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    coverage: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    empty: tuple[str, ...] = ()
+    edge_drift_px: np.ndarray
+    edge_drift_se_px: np.ndarray
+    drift_mm_per_px: np.ndarray
+    coverage: np.ndarray
 
     def edge_drift_mm(self, c: int) -> float:
         """Camera ``c``'s edge drift as a distance in the volume, mm (NaN when unknown)."""
-        if c >= self.edge_drift_px.size:
-            return float("nan")
         return float(abs(self.edge_drift_px[c]) * self.drift_mm_per_px[c])
 
     def drift_found(self, c: int) -> bool:
         """A systematic drift: over three standard errors (and known)."""
-        if c >= self.edge_drift_px.size or not np.isfinite(self.edge_drift_px[c]):
+        if not np.isfinite(self.edge_drift_px[c]):
             return False
         return bool(abs(self.edge_drift_px[c]) > 3.0 * self.edge_drift_se_px[c])
 
@@ -260,25 +257,21 @@ def wand_check(cameras: Sequence[Camera], uv_px: np.ndarray, length_m: float) ->
     lengths = np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1)
     errors = 1000.0 * (lengths[np.isfinite(lengths)] - length_m)
     rms = np.full(C, np.nan)
-    drift, drift_se, mm_per_px, cover = (np.full(C, np.nan) for _ in range(4))
-    empty = []
+    drift, drift_se, mm_per_px = (np.full(C, np.nan) for _ in range(3))
+    cover = np.zeros(C)
     flat = pts.reshape(-1, 3)
     for c, cam in enumerate(cameras):
         ok = whole[c].reshape(-1) & np.all(np.isfinite(flat), axis=1)
         seen = uv[c].reshape(-1, 2)[whole[c].reshape(-1)]
         if seen.size:
-            cover[c], hit = coverage_of([Detection(seen, cam.size_px)], cam.size_px)
-            empty.append(empty_regions(hit))
-        else:
-            cover[c] = 0.0
-            empty.append("")
+            cover[c] = coverage_of([Detection(seen, cam.size_px)], cam.size_px)[0]
         if ok.any():
             d = uv[c].reshape(-1, 2)[ok] - cam.project(flat[ok])
             rms[c] = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
             drift[c], drift_se[c] = edge_drift(cam, uv[c].reshape(-1, 2)[ok], d)
             depth = (flat[ok] @ cam.R.T + cam.t_m)[:, 2]
             mm_per_px[c] = 1000.0 * float(np.median(depth)) / float(cam.K[0, 0])
-    return WandCheck(errors, rms, drift, drift_se, mm_per_px, cover, tuple(empty))
+    return WandCheck(errors, rms, drift, drift_se, mm_per_px, cover)
 
 
 def edge_drift(cam: Camera, uv_px: np.ndarray, residual_px: np.ndarray) -> tuple[float, float]:
@@ -356,7 +349,7 @@ class QualityReport:
                        f"{wand.length_rms_mm:.2f} mm RMS (worst {np.max(np.abs(wand.length_error_mm)):.2f} mm)")
         for k, (n, r) in enumerate(zip(self.names, self.rms_px)):
             w = "" if wand is None or not np.isfinite(wand.rms_px[k]) else f", wand balls {wand.rms_px[k]:.2f} px"
-            if wand is not None and k < wand.edge_drift_px.size and np.isfinite(wand.edge_drift_px[k]):
+            if wand is not None and np.isfinite(wand.edge_drift_px[k]):
                 w += f" (near the edge {wand.edge_drift_px[k]:+.2f} px, balls in {100 * wand.coverage[k]:.0f} % of the picture)"
             out.append(f"{n}: {r:.2f} px{w}")
         return out + list(self.advice)

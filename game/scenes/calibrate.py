@@ -1004,7 +1004,7 @@ class CalibrateScene(BaseScene):
             fit = f"{what} {rep.rms_px[k]:.2f} px"
             if wand_px is not None and self.method != "wand" and np.isfinite(wand_px[k]):
                 fit += f", wand {wand_px[k]:.2f} px"
-            drifts = rep.wand is not None and k < rep.wand.edge_drift_px.size and np.isfinite(rep.wand.edge_drift_px[k])
+            drifts = rep.wand is not None and np.isfinite(rep.wand.edge_drift_px[k])
             if drifts:   # the lens near the picture's edge, as far as the balls went
                 fit += f", lens near the edge {rep.wand.edge_drift_px[k]:+.2f} px"
             extra = "" if pos is None else f"  (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg off)"
