@@ -14,7 +14,8 @@ Steps (:func:`calibrate_extrinsics`):
    scatter (:func:`view_sigmas_px`): an oblique board's corners in one camera can be several
    times as scattered as in another, and the seat board alone sets the world frame. Given the
    lens step's information matrices, this second pass also refines the lens data, the lens
-   step's estimate a prior of that weight (:class:`LensPrior`).
+   step's estimate a prior of that weight (:class:`LensPrior`; an adjustment that does not
+   settle keeps the lens step's data).
 5. The world frame of docs/INTERFACES.md from one board lying face up on the floor or the seat
    (:func:`world_from_floor_board`): +Y is up out of the board, +X along the board's rows of
    corners (the patient's right), corner 0 at ``origin_m``.

@@ -8,7 +8,9 @@ once, a wand frame when two or more saw both balls; cameras are linked by ``MIN_
 views (``MIN_WAND_FRAMES`` frames), and the rig can be solved when the links join every camera.
 The quality report measures with the finished calibration alone: the board's corners and the
 wand's balls (frames waved after the solve) triangulated from every camera that saw them, the
-board's edges and diagonal and the wand's length against the known ones, and each camera's fit.
+board's edges and diagonal and the wand's length against the known ones, each camera's fit, and
+each camera's lens near the picture's edge (the balls' radial drift, :func:`edge_drift`: a
+distortion error the wand's length does not show).
 """
 
 from __future__ import annotations
