@@ -216,7 +216,7 @@ class LiveScene(BaseScene):
         motions: scripted motion names M cycles through (None in the list: mouse control).
         motion: what plays when the scene opens (None: mouse control).
         open_monitor: makes the camera-check scene for C (None: C does nothing).
-        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar
+        make_avatar: ``make_avatar(ctx, marker_names, roles=...)`` builds the avatar
             (:class:`game.avatar.live.LiveAvatar`); None: markers only.
         show_markers: draw the measured markers over the avatar.
     """
@@ -298,8 +298,8 @@ class LiveScene(BaseScene):
         """The active shoulder marker's last position (a typical seated one before any sample)."""
         side = self.control.side
         sample, markerset = self.link.latest, self.link.markerset
-        name = "MRS" if side == "right" else "MLS"
-        if sample is not None and markerset is not None and name in markerset.names:
+        name = None if markerset is None else markerset.roles.get(f"{side}_shoulder")
+        if sample is not None and name in markerset.names:
             p = sample.positions_m[markerset.names.index(name)]
             if np.isfinite(p).all():
                 self._last_shoulder_m[side] = np.array(p, dtype=np.float64)
@@ -380,7 +380,8 @@ class LiveScene(BaseScene):
         if self._shown_for is not sample:
             self._shown_for = sample
             names = self.link.angle_names
-            live = joint_angles(sample.positions_m, self.link.markerset.names, near_singular="withhold")
+            markerset = self.link.markerset
+            live = joint_angles(sample.positions_m, markerset.names, roles=markerset.roles, near_singular="withhold")
             self._shown = {n: float(live[n]) if n in live and math.isfinite(sample.angles_deg[i])
                            else float(sample.angles_deg[i]) for i, n in enumerate(names)}
         return self._shown[name]

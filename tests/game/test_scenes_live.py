@@ -106,7 +106,7 @@ def make_app(screen, *, motion=None, avatar=True):
     app.push(BaseScene())
     scene = LiveScene(link, motions=[None, "shoulder_flexion", "reach"], motion=motion,
                       open_monitor=lambda: MonitorScene(link),
-                      make_avatar=(lambda ctx, names: LiveAvatar(ctx, names)) if avatar else None)
+                      make_avatar=(lambda ctx, names, roles: LiveAvatar(ctx, names, roles=roles)) if avatar else None)
     app.push(scene)
     return app, scene, link, clock
 
