@@ -32,7 +32,7 @@ from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspe
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
 from game.scenes.live_feed import WAITING_LINE, LiveFeed
-from tracking.angles import joint_angles
+from tracking.angles import joint_angles, withheld_angles
 from tracking.live import PatientInput
 
 log = logging.getLogger(__name__)
@@ -386,6 +386,19 @@ class LiveScene(BaseScene):
                            else float(sample.angles_deg[i]) for i, n in enumerate(names)}
         return self._shown[name]
 
+    def _rows(self, side: bool) -> list[tuple[str, str, tuple[float, float]]]:
+        """The panel's angle rows (column, label, bar range): the active arm's and the trunk's
+        under mouse control, else both arms'; an angle the marker set cannot give (its roles have
+        no marker: :func:`tracking.angles.withheld_angles`) has no row."""
+        sides = (self.control.side,) if side else ("right", "left")
+        rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
+                for sd in sides for suffix, label, rng in ARM_ROWS]
+        if side:
+            rows += TRUNK_ROWS
+        markerset = self.link.markerset
+        withheld = withheld_angles(markerset.roles) if markerset is not None else {}
+        return [row for row in rows if row[0] not in withheld]
+
     def _draw_panel(self, frame: Frame, sample) -> None:
         c, s = frame.canvas, self.layout.scale
         # The panel is the window's plain background (no large shape to fill: llvmpipe pays per pixel).
@@ -410,11 +423,7 @@ class LiveScene(BaseScene):
         else:
             c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
-        sides = (self.control.side,) if side else ("right", "left")
-        rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
-                for sd in sides for suffix, label, rng in ARM_ROWS]
-        if side:
-            rows += TRUNK_ROWS
+        rows = self._rows(side)
         # from the bottom up: the key help, the note on the rest pose, the marker counts, the rows
         note, note_size, note_h = self._rest_note(frame, right - x)
         note_y = self._help_top(frame) - 8 * s - len(note) * note_h
