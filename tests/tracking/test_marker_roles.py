@@ -188,3 +188,30 @@ def test_a_marker_set_is_content_only():
     root = pathlib.Path(__file__).resolve().parents[2]
     code = "".join(p.read_text(encoding="utf-8") for d in ("tracking", "game") for p in (root / d).rglob("*.py"))
     assert not [n for n in ONE_ARM.names if f'"{n}"' in code or f"'{n}'" in code]
+
+
+def test_rehab_angles_reads_a_file_of_another_marker_set_through_its_roles(tmp_path, capsys):
+    from game.cli import main
+    from tracking.tables import read_angles_csv
+    from tracking.trc import write_trc
+
+    markers_mm = 1000.0 * np.concatenate([_frames(ONE_ARM, "reach", n=6),
+                                          BodyModel(_dims(50, "male"), ONE_ARM).markers_m(ALL_DEFINED)[None]])
+    trc = tmp_path / "one_arm.trc"
+    write_trc(trc, ONE_ARM.names, markers_mm, 30.0)
+    assert main(["angles", str(trc), "--out", str(tmp_path / "a.csv"), "--markerset", "right_arm_seated"]) == 0
+    out = capsys.readouterr().out
+    assert "left empty: left_shoulder_flexion," in out
+    table = read_angles_csv(tmp_path / "a.csv")
+    expected = joint_angles(markers_mm, ONE_ARM.names, roles=ONE_ARM.roles)
+    for c in ANGLE_COLUMNS:  # the file keeps 3 decimals
+        np.testing.assert_allclose(table.angles[c], expected[c], rtol=0, atol=1e-3, equal_nan=True)
+    assert np.isfinite(table.angles["right_shoulder_external_rotation"]).any()
+    assert np.isnan(table.angles["left_elbow_flexion"]).all()
+    # the file lacks the marker set's markers, or two ways of naming them: one line each
+    assert main(["angles", str(trc), "--out", str(tmp_path / "b.csv"), "--markerset", "upper_limb_seated"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "lacks MB, MP," in err and "(it has STRN, XIPH," in err
+    assert main(["angles", str(trc), "--out", str(tmp_path / "c.csv"), "--markerset", "right_arm_seated",
+                 "--map", str(trc)]) == 1
+    assert "not both" in capsys.readouterr().err
