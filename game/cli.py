@@ -227,16 +227,27 @@ def _add_angles(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
     p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",
                    help="the file's names for the angles' markers, one 'MB: STER' line each (TRCs of other marker sets)")
+    p.add_argument("--markerset", default=None, metavar="NAME|FILE",
+                   help="the marker set the file was made with: the angles take their markers from its roles "
+                        "(those it has no markers for are left empty)")
     p.set_defaults(func=_cmd_angles)
 
 
 def _cmd_angles(args) -> int:
+    from tracking.angles import withheld_angles
+    from tracking.markerset import load_markerset
     from tracking.tables import angles_csv_from_trc, read_marker_map
 
     check_outputs({"--out": args.out})
+    if args.map is not None and args.markerset is not None:
+        raise RehabError("give --map (names mapped to upper_limb_seated's) or --markerset (the file's marker set), not both")
     marker_map = read_marker_map(args.map) if args.map is not None else None
-    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map)
+    roles = load_markerset(args.markerset).roles if args.markerset is not None else None
+    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map, roles)
     print(f"wrote {n} frames of joint angles to {args.out}")
+    withheld = withheld_angles(roles) if roles is not None else {}
+    if withheld:
+        print(f"left empty: {', '.join(withheld)} (the marker set has no markers for them)")
     return 0
 
 

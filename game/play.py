@@ -95,11 +95,11 @@ class PlayOptions:
     sign_in: bool = False     # open on the sign-in screen (accounts, and no account or PIN given: needs_sign_in)
 
 
-def make_avatar(ctx, marker_names):
-    """The patient's avatar on ``ctx`` for a marker set's names (:mod:`game.avatar`)."""
+def make_avatar(ctx, marker_names, roles=None):
+    """The patient's avatar on ``ctx`` for a marker set's names and roles (:mod:`game.avatar`)."""
     from game.avatar.live import LiveAvatar
 
-    return LiveAvatar(ctx, marker_names)
+    return LiveAvatar(ctx, marker_names, roles=roles)
 
 
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,

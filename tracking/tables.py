@@ -123,11 +123,14 @@ def read_angles_csv(path: str | Path) -> AnglesTable:
     return AnglesTable(frames=frames, times_s=times, angles=angles)
 
 
-def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: Mapping[str, str] | None = None) -> int:
+def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: Mapping[str, str] | None = None,
+                        roles: Mapping[str, str] | None = None) -> int:
     """``rehab angles``: joint angles of every frame of a TRC file, written as an angles CSV.
 
     ``marker_map`` (from :func:`read_marker_map`) names the file's marker for each name the
-    angles need (the rest keep their own names). Raises
+    angles need (the rest keep their own names). ``roles`` (a marker set's ``MarkerSet.roles``,
+    ``--markerset``): the file holds that marker set's names, and the angles take their markers
+    from its roles (the columns it has no markers for are left empty). Raises
     :class:`~tracking.angles.MissingMarkersError` (one line, naming the markers wanted and those
     found) if the TRC lacks a marker the angles need. Returns the number of frames written.
     """
@@ -146,8 +149,14 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: M
             raise MissingMarkersError(f"{source} lacks {shown} named in the --map file (it has {', '.join(names)})")
         renamed = {theirs: ours for ours, theirs in marker_map.items()}
         names = [renamed.get(n, n if n not in marker_map else f"{n} (unmapped)") for n in names]
-    require_markers(names, source)
-    write_angles_csv(out_csv, trc.frame_indices, trc.times_s, joint_angles(trc.positions_mm, names))
+    if roles is None:
+        require_markers(names, source)
+    else:
+        absent = [name for name in roles.values() if name not in names]
+        if absent:
+            raise MissingMarkersError(f"{source} lacks {', '.join(absent)} (it has {', '.join(names) or 'no markers'}): "
+                                      "the marker set's roles name them; give the marker set the file was made with")
+    write_angles_csv(out_csv, trc.frame_indices, trc.times_s, joint_angles(trc.positions_mm, names, roles=roles))
     return trc.n_frames
 
 

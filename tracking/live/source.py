@@ -24,7 +24,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.angles import ANGLE_COLUMNS, missing_markers
+from tracking.angles import supported_angles
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.live.protocol import LiveError, PatientInput, Reidentify, SetMotion, SetPatientInput, SourceConfig
 
@@ -146,8 +146,8 @@ def resolve_config(config: SourceConfig) -> SourceConfig:
 
 
 def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:
-    """The joint angles the tracker reports for a marker set (none if it lacks their markers)."""
-    return tuple(ANGLE_COLUMNS) if not missing_markers(markerset.names) else ()
+    """The joint angles the tracker reports for a marker set: those its roles' markers give."""
+    return supported_angles(markerset.roles)
 
 
 def open_source(config: SourceConfig) -> FrameSource:

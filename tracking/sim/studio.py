@@ -348,7 +348,7 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
     frame_idx = np.arange(n_frames)
     times = frame_idx / settings.fps
     write_trc(out_dir / "truth.trc", ms.names, positions_m * 1000.0, settings.fps)
-    write_angles_csv(out_dir / "truth_angles.csv", frame_idx, times, joint_angles(positions_m, ms.names))
+    write_angles_csv(out_dir / "truth_angles.csv", frame_idx, times, joint_angles(positions_m, ms.names, roles=ms.roles))
     write_visibility_csv(out_dir / "truth_visibility.csv", [c.name for c in studio.cameras], ms.names, np.stack(vis_rows))
     return f"wrote {n_frames} frame sets from {len(studio.cameras)} cameras at {settings.size_px[0]}x{settings.size_px[1]} to {out_dir}"
 
