@@ -247,7 +247,8 @@ class Tracker:
             suspect, message = self_check(self.checks, self.memory, self.estimator, self.markerset.names,
                                           self.params, self.frame_count - 1)
             # angles that need a suspect marker are withheld (NaN), the reason in the message
-            angles = checked_angles(self.memory.positions, suspect, self.estimator.axis_guessed, self.markerset.names)
+            angles = checked_angles(self.memory.positions, suspect, self.estimator.axis_guessed, self.markerset.names,
+                                    self.markerset.roles)
         self.times.add("joint angles", time.perf_counter() - t0)
         self.times.frames += 1
         return TrackerSample(frame_index=index, time_s=t, state=self.state, positions_m=self.memory.positions.copy(),

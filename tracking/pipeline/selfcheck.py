@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
-from tracking.angles import AXIS_ANGLES, joint_angles
+from tracking.angles import axis_angles, joint_angles
 from tracking.labelling.checks import SelfChecks
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.state import MarkerMemory
@@ -58,12 +58,13 @@ def exchange(memory: MarkerMemory, estimator, i: int, j: int) -> None:
 
 
 def checked_angles(positions: np.ndarray, suspect: np.ndarray, axis_guessed: np.ndarray,
-                   names: Sequence[str]) -> dict[str, float]:
+                   names: Sequence[str], roles: Mapping[str, str] | None = None) -> dict[str, float]:
     """The joint angles, NaN where they need a suspect marker, and no supination where an elbow or
     wrist axis that no measurement pins is a guess."""
-    angles = joint_angles(np.where(suspect[:, None], np.nan, positions), names)
+    angles = joint_angles(np.where(suspect[:, None], np.nan, positions), names, roles=roles)
+    axes = axis_angles() if roles is None else axis_angles(roles)
     for k in np.flatnonzero(axis_guessed).tolist():
-        name = AXIS_ANGLES.get(names[k])
+        name = axes.get(names[k])
         if name in angles:
             angles[name] = math.nan
     return angles
