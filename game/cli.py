@@ -266,7 +266,7 @@ def _add_validate(sub) -> None:
 def _cmd_validate(args) -> int:
     from dataclasses import replace
 
-    from tracking.sim.studio import SimulationSettings
+    from tracking.sim.studio import SimulationSettings  # lazy: only to run the simulated patient
     from tracking.sim.validate import combine, validate
 
     if args.population is not None:
@@ -275,7 +275,7 @@ def _cmd_validate(args) -> int:
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex, seed=args.seed)
     if args.tracker:
-        from tracking.sim.motions import available_motions
+        from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
         from tracking.sim.validate import validate_tracking
 
         for name in args.motion or available_motions():
@@ -331,7 +331,7 @@ def add_tracker_source_options(p) -> None:
 
 def check_motion(motion: str | None) -> None:
     """A one-line error for a motion that is neither built in nor a file (None passes)."""
-    from tracking.sim.motions import available_motions
+    from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
 
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "

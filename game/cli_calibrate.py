@@ -725,7 +725,7 @@ def _cmd_simulate_calibration(args) -> int:
         raise RehabError(f"--size {args.size!r} must look like 640x480") from None
     cams = load_rig(args.rig, (w, h))
     if args.lens:
-        from tracking.sim.renderer import DEMO_LENS
+        from tracking.sim.renderer import DEMO_LENS  # lazy: only to run the simulated patient
 
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
@@ -825,7 +825,7 @@ def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: floa
     from tracking.calibration_check import tracking_difference_mm
     from tracking.markerset import load_markerset
     from tracking.recording import RecordingWriter
-    from tracking.sim.body import BodyDimensions
+    from tracking.sim.body import BodyDimensions  # lazy: only to run the simulated patient
     from tracking.sim.motions import load_motion
     from tracking.sim.studio import Studio
 

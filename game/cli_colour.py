@@ -63,7 +63,7 @@ def _cmd_learn(args) -> int:
 def _cmd_drift_check(args) -> int:
     from dataclasses import replace
 
-    from tracking.sim.colour_drift import DRIFT_SETTINGS, run_drift
+    from tracking.sim.colour_drift import DRIFT_SETTINGS, run_drift  # lazy: only to run the simulated patient
 
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))

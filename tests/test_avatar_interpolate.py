@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 
 from game.avatar.interpolate import PoseInterpolator, lerp_pose, slerp_frames
 from game.avatar.skeleton import JOINTS, SEGMENTS, Proportions, SkeletonPose
-from tracking.sim.body import axis_angle_matrix, slerp_rotation
+from tracking.geometry.rotations import axis_angle_matrix, slerp_rotation
 from tracking.status import MarkerStatus
 
 

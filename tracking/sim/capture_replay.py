@@ -40,15 +40,8 @@ from content import content_path
 from tracking.content import StrictModel, load_model
 from tracking.errors import MotionError
 from tracking.markerset import load_markerset
-from tracking.sim.body import (
-    SIDES,
-    ArmPose,
-    BodyDimensions,
-    BodyModel,
-    Pose,
-    reference_pose,
-    slerp_rotation,
-)
+from tracking.sim.body import SIDES, ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
+from tracking.geometry.rotations import slerp_rotation
 from tracking.sim.motions import MIN_REFERENCE_HOLD_S, Motion, ease
 
 log = logging.getLogger(__name__)

@@ -27,7 +27,8 @@ from typing import Iterable
 import numpy as np
 
 from tracking.markerset import MarkerSet, load_markerset
-from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, axis_angle_matrix
+from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose
+from tracking.geometry.rotations import axis_angle_matrix
 from tracking.sim.imaging import Webcam, WebcamPipeline, drawn_webcam
 
 #: seeds from here on are reported; below are for tuning
