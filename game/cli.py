@@ -171,7 +171,7 @@ def _track_folder(args) -> Path:
 
 
 def _cmd_track(args) -> int:
-    from tracking.offline import track_recording
+    from tracking.drivers.offline import track_recording
 
     args.recording = _track_folder(args)
 
@@ -231,7 +231,7 @@ def _add_angles(sub) -> None:
 
 
 def _cmd_angles(args) -> int:
-    from tracking.tables import angles_csv_from_trc, read_marker_map
+    from tracking.io.csv_tables import angles_csv_from_trc, read_marker_map
 
     check_outputs({"--out": args.out})
     marker_map = read_marker_map(args.map) if args.map is not None else None
@@ -531,7 +531,7 @@ def _add_bench(sub) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from tracking.bench import run_benchmarks
+    from tracking.drivers.bench import run_benchmarks
 
     n = 10 if args.quick else args.frames
     for line in run_benchmarks(n_frames=n, passes=1 if args.quick else max(1, args.passes)):
@@ -541,7 +541,7 @@ def _cmd_bench(args) -> int:
     seconds = 2.0 if args.quick else args.seconds
     app_measured = _bench_live(seconds)
     if args.streaming:
-        from tracking.live.bench import compare_streaming
+        from tracking.live.latency_bench import compare_streaming
 
         print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, alternating passes of "
               f"{seconds:g} s, {1 if args.quick else 3} of each (LSL inlets and an OSC socket receive in this process):",
@@ -554,7 +554,7 @@ def _cmd_bench(args) -> int:
 def _bench_live(seconds: float) -> bool:
     """The tracker process (latency, pace) and the application (frame rate) with it running;
     False when the application could not be measured."""
-    from tracking.live.bench import format_result, measure_latency
+    from tracking.live.latency_bench import format_result, measure_latency
 
     print("\nTracker process (simulated patient, 30 frame sets/s): frame ready -> sample seen by the game "
           "process, minus the tracker's own step time", flush=True)

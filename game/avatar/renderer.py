@@ -21,7 +21,7 @@ body against the background, and a little Blinn-Phong sheen. The lights are fixe
 the camera, so every view is lit from the front. The floor disc carries soft contact shadows
 (blobs under the chair, the feet and the hands) and fades out at its edge into the background.
 
-Segment states (:class:`tracking.status.MarkerStatus` from the skeleton):
+Segment states (:class:`tracking.marker_status.MarkerStatus` from the skeleton):
 - MEASURED: the normal skin and clothes colours;
 - ESTIMATED: tinted amber with a glowing amber outline (the tracker guessed these markers);
 - LOST: desaturated grey and translucent (the segment shows its last known pose).

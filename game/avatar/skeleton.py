@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tracking.angles import require_markers
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 #: Joint centres of a :class:`SkeletonPose`, in ``joints_m`` order.
 JOINTS: tuple[str, ...] = (

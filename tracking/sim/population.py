@@ -268,7 +268,7 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
     from tqdm import tqdm
 
     from tracking.sim.studio import Studio
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
     from tracking.tracker import Tracker, TrackerParams, TrackingState
 
     base = markerset or load_markerset()
