@@ -267,7 +267,7 @@ def _triple(text: str, what: str) -> tuple[float, float, float]:
 
 
 def _images_in(folder: Path) -> list[Path]:
-    from tracking.recording import IMAGE_SUFFIXES
+    from tracking.io.recording import IMAGE_SUFFIXES
 
     return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
 
@@ -583,8 +583,8 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
     from calibration.extrinsics import world_from_floor_board
     from calibration.wand import calibrate_wand, match_same_colour_balls
     from tracking.markerset import parse_rgb
-    from tracking.recording import read_meta
-    from tracking.wand_capture import wand_centroids
+    from tracking.io.recording import read_meta
+    from tracking.drivers.wand_capture import wand_centroids
 
     if not recording.is_dir():
         raise RehabError(f"{recording}: no such wand recording folder")
@@ -693,9 +693,9 @@ def _cmd_import(args) -> int:
 def _cmd_colour(args) -> int:
     import shutil
 
-    from tracking.colour_adapt import learn_colours, save_colours_to_calibration
-    from tracking.offline import markerset_for
-    from tracking.recording import Recording
+    from tracking.colour.adapt import learn_colours, save_colours_to_calibration
+    from tracking.drivers.offline import markerset_for
+    from tracking.io.recording import Recording
 
     if args.frames < 1:
         raise RehabError(f"--frames {args.frames}: give at least 1")
@@ -735,7 +735,7 @@ def _cmd_simulate_calibration(args) -> int:
         raise RehabError(f"--size {args.size!r} must look like 640x480") from None
     cams = load_rig(args.rig, (w, h))
     if args.lens:
-        from tracking.sim.renderer import DEMO_LENS
+        from tracking.sim.renderer import DEMO_LENS  # lazy: only to run the simulated patient
 
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
@@ -833,10 +833,10 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:
     """Track a short simulated recording with the true and the recovered calibrations."""
-    from tracking.calibration_check import tracking_difference_mm
+    from tracking.drivers.calibration_check import tracking_difference_mm
     from tracking.markerset import load_markerset
-    from tracking.recording import RecordingWriter
-    from tracking.sim.body import BodyDimensions
+    from tracking.io.recording import RecordingWriter
+    from tracking.sim.body import BodyDimensions  # lazy: only to run the simulated patient
     from tracking.sim.motions import load_motion
     from tracking.sim.studio import Studio
 

@@ -105,7 +105,7 @@ def make_avatar(ctx, marker_names, roles=None):
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,
               sleep: Callable[[float], None] = time.sleep) -> App:
     """The application with its scenes on ``screen``, reading ``link``."""
-    from tracking.sim.motions import available_motions
+    from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
 
     app = App(screen, options.settings, clock=clock, sleep=sleep, services=Services(link))
     motions = [None, *available_motions()]
@@ -163,7 +163,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
     def open_calibrate():
         from game.scenes.calibrate import CalibrateScene, camera_feeds, lenses_for_feeds, sim_feeds
-        from tracking.sim.calibration_material import DEFAULT_BOARD
+        from tracking.sim.calibration_material import DEFAULT_BOARD  # lazy: only to run the simulated patient
 
         board = options.calibration_board or DEFAULT_BOARD
         if options.calibrate_devices:

@@ -9,7 +9,7 @@ from game.avatar.skeleton import JOINTS, SEGMENTS, SkeletonTracker
 from tracking.angles import MissingMarkersError, joint_angles
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 MS = load_markerset()
 MEASURED = np.full(MS.n_markers, MarkerStatus.MEASURED, np.uint8)

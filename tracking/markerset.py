@@ -23,7 +23,7 @@ from typing import Annotated, Literal, Sequence
 import numpy as np
 import pydantic
 
-from tracking.content import StrictModel, load_model, resolve
+from tracking.content_loader import StrictModel, load_model, resolve
 from tracking.errors import ContentError
 from tracking.hidden import registry as hidden_registry
 

@@ -33,11 +33,11 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.errors import RehabError
 from tracking import window_kernel
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.hidden import Estimator, estimator_config
 from tracking.labelling.checks import SelfChecks
 from tracking.markerset import MarkerSet
-from tracking.measure import FrameMeasurer, StageTimes
+from tracking.full_frame import FrameMeasurer, StageTimes
 from tracking.pipeline.arcs import ArcRegions
 from tracking.pipeline.consistency import accept, learn_lengths
 from tracking.pipeline.naming import Naming
@@ -51,7 +51,7 @@ from tracking.pipeline.update import estimate_hidden, remember
 from tracking.pipeline.views import choose_views, full_views_as_rays
 from tracking.pipeline.windows import ImageSizes, window_observations
 from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from tracking.angles import MissingMarkersError
 from tracking.markerset import DEFAULT_ROLES
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 #: Joint centres of a :class:`SkeletonPose`, in ``joints_m`` order.
 JOINTS: tuple[str, ...] = (

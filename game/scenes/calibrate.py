@@ -662,8 +662,8 @@ class CalibrateScene(BaseScene):
 
     def _find_wand(self, images: list[np.ndarray]) -> np.ndarray:
         """(C, 2, 2) the two balls' centroids in every camera's image, NaN where not seen once exactly."""
-        from tracking.colour_table import ColourTable
-        from tracking.wand_capture import wand_centroids_in_images
+        from tracking.colour.table import ColourTable
+        from tracking.drivers.wand_capture import wand_centroids_in_images
 
         if self._table is None:
             self._table = ColourTable.build(self.wand_colours)

@@ -28,7 +28,7 @@ from tracking.hidden import (
     wrist_centre,
 )
 from tracking.markerset import load_markerset
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 LOST, MEASURED, ESTIMATED = MarkerStatus.LOST, MarkerStatus.MEASURED, MarkerStatus.ESTIMATED
 

@@ -12,7 +12,7 @@ from tracking.markerset import load_markerset
 from tracking.sim.body import BodyDimensions, BodyModel
 from tracking.sim.motions import load_motion
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker
 
 SEATED = Path(__file__).resolve().parents[2] / "content" / "markersets" / "upper_limb_seated.yaml"

@@ -86,7 +86,7 @@ def test_a_whole_arm_hidden_for_a_moment_coasts_on_its_velocity():
     they were) while 0.5 a t^2 stays within max_extrapolation_m; then the other estimators (and
     their gates) take over."""
     from tracking.hidden import Estimator, Method, estimator_config
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
 
     ms, truth = _moving_body(20, [0.01, 0.0, 0.0])  # 10 mm per frame, 0.3 m/s at 30 frames/s
     chain = [ms.index(n) for n in ("MRE1", "MRE2", "MRW1", "MRW2")]

@@ -20,7 +20,7 @@ from tracking.live.source import angle_names_for
 from tracking.markerset import DEFAULT_ROLES, ROLES, load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 from tracking.sim.motions import load_motion
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 SEATED = load_markerset("upper_limb_seated")
 ONE_ARM = load_markerset("right_arm_seated")
@@ -192,8 +192,8 @@ def test_a_marker_set_is_content_only():
 
 def test_rehab_angles_reads_a_file_of_another_marker_set_through_its_roles(tmp_path, capsys):
     from game.cli import main
-    from tracking.tables import read_angles_csv
-    from tracking.trc import write_trc
+    from tracking.io.csv_tables import read_angles_csv
+    from tracking.io.trc import write_trc
 
     markers_mm = 1000.0 * np.concatenate([_frames(ONE_ARM, "reach", n=6),
                                           BodyModel(_dims(50, "male"), ONE_ARM).markers_m(ALL_DEFINED)[None]])

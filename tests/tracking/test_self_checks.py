@@ -16,7 +16,7 @@ from tracking.sim.body import BodyDimensions, BodyModel
 from tracking.sim.motions import available_motions, load_motion
 from tracking.sim.population import draw, markers_m
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
 
 MS = load_markerset()

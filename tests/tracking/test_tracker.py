@@ -5,7 +5,7 @@ import pytest
 
 from tracking.angles import joint_angles
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from game.cli import main as rehab
-from tracking.offline import track_frames_of
+from tracking.drivers.offline import track_frames_of
 from tracking.pipeline.timing import image_velocity
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.studio import SimulationSettings, simulate_recording
@@ -94,7 +94,7 @@ def test_live_sources_carry_the_recordings_stamps(tmp_path):
     """A recording tracked live (RecordingSource through DeviceSource, the tracker process's source)
     gives the tracker the same image instants as ``rehab track``."""
     from tracking.live.source import DeviceSource
-    from tracking.recording import read_timestamps
+    from tracking.io.recording import read_timestamps
     from tracking.sources.recording import RecordingSource
 
     settings = dataclasses.replace(BASE, seconds=0.3, camera_offsets=(0.0, 0.45, -0.4, 0.3), clock_drift=0.001,
@@ -113,10 +113,10 @@ def test_live_sources_carry_the_recordings_stamps(tmp_path):
 def test_sync_auto_estimates_the_clocks_of_a_recording_without_stamps(tmp_path):
     """``rehab track --sync auto`` on a recording whose cameras ran on their own clocks and left no
     timestamps.csv: the offsets against the first camera come from the markers' motion."""
-    from tracking.offline import estimated_skews
-    from tracking.recording import read_timestamps
-    from tracking.status import MarkerStatus
-    from tracking.trc import read_trc
+    from tracking.drivers.offline import estimated_skews
+    from tracking.io.recording import read_timestamps
+    from tracking.marker_status import MarkerStatus
+    from tracking.io.trc import read_trc
 
     settings = dataclasses.replace(BASE, fps=30.0, seconds=5.0, camera_offsets=(0.0, 0.4, -0.3, 0.2), images=True)
     rec = tmp_path / "rec"

@@ -17,7 +17,7 @@ from tracking.pipeline.views import view_to_drop
 from tracking.pipeline.windows import one_ball_one_marker
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.sim.validate import track_frames
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker
 
 

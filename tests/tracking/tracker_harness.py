@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from tracking.markerset import load_markerset
-from tracking.offline import track_frames_of
+from tracking.drivers.offline import track_frames_of
 from tracking.sim.body import BodyDimensions
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.motions import load_motion

@@ -28,7 +28,7 @@ from tracking.hidden.methods.neighbours import neighbour_motion
 from tracking.hidden.params import EstimatorParams
 from tracking.hidden.pivots import ShoulderPivots
 from tracking.hidden.views import ViewRays
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 class Estimator:
@@ -153,7 +153,7 @@ class Estimator:
 
         Returns:
             positions: (M, 3) measured or estimated positions, NaN where LOST (a new array).
-            status: (M,) uint8 :class:`~tracking.status.MarkerStatus` values.
+            status: (M,) uint8 :class:`~tracking.marker_status.MarkerStatus` values.
         """
         ok = np.asarray(measured, dtype=bool) & np.isfinite(positions_m).all(axis=1)
         p = np.where(ok[:, None], positions_m, np.nan)

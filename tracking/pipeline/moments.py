@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 
 
 def window_moments_numpy(table: ColourTable, images: Sequence[np.ndarray], labels_k: np.ndarray, ci: np.ndarray,

@@ -11,7 +11,7 @@ from tracking.identify import Identifier
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.state import MarkerMemory, Setup
 from tracking.reconstruction import CameraObservations, Points3D
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 def search_now(p: TrackerParams, memory: MarkerMemory, measured: np.ndarray, frame_count: int) -> np.ndarray:

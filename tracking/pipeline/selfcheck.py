@@ -14,7 +14,7 @@ from tracking.angles import axis_angles, joint_angles
 from tracking.labelling.checks import SelfChecks
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.state import MarkerMemory
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 

@@ -11,9 +11,9 @@ import numpy as np
 
 from calibration.camera import Camera, CameraStack
 from tracking.markerset import MarkerSet
-from tracking.measure import BlobGates, blob_gates
+from tracking.full_frame import BlobGates, blob_gates
 from tracking.reconstruction import RigGeometry
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.triangulation import Triangulator
 
 ONES2 = np.ones(2)  # row sums of (N, 2) and (N, 3) arrays as matrix products
@@ -94,7 +94,7 @@ class MarkerMemory:
     Attributes:
         positions: (M, 3) last positions, world metres (NaN: lost).
         velocity: (M, 3) displacement per frame set.
-        status: (M,) uint8 :class:`~tracking.status.MarkerStatus`.
+        status: (M,) uint8 :class:`~tracking.marker_status.MarkerStatus`.
         frames_unmeasured: (M,) frame sets since each marker was last measured.
         seg_length: (M, M) learned distances on segments (NaN until learned).
         last_seen: (M, 3) last measured position of each marker.

@@ -12,7 +12,7 @@ from tracking.pipeline.consistency import learn_lengths
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.state import FrameState, MarkerMemory, Setup
 from tracking.pipeline.timing import remember_views
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 def estimate_hidden(setup: Setup, p: TrackerParams, frame: FrameState, estimator, new_pos: np.ndarray,

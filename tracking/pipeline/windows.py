@@ -21,7 +21,7 @@ import numpy as np
 
 from tracking import window_kernel
 from tracking.blobs import ARC_EDGE_SHRINK_PX, PIXEL_MOMENT, axis_ratio, find_blobs
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.pipeline.arcs import ArcRegions
 from tracking.pipeline.moments import window_moments_numpy
 from tracking.pipeline.params import TrackerParams

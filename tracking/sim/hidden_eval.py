@@ -3,7 +3,7 @@
 For each motion the true marker centres come from the body model, and which markers are hidden
 comes from rendering the studio: a marker is *measured* in a frame when at least two cameras see
 it (``seen_fraction`` of its disc visible and its disc not merged with a same-coloured one, the
-definitions of :mod:`tracking.evaluate`), otherwise it is *hidden*. Measured positions get
+definitions of :mod:`tracking.drivers.evaluate`), otherwise it is *hidden*. Measured positions get
 Gaussian noise (``noise_mm`` per coordinate). Each estimator then runs online over the frames, and
 is scored on:
 
@@ -36,7 +36,7 @@ import numpy as np
 from tracking.hidden import Estimator, Method, estimator_config
 from tracking.markerset import MarkerSet
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 

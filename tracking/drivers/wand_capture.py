@@ -23,9 +23,9 @@ from tqdm import tqdm
 from calibration.camera import Camera
 from calibration.files import load_calibration
 from tracking.blobs import find_blobs
-from tracking.colour_table import ColourTable
-from tracking.measure import blob_gates
-from tracking.recording import Recording
+from tracking.colour.table import ColourTable
+from tracking.full_frame import blob_gates
+from tracking.io.recording import Recording
 
 log = logging.getLogger(__name__)
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RehabError
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +92,7 @@ def write_c3d(
         residuals: optional (T, M) residuals in mm (e.g. mean reprojection distance) of the
             measured points; NaN or below 0.1 mm is written as 0.1 mm (a measured point's
             residual is positive). Ignored where the point is estimated or missing.
-        status: optional (T, M) :class:`~tracking.status.MarkerStatus` codes: ESTIMATED points get
+        status: optional (T, M) :class:`~tracking.marker_status.MarkerStatus` codes: ESTIMATED points get
             residual 0 and no camera, LOST points residual -1. Default: every point with a
             position was measured.
         camera_masks: optional (T, M, C) bool, the cameras (calibration order) that saw each

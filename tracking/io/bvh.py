@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from tracking.sim.body import direction_from_plane, swing_matrix
+from tracking.geometry.rotations import direction_from_plane, swing_matrix
 
 _MIRROR = np.diag([-1.0, 1.0, 1.0])
 _CM_PER_M = 100.0

@@ -9,8 +9,8 @@ import numpy as np
 
 from calibration.camera import Camera
 from tracking.markerset import load_markerset
-from tracking.recording import Recording
-from tracking.status import MarkerStatus
+from tracking.io.recording import Recording
+from tracking.marker_status import MarkerStatus
 
 
 def track_positions(folder: str | Path, cameras: Sequence[Camera]) -> tuple[np.ndarray, np.ndarray]:

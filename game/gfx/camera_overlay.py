@@ -23,10 +23,10 @@ import cv2
 import moderngl
 import numpy as np
 
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 if TYPE_CHECKING:
-    from tracking.colour_table import ColourTable
+    from tracking.colour.table import ColourTable
 
 _SHIFT = 4  # fractional bits of OpenCV's fixed-point coordinates
 _SCALE = 1 << _SHIFT
@@ -167,7 +167,7 @@ def overlay_cameras(
         status: (M,) uint8 :class:`MarkerStatus`.
         state: tracking state (0 WAITING, 1 TRACKING), shown in every title with ``message``.
         camera_names: C names for the titles (default cam1, cam2, ...).
-        colour_table: a :class:`tracking.colour_table.ColourTable`; when given, its labels of
+        colour_table: a :class:`tracking.colour.table.ColourTable`; when given, its labels of
             each image are painted (costs ~1 ms per 640x480 image).
 
     Returns:

@@ -27,7 +27,7 @@ import numpy as np
 
 from calibration.errors import RehabError
 from tracking.angles import ANGLE_COLUMNS, MissingMarkersError
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 __all__ = [
     "ANGLES_HEADER", "STATUS_HEADER", "AnglesTable", "MarkerStatus", "StatusTable", "TableError",
@@ -135,7 +135,7 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: M
     found) if the TRC lacks a marker the angles need. Returns the number of frames written.
     """
     from tracking.angles import joint_angles, require_markers
-    from tracking.trc import read_trc
+    from tracking.io.trc import read_trc
 
     trc = read_trc(trc_path)
     if trc.n_frames == 0:

@@ -1,6 +1,6 @@
 """Learned marker colours: colour models from pixels, and the lookup table built from them.
 
-The nominal table (:mod:`tracking.colour_table`) labels a colour by its distance in hue from the
+The nominal table (:mod:`tracking.colour.table`) labels a colour by its distance in hue from the
 marker set's nominal sRGB colours. Under clinic lighting the markers' colours in the images are
 not the nominal ones: a warm cast moves the magenta's hue by 20-30 deg, past the nominal table's
 20 deg tolerance, and a 40 % darker room moves noisy dark-side pixels further. Here each marker
@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracking.colour_table import (
+from tracking.colour.table import (
     DEFAULT_MIN_VALUE,
     DEFAULT_NOISE_COUNTS,
     ColourTable,

@@ -1,6 +1,6 @@
 """Online colour adaptation: the tracker's table follows the lighting, from the tracked markers.
 
-:class:`ColourAdapter` owns a learned table (:mod:`tracking.colour_learn`) that starts as the
+:class:`ColourAdapter` owns a learned table (:mod:`tracking.colour.learn`) that starts as the
 nominal one. Every ``every`` frame sets, after :meth:`tracking.tracker.Tracker.step`, it projects
 the markers measured this frame into each camera and takes the pixels of the inner part of the
 largest ``max_discs`` ball views of each colour (``inner`` of the projected radius) for the
@@ -11,7 +11,7 @@ those within ``loose_hue_deg`` of the colour's current hue with saturation >=
 ``loose_saturation``: that band is wider than the table's, so pixels the table has begun to miss
 as the light drifts are learned and pull the model along. The models are refitted with
 forgetting ``rate``; the first update (at identification) replaces the nominal table at once,
-later ones stage their changed table entries (:meth:`tracking.colour_learn.LutBuilder.stage`),
+later ones stage their changed table entries (:meth:`tracking.colour.learn.LutBuilder.stage`),
 colours the cameras see first, and each frame set rewrites ``max(budget, pending / every)`` of
 them in place. The tracker, which reads ``table.lut`` at every window, sees each rewrite from its
 next frame, and the table is never more than one update behind the models.
@@ -29,7 +29,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.colour_learn import (
+from tracking.colour.learn import (
     ColourModel,
     ColourStats,
     LutBuilder,
@@ -40,10 +40,10 @@ from tracking.colour_learn import (
     disc_pixels,
     outside_discs_sample,
 )
-from tracking.colour_table import ColourTable, DEFAULT_HUE_TOL_DEG, DEFAULT_MIN_SATURATION
+from tracking.colour.table import ColourTable, DEFAULT_HUE_TOL_DEG, DEFAULT_MIN_SATURATION
 from tracking.errors import ContentError
 from tracking.markerset import MarkerSet
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 
@@ -244,7 +244,7 @@ def colours_toml(markerset: MarkerSet, models: Sequence[ColourModel], label_hs: 
 
 def save_colours(path: Path, markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray) -> None:
     """Learned colours -> a TOML colour file of their own (:func:`colours_toml`)."""
-    header = "# Marker colours learned by `rehab colour learn` (tracking/colour_adapt.py).\n"
+    header = "# Marker colours learned by `rehab colour learn` (tracking/colour/adapt.py).\n"
     Path(path).write_text(header + colours_toml(markerset, models, label_hs), encoding="utf-8")
 
 
@@ -253,7 +253,7 @@ def save_colours_to_calibration(path: Path, markerset: MarkerSet, models: Sequen
     (replacing an older one; the cameras are kept as they are)."""
     from calibration.files import write_metadata_section
 
-    text = ("# Marker colours learned by `rehab calibrate colour` (tracking/colour_adapt.py)\n"
+    text = ("# Marker colours learned by `rehab calibrate colour` (tracking/colour/adapt.py)\n"
             + colours_toml(markerset, models, label_hs, prefix=f"metadata.{CALIBRATION_SECTION}"))
     write_metadata_section(path, CALIBRATION_SECTION, text)
 
@@ -338,7 +338,7 @@ def learn_colours(frame_sets: Iterable, cameras: Sequence[Camera], markerset: Ma
     the images with equal weight (a running mean).
 
     Args:
-        frame_sets: :class:`tracking.recording.FrameSet` objects in time order.
+        frame_sets: :class:`tracking.io.recording.FrameSet` objects in time order.
         cameras: calibrated cameras, in the order of the images.
         markerset: the marker set worn.
         frames: frame sets to learn from after identification.

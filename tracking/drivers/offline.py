@@ -13,11 +13,11 @@ import numpy as np
 from tqdm import tqdm
 
 from calibration.atomic import written_via_temp
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.markerset import MarkerSet, load_markerset, parse_rgb
-from tracking.measure import FrameMeasurer
+from tracking.full_frame import FrameMeasurer
 from tracking.errors import RecordingError
-from tracking.recording import Recording, read_timestamps
+from tracking.io.recording import Recording, read_timestamps
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ def track_recording(
 def learnt_colours(calibration: Path, ms: MarkerSet, colours: Path | None = None):
     """The learnt colours to track with: ``colours`` (a colour file) if given, else those saved in
     the calibration file, else None (the nominal table). Returns (models, label_hs) or None."""
-    from tracking.colour_adapt import calibration_colours, read_colours
+    from tracking.colour.adapt import calibration_colours, read_colours
 
     if colours is not None:
         return read_colours(colours, ms)
@@ -121,7 +121,7 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
     """The nominal table, or the table of ``learnt`` (models, label_hs) colours."""
     if learnt is None:
         return ColourTable.build(ms.palette)
-    from tracking.colour_adapt import table_from_colours
+    from tracking.colour.adapt import table_from_colours
 
     return table_from_colours(*learnt)
 
@@ -136,7 +136,7 @@ class TrackedRecording:
         frames: (T,) recording frame indices (0 = first image); times_s: (T,) seconds.
         rate_hz: the recording's frame rate.
         positions_mm: (T, M, 3) world millimetres, NaN where lost.
-        status: (T, M) :class:`~tracking.status.MarkerStatus` codes.
+        status: (T, M) :class:`~tracking.marker_status.MarkerStatus` codes.
         angles_deg: angle name -> (T,) degrees (the tracker's, NaN where undefined).
         uv_px: (T, M, C, 2) centroids each position was triangulated from, NaN where unused.
         identified: (T,) bool, the frame sets where the tracker identified the markers (the first
@@ -210,7 +210,7 @@ def image_skews(rec: Recording, sync: str = "auto") -> tuple[np.ndarray | None, 
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
                     c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
                     progress=False, sync="auto") -> str:
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
 
     run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                           colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync)
@@ -235,12 +235,12 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
     the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
     when every camera is within 1 ms of the first, and a line saying what was found)."""
     from tracking.clock_sync import block_offsets, fit_clocks
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
 
     study = int(round(SYNC_STUDY_S * fps))
     skews = None
     est = None
-    reading = logging.getLogger("tracking.recording")
+    reading = logging.getLogger("tracking.io.recording")
     level = reading.level
     reading.setLevel(logging.ERROR)  # the recording's warnings (a camera that ends early) once, in the real pass
     try:
@@ -268,7 +268,7 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
     identified the markers. ``sync``: the images' instants (:func:`image_skews`; "auto" without
     timestamps.csv estimates them, :func:`estimated_skews`)."""
     from tracking.angles import ANGLE_COLUMNS
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
     from tracking.tracker import Tracker, TrackingState
 
     with Recording(folder, calibration) as rec:
@@ -283,7 +283,7 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         adapter = None
         learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
-            from tracking.colour_adapt import ColourAdapter
+            from tracking.colour.adapt import ColourAdapter
 
             adapter = ColourAdapter(rec.cameras, ms, start=learnt)
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
@@ -335,8 +335,8 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
 def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_csv=None, c3d=None, mot=None,
                   bvh=None, detections=None) -> None:
     """Write the asked result files of a tracked recording (docs/FILES.md)."""
-    from tracking.tables import write_angles_csv, write_status_csv
-    from tracking.trc import write_trc
+    from tracking.io.csv_tables import write_angles_csv, write_status_csv
+    from tracking.io.trc import write_trc
 
     for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
         if path:
@@ -360,28 +360,28 @@ def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_cs
         with written_via_temp(c3d) as tmp:
             _write_c3d(tmp, run)
     if mot:
-        from tracking.opensim_mot import write_mot
+        from tracking.io.opensim_mot import write_mot
 
         with written_via_temp(mot) as tmp:
             write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
     if bvh:
-        from tracking.bvh import BvhSkeleton, write_bvh
-        from tracking.status import MarkerStatus
+        from tracking.io.bvh import BvhSkeleton, write_bvh
+        from tracking.marker_status import MarkerStatus
 
         # segment lengths from the measured positions only (an estimate must not teach them)
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
         with written_via_temp(bvh) as tmp:
             write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
     if detections:
-        from tracking.detections import write_detections_csv
+        from tracking.io.detections import write_detections_csv
 
         with written_via_temp(detections) as tmp:
             write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras], run.names, run.uv_px)
 
 
 def _write_c3d(path, run: TrackedRecording) -> None:
-    from tracking.c3d_io import C3dEvent, write_c3d
-    from tracking.detections import reprojection_residuals_mm, seen_by
+    from tracking.io.c3d import C3dEvent, write_c3d
+    from tracking.io.detections import reprojection_residuals_mm, seen_by
 
     residuals = reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
     events = [C3dEvent("Identified", float(t - run.times_s[0]), "General",

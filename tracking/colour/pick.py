@@ -11,7 +11,7 @@ a camera image (the camera monitor scene) and says which colour it is.
 - :class:`ManualColours`: per colour the pixels of its picks (a running mean over picks), and
   the rest of each picked image (random pixels outside the ball that the current table does not
   take for a marker) as "not a marker". A colour with a pick gets its model from its pixels
-  (:func:`tracking.colour_learn.fit_models`) and its table cells where the background is more
+  (:func:`tracking.colour.learn.fit_models`) and its table cells where the background is more
   likely are dropped; a colour without a pick keeps its current model and cells.
 
 Pure arrays: images in, models and tables out.
@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 
 from calibration.errors import RehabError
-from tracking.colour_learn import (
+from tracking.colour.learn import (
     HUE_UNITS_PER_DEG,
     ColourModel,
     ColourStats,
@@ -36,7 +36,7 @@ from tracking.colour_learn import (
     label_hue_saturation,
     outside_discs_sample,
 )
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 
 MIN_BLOB_PX = 6
 

@@ -11,7 +11,7 @@ reads its samples in a tight loop and reports, per sample:
 - **pace**: frame sets per second the source kept, against the rate asked for, with the mean
   render and tracker step times (on a shared machine these depend on the load: it is reported).
 
-``python -m tracking.live.bench`` prints the figures for 320x240 and 640x480;
+``python -m tracking.live.latency_bench`` prints the figures for 320x240 and 640x480;
 ``rehab bench`` calls :func:`measure_latency` as well. ``--kill-both N`` instead times the
 restart after the tracker and its warm standby are killed together (:func:`measure_kill_both`).
 """
@@ -262,7 +262,7 @@ def measure_kill_both(n: int = 10, size: tuple[int, int] = (320, 240), *, log=pr
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m tracking.live.bench", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m tracking.live.latency_bench", description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="measuring time per size (default 10)")
     parser.add_argument("--size", action="append", default=None, metavar="WxH",
                         help="camera size; repeat for several (default 320x240 and 640x480)")

@@ -23,8 +23,8 @@ import cv2
 import numpy as np
 
 from tracking import window_kernel
-from tracking.colour_table import ColourTable
-from tracking.measure import FrameMeasurer
+from tracking.colour.table import ColourTable
+from tracking.full_frame import FrameMeasurer
 from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 

@@ -1,4 +1,4 @@
-"""Unit triangle meshes for the simulated studio (pure numpy, no GL).
+"""Unit triangle meshes for the simulated studio and the game's avatar (pure numpy, no GL).
 
 Every mesh is a pair ``(vertices, triangles)``: float32 vertex attributes and an (F, 3) int32
 index array whose triangles wind counter-clockwise seen from outside (outward normals by the

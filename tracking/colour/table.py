@@ -297,7 +297,7 @@ class ColourTable:
         min_value: float = DEFAULT_MIN_VALUE,
         noise_counts: float = DEFAULT_NOISE_COUNTS,
     ) -> "ColourTable":
-        """Wrap a full table filled elsewhere (e.g. from learned colours, :mod:`tracking.colour_learn`).
+        """Wrap a full table filled elsewhere (e.g. from learned colours, :mod:`tracking.colour.learn`).
 
         The array is used as is, not copied: its owner may rewrite it between frames (online
         adaptation); the numeric attributes only describe it.

@@ -16,7 +16,7 @@ import numpy as np
 
 from calibration.camera import Camera
 from tracking.blobs import DEFAULT_MAX_PER_COLOUR, Blobs, find_blobs
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.reconstruction import (
     CameraObservations,
     Points3D,
