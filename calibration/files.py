@@ -77,6 +77,7 @@ __all__ = [
     "read_metadata_section",
     "write_metadata_section",
     "read_lens_information",
+    "read_lens_views",
     "write_lens_information",
     "save_calibration_toml",
     "save_calibration_opencv",
@@ -578,13 +579,16 @@ def write_metadata_section(path: str | os.PathLike, name: str, toml_text: str) -
 
 
 LENS_INFORMATION = "lens_information"
+LENS_VIEWS = "lens_views"
 
 
-def write_lens_information(path: str | os.PathLike, information: dict[str, np.ndarray]) -> None:
+def write_lens_information(path: str | os.PathLike, information: dict[str, np.ndarray],
+                           views: dict[str, int] | None = None) -> None:
     """Keep how exact each camera's lens data are in a TOML calibration file: the information
     matrix (inverse covariance) of fx, fy, cx, cy and the distortion coefficients from the lens
     step (:attr:`calibration.intrinsics.IntrinsicsResult.information`), as
-    ``[metadata.lens_information]`` with one ``"camera name" = [[...], ...]`` row list per camera.
+    ``[metadata.lens_information]`` with one ``"camera name" = [[...], ...]`` row list per camera;
+    with ``views``, the number of images each lens step used as ``[metadata.lens_views]``.
     The positions step then refines the lens data with this weight (docs/CALIBRATION.md).
     """
     rows = [f"[metadata.{LENS_INFORMATION}]"]
@@ -593,6 +597,20 @@ def write_lens_information(path: str | os.PathLike, information: dict[str, np.nd
         info = 0.5 * (info + info.T)
         rows.append(f"{json.dumps(name, ensure_ascii=False)} = [ {' '.join(_toml_list(r) + ',' for r in info)}]")
     write_metadata_section(path, LENS_INFORMATION, "\n".join(rows))
+    if views:
+        write_metadata_section(path, LENS_VIEWS, "\n".join(
+            [f"[metadata.{LENS_VIEWS}]"] + [f"{json.dumps(name, ensure_ascii=False)} = {int(n)}" for name, n in views.items()]))
+
+
+def read_lens_views(path: str | os.PathLike, cameras: Sequence[Camera]) -> list[int | None]:
+    """How many images each camera's lens step used (:func:`write_lens_information`), None where
+    the file does not say (or says something that is not a count)."""
+    section = read_metadata_section(path, LENS_VIEWS) or {}
+    out: list[int | None] = []
+    for cam in cameras:
+        n = section.get(cam.name)
+        out.append(n if isinstance(n, int) and not isinstance(n, bool) and n >= 0 else None)
+    return out
 
 
 def read_lens_information(path: str | os.PathLike, cameras: Sequence[Camera]) -> list[np.ndarray | None]:

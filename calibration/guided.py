@@ -8,7 +8,9 @@ once, a wand frame when two or more saw both balls; cameras are linked by ``MIN_
 views (``MIN_WAND_FRAMES`` frames), and the rig can be solved when the links join every camera.
 The quality report measures with the finished calibration alone: the board's corners and the
 wand's balls (frames waved after the solve) triangulated from every camera that saw them, the
-board's edges and diagonal and the wand's length against the known ones, and each camera's fit.
+board's edges and diagonal and the wand's length against the known ones, each camera's fit, and
+each camera's lens near the picture's edge (the balls' radial drift, :func:`edge_drift`: a
+distortion error the wand's length does not show).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 from calibration.board import Detection
 from calibration.camera import Camera
 from calibration.errors import CalibrationError
+from calibration.intrinsics import coverage_of
 
 MIN_SHARED_VIEWS = 3  # board views two cameras must share to count as linked
 GOOD_RMS_PX, USABLE_RMS_PX = 0.5, 1.0
@@ -97,8 +100,10 @@ def link_advice(names: Sequence[str], counts: np.ndarray, min_count: int, doing:
 
 
 def solve_rig(cameras: Sequence[Camera], board, rig: RigViews, floor: Sequence[Detection | None], *,
-              origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0):
-    """The cameras' positions from the shared views, the world frame from the floor board.
+              origin_m=(0.0, 0.0, 0.0), turn_deg: float = 0.0, lens_information=None):
+    """The cameras' positions from the shared views, the world frame from the floor board; the
+    lens data of cameras with an information matrix in ``lens_information`` refined with them
+    (:func:`calibration.extrinsics.calibrate_extrinsics`).
 
     Returns:
         :class:`calibration.extrinsics.ExtrinsicsResult`.
@@ -114,7 +119,8 @@ def solve_rig(cameras: Sequence[Camera], board, rig: RigViews, floor: Sequence[D
         raise CalibrationError("no camera sees the floor board: lay it face up on the seat, in view of the cameras")
     views = dict(rig.views)
     views["floor"] = list(floor)
-    return calibrate_extrinsics(cameras, board, views, floor_view="floor", origin_m=origin_m, turn_deg=turn_deg)
+    return calibrate_extrinsics(cameras, board, views, floor_view="floor", origin_m=origin_m, turn_deg=turn_deg,
+                                lens_information=lens_information)
 
 
 @dataclass
@@ -201,10 +207,31 @@ class WandCheck:
             by two or more cameras.
         rms_px: (C,) each camera's RMS distance between the balls it saw and the triangulated balls
             projected into it, pixels (NaN for a camera that saw none).
+        edge_drift_px: (C,) the balls' systematic radial offset at the outer edge of where they
+            were seen (:func:`edge_drift`), pixels, + outwards (NaN: too few balls).
+        edge_drift_se_px: (C,) its standard error, pixels.
+        drift_mm_per_px: (C,) what one pixel at that camera means in the volume (the balls'
+            median distance over the focal length), mm.
+        coverage: (C,) share of the cells of an 8 x 6 grid over the picture that hold a ball
+            (the lens is checked only where the balls went).
     """
 
     length_error_mm: np.ndarray
     rms_px: np.ndarray
+    edge_drift_px: np.ndarray
+    edge_drift_se_px: np.ndarray
+    drift_mm_per_px: np.ndarray
+    coverage: np.ndarray
+
+    def edge_drift_mm(self, c: int) -> float:
+        """Camera ``c``'s edge drift as a distance in the volume, mm (NaN when unknown)."""
+        return float(abs(self.edge_drift_px[c]) * self.drift_mm_per_px[c])
+
+    def drift_found(self, c: int) -> bool:
+        """A systematic drift: over three standard errors (and known)."""
+        if not np.isfinite(self.edge_drift_px[c]):
+            return False
+        return bool(abs(self.edge_drift_px[c]) > 3.0 * self.edge_drift_se_px[c])
 
     @property
     def n_frames(self) -> int:
@@ -232,13 +259,53 @@ def wand_check(cameras: Sequence[Camera], uv_px: np.ndarray, length_m: float) ->
     lengths = np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1)
     errors = 1000.0 * (lengths[np.isfinite(lengths)] - length_m)
     rms = np.full(C, np.nan)
+    drift, drift_se, mm_per_px = (np.full(C, np.nan) for _ in range(3))
+    cover = np.zeros(C)
     flat = pts.reshape(-1, 3)
     for c, cam in enumerate(cameras):
         ok = whole[c].reshape(-1) & np.all(np.isfinite(flat), axis=1)
+        seen = uv[c].reshape(-1, 2)[whole[c].reshape(-1)]
+        if seen.size:
+            cover[c] = coverage_of([Detection(seen, cam.size_px)], cam.size_px)[0]
         if ok.any():
-            d = cam.project(flat[ok]) - uv[c].reshape(-1, 2)[ok]
+            d = uv[c].reshape(-1, 2)[ok] - cam.project(flat[ok])
             rms[c] = float(np.sqrt(np.mean(np.sum(d**2, axis=1))))
-    return WandCheck(errors, rms)
+            drift[c], drift_se[c] = edge_drift(cam, uv[c].reshape(-1, 2)[ok], d)
+            depth = (flat[ok] @ cam.R.T + cam.t_m)[:, 2]
+            mm_per_px[c] = 1000.0 * float(np.median(depth)) / float(cam.K[0, 0])
+    return WandCheck(errors, rms, drift, drift_se, mm_per_px, cover)
+
+
+def edge_drift(cam: Camera, uv_px: np.ndarray, residual_px: np.ndarray) -> tuple[float, float]:
+    """The radial pattern of one camera's residuals (seen minus projected), as the offset at the
+    outer edge of where they lie: a lens whose distortion is off moves points near the picture's
+    edge in or out, while the fit of the whole stays small and the wand's length, measured where
+    the balls were, barely changes (docs/CALIBRATION.md, "What the report can see").
+
+    The radial component of each residual, fitted as ``a r^3 + b r`` over the distance ``r`` from
+    the picture's centre in focal lengths (a radial distortion error, and the small scale term a
+    pose absorbs), evaluated at the 95th percentile of ``r``. Returns the offset and its standard
+    error, pixels (NaN with fewer than 10 points).
+    """
+    if len(uv_px) < 10:
+        return float("nan"), float("nan")
+    centre = cam.K[:2, 2]
+    out = uv_px - centre
+    norm = np.linalg.norm(out, axis=1)
+    keep = norm > 1e-6
+    r = np.linalg.norm(cam.undistort_points(uv_px[keep]), axis=1)
+    radial = np.sum(residual_px[keep] * out[keep] / norm[keep, None], axis=1)
+    A = np.stack([r**3, r], axis=1)
+    coef, *_ = np.linalg.lstsq(A, radial, rcond=None)
+    left = radial - A @ coef
+    var = float(left @ left) / max(len(radial) - 2, 1)
+    edge = float(np.quantile(r, 0.95))
+    g = np.array([edge**3, edge])
+    try:
+        se = float(np.sqrt(var * g @ np.linalg.solve(A.T @ A, g)))
+    except np.linalg.LinAlgError:
+        return float("nan"), float("nan")
+    return float(g @ coef), se
 
 
 @dataclass(frozen=True, slots=True)
@@ -284,6 +351,8 @@ class QualityReport:
                        f"{wand.length_rms_mm:.2f} mm RMS (worst {np.max(np.abs(wand.length_error_mm)):.2f} mm)")
         for k, (n, r) in enumerate(zip(self.names, self.rms_px)):
             w = "" if wand is None or not np.isfinite(wand.rms_px[k]) else f", wand balls {wand.rms_px[k]:.2f} px"
+            if wand is not None and np.isfinite(wand.edge_drift_px[k]):
+                w += f" (near the edge {wand.edge_drift_px[k]:+.2f} px, balls in {100 * wand.coverage[k]:.0f} % of the picture)"
             out.append(f"{n}: {r:.2f} px{w}")
         return out + list(self.advice)
 
@@ -335,20 +404,29 @@ def quality_report(cameras: Sequence[Camera], board, views: dict[str, list[Detec
     if use_wand:
         figures.append(wand.length_rms_mm)
         rms = np.fmax(rms, wand.rms_px)  # the worse of the two fits (NaN ignored)
+    # a lens whose distortion is off: the balls drift in or out near the picture's edge, as a
+    # distance in the volume; it counts like a length error (the wand's length barely shows it)
+    drift_mm = np.array([wand.edge_drift_mm(c) if use_wand and wand.drift_found(c) else 0.0 for c in range(len(names))])
     length_rms = max(figures) if figures else float("inf")
     worst = float(np.nanmax(rms)) if np.isfinite(rms).any() else float("inf")
-    if worst < GOOD_RMS_PX and length_rms < GOOD_LENGTH_MM:
+    drift = float(np.max(drift_mm, initial=0.0))
+    if worst < GOOD_RMS_PX and length_rms < GOOD_LENGTH_MM and drift < GOOD_LENGTH_MM:
         verdict = "good"
-    elif worst < USABLE_RMS_PX and length_rms < USABLE_LENGTH_MM:
+    elif worst < USABLE_RMS_PX and length_rms < USABLE_LENGTH_MM and drift < USABLE_LENGTH_MM:
         verdict = "usable"
     else:
         verdict = "redo"
     advice = []
-    for n, r in zip(names, rms):
+    for c, (n, r) in enumerate(zip(names, rms)):
         if not np.isfinite(r):
             advice.append(f"Redo the positions: {n} saw no board view or wand")
         elif r >= GOOD_RMS_PX:
             advice.append(f"Redo {n}'s lens step: its corners or wand balls fit to {r:.2f} px (blurred views, or the lens moved)")
+        elif drift_mm[c] >= GOOD_LENGTH_MM:
+            way = "outwards" if wand.edge_drift_px[c] > 0 else "inwards"
+            advice.append(f"Redo {n}'s lens step with the board also near the edges and corners of the picture: the wand "
+                          f"balls drift {abs(wand.edge_drift_px[c]):.2f} px {way} near the edge (about {drift_mm[c]:.1f} mm "
+                          "in the volume), its lens distortion is off")
     if not figures:
         advice.append("Redo the positions: neither the board nor the wand was seen whole by two cameras, "
                       "so no length could be measured")

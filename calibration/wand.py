@@ -1,7 +1,7 @@
 """Wand calibration: camera poses from two markers at a known distance waved through the volume.
 
 Pure math on arrays: the ball centroids in every camera and frame come in (from the blob detector,
-see :mod:`tracking.wand_capture`), the intrinsics are known.
+see :mod:`tracking.drivers.wand_capture`), the intrinsics are known.
 
 Steps (:func:`calibrate_wand`):
 

@@ -171,7 +171,7 @@ def _track_folder(args) -> Path:
 
 
 def _cmd_track(args) -> int:
-    from tracking.offline import track_recording
+    from tracking.drivers.offline import track_recording
 
     args.recording = _track_folder(args)
 
@@ -227,16 +227,27 @@ def _add_angles(sub) -> None:
     p.add_argument("--out", type=Path, required=True, help="angles CSV to write")
     p.add_argument("--map", type=Path, default=None, metavar="FILE.yaml",
                    help="the file's names for the angles' markers, one 'MB: STER' line each (TRCs of other marker sets)")
+    p.add_argument("--markerset", default=None, metavar="NAME|FILE",
+                   help="the marker set the file was made with: the angles take their markers from its roles "
+                        "(those it has no markers for are left empty)")
     p.set_defaults(func=_cmd_angles)
 
 
 def _cmd_angles(args) -> int:
-    from tracking.tables import angles_csv_from_trc, read_marker_map
+    from tracking.angles import withheld_angles
+    from tracking.markerset import load_markerset
+    from tracking.io.csv_tables import angles_csv_from_trc, read_marker_map
 
     check_outputs({"--out": args.out})
+    if args.map is not None and args.markerset is not None:
+        raise RehabError("give --map (names mapped to upper_limb_seated's) or --markerset (the file's marker set), not both")
     marker_map = read_marker_map(args.map) if args.map is not None else None
-    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map)
+    roles = load_markerset(args.markerset).roles if args.markerset is not None else None
+    n = _writing(angles_csv_from_trc, "the angles")(args.trc, args.out, marker_map, roles)
     print(f"wrote {n} frames of joint angles to {args.out}")
+    withheld = withheld_angles(roles) if roles is not None else {}
+    if withheld:
+        print(f"left empty: {', '.join(withheld)} (the marker set has no markers for them)")
     return 0
 
 
@@ -266,7 +277,7 @@ def _add_validate(sub) -> None:
 def _cmd_validate(args) -> int:
     from dataclasses import replace
 
-    from tracking.sim.studio import SimulationSettings
+    from tracking.sim.studio import SimulationSettings  # lazy: only to run the simulated patient
     from tracking.sim.validate import combine, validate
 
     if args.population is not None:
@@ -275,7 +286,7 @@ def _cmd_validate(args) -> int:
                               seconds=args.seconds, noise_sigma=args.noise, percentile=args.percentile,
                               sex=args.sex, seed=args.seed)
     if args.tracker:
-        from tracking.sim.motions import available_motions
+        from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
         from tracking.sim.validate import validate_tracking
 
         for name in args.motion or available_motions():
@@ -331,7 +342,7 @@ def add_tracker_source_options(p) -> None:
 
 def check_motion(motion: str | None) -> None:
     """A one-line error for a motion that is neither built in nor a file (None passes)."""
-    from tracking.sim.motions import available_motions
+    from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
 
     if motion is not None and motion not in available_motions() and not Path(motion).is_file():
         raise RehabError(f"unknown motion {motion!r}: choose one of {', '.join(available_motions())} "
@@ -531,7 +542,7 @@ def _add_bench(sub) -> None:
 
 
 def _cmd_bench(args) -> int:
-    from tracking.bench import run_benchmarks
+    from tracking.drivers.bench import run_benchmarks
 
     n = 10 if args.quick else args.frames
     for line in run_benchmarks(n_frames=n, passes=1 if args.quick else max(1, args.passes)):
@@ -541,7 +552,7 @@ def _cmd_bench(args) -> int:
     seconds = 2.0 if args.quick else args.seconds
     app_measured = _bench_live(seconds)
     if args.streaming:
-        from tracking.live.bench import compare_streaming
+        from tracking.live.latency_bench import compare_streaming
 
         print(f"\nTracker process (320x240, 30 frame sets/s) with streaming off and on, alternating passes of "
               f"{seconds:g} s, {1 if args.quick else 3} of each (LSL inlets and an OSC socket receive in this process):",
@@ -554,7 +565,7 @@ def _cmd_bench(args) -> int:
 def _bench_live(seconds: float) -> bool:
     """The tracker process (latency, pace) and the application (frame rate) with it running;
     False when the application could not be measured."""
-    from tracking.live.bench import format_result, measure_latency
+    from tracking.live.latency_bench import format_result, measure_latency
 
     print("\nTracker process (simulated patient, 30 frame sets/s): frame ready -> sample seen by the game "
           "process, minus the tracker's own step time", flush=True)

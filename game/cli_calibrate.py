@@ -13,6 +13,7 @@ Every command writes the calibration as TOML (docs/INTERFACES.md) and, on reques
 
 from __future__ import annotations
 
+import argparse
 import logging
 from pathlib import Path
 from typing import Sequence
@@ -71,10 +72,11 @@ def add_commands(sub) -> None:
                    help="folder with one sub-folder per camera holding the floor board's image (named as --floor); "
                    "default: the views folder")
     q.add_argument("--list-skipped", action="store_true", help="name every image without a usable board")
-    q.add_argument("--refine-lenses", action="store_true",
+    q.add_argument("--refine-lenses", action=argparse.BooleanOptionalAction, default=None,
                    help="refine the lens data together with the positions, weighted by how exact the lens step found "
-                   "them (kept in the intrinsics file by 'rehab calibrate intrinsics'); for ChArUco lens data from "
-                   "15 or more images and several views per camera pair (docs/CALIBRATION.md)")
+                   "them (kept in the intrinsics file by 'rehab calibrate intrinsics'). Default: for the cameras whose "
+                   "lens step used 10 or more images; --refine-lenses: every camera the file has that weight for; "
+                   "--no-refine-lenses: none (docs/CALIBRATION.md)")
     q.add_argument("--floor-board", default=None, metavar="SPEC",
                    help="another board on the floor or seat than the shared views': 9x6:60 (checkerboard inner "
                    "corners : square mm) or charuco:10x7:40[:30]; --origin and --board-centre then refer to it")
@@ -265,7 +267,7 @@ def _triple(text: str, what: str) -> tuple[float, float, float]:
 
 
 def _images_in(folder: Path) -> list[Path]:
-    from tracking.recording import IMAGE_SUFFIXES
+    from tracking.io.recording import IMAGE_SUFFIXES
 
     return sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
 
@@ -369,7 +371,8 @@ def _cmd_intrinsics(args) -> int:
     _save(args, [r.camera for r in results], worst)
     from calibration.files import write_lens_information
 
-    write_lens_information(args.out, {r.camera.name: r.information for r in results if r.information is not None})
+    write_lens_information(args.out, {r.camera.name: r.information for r in results if r.information is not None},
+                           views={r.camera.name: len(r.per_view_rms_px) for r in results})
     print(f"wrote the intrinsics of {len(results)} cameras to {args.out}")
     return 0
 
@@ -548,15 +551,22 @@ def lens_change(cam, given) -> str:
 
 
 def _cmd_extrinsics(args) -> int:
-    from calibration.files import load_calibration, read_lens_information
+    from calibration.files import load_calibration, read_lens_information, read_lens_views
+    from calibration.intrinsics import steady_lens_information
 
     board = board_from_args(args)
     floor_board = board_from_spec(args.floor_board) if args.floor_board else None
     cameras = load_calibration(args.intrinsics)
-    info = read_lens_information(args.intrinsics, cameras) if args.refine_lenses else None
+    info = read_lens_information(args.intrinsics, cameras) if args.refine_lenses is not False else None
     if args.refine_lenses and all(i is None for i in info):
         raise RehabError(f"--refine-lenses: {args.intrinsics} does not say how exact its lens data are: make it with "
                          "'rehab calibrate intrinsics' (or leave the option out)")
+    if args.refine_lenses is None:   # the default: the lenses of steady lens steps
+        n_views = read_lens_views(args.intrinsics, cameras)
+        info = steady_lens_information(info, n_views)
+        kept = [c.name for c, i, n in zip(cameras, info, n_views) if i is None and n is not None]
+        if kept:
+            print(f"lens data kept as they are for {', '.join(kept)} (lens step from fewer than 10 images)")
     res = run_extrinsics(args.views, cameras, board, floor=args.floor, origin_m=origin_from_args(args, floor_board or board),
                          turn_deg=args.turn_deg, floor_views=args.floor_views, list_skipped=args.list_skipped,
                          check_world=not args.no_world_check, floor_board=floor_board, lens_information=info)
@@ -573,8 +583,8 @@ def run_wand(recording: Path, intrinsics: Path, *, length_mm: float | None, colo
     from calibration.extrinsics import world_from_floor_board
     from calibration.wand import calibrate_wand, match_same_colour_balls
     from tracking.markerset import parse_rgb
-    from tracking.recording import read_meta
-    from tracking.wand_capture import wand_centroids
+    from tracking.io.recording import read_meta
+    from tracking.drivers.wand_capture import wand_centroids
 
     if not recording.is_dir():
         raise RehabError(f"{recording}: no such wand recording folder")
@@ -683,9 +693,9 @@ def _cmd_import(args) -> int:
 def _cmd_colour(args) -> int:
     import shutil
 
-    from tracking.colour_adapt import learn_colours, save_colours_to_calibration
-    from tracking.offline import markerset_for
-    from tracking.recording import Recording
+    from tracking.colour.adapt import learn_colours, save_colours_to_calibration
+    from tracking.drivers.offline import markerset_for
+    from tracking.io.recording import Recording
 
     if args.frames < 1:
         raise RehabError(f"--frames {args.frames}: give at least 1")
@@ -725,7 +735,7 @@ def _cmd_simulate_calibration(args) -> int:
         raise RehabError(f"--size {args.size!r} must look like 640x480") from None
     cams = load_rig(args.rig, (w, h))
     if args.lens:
-        from tracking.sim.renderer import DEMO_LENS
+        from tracking.sim.renderer import DEMO_LENS  # lazy: only to run the simulated patient
 
         cams = tuple(Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in cams)
     print(write_calibration_material(args.out_dir, cams, n_intrinsics=args.images, per_pair=args.per_pair,
@@ -781,6 +791,7 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
     when the material has them) against the truth: a summary line, then one line per camera."""
     from calibration.charuco import CharucoBoard
     from calibration.extrinsics import rig_errors
+    from calibration.intrinsics import steady_lens_information
 
     spec = material["charuco"]
     board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
@@ -793,7 +804,7 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
     spec = material.get("charuco_extrinsics")
     if spec is not None and (folder / "extrinsics_charuco").is_dir():
         board = CharucoBoard.parse(spec["squares"], spec["square_mm"], spec["marker_mm"], spec["dictionary"])
-        info = [r.information for r in res]   # as 'rehab calibrate extrinsics --refine-lenses' does
+        info = steady_lens_information([r.information for r in res], [len(r.per_view_rms_px) for r in res])   # as 'rehab calibrate extrinsics' does
         ext = run_extrinsics(folder / "extrinsics_charuco", [r.camera for r in res], board, floor="seat",
                              origin_m=tuple(spec["seat_origin_m"]), turn_deg=0.0, verbose=False, lens_information=info)
         pos, ang = rig_errors(ext.cameras, truth)
@@ -822,10 +833,10 @@ def charuco_check(folder: Path, material: dict, truth) -> list[str]:
 
 def tracking_check(rec_dir: Path, truth, board_cams, wand_cams, *, seconds: float, seed: int) -> str:
     """Track a short simulated recording with the true and the recovered calibrations."""
-    from tracking.calibration_check import tracking_difference_mm
+    from tracking.drivers.calibration_check import tracking_difference_mm
     from tracking.markerset import load_markerset
-    from tracking.recording import RecordingWriter
-    from tracking.sim.body import BodyDimensions
+    from tracking.io.recording import RecordingWriter
+    from tracking.sim.body import BodyDimensions  # lazy: only to run the simulated patient
     from tracking.sim.motions import load_motion
     from tracking.sim.studio import Studio
 

@@ -1,4 +1,4 @@
-"""``rehab colour learn|drift-check``: learned marker colours (tracking/colour_adapt.py, docs/COLOUR.md)."""
+"""``rehab colour learn|drift-check``: learned marker colours (tracking/colour/adapt.py, docs/COLOUR.md)."""
 
 from __future__ import annotations
 
@@ -42,9 +42,9 @@ def add_commands(sub) -> None:
 
 
 def _cmd_learn(args) -> int:
-    from tracking.colour_adapt import learn_colours
-    from tracking.offline import markerset_for
-    from tracking.recording import Recording
+    from tracking.colour.adapt import learn_colours
+    from tracking.drivers.offline import markerset_for
+    from tracking.io.recording import Recording
 
     if args.frames < 1:
         raise RehabError(f"--frames {args.frames}: give at least 1")
@@ -63,7 +63,7 @@ def _cmd_learn(args) -> int:
 def _cmd_drift_check(args) -> int:
     from dataclasses import replace
 
-    from tracking.sim.colour_drift import DRIFT_SETTINGS, run_drift
+    from tracking.sim.colour_drift import DRIFT_SETTINGS, run_drift  # lazy: only to run the simulated patient
 
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))

@@ -52,7 +52,7 @@ def _cmd_record(args) -> int:
     check_new_folder(args.out_dir)
     n_frames = max(1, int(math.floor(args.seconds * args.fps + 1e-9)))
     if args.source == "sim":
-        from tracking.sim.studio import SimulationSettings
+        from tracking.sim.studio import SimulationSettings  # lazy: only to run the simulated patient
         from tracking.sources.sim import SimulatedSource
 
         if args.cameras or args.calibration:

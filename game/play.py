@@ -95,17 +95,17 @@ class PlayOptions:
     sign_in: bool = False     # open on the sign-in screen (accounts, and no account or PIN given: needs_sign_in)
 
 
-def make_avatar(ctx, marker_names):
-    """The patient's avatar on ``ctx`` for a marker set's names (:mod:`game.avatar`)."""
+def make_avatar(ctx, marker_names, roles=None):
+    """The patient's avatar on ``ctx`` for a marker set's names and roles (:mod:`game.avatar`)."""
     from game.avatar.live import LiveAvatar
 
-    return LiveAvatar(ctx, marker_names)
+    return LiveAvatar(ctx, marker_names, roles=roles)
 
 
 def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[], float] = time.perf_counter,
               sleep: Callable[[float], None] = time.sleep) -> App:
     """The application with its scenes on ``screen``, reading ``link``."""
-    from tracking.sim.motions import available_motions
+    from tracking.sim.motions import available_motions  # lazy: only to run the simulated patient
 
     app = App(screen, options.settings, clock=clock, sleep=sleep, services=Services(link))
     motions = [None, *available_motions()]
@@ -163,7 +163,7 @@ def build_app(screen, options: PlayOptions, link: LiveLink, *, clock: Callable[[
 
     def open_calibrate():
         from game.scenes.calibrate import CalibrateScene, camera_feeds, lenses_for_feeds, sim_feeds
-        from tracking.sim.calibration_material import DEFAULT_BOARD
+        from tracking.sim.calibration_material import DEFAULT_BOARD  # lazy: only to run the simulated patient
 
         board = options.calibration_board or DEFAULT_BOARD
         if options.calibrate_devices:

@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from game.avatar.interpolate import PoseInterpolator, lerp_pose, slerp_frames
 from game.avatar.skeleton import JOINTS, SEGMENTS, Proportions, SkeletonPose
-from tracking.sim.body import axis_angle_matrix, slerp_rotation
-from tracking.status import MarkerStatus
+from tracking.geometry.rotations import axis_angle_matrix, slerp_rotation
+from tracking.marker_status import MarkerStatus
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:

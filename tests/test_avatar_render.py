@@ -12,7 +12,7 @@ from game.avatar.shapes import body_shapes
 from game.avatar.skeleton import SEGMENTS, SkeletonTracker
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 MS = load_markerset()
 W, H = 320, 240
@@ -178,7 +178,7 @@ def test_shapes_are_finite_and_right_handed():
 
 
 def test_bench_reports_a_frame_rate(gl):
-    from game.avatar.bench import avatar_fps
+    from game.avatar.fps_bench import avatar_fps
 
     fps = avatar_fps((160, 120), seconds=0.2, ctx=gl[0])
     assert 0.5 < fps < 10_000

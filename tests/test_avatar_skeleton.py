@@ -9,7 +9,7 @@ from game.avatar.skeleton import JOINTS, SEGMENTS, SkeletonTracker
 from tracking.angles import MissingMarkersError, joint_angles
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 MS = load_markerset()
 MEASURED = np.full(MS.n_markers, MarkerStatus.MEASURED, np.uint8)
@@ -183,9 +183,24 @@ def test_estimated_markers_do_not_teach_proportions():
     assert tracker.proportions.n_frames == 0
 
 
-def test_missing_marker_names_are_one_line_errors():
-    with pytest.raises(MissingMarkersError, match="MRW2"):
-        SkeletonTracker([n for n in MS.names if n != "MRW2"])
+def test_a_role_without_a_marker_leaves_its_segment_lost_and_the_rest_drawn():
+    names = [n for n in MS.names if n != "MRW2"]
+    m = body().markers_m(reference_pose())
+    keep = [MS.index(n) for n in names]
+    full = SkeletonTracker(MS.names).update(m, MEASURED)
+    sk = SkeletonTracker(names).update(m[keep], MEASURED[keep])
+    assert sk.segment_state("right_forearm") is MarkerStatus.LOST
+    for seg in SEGMENTS:
+        if seg != "right_forearm":
+            assert sk.segment_state(seg) is MarkerStatus.MEASURED
+    # the other segments are drawn from their own markers, exactly as with the full set
+    for joint in ("sternum", "right_elbow", "left_wrist", "left_hand"):
+        np.testing.assert_array_equal(sk.joint(joint), full.joint(joint))
+
+
+def test_a_marker_set_without_any_role_is_a_one_line_error():
+    with pytest.raises(MissingMarkersError, match="no marker for any role.*roles:"):
+        SkeletonTracker(["A", "B", "C"])
 
 
 def test_bad_array_shapes_are_rejected():

@@ -10,10 +10,10 @@ from calibration.errors import CalibrationError
 from calibration.files import load_calibration, read_metadata_section, write_metadata_section
 from game.cli import main
 from tests.test_colour_learn_cli import write_recording
-from tracking.colour_adapt import calibration_colours
+from tracking.colour.adapt import calibration_colours
 from tracking.markerset import load_markerset
-from tracking.status import MarkerStatus
-from tracking.tables import read_status_csv
+from tracking.marker_status import MarkerStatus
+from tracking.io.csv_tables import read_status_csv
 
 CAST = (1.15, 1.0, 0.85)  # a warm cast the nominal table still identifies the reference pose under
 
@@ -51,7 +51,7 @@ def test_colours_saved_in_the_calibration_and_used_by_track(recording, tmp_path,
 
     # rehab track picks the colours up from the calibration.
     status = tmp_path / "a.csv"
-    with caplog.at_level("INFO", logger="tracking.offline"):
+    with caplog.at_level("INFO", logger="tracking.drivers.offline"):
         assert main(["track", str(recording), "--calibration", str(out), "--status", str(status)]) == 0
     assert any("marker colours learnt into" in r.getMessage() for r in caplog.records)
     assert np.all(read_status_csv(status).status == MarkerStatus.MEASURED)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from calibration.errors import RehabError
-from tracking.colour_adapt import load_colours, nominal_models, read_colours, save_colours
-from tracking.colour_learn import ColourStats, LutBuilder, fit_models, hsv_bytes, label_hue_saturation
-from tracking.colour_table import ColourTable
+from tracking.colour.adapt import load_colours, nominal_models, read_colours, save_colours
+from tracking.colour.learn import ColourStats, LutBuilder, fit_models, hsv_bytes, label_hue_saturation
+from tracking.colour.table import ColourTable
 from tracking.markerset import load_markerset
 
 

@@ -3,11 +3,11 @@
 import numpy as np
 
 from game.cli import main
-from tracking.recording import RecordingWriter
+from tracking.io.recording import RecordingWriter
 from tracking.sim.body import reference_pose
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
-from tracking.tables import read_status_csv
+from tracking.marker_status import MarkerStatus
+from tracking.io.csv_tables import read_status_csv
 
 
 def write_recording(folder, n, exposure=1.0, cast=(1.0, 1.0, 1.0)):

@@ -5,12 +5,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from tracking.colour_adapt import ColourAdapter, learn_colours, nominal_models
-from tracking.colour_learn import disc_pixels, outside_discs_sample
-from tracking.colour_table import ColourTable
+from tracking.colour.adapt import ColourAdapter, learn_colours, nominal_models
+from tracking.colour.learn import disc_pixels, outside_discs_sample
+from tracking.colour.table import ColourTable
 from tracking.sim.colour_drift import DRIFT_SETTINGS, run_drift
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 @pytest.fixture(scope="module")

@@ -3,7 +3,7 @@
 import pytest
 
 from content import content_path
-from tracking.content import available
+from tracking.content_loader import available
 from tracking.markerset import load_markerset
 from tracking.sim.body import BodyDimensions
 from tracking.sim.motions import load_motion

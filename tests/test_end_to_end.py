@@ -5,11 +5,11 @@ import csv
 import numpy as np
 
 from game.cli import main
-from tracking.evaluate import evaluate_points
+from tracking.drivers.evaluate import evaluate_points
 from tracking.markerset import load_markerset
 from tracking.sim.studio import read_visibility_csv
-from tracking.tables import read_angles_csv
-from tracking.trc import read_trc
+from tracking.io.csv_tables import read_angles_csv
+from tracking.io.trc import read_trc
 
 
 def test_simulate_then_track_recovers_the_markers(tmp_path):

@@ -187,7 +187,7 @@ def _calibration_kinds(tmp: Path) -> list[Kind]:
 
 def _recording_kinds(tmp: Path) -> list[Kind]:
     from tracking.markerset import load_markerset
-    from tracking.recording import read_meta
+    from tracking.io.recording import read_meta
 
     ms = load_markerset("upper_limb_seated")
     colours = [[int(v) for v in c] for c in ms.rgb]
@@ -218,8 +218,8 @@ def _recording_kinds(tmp: Path) -> list[Kind]:
     stamps_seed.write_text("\n".join(rows) + "\n", encoding="utf-8")
 
     def read_stamps(p):
-        from tracking.offline import check_skews
-        from tracking.recording import read_timestamps
+        from tracking.drivers.offline import check_skews
+        from tracking.io.recording import read_timestamps
 
         folder = p.parent / (p.stem + "_rec")
         folder.mkdir()
@@ -237,7 +237,7 @@ def _recording_kinds(tmp: Path) -> list[Kind]:
 
 
 def _trc_kinds(tmp: Path) -> list[Kind]:
-    from tracking.trc import read_trc, write_trc
+    from tracking.io.trc import read_trc, write_trc
 
     rng = np.random.default_rng(0)
     pos = rng.normal(0, 300, (12, 4, 3))
@@ -256,7 +256,7 @@ def _trc_kinds(tmp: Path) -> list[Kind]:
 
 def _table_kinds(tmp: Path) -> list[Kind]:
     from tracking.angles import ANGLE_COLUMNS
-    from tracking.tables import read_angles_csv, write_angles_csv
+    from tracking.io.csv_tables import read_angles_csv, write_angles_csv
 
     frames = np.arange(6)
     write_angles_csv(tmp / "seed_angles.csv", frames, frames / 30.0,
@@ -392,7 +392,7 @@ def fuzz_kinds(kinds: list[Kind], tmp: Path, n_per_kind: int, rng: random.Random
 
 
 def _c3d_kinds(tmp: Path) -> list[Kind]:
-    from tracking.c3d_io import read_c3d_points, write_c3d
+    from tracking.io.c3d import read_c3d_points, write_c3d
 
     rng = np.random.default_rng(1)
     write_c3d(tmp / "seed.c3d", ["RSHO", "RELB", "RWRI"], rng.normal(0, 300, (20, 3, 3)), 30.0)

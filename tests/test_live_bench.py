@@ -1,6 +1,6 @@
 """The live latency benchmark runs the process and reports consistent figures."""
 
-from tracking.live.bench import format_result, measure_latency
+from tracking.live.latency_bench import format_result, measure_latency
 
 
 def test_measure_latency_reports_percentiles_and_pace():

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from game.cli import main
-from tracking.colour_adapt import ColourAdapter
+from tracking.colour.adapt import ColourAdapter
 from tracking.live.process import TrackerLoop, make_tracker
 from tracking.live.protocol import SourceConfig
 from tracking.live.ring import RingLayout, RingReader, RingWriter
 from tracking.live.source import angle_names_for, open_source
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 @pytest.fixture(scope="module")
@@ -69,8 +69,8 @@ def test_the_adapter_keeps_every_marker_measured_through_a_lighting_drift(drifti
 
 def test_learnt_colours_in_the_calibration_are_used_live(drifting, tmp_path):
     from calibration.files import load_calibration, save_calibration_toml
-    from tracking.colour_adapt import calibration_colours, save_colours_to_calibration
-    from tracking.colour_learn import ColourModel
+    from tracking.colour.adapt import calibration_colours, save_colours_to_calibration
+    from tracking.colour.learn import ColourModel
     from tracking.markerset import load_markerset
 
     calib = tmp_path / "calibration.toml"
@@ -93,7 +93,7 @@ def test_learnt_colours_in_the_calibration_are_used_live(drifting, tmp_path):
 
 
 def test_taught_colours_sent_to_the_loop_replace_its_table(drifting):
-    from tracking.colour_adapt import nominal_models
+    from tracking.colour.adapt import nominal_models
     from tracking.live.protocol import SetColours
 
     config = SourceConfig(kind="recording", path=str(drifting), fps=15.0, adapt_colours=True)

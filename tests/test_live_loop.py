@@ -9,7 +9,7 @@ from tracking.live.process import TrackerLoop
 from tracking.live.protocol import Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig, Stop
 from tracking.live.ring import ImageLayout, ImageSlot, RingLayout, RingReader, RingWriter
 from tracking.live.source import SimSource, SourceFrame, angle_names_for
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import TrackingState
 
 CONFIG = SourceConfig(size=(320, 240), fps=30.0, motion="reference")

@@ -18,7 +18,7 @@ from tracking.live.client import BLOCK_PREFIX, remove_stale_blocks
 from tracking.live.protocol import LiveError
 from tracking.live.ring import ProcessState
 from tracking.live.source import SimSource
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import TrackingState
 
 SIZE = (320, 240)

@@ -246,7 +246,7 @@ def test_stream_options_are_one_line_errors(capsys, argv, needle):
 
 def test_rehab_stream_of_a_recording_stops_at_its_end(tmp_path, capsys):
     from game.cli import main
-    from tracking.recording import RecordingWriter
+    from tracking.io.recording import RecordingWriter
     from tracking.sim.body import reference_pose
     from tracking.sim.studio import SimulationSettings, studio_from_settings
 

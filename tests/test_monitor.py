@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from game.monitor import MonitorTexture, grid_shape, overlay_camera, overlay_cameras, paint_labels, tile_images
-from tracking.colour_table import ColourTable
-from tracking.status import MarkerStatus
+from game.gfx.camera_overlay import MonitorTexture, grid_shape, overlay_camera, overlay_cameras, paint_labels, tile_images
+from tracking.colour.table import ColourTable
+from tracking.marker_status import MarkerStatus
 
 NAMES = ("MA", "MB", "MC")
 RGB = np.array([[0, 200, 70], [225, 0, 210], [0, 190, 235]], np.uint8)

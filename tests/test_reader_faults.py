@@ -25,7 +25,7 @@ def test_a_latin1_accent_in_a_content_yaml_names_the_line_and_byte(tmp_path):
 
 
 def test_a_latin1_accent_in_meta_yaml_is_one_line(tmp_path):
-    from tracking.recording import read_meta
+    from tracking.io.recording import read_meta
 
     (tmp_path / "meta.yaml").write_bytes(b"fps: 30\n# r\xe9glage\n")
     with pytest.raises(RehabError, match=r"meta.yaml: not UTF-8 text: byte 0xE9 at line 2"):
@@ -41,7 +41,7 @@ def test_a_latin1_accent_in_meta_yaml_is_one_line(tmp_path):
     ("fps: 30\nmarkerset: [a, b]\n", "'markerset' must be a marker set name"),
 ])
 def test_meta_yaml_values_are_checked_once_at_load(tmp_path, text, words):
-    from tracking.recording import read_meta
+    from tracking.io.recording import read_meta
 
     (tmp_path / "meta.yaml").write_text(text)
     with pytest.raises(RehabError, match=words):
@@ -51,8 +51,8 @@ def test_meta_yaml_values_are_checked_once_at_load(tmp_path, text, words):
 def test_meta_yaml_with_3_of_14_colours_is_refused_not_ignored(tmp_path):
     from types import SimpleNamespace
 
-    from tracking.offline import markerset_for
-    from tracking.recording import RecordingMeta
+    from tracking.drivers.offline import markerset_for
+    from tracking.io.recording import RecordingMeta
 
     rec = SimpleNamespace(folder=tmp_path, meta=RecordingMeta(fps=30.0, marker_colours=((255, 0, 0),) * 3))
     with pytest.raises(RehabError, match="gives 3 marker_colours but the marker set upper_limb_seated has 14"):
@@ -69,7 +69,7 @@ def test_a_nan_in_a_game_yaml_is_refused(tmp_path):
 
 
 def _trc(tmp_path) -> Path:
-    from tracking.trc import write_trc
+    from tracking.io.trc import write_trc
 
     path = tmp_path / "m.trc"
     write_trc(path, ["RSHO", "RELB", "RWRI"], np.arange(60, dtype=float).reshape(5, 4, 3)[:, :3], 30.0)
@@ -77,7 +77,7 @@ def _trc(tmp_path) -> Path:
 
 
 def test_a_trc_cut_mid_row_is_refused(tmp_path):
-    from tracking.trc import read_trc
+    from tracking.io.trc import read_trc
 
     path = _trc(tmp_path)
     data = path.read_bytes()
@@ -87,7 +87,7 @@ def test_a_trc_cut_mid_row_is_refused(tmp_path):
 
 
 def test_a_trc_with_its_header_only_is_refused(tmp_path):
-    from tracking.trc import read_trc
+    from tracking.io.trc import read_trc
 
     path = _trc(tmp_path)
     lines = path.read_text().splitlines(keepends=True)
@@ -97,7 +97,7 @@ def test_a_trc_with_its_header_only_is_refused(tmp_path):
 
 
 def test_a_c3d_cut_to_30_percent_is_refused(tmp_path):
-    from tracking.c3d_io import read_c3d_points
+    from tracking.io.c3d import read_c3d_points
 
     data = content_path("captures", "ezc3d_vicon_upper_limb.c3d").read_bytes()
     path = tmp_path / "cut.c3d"
@@ -140,7 +140,7 @@ def test_a_calibration_missing_one_of_the_recordings_cameras_is_stated(tmp_path,
 def test_one_image_of_another_size_is_one_line(tmp_path):
     import cv2
 
-    from tracking.recording import Recording, RecordingWriter
+    from tracking.io.recording import Recording, RecordingWriter
     from tracking.sim.rigs import load_rig
 
     cams = load_rig("tri3", (160, 120))
@@ -161,11 +161,11 @@ def test_track_refuses_an_impossible_output_before_the_work(tmp_path, capsys, mo
     """A folder given as the file, a folder under a regular file, a folder that takes no files
     (/proc refuses new files even to root, as a read-only disk does): one line naming the
     option and the path, before any tracking."""
-    import tracking.offline
+    import tracking.drivers.offline
     from game.cli import main
 
     _recording(tmp_path / "rec")
-    monkeypatch.setattr(tracking.offline, "track_recording", lambda *a, **k: pytest.fail("the work began"))
+    monkeypatch.setattr(tracking.drivers.offline, "track_recording", lambda *a, **k: pytest.fail("the work began"))
     (tmp_path / "file").write_text("x")
     for target, words in [(tmp_path / "rec", "is a folder"), (tmp_path / "file" / "out.trc", "cannot write in"),
                           (Path("/proc/rehab-test-out.trc"), "cannot write in /proc")]:
@@ -213,7 +213,7 @@ def test_an_opencv_matrix_without_cols_is_one_line_and_no_crash(tmp_path):
 
 
 def _c3d_bytes(tmp_path) -> bytearray:
-    from tracking.c3d_io import write_c3d
+    from tracking.io.c3d import write_c3d
 
     path = tmp_path / "s.c3d"
     write_c3d(path, ["A", "B", "C"], np.zeros((20, 3, 3)) + 1.0, 30.0)
@@ -223,7 +223,7 @@ def _c3d_bytes(tmp_path) -> bytearray:
 def test_a_c3d_whose_rotation_group_lost_its_data_start_is_refused_quickly(tmp_path):
     import time
 
-    from tracking.c3d_io import read_c3d_points
+    from tracking.io.c3d import read_c3d_points
 
     data = _c3d_bytes(tmp_path)
     i = data.index(b"DATA_START", data.index(b"ROTATION"))
@@ -237,7 +237,7 @@ def test_a_c3d_whose_rotation_group_lost_its_data_start_is_refused_quickly(tmp_p
 
 
 def test_a_c3d_parameter_of_no_group_is_refused(tmp_path):
-    from tracking.c3d_io import read_c3d_points
+    from tracking.io.c3d import read_c3d_points
 
     data = _c3d_bytes(tmp_path)
     i = data.index(b"LABELS", data.index(b"ANALOG"))

@@ -11,10 +11,10 @@ import yaml
 
 from game.cli import main
 from tracking.markerset import load_markerset
-from tracking.recording import Recording
+from tracking.io.recording import Recording
 from tracking.sources.cameras import CameraSource
 from tracking.sources.record import record
-from tracking.trc import read_trc
+from tracking.io.trc import read_trc
 
 from fake_cameras import FakeDevice, cameras, factory_of
 

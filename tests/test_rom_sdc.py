@@ -41,7 +41,7 @@ def test_every_rom_test_has_a_measured_sdc_from_reported_seeds():
         t = load_rom_test(name)
         assert t.sdc_deg is not None and 0 < t.sdc_deg < 45, name
     from game.rom.spec import _RomTestSpec
-    from tracking.content import load_model, resolve
+    from tracking.content_loader import load_model, resolve
 
     for name in available_rom_tests():
         spec = load_model(resolve("rom_tests", name), _RomTestSpec)

@@ -12,7 +12,7 @@ from calibration.errors import RehabError
 from game.rom.session import RomState, RomTestSession, angle_markers, round_to_5
 from game.rom.spec import load_rom_test
 from tracking.angles import REQUIRED_MARKERS
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 NAMES = REQUIRED_MARKERS
 IDX = {n: i for i, n in enumerate(NAMES)}

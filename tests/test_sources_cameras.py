@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from calibration.errors import CalibrationError
-from tracking.recording import RecordingWriter
+from tracking.io.recording import RecordingWriter
 from tracking.sources.base import SourceError
 from tracking.sources.cameras import CameraSource, PacedCapture, is_file_device, open_capture
 

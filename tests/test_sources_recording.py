@@ -17,14 +17,14 @@ from tracking.live import LiveTracker, SourceConfig
 from tracking.live.process import TrackerLoop
 from tracking.live.ring import ImageLayout, ImageSlot, RingLayout, RingReader, RingWriter
 from tracking.live.source import DeviceSource, angle_names_for, resolve_config
-from tracking.recording import Recording
+from tracking.io.recording import Recording
 from tracking.sim.studio import SimulationSettings, simulate_recording
 from tracking.sources.base import SourceError
 from tracking.sources.cameras import CameraSource
 from tracking.sources.recording import RecordingSource
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
-from tracking.trc import read_trc
+from tracking.io.trc import read_trc
 
 FPS = 15.0
 

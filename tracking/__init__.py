@@ -1,5 +1,7 @@
 """Marker tracking: colour extraction, multi-view geometry, labelling, gap filling, joint angles.
 
-Pure per-frame computation lives in its own modules (arrays in, arrays out); sources, files and
-processes are separate. The simulated patient studio is in :mod:`tracking.sim`.
+The per-frame math lives at the top and in ``pipeline/``, ``labelling/``, ``hidden/``, ``colour/``
+and ``geometry/`` (arrays in, arrays out); file formats are in ``io/``, frame sources in
+``sources/``, the commands' drivers in ``drivers/``, the background process in ``live/`` and the
+simulated patient studio in :mod:`tracking.sim` (docs/ARCHITECTURE.md, "Packages").
 """

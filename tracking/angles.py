@@ -1,4 +1,9 @@
-"""Joint angles of the seated upper body from the 14 ``upper_limb_seated`` markers.
+"""Joint angles of the seated upper body from the markers that play the anatomical roles.
+
+Each marker is found by its role (``roles:`` of the marker set, :data:`tracking.markerset.ROLES`);
+without a marker set, by the ``upper_limb_seated`` names (:data:`DEFAULT_ROLES`), which is how a
+marker file is read. An angle whose roles have no marker is withheld (NaN; the reason from
+:func:`withheld_angles`), never computed from another marker.
 
 The definitions are those of ``docs/JOINT_ANGLES.md`` (clinical goniometry: 0 in the neutral
 start position, positive in the named direction, degrees). They use marker positions alone, so
@@ -8,11 +13,12 @@ with a whole (T, M, 3) file.
 
 Frames and vectors (world frame: +Y up, the patient faces -Z, the patient's right is +X)::
 
-    y_T = unit(MB - MP)                       up the trunk
-    x_T = unit(MRH - MLH, made orthogonal to y_T)   towards the patient's right
+    y_T = unit(MB - MP)                       up the trunk (MB: trunk_upper, MP: trunk_lower)
+    x_T = unit(MRH - MLH, made orthogonal to y_T)   towards the patient's right (the hips)
     z_T = x_T x y_T                           backwards (the patient faces -z_T)
     out = +x_T (right side), -x_T (left side)
     E = (E1 + E2) / 2, W = (W1 + W2) / 2, u = E - S (upper arm), f = W - E (forearm)
+    (S shoulder, E1/E2 elbow lateral/medial, W1/W2 wrist radial/ulnar of the side)
 
 Signed rotations about an axis use the negated axis on the left side, so that a motion and its
 mirror image across the sagittal plane give the same numbers.
@@ -42,15 +48,17 @@ Numerical conventions (documented choices where the spec leaves room):
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from calibration.errors import RehabError
+from tracking.markerset import DEFAULT_ROLES
 
 MARKER_SET = "upper_limb_seated"
 
-#: Marker names the angles read, in the order of the ``upper_limb_seated`` marker set.
+#: Marker names a marker file (TRC, C3D) needs for every angle: the ``upper_limb_seated`` names
+#: of the roles, in that marker set's order.
 REQUIRED_MARKERS: tuple[str, ...] = (
     "MB", "MP", "MLS", "MRS", "MLE1", "MLE2", "MRE1", "MRE2",
     "MLW1", "MLW2", "MRW1", "MRW2", "MLH", "MRH",
@@ -76,13 +84,63 @@ ANGLE_COLUMNS: tuple[str, ...] = tuple(f"{side}_{angle}" for side in SIDES for a
     "trunk_lateral_lean",
 )
 
-#: Epicondyle or styloid marker -> the angle that reads its direction to its pair (the elbow's
-#: flexion axis ``E2 - E1``, the wrist's ``W2 - W1``): forearm supination. The tracker withholds
-#: that angle (NaN) while the direction is a guess (:attr:`tracking.hidden.Estimator.axis_guessed`).
-AXIS_ANGLES: dict[str, str] = {
-    f"M{side[0].upper()}{joint}{i}": f"{side}_forearm_supination"
-    for side in SIDES for joint in ("E", "W") for i in (1, 2)
+_TRUNK_AXIS = ("trunk_upper", "trunk_lower")
+_TRUNK_FRAME = _TRUNK_AXIS + ("left_hip", "right_hip")
+_ARM_PARTS = ("shoulder", "elbow_lateral", "elbow_medial", "wrist_radial", "wrist_ulnar")
+
+
+def _arm_roles(side: str, *parts: str) -> tuple[str, ...]:
+    return tuple(f"{side}_{part}" for part in parts)
+
+
+#: Column -> the roles (:data:`tracking.markerset.ROLES`) whose markers the angle is computed
+#: from (the trunk frame, the shoulder, the elbow centre ``E`` from both epicondyles, the wrist
+#: centre ``W`` from both styloids): exactly what the formulas read, no more.
+ANGLE_ROLES: dict[str, tuple[str, ...]] = {
+    **{column: roles for side in SIDES for column, roles in (
+        (f"{side}_shoulder_flexion", _TRUNK_FRAME + _arm_roles(side, *_ARM_PARTS[:3])),
+        (f"{side}_shoulder_abduction", _TRUNK_FRAME + _arm_roles(side, *_ARM_PARTS[:3])),
+        (f"{side}_shoulder_elevation", _TRUNK_AXIS + _arm_roles(side, *_ARM_PARTS[:3])),
+        (f"{side}_shoulder_horizontal_flexion", _TRUNK_FRAME + _arm_roles(side, *_ARM_PARTS[:3])),
+        (f"{side}_shoulder_external_rotation", _TRUNK_FRAME + _arm_roles(side, *_ARM_PARTS)),
+        (f"{side}_elbow_flexion", _arm_roles(side, *_ARM_PARTS)),
+        (f"{side}_forearm_supination", _arm_roles(side, *_ARM_PARTS[1:])),
+    )},
+    "trunk_forward_lean": _TRUNK_AXIS,
+    "trunk_lateral_lean": _TRUNK_AXIS,
 }
+
+
+def withheld_angles(roles: Mapping[str, str] = DEFAULT_ROLES) -> dict[str, str]:
+    """The columns a marker set cannot give (always NaN), each with the reason in one line.
+
+    ``roles``: the marker set's role -> marker name (``MarkerSet.roles``).
+    """
+    out = {}
+    for column, needed in ANGLE_ROLES.items():
+        absent = [r.replace("_", " ") for r in needed if r not in roles]
+        if absent:
+            out[column] = f"the marker set has no marker for the {', '.join(absent)}"
+    return out
+
+
+def supported_angles(roles: Mapping[str, str] = DEFAULT_ROLES) -> tuple[str, ...]:
+    """The columns of :data:`ANGLE_COLUMNS` that a marker set with ``roles`` can give, in order."""
+    withheld = withheld_angles(roles)
+    return tuple(c for c in ANGLE_COLUMNS if c not in withheld)
+
+
+def axis_angles(roles: Mapping[str, str] = DEFAULT_ROLES) -> dict[str, str]:
+    """Epicondyle or styloid marker name -> the angle that reads its direction to its pair (the
+    elbow's flexion axis ``E2 - E1``, the wrist's ``W2 - W1``): forearm supination. The tracker
+    withholds that angle (NaN) while the direction is a guess
+    (:attr:`tracking.hidden.Estimator.axis_guessed`)."""
+    return {roles[f"{side}_{part}"]: f"{side}_forearm_supination"
+            for side in SIDES for part in _ARM_PARTS[1:] if f"{side}_{part}" in roles}
+
+
+#: :func:`axis_angles` of the ``upper_limb_seated`` names.
+AXIS_ANGLES: dict[str, str] = axis_angles(DEFAULT_ROLES)
 
 #: Horizontal flexion is undefined (NaN) below this shoulder elevation (degrees).
 MIN_ELEVATION_FOR_HORIZONTAL_FLEXION_DEG = 45.0
@@ -145,15 +203,19 @@ def wrap180(angle_deg: np.ndarray) -> np.ndarray:
 NEAR_SINGULAR = ("spec", "withhold")
 
 
-def joint_angles(positions: np.ndarray, names: Sequence[str], *, near_singular: str = "spec") -> dict[str, np.ndarray]:
+def joint_angles(positions: np.ndarray, names: Sequence[str], *, roles: Mapping[str, str] | None = None,
+                 near_singular: str = "spec") -> dict[str, np.ndarray]:
     """Joint angles (degrees) of every frame, per ``docs/JOINT_ANGLES.md``.
 
     Args:
         positions: (..., M, 3) float marker positions in the world frame (+Y up, the patient
             faces -Z), any length unit; typically (T, M, 3) or one frame (M, 3). NaN = missing.
-        names: the M marker names, in the order of ``positions``' marker axis. Names not in
-            :data:`REQUIRED_MARKERS` are ignored; a required name that is absent counts as a
-            marker missing in every frame (use :func:`require_markers` to reject such files).
+        names: the M marker names, in the order of ``positions``' marker axis. Names playing
+            no role are ignored; a role whose marker is absent counts as a marker missing in
+            every frame (its angles NaN: :func:`withheld_angles`; :func:`require_markers`
+            rejects such files).
+        roles: role -> marker name (``MarkerSet.roles``); None: the ``upper_limb_seated``
+            names (:data:`DEFAULT_ROLES`), as a marker file is read.
         near_singular: ``"spec"``: the spec's definitions exactly (files, samples); ``"withhold"``:
             for a person reading them live, planar angles withheld near their plane's normal and
             flexion and abduction continued past 180 (module docstring).
@@ -172,23 +234,24 @@ def joint_angles(positions: np.ndarray, names: Sequence[str], *, near_singular: 
     p = np.asarray(positions, dtype=np.float64)
     if p.ndim < 2 or p.shape[-1] != 3 or p.shape[-2] != len(names):
         raise ValueError(f"positions must be (..., {len(names)}, 3) for {len(names)} names, got {p.shape}")
+    index = _role_index(names, DEFAULT_ROLES if roles is None else roles)
     if p.ndim == 2:
-        return _frame_angles(p, names, guarded)
+        return _frame_angles(p, index, guarded)
     batch = p.shape[:-2]
-    index = {name: i for i, name in enumerate(names)}
     absent = np.full(batch + (3,), np.nan)
 
-    def marker(name: str) -> np.ndarray:
-        return p[..., index[name], :] if name in index else absent
+    def marker(role: str) -> np.ndarray:
+        i = index.get(role)
+        return absent if i is None else p[..., i, :]
 
-    mb, mp = marker("MB"), marker("MP")
+    mb, mp = marker("trunk_upper"), marker("trunk_lower")
     y_t = _unit(mb - mp, _norm(mb) + _norm(mp))
-    hips = marker("MRH") - marker("MLH")
+    hips = marker("right_hip") - marker("left_hip")
     x_t = _unit(hips - _dot(hips, y_t)[..., None] * y_t, _norm(hips))
     z_t = _cross(x_t, y_t)
 
     # Both arms at once: a leading side axis (left, right), so one frame costs few numpy calls.
-    arm = {part: np.stack([marker(f"M{s}{part}") for s in ("L", "R")]) for part in ("S", "E1", "E2", "W1", "W2")}
+    arm = {part: np.stack([marker(f"{side}_{part}") for side in SIDES]) for part in _ARM_PARTS}
     sign = np.array([_SIDE_SIGN[side] for side in SIDES]).reshape((len(SIDES),) + (1,) * (len(batch) + 1))
     arms = _arm_angles(arm, sign, x_t, y_t, z_t, guarded)
 
@@ -199,6 +262,12 @@ def joint_angles(positions: np.ndarray, names: Sequence[str], *, near_singular: 
     return {name: np.asarray(out[name], dtype=np.float64) for name in ANGLE_COLUMNS}
 
 
+def _role_index(names: Sequence[str], roles: Mapping[str, str]) -> dict[str, int]:
+    """Role -> index in ``names`` of the marker playing it (roles whose marker is absent left out)."""
+    position = {name: i for i, name in enumerate(names)}
+    return {role: position[name] for role, name in roles.items() if name in position}
+
+
 def _arm_angles(
     arm: dict[str, np.ndarray], sign: np.ndarray, x_t: np.ndarray, y_t: np.ndarray, z_t: np.ndarray,
     guarded: bool = False,
@@ -206,7 +275,8 @@ def _arm_angles(
     """The angles of :data:`ARM_ANGLES` for both sides.
 
     Args:
-        arm: ``S, E1, E2, W1, W2`` -> (2, ..., 3) positions of (left, right).
+        arm: ``shoulder, elbow_lateral, elbow_medial, wrist_radial, wrist_ulnar`` -> (2, ..., 3)
+            positions of (left, right).
         sign: (2, 1, ..., 1) -1 for the left side, +1 for the right.
         x_t, y_t, z_t: (..., 3) unit trunk axes.
         guarded: ``near_singular="withhold"`` of :func:`joint_angles`.
@@ -214,7 +284,7 @@ def _arm_angles(
     Returns:
         angle name -> (2, ...) degrees.
     """
-    e1, e2, w1, w2, shoulder = arm["E1"], arm["E2"], arm["W1"], arm["W2"], arm["S"]
+    shoulder, e1, e2, w1, w2 = (arm[part] for part in _ARM_PARTS)
     elbow = 0.5 * (e1 + e2)
     wrist = 0.5 * (w1 + w2)
 
@@ -320,27 +390,25 @@ def _planar_deg(v: np.ndarray, zero_axis: np.ndarray, positive_axis: np.ndarray)
 _NAN3 = (math.nan, math.nan, math.nan)
 
 
-def _frame_angles(p: np.ndarray, names: Sequence[str], guarded: bool = False) -> dict[str, np.ndarray]:
-    """:func:`joint_angles` of one (M, 3) frame, in Python floats."""
+def _frame_angles(p: np.ndarray, index: Mapping[str, int], guarded: bool = False) -> dict[str, np.ndarray]:
+    """:func:`joint_angles` of one (M, 3) frame, in Python floats; ``index``: role -> marker index."""
     rows = p.tolist()
-    index = {name: i for i, name in enumerate(names)}
 
-    def marker(name: str) -> tuple[float, float, float]:
-        i = index.get(name)
+    def marker(role: str) -> tuple[float, float, float]:
+        i = index.get(role)
         return _NAN3 if i is None else tuple(rows[i])
 
-    mb, mp = marker("MB"), marker("MP")
+    mb, mp = marker("trunk_upper"), marker("trunk_lower")
     y_t = _f_unit(_f_sub(mb, mp), _f_norm(mb) + _f_norm(mp))
-    hips = _f_sub(marker("MRH"), marker("MLH"))
+    hips = _f_sub(marker("right_hip"), marker("left_hip"))
     x_t = _f_unit(_f_sub(hips, _f_scale(_f_dot(hips, y_t), y_t)), _f_norm(hips))
     z_t = _f_cross(x_t, y_t)
     down = _f_scale(-1.0, y_t)
     forward = _f_scale(-1.0, z_t)
     out: dict[str, float] = {}
     for side in SIDES:
-        s = "L" if side == "left" else "R"
         sign = _SIDE_SIGN[side]
-        shoulder, e1, e2, w1, w2 = (marker(f"M{s}{part}") for part in ("S", "E1", "E2", "W1", "W2"))
+        shoulder, e1, e2, w1, w2 = (marker(f"{side}_{part}") for part in _ARM_PARTS)
         elbow = _f_scale(0.5, _f_add(e1, e2))
         wrist = _f_scale(0.5, _f_add(w1, w2))
         u = _f_unit(_f_sub(elbow, shoulder), _f_norm(elbow) + _f_norm(shoulder))

@@ -1,6 +1,6 @@
 """Connected marker-coloured regions -> sub-pixel centroids, areas and roundness.
 
-A blob is an 8-connected region of one label of a :class:`tracking.colour_table.ColourTable`
+A blob is an 8-connected region of one label of a :class:`tracking.colour.table.ColourTable`
 label image. Nothing is merged or split: two touching markers of one colour form one blob, whose
 poor roundness rejects it (or flags it when ``min_roundness=0``).
 

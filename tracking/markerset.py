@@ -1,5 +1,10 @@
 """Marker sets: names, colours and placements, loaded from content YAML.
 
+``roles:`` says which marker plays which anatomical role (:data:`ROLES`: the trunk points, each
+side's shoulder, epicondyles and styloids); the joint angles, the avatar and the live scene find
+their markers through the roles, never by name, so a new marker set is content only
+(docs/ARCHITECTURE.md "Where a new thing goes").
+
 A marker set may also say how its markers are identified on the first frame (docs/METHOD.md 5.2):
 the reference pose the patient takes, structure rules of that pose written as coordinate
 orderings in the patient's frame (:class:`OrderRule`), and distance ranges of markers on one
@@ -13,15 +18,42 @@ import dataclasses
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Sequence
+from typing import Annotated, Literal, Sequence
 
 import numpy as np
 import pydantic
 
-from tracking.content import StrictModel, load_model, resolve
+from tracking.content_loader import StrictModel, load_model, resolve
 from tracking.errors import ContentError
+from tracking.hidden import registry as hidden_registry
 
 RGB = tuple[int, int, int]
+
+#: The anatomical roles a marker can play (``roles:`` in a marker-set YAML), with the landmark
+#: each stands for. The angles (docs/JOINT_ANGLES.md) and the avatar read their markers by role.
+ROLES: dict[str, str] = {
+    "trunk_upper": "upper sternum (jugular notch region)",
+    "trunk_lower": "lower trunk midline (xiphoid)",
+    **{f"{side}_{part}": f"{side} {landmark}" for side in ("left", "right") for part, landmark in (
+        ("hip", "anterior superior iliac spine"),
+        ("shoulder", "acromion"),
+        ("elbow_lateral", "lateral epicondyle (thumb side)"),
+        ("elbow_medial", "medial epicondyle (little-finger side)"),
+        ("wrist_radial", "radial styloid (thumb side)"),
+        ("wrist_ulnar", "ulnar styloid (little-finger side)"),
+    )},
+}
+
+#: The roles' markers in the default ``upper_limb_seated`` set. These names are what a marker
+#: file (TRC, C3D) is read by when no marker set says otherwise (``rehab angles``), so a marker
+#: set may give one of them only to the marker playing that role.
+DEFAULT_ROLES: dict[str, str] = {
+    "trunk_upper": "MB", "trunk_lower": "MP",
+    **{f"{side}_{part}": f"M{side[0].upper()}{code}" for side in ("left", "right") for part, code in (
+        ("hip", "H"), ("shoulder", "S"), ("elbow_lateral", "E1"), ("elbow_medial", "E2"),
+        ("wrist_radial", "W1"), ("wrist_ulnar", "W2"),
+    )},
+}
 
 
 def parse_rgb(text: str) -> RGB:
@@ -135,8 +167,19 @@ class _IdentificationSpec(StrictModel):
     rules: list[_RuleSpec] = pydantic.Field(min_length=1)
 
 
+#: The built-in hidden-marker estimators; others are files in tracking/hidden/methods/, named by
+#: the same key (:func:`_known_estimator` checks the name against the registry).
 ESTIMATORS = ("constant_velocity", "neighbours", "rigid", "hinge", "forearm")
-_Estimator = Literal["constant_velocity", "neighbours", "rigid", "hinge", "forearm"]
+
+
+def _known_estimator(name: str) -> str:
+    if name not in hidden_registry.names():
+        raise ValueError(f"{name!r} is not one of {', '.join(hidden_registry.names())} "
+                         "(a new estimator is a file in tracking/hidden/methods/)")
+    return name
+
+
+_Estimator = Annotated[str, pydantic.AfterValidator(_known_estimator)]
 _PATTERN = r"^[A-Za-z*#][A-Za-z0-9_*#]*$"
 
 
@@ -214,6 +257,10 @@ class _MarkerSetSpec(StrictModel):
     soft_tissue_mm: float = pydantic.Field(default=5.0, ge=0, lt=50)
     colours: dict[str, tuple[int, int, int]] = {}
     markers: list[_MarkerSpec] = pydantic.Field(min_length=2)
+    roles: dict[str, str] | None = pydantic.Field(
+        default=None, description="anatomical role -> marker name (the keys of tracking.markerset.ROLES); "
+        "without it, the markers named as in upper_limb_seated play their roles there",
+    )
     identification: _IdentificationSpec | None = None
     hidden_markers: _HiddenSpec | None = None
 
@@ -299,7 +346,7 @@ class HiddenMarkerConfig:
     for every other marker of its body segment.
 
     Attributes:
-        estimators: (M,) estimator name of each marker, one of :data:`ESTIMATORS`.
+        estimators: (M,) estimator name of each marker (:data:`ESTIMATORS` or a registered one).
         weights: marker -> {neighbour: S}, the equation 6 weights.
         velocity_decay_s: (M,) time constant of the own relative velocity kept in free directions.
         rigid_groups: groups of markers treated as rigid, in the order a hidden marker tries them.
@@ -346,6 +393,8 @@ class MarkerSet:
             marker set has none.
         hidden: how hidden markers are estimated (every marker set has one: without
             ``hidden_markers:`` equation 6 with weight 1 for the markers of the same segment).
+        roles: anatomical role (a key of :data:`ROLES`) -> the marker playing it; a role the
+            set has no marker for is absent, and what needs it is withheld.
     """
 
     name: str
@@ -357,6 +406,11 @@ class MarkerSet:
     soft_tissue_m: float
     identification: IdentificationRules | None = None
     hidden: HiddenMarkerConfig | None = None
+    roles: dict[str, str] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.hidden is None:  # every marker set has one (see ``hidden``)
+            object.__setattr__(self, "hidden", default_hidden(self.names, self.segments))
 
     @property
     def n_markers(self) -> int:
@@ -425,7 +479,34 @@ def load_markerset(name_or_path: str | Path = "upper_limb_seated") -> MarkerSet:
         soft_tissue_m=spec.soft_tissue_mm / 1000.0,
         identification=None if spec.identification is None else _identification(path, spec.identification, names),
         hidden=_hidden(path, spec, names),
+        roles=_roles(path, spec.roles, names),
     )
+
+
+def _roles(path: Path, spec: dict[str, str] | None, names: list[str]) -> dict[str, str]:
+    """``roles:`` checked against :data:`ROLES` and the markers, in :data:`ROLES` order; without
+    it, the markers named as in :data:`DEFAULT_ROLES` play their roles."""
+    if spec is None:
+        return {role: name for role, name in DEFAULT_ROLES.items() if name in names}
+    unknown = [r for r in spec if r not in ROLES]
+    if unknown:
+        raise ContentError(f"{path}: roles: unknown role {unknown[0]!r}; the roles are {', '.join(ROLES)}")
+    by_marker: dict[str, str] = {}
+    for role, name in spec.items():
+        if name not in names:
+            raise ContentError(f"{path}: roles.{role}: unknown marker {name!r}; the markers are {', '.join(names)}")
+        if name in by_marker:
+            raise ContentError(f"{path}: roles: {name} plays both {by_marker[name]} and {role}; give each role its own marker")
+        by_marker[name] = role
+    default_role = {name: role for role, name in DEFAULT_ROLES.items()}
+    for name in names:
+        role = default_role.get(name)
+        if role is not None and by_marker.get(name) != role:
+            raise ContentError(
+                f"{path}: marker {name} is the {role} marker's name in upper_limb_seated (marker files are read by it): "
+                f"give it the role {role} or rename the marker"
+            )
+    return {role: spec[role] for role in ROLES if role in spec}
 
 
 def default_hidden(names: Sequence[str], segments: Sequence[str]) -> HiddenMarkerConfig:

@@ -27,7 +27,7 @@ AVAILABLE = INSTALLED
 
 def _table_index(img, y, x, bits):
     """The colour table's index of pixel (x, y): ``B | G << 8 | R << 16``, quantized to ``bits``
-    per channel as :func:`tracking.colour_table._quantize_index` does for a table of fewer bits."""
+    per channel as :func:`tracking.colour.table._quantize_index` does for a table of fewer bits."""
     word = np.int64(img[y, x, 0]) | (np.int64(img[y, x, 1]) << 8) | (np.int64(img[y, x, 2]) << 16)
     if bits < 8:
         s, m = 8 - bits, (1 << bits) - 1
@@ -95,7 +95,7 @@ def window_moments(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, 
 
     Args:
         images: C-contiguous (H, W, 3) uint8 BGR images (:func:`usable`).
-        lut: the colour table (:attr:`tracking.colour_table.ColourTable.lut`), indexed by
+        lut: the colour table (:attr:`tracking.colour.table.ColourTable.lut`), indexed by
             ``B | G << 8 | R << 16`` (quantized to ``bits`` per channel as the table is).
         cam: (K,) int64 image of each window; boxes: (K, 4) int64 ``x0, y0, x1, y1`` inside it,
             end exclusive; label: (K,) the colour label each window looks for (non-zero).
@@ -264,7 +264,7 @@ def _crowded_window(img, lut, bits, x0, y0, x1, y1, own, pred_u, pred_v, min_are
 def crowded_window(image, lut: np.ndarray, bits: int, box, own: int, pred_px, gate):
     """:func:`_crowded_window` compiled, for one C-contiguous (H, W, 3) uint8 image (:func:`usable`);
     ``box`` (x0, y0, x1, y1) inside it, ``pred_px`` the predicted centre in full-image pixels,
-    ``gate`` a :class:`tracking.measure.BlobGates`. Returns (found, (u, v) full-image pixels,
+    ``gate`` a :class:`tracking.full_frame.BlobGates`. Returns (found, (u, v) full-image pixels,
     area, roundness, xs, ys window pixels of the arc fit's region)."""
     x0, y0, x1, y1 = (int(v) for v in box)
     found, u, v, area, roundness, xs, ys = compile_loop(_crowded_window, helpers=(_table_index, binary_roundness))(

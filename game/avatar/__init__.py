@@ -5,5 +5,5 @@
 - :mod:`game.avatar.shapes`: a pose -> ellipsoids and capsules (pure numpy).
 - :mod:`game.avatar.renderer`: draws them with moderngl into the bound framebuffer.
 - :mod:`game.avatar.live`: :class:`LiveAvatar`, all of the above for a game scene.
-- :mod:`game.avatar.bench`: render speed offscreen.
+- :mod:`game.avatar.fps_bench`: render speed offscreen.
 """

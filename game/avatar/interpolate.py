@@ -21,7 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from game.avatar.skeleton import SkeletonPose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 def _quat_from_matrix(r: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ while the patient moves (it is re-aimed only when the patient's seat position or
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import moderngl
 import numpy as np
@@ -30,14 +30,15 @@ class LiveAvatar:
     Args:
         ctx: the moderngl context (OpenGL 3.3 core or later).
         marker_names: the marker set's names (``LiveTracker.markerset.names``).
+        roles: role -> marker name (``MarkerSet.roles``); None: the ``upper_limb_seated`` names.
         style: colours and strengths of the look.
         yaw_deg: camera turn about the vertical towards the patient's right (0 = straight front).
         mirror: show the avatar as the patient's mirror image.
     """
 
-    def __init__(self, ctx: moderngl.Context, marker_names: Sequence[str], *, style: AvatarStyle = AvatarStyle(),
-                 yaw_deg: float = 20.0, mirror: bool = True) -> None:
-        self.skeleton = SkeletonTracker(marker_names)
+    def __init__(self, ctx: moderngl.Context, marker_names: Sequence[str], *, roles: Mapping[str, str] | None = None,
+                 style: AvatarStyle = AvatarStyle(), yaw_deg: float = 20.0, mirror: bool = True) -> None:
+        self.skeleton = SkeletonTracker(marker_names, roles=roles)
         self.interpolator = PoseInterpolator()
         self.fader = LookFader(len(SEGMENTS))
         self.renderer = AvatarRenderer(ctx, style)

@@ -11,7 +11,7 @@ are ray-cast on instanced screen-space quads bounding their exact outline, as th
 cameras draw them (two triangles each instead of 80 for an icosphere: llvmpipe pays per
 triangle); the large ones (trunk, head, chair) are instanced 320-triangle icospheres, depth-tested
 before shading; tapered capsules are an instanced band tangent to the two end spheres (the
-simulator's band, ``tracking.sim.meshes.cone_band``); end spheres hidden inside other solids are
+simulator's band, ``tracking.geometry.meshes.cone_band``); end spheres hidden inside other solids are
 not drawn. About 4.8k triangles in all (the floor's 544 among them).
 
 Lighting, in linear RGB then encoded to sRGB (per pixel on the ray-cast ellipsoids, per vertex on
@@ -21,7 +21,7 @@ body against the background, and a little Blinn-Phong sheen. The lights are fixe
 the camera, so every view is lit from the front. The floor disc carries soft contact shadows
 (blobs under the chair, the feet and the hands) and fades out at its edge into the background.
 
-Segment states (:class:`tracking.status.MarkerStatus` from the skeleton):
+Segment states (:class:`tracking.marker_status.MarkerStatus` from the skeleton):
 - MEASURED: the normal skin and clothes colours;
 - ESTIMATED: tinted amber with a glowing amber outline (the tracker guessed these markers);
 - LOST: desaturated grey and translucent (the segment shows its last known pose).
@@ -42,8 +42,8 @@ from game.avatar.interpolate import state_looks
 from game.avatar.shapes import BodyShapes, body_shapes
 from game.avatar.skeleton import SkeletonPose
 from game.gfx.view3d import look_at, perspective  # noqa: F401  (re-exported)
-from tracking.sim.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
-from tracking.sim.meshes import cone_band, icosphere
+from tracking.geometry.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
+from tracking.geometry.meshes import cone_band, icosphere
 
 
 

@@ -1,9 +1,13 @@
-"""The avatar's skeleton from the 14 upper-body markers (pure numpy, no GL).
+"""The avatar's skeleton from the upper-body markers, found by their roles (pure numpy, no GL).
 
 :class:`SkeletonTracker` turns one frame of tracked markers (positions + :class:`MarkerStatus`)
 into a :class:`SkeletonPose`: joint centres, segment frames and a per-segment state, in the
 world frame of ``docs/INTERFACES.md`` (metres, +Y up, the patient faces -Z, the patient's right
-is +X). The frames follow ``docs/JOINT_ANGLES.md``::
+is +X). Each marker is found by its role (``roles:`` of the marker set; below by its
+``upper_limb_seated`` name: MB trunk_upper, MP trunk_lower, M*H hip, M*S shoulder, M*E1/M*E2
+elbow lateral/medial, M*W1/M*W2 wrist radial/ulnar). A role the marker set has no marker for is a
+marker never seen: it sits where it would on an average adult and its segment's state is LOST.
+The frames follow ``docs/JOINT_ANGLES.md``::
 
     trunk      y = unit(MB - MP), x = MRH - MLH made orthogonal to y, z = x cross y (backwards)
     pelvis     x = unit(MRH - MLH), y = world up made orthogonal to x, z = x cross y
@@ -34,13 +38,14 @@ stature estimate behind every body radius comes from them, so the avatar takes t
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from tracking.angles import require_markers
-from tracking.status import MarkerStatus
+from tracking.angles import MissingMarkersError
+from tracking.markerset import DEFAULT_ROLES
+from tracking.marker_status import MarkerStatus
 
 #: Joint centres of a :class:`SkeletonPose`, in ``joints_m`` order.
 JOINTS: tuple[str, ...] = (
@@ -55,30 +60,30 @@ SEGMENTS: tuple[str, ...] = ("pelvis", "trunk", "right_upper_arm", "right_forear
 SIDES: tuple[str, ...] = ("right", "left")
 SIDE_SIGN = {"right": 1.0, "left": -1.0}
 
-# Markers whose states make up each segment's state.
+# Roles (tracking.markerset.ROLES) whose markers' states make up each segment's state.
 _SEGMENT_MARKERS = {
-    "pelvis": ("MLH", "MRH"),
-    "trunk": ("MB", "MP"),
-    "right_upper_arm": ("MRS", "MRE1", "MRE2"),
-    "right_forearm": ("MRW1", "MRW2"),
-    "left_upper_arm": ("MLS", "MLE1", "MLE2"),
-    "left_forearm": ("MLW1", "MLW2"),
+    "pelvis": ("left_hip", "right_hip"),
+    "trunk": ("trunk_upper", "trunk_lower"),
+    "right_upper_arm": ("right_shoulder", "right_elbow_lateral", "right_elbow_medial"),
+    "right_forearm": ("right_wrist_radial", "right_wrist_ulnar"),
+    "left_upper_arm": ("left_shoulder", "left_elbow_lateral", "left_elbow_medial"),
+    "left_forearm": ("left_wrist_radial", "left_wrist_ulnar"),
 }
-_TRUNK_MARKERS = ("MB", "MP", "MLH", "MRH", "MLS", "MRS")
+_TRUNK_MARKERS = ("trunk_upper", "trunk_lower", "left_hip", "right_hip", "left_shoulder", "right_shoulder")
 
 # Marker positions of an average adult in the reference pose (seated upright, arms hanging a
 # little away from the body, thumbs forward), relative to MB in the trunk frame, in units of
 # stature; right side (x > 0). Measured on tracking.sim.body at the 50th percentile (the ratios
 # vary by < 0.01 H over 5th-95th percentile bodies). Used only until a marker is first seen.
 _DEFAULT_LAYOUT_H = {
-    "MB": (0.0, 0.0, 0.0),
-    "MP": (0.0, -0.106, -0.021),
-    "MRS": (0.116, 0.026, 0.051),
-    "MRE1": (0.191, -0.184, 0.036),
-    "MRE2": (0.131, -0.201, 0.065),
-    "MRW1": (0.189, -0.329, -0.003),
-    "MRW2": (0.192, -0.338, 0.058),
-    "MRH": (0.072, -0.228, 0.0),
+    "trunk_upper": (0.0, 0.0, 0.0),
+    "trunk_lower": (0.0, -0.106, -0.021),
+    "right_shoulder": (0.116, 0.026, 0.051),
+    "right_elbow_lateral": (0.191, -0.184, 0.036),
+    "right_elbow_medial": (0.131, -0.201, 0.065),
+    "right_wrist_radial": (0.189, -0.329, -0.003),
+    "right_wrist_ulnar": (0.192, -0.338, 0.058),
+    "right_hip": (0.072, -0.228, 0.0),
 }
 
 # Ratios of stature behind the stature estimate (tracking.sim.body anthropometry, same source).
@@ -220,7 +225,7 @@ class ProportionLearner:
     and the median ignores occasional mislabelled frames.
     """
 
-    def __init__(self, index: dict[str, int], window: int = 600, refresh_every: int = 15) -> None:
+    def __init__(self, index: Mapping[str, int], window: int = 600, refresh_every: int = 15) -> None:
         self._ix = index
         self._values = {k: deque(maxlen=window) for k in _STATURE_RATIOS} | {"hip_width_m": deque(maxlen=window)}
         self._refresh_every = refresh_every
@@ -236,30 +241,31 @@ class ProportionLearner:
         """positions_m: (M, 3) float64; measured: (M,) bool, the marker was MEASURED."""
         ix = self._ix
 
-        def ok(*names: str) -> bool:
-            return all(measured[ix[n]] for n in names)
+        def ok(*roles: str) -> bool:
+            return all(role in ix and measured[ix[role]] for role in roles)
 
-        def p(name: str) -> np.ndarray:
-            return positions_m[ix[name]]
+        def p(role: str) -> np.ndarray:
+            return positions_m[ix[role]]
 
         added = False
-        if ok("MLS", "MRS"):
-            self._values["shoulder_width_m"].append(float(np.linalg.norm(p("MRS") - p("MLS"))))
+        if ok("left_shoulder", "right_shoulder"):
+            self._values["shoulder_width_m"].append(float(np.linalg.norm(p("right_shoulder") - p("left_shoulder"))))
             added = True
-        if ok("MLH", "MRH"):
-            self._values["hip_width_m"].append(float(np.linalg.norm(p("MRH") - p("MLH"))))
+        if ok("left_hip", "right_hip"):
+            self._values["hip_width_m"].append(float(np.linalg.norm(p("right_hip") - p("left_hip"))))
             added = True
-        if ok("MB", "MLH", "MRH"):
-            self._values["trunk_height_m"].append(float(np.linalg.norm(p("MB") - 0.5 * (p("MLH") + p("MRH")))))
+        if ok("trunk_upper", "left_hip", "right_hip"):
+            mid_hips = 0.5 * (p("left_hip") + p("right_hip"))
+            self._values["trunk_height_m"].append(float(np.linalg.norm(p("trunk_upper") - mid_hips)))
             added = True
-        for s in ("R", "L"):
-            if ok(f"M{s}S", f"M{s}E1", f"M{s}E2"):
-                e = 0.5 * (p(f"M{s}E1") + p(f"M{s}E2"))
-                self._values["upper_arm_m"].append(float(np.linalg.norm(e - p(f"M{s}S"))))
+        for s in SIDES:
+            if ok(f"{s}_shoulder", f"{s}_elbow_lateral", f"{s}_elbow_medial"):
+                e = 0.5 * (p(f"{s}_elbow_lateral") + p(f"{s}_elbow_medial"))
+                self._values["upper_arm_m"].append(float(np.linalg.norm(e - p(f"{s}_shoulder"))))
                 added = True
-            if ok(f"M{s}E1", f"M{s}E2", f"M{s}W1", f"M{s}W2"):
-                e = 0.5 * (p(f"M{s}E1") + p(f"M{s}E2"))
-                w = 0.5 * (p(f"M{s}W1") + p(f"M{s}W2"))
+            if ok(f"{s}_elbow_lateral", f"{s}_elbow_medial", f"{s}_wrist_radial", f"{s}_wrist_ulnar"):
+                e = 0.5 * (p(f"{s}_elbow_lateral") + p(f"{s}_elbow_medial"))
+                w = 0.5 * (p(f"{s}_wrist_radial") + p(f"{s}_wrist_ulnar"))
                 self._values["forearm_m"].append(float(np.linalg.norm(w - e)))
                 added = True
         if not added:
@@ -293,18 +299,26 @@ class SkeletonTracker:
 
     Args:
         marker_names: the marker set's names (``MarkerSet.names``), in the order of the arrays
-            passed to :meth:`update`; must contain the 14 ``upper_limb_seated`` names.
+            passed to :meth:`update`.
+        roles: role -> marker name (``MarkerSet.roles``); None: the ``upper_limb_seated`` names.
         learn_window: number of measured frames the proportion medians run over.
 
     Raises:
-        tracking.angles.MissingMarkersError: a required marker name is absent.
+        tracking.angles.MissingMarkersError: no marker plays any of the avatar's roles.
     """
 
-    def __init__(self, marker_names: Sequence[str], *, learn_window: int = 600) -> None:
+    def __init__(self, marker_names: Sequence[str], *, roles: Mapping[str, str] | None = None,
+                 learn_window: int = 600) -> None:
         names = tuple(marker_names)
-        require_markers(names, "the avatar's marker set")
+        self._roles = dict(DEFAULT_ROLES if roles is None else roles)
+        position = {n: i for i, n in enumerate(names)}
         self._names = names
-        self._ix = {n: i for i, n in enumerate(names)}
+        # role -> marker index; a role without a marker is a marker never seen
+        self._ix = {role: position[n] for role, n in self._roles.items() if n in position}
+        if not self._ix:
+            raise MissingMarkersError(
+                f"the avatar's marker set ({', '.join(names) or 'no markers'}) has no marker for any role: "
+                "name them under 'roles:' in its YAML (docs/INTERFACES.md)")
         self._learner = ProportionLearner(self._ix, window=learn_window)
         self._window = learn_window
         self._trunk_r = np.eye(3)
@@ -320,13 +334,13 @@ class SkeletonTracker:
 
     def reset(self) -> None:
         """Forget remembered marker positions and learned proportions (a new patient)."""
-        self.__init__(self._names, learn_window=self._window)
+        self.__init__(self._names, roles=self._roles, learn_window=self._window)
 
     # ------------------------------------------------------------------ helpers
-    def _default_local_trunk(self, name: str, stature_m: float) -> np.ndarray:
-        """Default position of ``name`` relative to MB in the trunk frame (metres)."""
-        right = name[:2] == "MR" or name in ("MB", "MP")
-        key = name if right else "MR" + name[2:]
+    def _default_local_trunk(self, role: str, stature_m: float) -> np.ndarray:
+        """Default position of ``role``'s marker relative to MB in the trunk frame (metres)."""
+        right = not role.startswith("left_")
+        key = role if right else "right_" + role.removeprefix("left_")
         v = np.array(_DEFAULT_LAYOUT_H[key], float) * stature_m
         if not right:
             v[0] = -v[0]
@@ -335,10 +349,11 @@ class SkeletonTracker:
     def _trunk_frame(self, p: np.ndarray, finite: np.ndarray, stature_m: float) -> None:
         """Update the trunk frame (rotation, origin at MB) from whatever trunk markers exist."""
         ix = self._ix
-        have = {n: bool(finite[ix[n]]) for n in _TRUNK_MARKERS}
-        if have["MB"] and have["MP"] and have["MLH"] and have["MRH"]:
-            self._trunk_r = frame_from_axes(p[ix["MB"]] - p[ix["MP"]], p[ix["MRH"]] - p[ix["MLH"]], self._trunk_r)
-            self._trunk_o = p[ix["MB"]].copy()
+        have = {n: n in ix and bool(finite[ix[n]]) for n in _TRUNK_MARKERS}
+        if have["trunk_upper"] and have["trunk_lower"] and have["left_hip"] and have["right_hip"]:
+            self._trunk_r = frame_from_axes(p[ix["trunk_upper"]] - p[ix["trunk_lower"]],
+                                            p[ix["right_hip"]] - p[ix["left_hip"]], self._trunk_r)
+            self._trunk_o = p[ix["trunk_upper"]].copy()
             return
         # Rigid fit of the remembered (or default) trunk-frame positions of the visible ones.
         names = [n for n in _TRUNK_MARKERS if have[n]]
@@ -354,10 +369,10 @@ class SkeletonTracker:
 
     def _fill(self, name: str, p: np.ndarray, finite: np.ndarray, origin: np.ndarray, rot: np.ndarray,
               stature_m: float, default_world: np.ndarray) -> np.ndarray:
-        """Marker ``name``'s position: measured/estimated if finite (remembered in the parent frame
-        ``origin + rot @ local``), else the remembered one, else ``default_world``."""
-        i = self._ix[name]
-        if finite[i]:
+        """Role ``name``'s marker position: measured/estimated if finite (remembered in the parent
+        frame ``origin + rot @ local``), else the remembered one, else ``default_world``."""
+        i = self._ix.get(name)
+        if i is not None and finite[i]:
             self._local[name] = rot.T @ (p[i] - origin)
             return p[i]
         if name in self._local:
@@ -396,9 +411,9 @@ class SkeletonTracker:
         joints: dict[str, np.ndarray] = {}
         frames: dict[str, np.ndarray] = {"trunk": rt}
         # Pelvis: the ASIS line, upright (the seated pelvis barely tilts; the trunk frame carries the lean).
-        asis_mid = 0.5 * (q["MLH"] + q["MRH"])
-        w = float(np.linalg.norm(q["MRH"] - q["MLH"]))
-        across = q["MRH"] - q["MLH"]
+        asis_mid = 0.5 * (q["left_hip"] + q["right_hip"])
+        w = float(np.linalg.norm(q["right_hip"] - q["left_hip"]))
+        across = q["right_hip"] - q["left_hip"]
         x = _unit(across)
         up = np.array([0.0, 1.0, 0.0])
         rp = self._pelvis_r if x is None else frame_from_axes(up - x[1] * x, across, self._pelvis_r)
@@ -407,23 +422,23 @@ class SkeletonTracker:
         for side, sgn in SIDE_SIGN.items():
             joints[f"{side}_hip"] = asis_mid + rp @ np.array([sgn * 0.36 * w, -0.30 * w, 0.19 * w])
         joints["pelvis"] = 0.5 * (joints["right_hip"] + joints["left_hip"])
-        joints["sternum"] = q["MB"]
-        joints["neck"] = q["MB"] + rt @ (np.array(_NECK_FROM_MB_H) * h)
-        joints["head"] = q["MB"] + rt @ (np.array(_HEAD_FROM_MB_H) * h)
+        joints["sternum"] = q["trunk_upper"]
+        joints["neck"] = q["trunk_upper"] + rt @ (np.array(_NECK_FROM_MB_H) * h)
+        joints["head"] = q["trunk_upper"] + rt @ (np.array(_HEAD_FROM_MB_H) * h)
 
         for side, sgn in SIDE_SIGN.items():
-            s = "R" if side == "right" else "L"
-            acromion = q[f"M{s}S"]
-            dflt = {n: o + rt @ self._default_local_trunk(n, h) for n in (f"M{s}E1", f"M{s}E2", f"M{s}W1", f"M{s}W2")}
-            e1 = self._fill(f"M{s}E1", p, finite, acromion, rt, h, dflt[f"M{s}E1"])
-            e2 = self._fill(f"M{s}E2", p, finite, acromion, rt, h, dflt[f"M{s}E2"])
+            acromion = q[f"{side}_shoulder"]
+            lat, med, rad, uln = (f"{side}_{part}" for part in ("elbow_lateral", "elbow_medial", "wrist_radial", "wrist_ulnar"))
+            dflt = {n: o + rt @ self._default_local_trunk(n, h) for n in (lat, med, rad, uln)}
+            e1 = self._fill(lat, p, finite, acromion, rt, h, dflt[lat])
+            e2 = self._fill(med, p, finite, acromion, rt, h, dflt[med])
             elbow = 0.5 * (e1 + e2)
             gh = acromion + rt @ _gh_offset(rt.T @ (elbow - acromion), sgn, h)
             # Upper arm: along shoulder -> elbow, x from the medial to the lateral epicondyle.
             rua = frame_from_axes(gh - elbow, e1 - e2, self._ua_frames[side])
             self._ua_frames[side] = rua
-            w1 = self._fill(f"M{s}W1", p, finite, elbow, rua, h, dflt[f"M{s}W1"])
-            w2 = self._fill(f"M{s}W2", p, finite, elbow, rua, h, dflt[f"M{s}W2"])
+            w1 = self._fill(rad, p, finite, elbow, rua, h, dflt[rad])
+            w2 = self._fill(uln, p, finite, elbow, rua, h, dflt[uln])
             wrist = 0.5 * (w1 + w2)
             rfa = frame_from_axes(elbow - wrist, w1 - w2, self._fa_frames[side])
             self._fa_frames[side] = rfa
@@ -437,8 +452,8 @@ class SkeletonTracker:
 
         state = np.empty(len(SEGMENTS), np.uint8)
         for k, seg in enumerate(SEGMENTS):
-            idx = [self._ix[n] for n in _SEGMENT_MARKERS[seg]]
-            if not finite[idx].all():
+            idx = [self._ix[n] for n in _SEGMENT_MARKERS[seg] if n in self._ix]
+            if len(idx) < len(_SEGMENT_MARKERS[seg]) or not finite[idx].all():
                 state[k] = MarkerStatus.LOST
             elif (st[idx] == MarkerStatus.ESTIMATED).any():
                 state[k] = MarkerStatus.ESTIMATED

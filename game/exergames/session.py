@@ -33,7 +33,7 @@ import numpy as np
 from game.exergames.spec import GameSpec, TherapistLimits
 from game.exergames.targets import ArmFrame, RomLimits, Target, arm_frame_from_markers
 
-#: Tracker sample states (tracking.tracker.TrackingState) and marker status (tracking.status).
+#: Tracker sample states (tracking.tracker.TrackingState) and marker status (tracking.marker_status).
 TRACKING = 1
 MARKER_LOST = 0
 #: Seconds of good readings that make the baseline.

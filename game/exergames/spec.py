@@ -20,7 +20,7 @@ from pathlib import Path
 import pydantic
 
 from game.exergames.kinds import GameKind, game_kind
-from tracking.content import StrictModel, available, load_model, resolve
+from tracking.content_loader import StrictModel, available, load_model, resolve
 
 KIND = "games"
 

@@ -22,7 +22,7 @@ ACCENT_DARK = (34, 86, 88)
 ATTENTION = (242, 190, 92)      # amber: waiting, estimated, restarting
 FAILURE = (232, 112, 104)       # muted red: lost, failed
 
-#: Marker status colours (tracking.status.MarkerStatus: 0 lost, 1 measured, 2 estimated).
+#: Marker status colours (tracking.marker_status.MarkerStatus: 0 lost, 1 measured, 2 estimated).
 STATUS_COLOURS = MappingProxyType({0: FAILURE, 1: ACCENT, 2: ATTENTION})
 
 TITLE = 76

@@ -108,7 +108,7 @@ def motion_peak_s(test: RomTest, side: str, fps: float = 30.0) -> tuple[float, f
     holds its peak a moment, and the recorded maximum may fall anywhere in that hold)."""
     from tracking.angles import joint_angles
     from tracking.markerset import load_markerset
-    from tracking.sim.body import BodyDimensions, BodyModel
+    from tracking.sim.body import BodyDimensions, BodyModel  # lazy: only to run the simulated patient
     from tracking.sim.motions import load_motion
     from tracking.sim.studio import SimulationSettings
 

@@ -37,7 +37,7 @@ import numpy as np
 from calibration.errors import RehabError
 from game.rom.spec import MODE_ACTIVE, Compensation, RomTest, check_side, check_standard
 from tracking.angles import joint_angles
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 #: Markers each arm angle rests on (docs/JOINT_ANGLES.md); ``*`` is L or R. The trunk frame needs
 #: MB, MP and both hips.

@@ -99,7 +99,7 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     frames = 0
     with studio:
         if donning is not None:
-            from tracking.sim.redonning import redon
+            from tracking.sim.redonning import redon  # lazy: only to run the simulated patient
 
             redon(studio, donning)
         names = studio.markerset.names

@@ -23,7 +23,7 @@ import pydantic
 
 from calibration.errors import RehabError
 from tracking.angles import ARM_ANGLES, SIDES
-from tracking.content import StrictModel, available, load_model, resolve
+from tracking.content_loader import StrictModel, available, load_model, resolve
 
 #: The reference standards. Their tables are never mixed: a result is labelled with one of them.
 STANDARDS: dict[str, str] = {

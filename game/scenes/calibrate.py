@@ -42,6 +42,7 @@ from calibration.board import Checkerboard, Detection, detect_board
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.errors import RehabError
 from calibration.intrinsics import COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of
+from calibration.guided import GOOD_LENGTH_MM
 from calibration.view_selection import coverage_hint
 from game.app import BaseScene, Frame
 from game.gfx import theme
@@ -541,7 +542,8 @@ class CalibrateScene(BaseScene):
             path.parent.mkdir(parents=True, exist_ok=True)
             rms = [r.rms_px for r in done if np.isfinite(r.rms_px)]   # lens data given (``lenses``) have none
             save_calibration_toml(path, [r.camera for r in done], error=float(np.mean(rms)) if rms else 0.0)
-            write_lens_information(path, {r.camera.name: r.information for r in done if r.information is not None})
+            write_lens_information(path, {r.camera.name: r.information for r in done if r.information is not None},
+                                   views={r.camera.name: len(r.per_view_rms_px) for r in done if r.information is not None})
         except (RehabError, OSError) as exc:
             self._say(f"Not saved: {exc}", theme.FAILURE)
             return None
@@ -660,8 +662,8 @@ class CalibrateScene(BaseScene):
 
     def _find_wand(self, images: list[np.ndarray]) -> np.ndarray:
         """(C, 2, 2) the two balls' centroids in every camera's image, NaN where not seen once exactly."""
-        from tracking.colour_table import ColourTable
-        from tracking.wand_capture import wand_centroids_in_images
+        from tracking.colour.table import ColourTable
+        from tracking.drivers.wand_capture import wand_centroids_in_images
 
         if self._table is None:
             self._table = ColourTable.build(self.wand_colours)
@@ -732,6 +734,15 @@ class CalibrateScene(BaseScene):
         target = np.asarray(self.board_centre_m if known is None else known, float)
         return tuple(float(v) for v in target - floor_board_centre_m(self.board))
 
+    def steady_lens_information(self) -> list:
+        """The information matrices of the lenses calibrated here from 10 views or more (the board
+        path refines them with the positions, as ``rehab calibrate extrinsics`` does); None for the
+        others and for lens data given from a file."""
+        from calibration.intrinsics import steady_lens_information
+
+        results = [p.result for p in self.progress]
+        return steady_lens_information([r.information for r in results], [len(r.per_view_rms_px) for r in results])
+
     def capture_floor(self) -> bool:
         """Solve the rig with the board on the seat, report its quality and save the calibration."""
         from calibration.files import save_calibration_toml
@@ -747,7 +758,8 @@ class CalibrateScene(BaseScene):
                                      origin_m=self.floor_origin_m())
                 self._report_views = {"floor": list(self.rig_detections)}
             else:
-                res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m())
+                res = solve_rig(cams, self.board, self.rig_views, self.rig_detections, origin_m=self.floor_origin_m(),
+                                lens_information=self.steady_lens_information())
                 self._report_views = {**self.rig_views.views, "floor": list(self.rig_detections)}
         except RehabError as exc:
             self.auto = False   # a wrong floor board is said once, not at every frame
@@ -992,10 +1004,14 @@ class CalibrateScene(BaseScene):
             fit = f"{what} {rep.rms_px[k]:.2f} px"
             if wand_px is not None and self.method != "wand" and np.isfinite(wand_px[k]):
                 fit += f", wand {wand_px[k]:.2f} px"
+            drifts = rep.wand is not None and np.isfinite(rep.wand.edge_drift_px[k])
+            if drifts:   # the lens near the picture's edge, as far as the balls went
+                fit += f", lens near the edge {rep.wand.edge_drift_px[k]:+.2f} px"
             extra = "" if pos is None else f"  (simulated: {pos[k]:.1f} mm, {ang[k]:.2f} deg off)"
             worst = np.nanmax([rep.rms_px[k], -1.0 if wand_px is None else wand_px[k]])
+            off = drifts and rep.wand.drift_found(k) and rep.wand.edge_drift_mm(k) >= GOOD_LENGTH_MM
             c.text(f"{cam.name}: {fit}, at ({at}) m{extra}", (m, y), round(theme.SMALL * 0.9 * s),
-                   theme.TEXT if worst < 0.5 else theme.ATTENTION)
+                   theme.TEXT if worst < 0.5 and not off else theme.ATTENTION)
             y += 30 * s
         y += 8 * s
         y = self._side_text(c, list(rep.advice), m, y, s, w - 2 * m, theme.SMALL * 0.9, theme.ATTENTION)

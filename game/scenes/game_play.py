@@ -126,7 +126,7 @@ class GameScene(BaseScene):
         link: the live tracker link.
         spec: the game; side: the active arm.
         db_path, patient_id: where the ROM is read from and the session stored.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`.
+        make_avatar: ``make_avatar(ctx, marker_names, roles=...)`` -> :class:`game.avatar.live.LiveAvatar`.
         auto: the simulated patient plays by itself.
         mute: no sound.
         seed: the targets' random generator.

@@ -32,7 +32,7 @@ from game.gfx.view3d import Viewport, intersect_plane, look_at, mirrored, perspe
 from game.input import Action, InputEvent, Pointer, PointerKind
 from game.live_link import LinkState, LiveLink
 from game.scenes.live_feed import WAITING_LINE, LiveFeed
-from tracking.angles import joint_angles
+from tracking.angles import joint_angles, withheld_angles
 from tracking.live import PatientInput
 
 log = logging.getLogger(__name__)
@@ -216,7 +216,7 @@ class LiveScene(BaseScene):
         motions: scripted motion names M cycles through (None in the list: mouse control).
         motion: what plays when the scene opens (None: mouse control).
         open_monitor: makes the camera-check scene for C (None: C does nothing).
-        make_avatar: ``make_avatar(ctx, marker_names)`` builds the avatar
+        make_avatar: ``make_avatar(ctx, marker_names, roles=...)`` builds the avatar
             (:class:`game.avatar.live.LiveAvatar`); None: markers only.
         show_markers: draw the measured markers over the avatar.
     """
@@ -298,8 +298,8 @@ class LiveScene(BaseScene):
         """The active shoulder marker's last position (a typical seated one before any sample)."""
         side = self.control.side
         sample, markerset = self.link.latest, self.link.markerset
-        name = "MRS" if side == "right" else "MLS"
-        if sample is not None and markerset is not None and name in markerset.names:
+        name = None if markerset is None else markerset.roles.get(f"{side}_shoulder")
+        if sample is not None and name in markerset.names:
             p = sample.positions_m[markerset.names.index(name)]
             if np.isfinite(p).all():
                 self._last_shoulder_m[side] = np.array(p, dtype=np.float64)
@@ -380,10 +380,24 @@ class LiveScene(BaseScene):
         if self._shown_for is not sample:
             self._shown_for = sample
             names = self.link.angle_names
-            live = joint_angles(sample.positions_m, self.link.markerset.names, near_singular="withhold")
+            markerset = self.link.markerset
+            live = joint_angles(sample.positions_m, markerset.names, roles=markerset.roles, near_singular="withhold")
             self._shown = {n: float(live[n]) if n in live and math.isfinite(sample.angles_deg[i])
                            else float(sample.angles_deg[i]) for i, n in enumerate(names)}
         return self._shown[name]
+
+    def _rows(self, side: bool) -> list[tuple[str, str, tuple[float, float]]]:
+        """The panel's angle rows (column, label, bar range): the active arm's and the trunk's
+        under mouse control, else both arms'; an angle the marker set cannot give (its roles have
+        no marker: :func:`tracking.angles.withheld_angles`) has no row."""
+        sides = (self.control.side,) if side else ("right", "left")
+        rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
+                for sd in sides for suffix, label, rng in ARM_ROWS]
+        if side:
+            rows += TRUNK_ROWS
+        markerset = self.link.markerset
+        withheld = withheld_angles(markerset.roles) if markerset is not None else {}
+        return [row for row in rows if row[0] not in withheld]
 
     def _draw_panel(self, frame: Frame, sample) -> None:
         c, s = frame.canvas, self.layout.scale
@@ -409,11 +423,7 @@ class LiveScene(BaseScene):
         else:
             c.text(mode, (x, y), round(theme.SMALL * s), theme.TEXT_DIM)
         y += 40 * s
-        sides = (self.control.side,) if side else ("right", "left")
-        rows = [(f"{sd}_{suffix}", label if side else f"{sd.capitalize()} {label[0].lower()}{label[1:]}", rng)
-                for sd in sides for suffix, label, rng in ARM_ROWS]
-        if side:
-            rows += TRUNK_ROWS
+        rows = self._rows(side)
         # from the bottom up: the key help, the note on the rest pose, the marker counts, the rows
         note, note_size, note_h = self._rest_note(frame, right - x)
         note_y = self._help_top(frame) - 8 * s - len(note) * note_h

@@ -40,7 +40,7 @@ class LiveFeed:
     Args:
         link: the link; ``new_samples``, ``latest``, ``markerset``, ``problem()`` and
             ``set_patient_input`` are used.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`
+        make_avatar: ``make_avatar(ctx, marker_names, roles=...)`` -> :class:`game.avatar.live.LiveAvatar`
             (None: no avatar, e.g. unit tests of the logic).
     """
 
@@ -67,7 +67,7 @@ class LiveFeed:
             self.sample_clock_s = app.clock()
         markerset = self.link.markerset
         if self.avatar is None and self.make_avatar is not None and markerset is not None:
-            self.avatar = self.make_avatar(app.screen.ctx, markerset.names)
+            self.avatar = self.make_avatar(app.screen.ctx, markerset.names, roles=markerset.roles)
         if self.avatar is not None:
             for sample in self.samples:
                 if known_markers(sample) >= MIN_KNOWN_MARKERS:

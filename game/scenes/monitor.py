@@ -1,7 +1,7 @@
 """The camera check: every camera's latest image with what the tracker made of it.
 
 For a therapist setting up (or a reviewer checking the simulated studio): the images in a grid,
-each drawn by :func:`game.monitor.overlay_cameras` with the pixels the colour table takes for
+each drawn by :func:`game.gfx.camera_overlay.overlay_cameras` with the pixels the colour table takes for
 marker colours painted in those colours over the dimmed picture, each marker's search window
 and name at the centroid used, the markers a camera does not see, and the tracking state. The
 overlays are redrawn when a new sample arrives (30 times a second), not every display frame.
@@ -10,7 +10,7 @@ C or Esc goes back.
 The colour table (a 2^24-entry lookup, about half a second to build) is built on a helper thread
 when the scene opens; until it is ready the images are shown without the painted colours.
 
-Manual colour pick (the fallback of colour calibration, :mod:`tracking.colour_pick`): Left and
+Manual colour pick (the fallback of colour calibration, :mod:`tracking.colour.pick`): Left and
 Right choose a marker colour, a click on a ball of that colour in a camera image teaches it
 (learnt from the clicked ball's pixels); the table is rebuilt on a helper thread, the images are
 painted with it and the tracker tracks with it from then on. Enter saves the taught colours into
@@ -30,7 +30,7 @@ from game.app import BaseScene, Frame
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LiveLink
-from game.monitor import overlay_cameras
+from game.gfx.camera_overlay import overlay_cameras
 
 log = logging.getLogger(__name__)
 
@@ -101,7 +101,7 @@ class MonitorScene(BaseScene):
         self._shown = None          # (sample number, table) the overlays were made for
         self._builder: threading.Thread | None = None
         self.teach_colour = 0       # palette index a click teaches
-        self.manual = None          # tracking.colour_pick.ManualColours, made at the first pick
+        self.manual = None          # tracking.colour.pick.ManualColours, made at the first pick
         self.message = ""
         self.message_colour = theme.TEXT_DIM
         self.images: list[np.ndarray] = []   # the raw images the overlays show (a click is learnt from them)
@@ -115,7 +115,7 @@ class MonitorScene(BaseScene):
             self._builder.start()
 
     def _build_table(self) -> None:
-        from tracking.colour_table import ColourTable
+        from tracking.colour.table import ColourTable
 
         markerset = self.link.markerset
         if markerset is None:
@@ -149,7 +149,7 @@ class MonitorScene(BaseScene):
 
     def teach(self, camera: int, uv_px) -> bool:
         """Learn the selected colour from the ball at ``uv_px`` in camera ``camera``'s image shown."""
-        from tracking.colour_pick import ColourPickError, ManualColours
+        from tracking.colour.pick import ColourPickError, ManualColours
 
         markerset = self.link.markerset
         if markerset is None or camera >= len(self.images):
@@ -176,7 +176,7 @@ class MonitorScene(BaseScene):
 
     def _start_models(self, markerset):
         """The colours to teach from: those learnt into the calibration file if any, else the nominal ones."""
-        from tracking.colour_adapt import nominal_models
+        from tracking.colour.adapt import nominal_models
         from tracking.live.source import learnt_colours_for
 
         config = getattr(getattr(self.link, "tracker", None), "source", None)
@@ -196,7 +196,7 @@ class MonitorScene(BaseScene):
 
     def save_colours(self) -> bool:
         """Write the taught colours into the source's calibration file ([metadata.marker_colours])."""
-        from tracking.colour_adapt import save_colours_to_calibration
+        from tracking.colour.adapt import save_colours_to_calibration
         from tracking.live.source import calibration_file_for
 
         if self.manual is None or not self.manual.picks.any():

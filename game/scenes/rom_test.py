@@ -238,7 +238,7 @@ class RomTestScene(BaseScene):
             samples' markers; ``set_motion`` plays the demo motion).
         visit: the patient, database and standard.
         test: the test; side: ``right`` or ``left``.
-        make_avatar: ``make_avatar(ctx, marker_names)`` -> :class:`game.avatar.live.LiveAvatar`
+        make_avatar: ``make_avatar(ctx, marker_names, roles=...)`` -> :class:`game.avatar.live.LiveAvatar`
             (None: no avatar, e.g. unit tests of the logic).
         demo: play the test's scripted motion on the simulated patient from the start.
     """

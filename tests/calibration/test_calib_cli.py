@@ -43,6 +43,9 @@ def test_simulated_material_calibrates_end_to_end(material, tmp_path, capsys):
     board_calib = tmp_path / "board.toml"
     assert main(["calibrate", "extrinsics", str(material / "extrinsics"), "--intrinsics", str(intr), "--board", "9x6",
                  "--square-mm", "60", f"--origin={origin}", "--out", str(board_calib)]) == 0
+    # six lens images each: the lens data are kept as the lens step found them (refined from 10 images on)
+    assert "lens data kept as they are for cam1, cam2, cam3, cam4 (lens step from fewer than 10 images)" in capsys.readouterr().out
+    assert load_calibration(board_calib)[1].K.tolist() == cams[1].K.tolist()
     pos, ang = rig_errors(load_calibration(board_calib), truth)
     assert pos.max() < 10.0 and ang.max() < 0.3  # the strict figures: test_calib_extrinsics.py
 

@@ -157,7 +157,7 @@ def test_world_frame_from_a_floor_board_for_a_rig_in_any_frame(ring4, rendered):
 
 
 def test_tracking_with_the_recovered_calibration_matches_tracking_with_the_true_one(ring4, rendered, tmp_path):
-    from tracking.calibration_check import tracking_difference_mm
+    from tracking.drivers.calibration_check import tracking_difference_mm
     from tracking.sim.studio import SimulationSettings, simulate_recording
 
     res, _ = rendered

@@ -15,8 +15,9 @@ from calibration.board import Checkerboard, Detection
 from calibration.camera import Camera, rotation_from_rvec
 from calibration.errors import CalibrationError, RehabError
 from calibration.extrinsics import calibrate_extrinsics, rig_errors
-from calibration.files import load_calibration, read_lens_information, save_calibration_toml, write_lens_information
-from calibration.intrinsics import calibrate_intrinsics
+from calibration.files import (load_calibration, read_lens_information, read_lens_views, save_calibration_toml,
+                               write_lens_information)
+from calibration.intrinsics import calibrate_intrinsics, steady_lens_information
 from tracking.sim.calibration_material import extrinsics_poses, seat_board_pose
 from tracking.sim.renderer import DEMO_LENS
 from tracking.sim.rigs import load_rig
@@ -122,11 +123,16 @@ def test_lens_information_round_trips_through_the_calibration_file(tmp_path):
     path = tmp_path / "intrinsics.toml"
     save_calibration_toml(path, [r.camera for r in steps])
     assert read_lens_information(path, load_calibration(path)) == [None, None]   # a file without the section
-    write_lens_information(path, {steps[0].camera.name: steps[0].information})
+    write_lens_information(path, {steps[0].camera.name: steps[0].information}, views={steps[0].camera.name: 6})
     cams = load_calibration(path)   # the cameras read as before
     back = read_lens_information(path, cams)
     assert back[1] is None
     assert np.allclose(back[0], steps[0].information, rtol=1e-12)
+    assert read_lens_views(path, cams) == [6, None]
+    # refined by default only from steady lens steps (10 images or more); unknown counts: not by default
+    assert steady_lens_information(back, [6, None]) == [None, None]
+    kept = steady_lens_information([back[0], back[0], None], [10, 9, 12])
+    assert kept[0] is back[0] and kept[1] is None and kept[2] is None
     text = path.read_text().replace("[metadata.lens_information]", "[metadata.lens_information]\ncam2 = [[1.0, 2.0], [2.0, 1.0]]")
     path.write_text(text)
     with pytest.raises(CalibrationError, match=r"'cam2' must be 8x8 numbers") as exc:

@@ -67,8 +67,8 @@ def test_missing_views_and_bad_input_are_refused():
 
 
 def test_rendered_wand_calibrates_a_4_camera_rig_to_under_1_mm_of_wand_length():
-    from tracking.colour_table import ColourTable
-    from tracking.wand_capture import wand_centroids_in_images
+    from tracking.colour.table import ColourTable
+    from tracking.drivers.wand_capture import wand_centroids_in_images
 
     cams = load_rig("ring4", (480, 360))
     balls = wand_path(80, 4.0, seed=1)

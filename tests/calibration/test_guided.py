@@ -122,3 +122,36 @@ def test_wand_not_linking_every_camera_is_refused_with_the_pair_to_wave_between(
         wand.add(uv[:, t])
     with pytest.raises(CalibrationError, match="Wave the wand where .* both see it"):
         solve_rig_wand(cams, wand, 0.5, BOARD, [None] * 4)
+
+
+def test_the_report_sees_a_lens_distortion_the_wand_length_does_not():
+    """ring4 with cam1's lens data missing its barrel distortion (k1 0 instead of -0.12): the rig
+    solved from the wand is 13 mm off and points at the volume's edge up to 9.5 mm, yet the wand
+    measures 0.65 mm RMS and every camera's balls fit within 0.35 px; the balls' radial drift near
+    the picture's edge (-0.44 px, about 1.4 mm) shows it, names the camera and the verdict drops.
+    The true lens: no drift found (0.05 px or less)."""
+    from tracking.sim.renderer import DEMO_LENS
+
+    truth = [Camera(c.name, c.size_px, c.K, DEMO_LENS, c.rvec, c.t_m) for c in load_rig("ring4", (640, 480))]
+    balls = wand_path(WAND_FRAMES + 100, 10.0, seed=3)
+    reports = []
+    for k1 in (DEMO_LENS[0], 0.0):
+        rng = np.random.default_rng(2)
+        uv = _wand_uv(truth, balls, 0.2, rng)
+        lenses = [Camera(c.name, c.size_px, c.K, (k1, *DEMO_LENS[1:]) if i == 0 else DEMO_LENS, np.zeros(3), np.zeros(3))
+                  for i, c in enumerate(truth)]
+        wand = WandViews([c.name for c in truth])
+        for t in range(WAND_FRAMES):
+            wand.add(uv[:, t])
+        seat = seat_board_pose(BOARD)
+        floor = _detections(truth, seat, 0.1, rng)
+        res = solve_rig_wand(lenses, wand, 0.5, BOARD, floor, origin_m=seat.t_m)
+        check = wand_check(res.cameras, uv[:, WAND_FRAMES:], 0.5)
+        reports.append(quality_report(res.cameras, BOARD, {"floor": floor}, res.rms_px, wand=check, wand_length_m=0.5))
+        assert check.length_rms_mm < 1.0 and np.nanmax(check.rms_px) < 0.5   # the wand alone says good
+    good, bad = reports
+    assert good.verdict == "good" and not good.advice and np.all(np.abs(good.wand.edge_drift_px) < 0.1)
+    assert bad.verdict == "usable", bad.lines()
+    assert bad.wand.drift_found(0) and bad.wand.edge_drift_px[0] < -0.3 and bad.wand.edge_drift_mm(0) > 1.0
+    assert len(bad.advice) == 1 and bad.advice[0].startswith("Redo cam1's lens step with the board also near the edges")
+    assert "near the edge -0.4" in next(line for line in bad.lines() if line.startswith("cam1:"))

@@ -30,8 +30,8 @@ class FakeApp:
 
 
 class FakeAvatar:
-    def __init__(self, ctx, names) -> None:
-        self.made_with = (ctx, tuple(names))
+    def __init__(self, ctx, names, roles) -> None:
+        self.made_with = (ctx, tuple(names), roles)
         self.pushed: list = []
         self.released = False
 
@@ -47,7 +47,7 @@ def test_samples_are_read_once_per_frame_and_move_the_avatar_when_they_know_enou
     link = BodyLink(clock)
     app = FakeApp(clock)
     made = []
-    feed = LiveFeed(link, lambda ctx, names: made.append(FakeAvatar(ctx, names)) or made[-1])
+    feed = LiveFeed(link, lambda ctx, names, roles: made.append(FakeAvatar(ctx, names, roles)) or made[-1])
     assert feed.problem(clock()) == (WAITING_LINE, False) and not feed.is_live(clock())
     good = link.feed(reference_pose())
     status = np.zeros(len(link.markerset.names), np.uint8)
@@ -56,7 +56,7 @@ def test_samples_are_read_once_per_frame_and_move_the_avatar_when_they_know_enou
     link.tick()
     assert feed.take(app) == [good, waiting]
     avatar, = made
-    assert avatar.made_with == ("ctx", tuple(link.markerset.names))
+    assert avatar.made_with == ("ctx", tuple(link.markerset.names), link.markerset.roles)
     assert avatar.pushed == [good]                       # too few known markers pose no body
     link.tick()                                          # a second look in the same frame: the same samples
     assert feed.take(app) == [good, waiting] and avatar.pushed == [good]

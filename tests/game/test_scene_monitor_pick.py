@@ -13,7 +13,7 @@ from game.app import App, BaseScene, Services, Settings
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState, LiveLink
 from game.scenes.monitor import MonitorScene, image_to_screen
-from tracking.colour_adapt import calibration_colours
+from tracking.colour.adapt import calibration_colours
 from tracking.live import LiveSample, SourceConfig
 from tracking.sim.body import reference_pose
 from tracking.sim.studio import SimulationSettings, studio_from_settings

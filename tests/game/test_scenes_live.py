@@ -14,10 +14,11 @@ from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState, LiveLink
 from game.avatar.live import LiveAvatar
-from game.scenes.live import ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
+from game.scenes.live import ARM_ROWS, ControlLimits, LiveScene, PatientControl, format_angle, live_layout, truth_error_mm
 from game.scenes.monitor import MonitorScene, grid_rects, image_to_screen
 from tracking.angles import ANGLE_COLUMNS, joint_angles
 from tracking.live import LiveSample
+from tracking.live.source import angle_names_for
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 
@@ -30,10 +31,10 @@ class BodyLink:
 
     problem = LiveLink.problem  # the real words for the link's state
 
-    def __init__(self, clock) -> None:
-        self.markerset = load_markerset("upper_limb_seated")
+    def __init__(self, clock, markerset: str = "upper_limb_seated") -> None:
+        self.markerset = load_markerset(markerset)
         self.body = BodyModel(BodyDimensions.from_percentile(50, "male"), self.markerset)
-        self.angle_names = tuple(ANGLE_COLUMNS)
+        self.angle_names = angle_names_for(self.markerset)
         self.cameras = ()
         self.clock = clock
         self.state = LinkState.RUNNING
@@ -52,7 +53,7 @@ class BodyLink:
         m = len(truth)
         status = np.ones(m, np.uint8) if status is None else np.asarray(status, np.uint8)
         p = np.where((status == 0)[:, None], np.nan, truth)   # lost markers have no position
-        angles = joint_angles(p, self.markerset.names)
+        angles = joint_angles(p, self.markerset.names, roles=self.markerset.roles)
         sample = LiveSample(
             frame_index=self._n, time_s=self._n / 30, t_frame_ready_s=self.clock() - 0.001 * (10 - self._n % 10),
             t_published_s=self.clock(), state=state, positions_m=p,
@@ -98,15 +99,15 @@ def screen(open_headless):
     return open_headless(SIZE)
 
 
-def make_app(screen, *, motion=None, avatar=True):
+def make_app(screen, *, motion=None, avatar=True, markerset="upper_limb_seated"):
     clock = Clock()
-    link = BodyLink(clock)
+    link = BodyLink(clock, markerset)
     app = App(screen, Settings(show_fps=False, max_fps=0), clock=clock, sleep=lambda s: None,
               services=Services(link), events=lambda: [])
     app.push(BaseScene())
     scene = LiveScene(link, motions=[None, "shoulder_flexion", "reach"], motion=motion,
                       open_monitor=lambda: MonitorScene(link),
-                      make_avatar=(lambda ctx, names: LiveAvatar(ctx, names)) if avatar else None)
+                      make_avatar=(lambda ctx, names, roles: LiveAvatar(ctx, names, roles=roles)) if avatar else None)
     app.push(scene)
     return app, scene, link, clock
 
@@ -229,6 +230,34 @@ def test_the_avatar_is_a_mirror_image_in_pixels(screen):
     centre = project_px(link.body.markers_m(rest)[[link.markerset.names.index("MB")]],
                         scene.proj_m @ scene.view_m, view)[0][0]
     assert np.mean(xs > centre) > 0.9                       # and it is on the screen's right
+
+
+def test_a_one_arm_marker_set_drives_the_avatar_and_the_readouts_through_its_roles(screen):
+    """right_arm_seated (other names, no left arm): the avatar is built from it and raises its
+    right arm on the screen's right, the right arm's angles read, the left arm's are withheld,
+    and the hand is aimed from the right shoulder marker found by its role."""
+    app, scene, link, clock = make_app(screen, motion="shoulder_flexion", markerset="right_arm_seated")
+    assert link.angle_names == tuple(c for c in ANGLE_COLUMNS if not c.startswith("left_"))
+    rest = reference_pose()
+    raised = rest.with_arm("right", ArmPose.clinical(abduction_deg=90.0))
+    a = _render(app, clock, link, rest)
+    assert scene.feed.avatar is not None
+    assert scene.feed.avatar.skeleton.update(link.latest.positions_m, link.latest.status).segment_state(
+        "left_forearm").name == "LOST"
+    b = _render(app, clock, link, raised)
+    view = live_layout(SIZE).view
+    ys, xs = np.nonzero((np.abs(a - b).sum(axis=2) > 60)[:, : int(view.w)])
+    centre = project_px(link.body.markers_m(rest)[[link.markerset.names.index("STRN")]],
+                        scene.proj_m @ scene.view_m, view)[0][0]
+    assert len(xs) > 400 and np.mean(xs > centre) > 0.9
+    full = load_markerset("upper_limb_seated")
+    want = joint_angles(BodyModel(link.body.dims, full).markers_m(raised), full.names, near_singular="withhold")
+    assert scene._angle(link.latest, "right_shoulder_abduction") == pytest.approx(float(want["right_shoulder_abduction"]))
+    assert 60.0 < scene._angle(link.latest, "right_shoulder_abduction") < 100.0  # (skin markers: ~80)
+    assert math.isnan(scene._angle(link.latest, "left_shoulder_abduction"))
+    np.testing.assert_array_equal(scene._shoulder_m(), link.latest.positions_m[link.markerset.names.index("RSHO")])
+    # the panel lists what the marker set gives: no rows for the left arm, which it has no markers for
+    assert [name for name, _, _ in scene._rows(False)] == [f"right_{suffix}" for suffix, _, _ in ARM_ROWS]
 
 
 def test_banners_say_what_the_tracker_is_doing(screen):

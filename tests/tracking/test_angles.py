@@ -726,7 +726,7 @@ VICON_NAMES = {  # ours -> the Vicon capture's labels (content/captures/README.m
 def test_real_vicon_capture_gives_physiological_angles():
     """A real right-arm capture (Z up, right +Y, forward -X) turned into our frame."""
     from content import content_path
-    from tracking.c3d_io import read_c3d_points
+    from tracking.io.c3d import read_c3d_points
 
     _, theirs, _ = read_c3d_points(content_path("captures", "ezc3d_vicon_upper_limb.c3d"),
                                    labels=list(VICON_NAMES.values()))

@@ -3,7 +3,7 @@ full-frame pass before it, and the best pass named (speed is reported, not asser
 
 import re
 
-from tracking.bench import run_benchmarks
+from tracking.drivers.bench import run_benchmarks
 
 
 def test_bench_reports_each_pass_and_the_best():

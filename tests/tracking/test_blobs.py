@@ -13,7 +13,7 @@ from tracking.blobs import (
     arc_centres,
     find_blobs,
 )
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.markerset import load_markerset
 
 SUPERSAMPLE = 8

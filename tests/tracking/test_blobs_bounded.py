@@ -79,9 +79,9 @@ def _noise_image(rng, w=320, h=240, block=3):
 
 
 def test_a_cap_per_colour_from_the_marker_set():
-    """The measurer caps each colour's regions at twice its markers + 4 (tracking.measure.regions_cap):
+    """The measurer caps each colour's regions at twice its markers + 4 (tracking.full_frame.regions_cap):
     on a clean render the points are exactly those of the global cap; on noise fewer regions."""
-    from tracking.measure import FrameMeasurer, regions_cap
+    from tracking.full_frame import FrameMeasurer, regions_cap
     from tracking.sim.studio import SimulationSettings, studio_from_settings
 
     assert [regions_cap(n) for n in (1, 3, 4, 14, 40)] == [6, 10, 12, 32, DEFAULT_MAX_PER_COLOUR]
@@ -89,7 +89,7 @@ def test_a_cap_per_colour_from_the_marker_set():
     with studio:
         images = studio.render(motion.pose_at(0.0), 0, 0.0, noise_sigma=1.5, with_visibility=False).frames.images
         ms, cams = studio.markerset, studio.cameras
-    from tracking.colour_table import ColourTable
+    from tracking.colour.table import ColourTable
 
     table = ColourTable.build(ms.palette)
     per_colour = np.bincount(ms.colour_index)

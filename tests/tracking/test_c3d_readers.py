@@ -8,8 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
-from tracking.c3d_io import C3dEvent, read_c3d_points, write_c3d
-from tracking.status import MarkerStatus
+from tracking.io.c3d import C3dEvent, read_c3d_points, write_c3d
+from tracking.marker_status import MarkerStatus
 
 c3d = pytest.importorskip("c3d")  # the test extra installs it
 ezc3d = pytest.importorskip("ezc3d")
@@ -210,7 +210,7 @@ def test_estimated_runs_too_many_for_the_parameters_leave_the_residuals(tmp_path
     p = np.zeros((n, len(NAMES), 3))
     status = np.full((n, len(NAMES)), MarkerStatus.MEASURED, dtype=np.uint8)
     status[::2] = MarkerStatus.ESTIMATED  # 2100 runs per marker, 8400 in all
-    with caplog.at_level("WARNING", logger="tracking.c3d_io"):
+    with caplog.at_level("WARNING", logger="tracking.io.c3d"):
         write_c3d(path, NAMES, p, 30.0, status=status)
     assert "8400 runs of estimated samples do not fit" in caplog.text
     assert "ESTIMATED" not in ezc3d.c3d(str(path))["parameters"]

@@ -6,9 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from tracking.colour_adapt import nominal_models
-from tracking.colour_pick import ColourPickError, ManualColours, pick_blob
-from tracking.colour_table import ColourTable
+from tracking.colour.adapt import nominal_models
+from tracking.colour.pick import ColourPickError, ManualColours, pick_blob
+from tracking.colour.table import ColourTable
 
 PALETTE = np.array([[255, 214, 0], [225, 0, 210], [0, 190, 235]], np.uint8)  # yellow, magenta, cyan (RGB)
 CAST_MAGENTA_BGR = (150, 40, 235)  # a magenta under a warm cast: hue ~325 deg, outside the nominal band

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from tracking.colour_table import ColourTable, benchmark
+from tracking.colour.table import ColourTable, benchmark
 from tracking.errors import ContentError
 from tracking.markerset import load_markerset
 

@@ -28,7 +28,7 @@ from tracking.hidden import (
     wrist_centre,
 )
 from tracking.markerset import load_markerset
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 LOST, MEASURED, ESTIMATED = MarkerStatus.LOST, MarkerStatus.MEASURED, MarkerStatus.ESTIMATED
 
@@ -710,12 +710,12 @@ def test_any_input_gives_consistent_statuses(seed, p_hidden):
         np.testing.assert_array_equal(p[measured], x[measured])
 
 
-def _arm_estimator() -> Estimator:
+def _arm_estimator(**tuning) -> Estimator:
     """A shoulder, two elbow markers on a hinge and two styloids on a forearm, at 30 frames/s."""
     return Estimator([Method.NEIGHBOURS, Method.HINGE, Method.HINGE, Method.FOREARM, Method.FOREARM],
                      np.ones((5, 5)), segments=[(1, 2, 3, 4)],
                      hinges=[Hinge(1, 2, 0, (3, 4)), Hinge(2, 1, 0, (3, 4))],
-                     forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0)
+                     forearms=[Forearm(3, 4, (1, 2)), Forearm(4, 3, (1, 2))], fps=30.0, scapular_rhythm=0.0, **tuning)
 
 
 def _flexing_arm(flexion_at):
@@ -741,7 +741,7 @@ def test_the_hinge_takes_the_mirror_image_on_the_side_the_elbow_bends():
         for t in range(20):
             est.update(truth[t], measured[t])
         if not learned:
-            est.hinge_sense[:] = 0.0  # as before the sense was learned: the previous axis decides
+            est.elbows.sense[:] = 0.0  # as before the sense was learned: the previous axis decides
         est.positions[2] = 2 * truth[19, 1] - truth[19, 2]  # the mirror image through the partner
         p, s = est.update(np.where(measured[20][:, None], truth[20], np.nan), measured[20])
         assert s[2] == ESTIMATED
@@ -757,7 +757,7 @@ def test_a_view_of_a_hidden_elbow_marker_corrects_the_hinge_across_its_ray():
         est = _arm_estimator()
         for t in range(20):
             est.update(truth[t], measured[t])
-        est.hinge_length[:] *= 1.1  # a hinge 1 cm off along the axis (a wrong learned width)
+        est.elbows.length[:] *= 1.1  # a hinge 1 cm off along the axis (a wrong learned width)
         if view:
             d = (truth[20, 2] - camera) / np.linalg.norm(truth[20, 2] - camera)
             est.observe_views([2], camera[None], d[None], [0.001])
@@ -797,8 +797,7 @@ def test_a_straight_elbows_weak_condition_is_averaged_with_the_prediction():
     shoulder = np.array([0.0, 0.32, 0.0])
     drift = {}
     for weak in (0.3, 0.25):  # 0.3 = min_singular: the weak band switched off
-        est = _arm_estimator()
-        est.weak_singular = weak
+        est = _arm_estimator(weak_singular=weak)
         for i in range(45):
             x = np.stack([shoulder, *forearm_pose(0.0, 0.4 - 0.02 * i)])
             measured = np.ones(5, dtype=bool)
@@ -877,8 +876,8 @@ def test_the_per_frame_forearm_angles_in_floats_match_the_elbow_frame_and_forear
     for p in truth:
         est.update(p, measured)
         turned.append(not np.allclose(est.pivot_offset(0, 0.5 * (p[1] + p[2]), p[0]), est.pivot_offset(0)))
-        fast = est._forearm_angles_f(0, p.tolist(), measured.tolist())
-        theta, psi, shape = forearm_angles(est._elbow_frame(0, p, measured, square=0.0), p[3], p[4])
+        fast = est.arms.forearm_angles_f(0, p.tolist(), measured.tolist())
+        theta, psi, shape = forearm_angles(est.arms.elbow_frame(0, p, measured, square=0.0), p[3], p[4])
         assert fast[0] == pytest.approx(theta, abs=1e-12) and fast[1] == pytest.approx(psi, abs=1e-12)
         assert np.allclose([fast[2].along, fast[2].radius, fast[2].half, fast[2].tilt],
                            [shape.along, shape.radius, shape.half, shape.tilt], atol=1e-12)

@@ -86,7 +86,7 @@ def test_a_whole_arm_hidden_for_a_moment_coasts_on_its_velocity():
     they were) while 0.5 a t^2 stays within max_extrapolation_m; then the other estimators (and
     their gates) take over."""
     from tracking.hidden import Estimator, Method, estimator_config
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
 
     ms, truth = _moving_body(20, [0.01, 0.0, 0.0])  # 10 mm per frame, 0.3 m/s at 30 frames/s
     chain = [ms.index(n) for n in ("MRE1", "MRE2", "MRW1", "MRW2")]
@@ -133,7 +133,7 @@ def test_the_flexion_speed_is_learned_through_fits_to_one_styloid():
         pose = motion.pose_at(1.0 + i / fps)
         measured[w2] = i < 20
         est.update(np.where(measured[:, None], body.markers_m(pose), np.nan), measured)
-        speeds.append(est.arm_velocity[0, 0] if est._arms[0][0] == ms.index("MRW1") else est.arm_velocity[1, 0])
+        speeds.append(est.arms.velocity[0, 0] if est.layout.arms[0][0] == ms.index("MRW1") else est.arms.velocity[1, 0])
     speeds = np.abs(np.nan_to_num(np.array(speeds)))
     # the speed while both styloids were measured is kept (not decayed to a tenth) through 40 fits
     assert speeds[19] > 1e-3

@@ -5,13 +5,13 @@ identification found later, re-identification on request and after a long loss."
 import numpy as np
 import pytest
 
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.markerset import load_markerset
 from tracking.sim.body import BodyDimensions, reference_pose
 from tracking.sim.identify_sweep import perturbed_poses, sweep, table_markdown, wrong_poses
 from tracking.sim.rigs import load_rig
 from tracking.sim.studio import Studio
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 MS = load_markerset()

@@ -15,7 +15,7 @@ import yaml
 
 from calibration.errors import RehabError
 from content import content_path
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.errors import ContentError
 from tracking.identify import (
     IdentificationError,
@@ -26,7 +26,7 @@ from tracking.identify import (
     try_identify,
 )
 from tracking.markerset import DistanceRule, OrderRule, load_markerset
-from tracking.measure import FrameMeasurer
+from tracking.full_frame import FrameMeasurer
 from tracking.reconstruction import Points3D
 from tracking.sim.body import (
     REFERENCE_ABDUCTION_DEG,

@@ -13,7 +13,7 @@ from tracking.sim.population import ONE_COLOUR_RGB
 from tracking.sim.rigs import load_rig
 from tracking.sim.studio import SimulationSettings, Studio, studio_from_settings
 from tracking.sim.body import BodyDimensions
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 HELD = TrackerParams(identify_hold_s=0.2)

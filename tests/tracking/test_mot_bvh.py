@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from tracking.angles import ANGLE_COLUMNS, joint_angles
-from tracking.bvh import BvhSkeleton, write_bvh
+from tracking.io.bvh import BvhSkeleton, write_bvh
 from tracking.markerset import load_markerset
-from tracking.opensim_mot import write_mot
+from tracking.io.opensim_mot import write_mot
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose
 
 MS = load_markerset("upper_limb_seated")
@@ -298,7 +298,7 @@ def test_blender_imports_the_bvh_as_the_avatar(tmp_path, seed):
     if blender is None:
         pytest.skip("Blender is not installed (apt-get install blender, or blender.org)")
     bvh = pytest.importorskip("bvh")
-    from tracking.bvh import JOINTS
+    from tracking.io.bvh import JOINTS
 
     angles = simulated_angles(12, seed)
     path, script, out = tmp_path / "skeleton.bvh", tmp_path / "dump.py", tmp_path / "out.json"

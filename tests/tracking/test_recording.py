@@ -7,7 +7,7 @@ import yaml
 
 from calibration.errors import RehabError
 from game.cli import main
-from tracking.recording import Recording, RecordingWriter
+from tracking.io.recording import Recording, RecordingWriter
 from tracking.sim.rigs import load_rig
 
 

@@ -11,11 +11,12 @@ from tracking.angles import joint_angles
 from tracking.labelling.checks import SelfChecks
 from tracking.labelling.roles import BodyRoles
 from tracking.markerset import load_markerset
+from tracking.pipeline.selfcheck import exchange
 from tracking.sim.body import BodyDimensions, BodyModel
 from tracking.sim.motions import available_motions, load_motion
 from tracking.sim.population import draw, markers_m
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
 
 MS = load_markerset()
@@ -88,7 +89,7 @@ def test_a_swap_injected_mid_recording_is_caught(recording, pair):
             elbow = joint_angles(truth[None], MS.names)["right_elbow_flexion"][0]
             if elbow > 60:
                 inject = k
-                tracker._exchange(i, j)
+                exchange(tracker.memory, tracker.estimator, i, j)
         out.append((tracker.step(images, t), truth))
     assert inject is not None
     after = out[inject:]

@@ -8,9 +8,9 @@ import pytest
 from calibration.errors import RehabError
 from content import content_path
 from tracking.angles import ANGLE_COLUMNS, REQUIRED_MARKERS, MissingMarkersError, joint_angles
-from tracking.c3d_io import C3dError, read_c3d_points, write_c3d
-from tracking.status import MarkerStatus
-from tracking.tables import (
+from tracking.io.c3d import C3dError, read_c3d_points, write_c3d
+from tracking.marker_status import MarkerStatus
+from tracking.io.csv_tables import (
     AnglesTable,
     StatusTable,
     TableError,
@@ -20,7 +20,7 @@ from tracking.tables import (
     write_angles_csv,
     write_status_csv,
 )
-from tracking.trc import write_trc
+from tracking.io.trc import write_trc
 
 
 def angle_values(n_frames: int = 5, seed: int = 0) -> dict[str, np.ndarray]:
@@ -199,7 +199,7 @@ def test_rehab_angles_map_renames_other_marker_sets(tmp_path, capsys):
     (None, "no such file"),
 ])
 def test_marker_map_errors_are_one_line(tmp_path, text, needle):
-    from tracking.tables import read_marker_map
+    from tracking.io.csv_tables import read_marker_map
 
     path = tmp_path / "map.yaml"
     if text is not None:

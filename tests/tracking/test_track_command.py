@@ -5,11 +5,11 @@ import pytest
 
 from game.cli import main
 from tracking.angles import joint_angles
-from tracking.recording import RecordingWriter
+from tracking.io.recording import RecordingWriter
 from tracking.sim.body import ArmPose, reference_pose
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.tables import read_angles_csv, read_status_csv
-from tracking.trc import read_trc
+from tracking.io.csv_tables import read_angles_csv, read_status_csv
+from tracking.io.trc import read_trc
 
 
 def write_recording(folder, poses, size=(320, 240)):
@@ -110,7 +110,7 @@ def test_bad_options_are_one_line(tmp_path, capsys, argv_tail, needle):
 def test_marker_color_once_with_many_values_or_repeated(tmp_path, monkeypatch):
     """`--marker-color R,G,B R,G,B ...` (docs/INTERFACES.md) and the repeated flag give the same colours,
     also with the recording folder written after the colours."""
-    import tracking.offline as offline
+    import tracking.drivers.offline as offline
 
     seen = []
     monkeypatch.setattr(offline, "track_recording", lambda folder, **kw: seen.append((folder, kw["marker_colours"])) or "")
@@ -155,10 +155,10 @@ def test_outputs_in_a_missing_folder_are_written_there(small_recording, tmp_path
 
 
 @pytest.mark.parametrize("writer, option, name", [
-    ("tracking.opensim_mot.write_mot", "--mot", "a.mot"),
-    ("tracking.trc.write_trc", "--out", "m.trc"),
-    ("tracking.c3d_io.write_c3d", "--c3d", "m.c3d"),
-    ("tracking.bvh.write_bvh", "--bvh", "a.bvh"),
+    ("tracking.io.opensim_mot.write_mot", "--mot", "a.mot"),
+    ("tracking.io.trc.write_trc", "--out", "m.trc"),
+    ("tracking.io.c3d.write_c3d", "--c3d", "m.c3d"),
+    ("tracking.io.bvh.write_bvh", "--bvh", "a.bvh"),
 ])
 def test_a_failure_half_way_through_a_file_leaves_no_half_file(small_recording, tmp_path, monkeypatch, capsys,
                                                                writer, option, name):
@@ -178,7 +178,7 @@ def test_a_failure_half_way_through_a_file_leaves_no_half_file(small_recording, 
 
     monkeypatch.setattr(module, fn, fails_half_way)
     if fn == "write_trc":   # offline imports it by name when it writes
-        import tracking.offline  # noqa: F401
+        import tracking.drivers.offline  # noqa: F401
     out = tmp_path / "out"
     out.mkdir()
     (out / name).write_text("an older result\n")

@@ -5,7 +5,7 @@ import pytest
 
 from tracking.angles import joint_angles
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 
@@ -235,14 +235,14 @@ def test_every_measured_marker_names_the_views_it_was_triangulated_from(monkeypa
         tracker = Tracker(studio.cameras, studio.markerset, fps=15.0)
     wrist = [studio.markerset.index(n) for n in ("MRW1", "MRW2")]
     taken = []
-    reacquire = tracker_module.Tracker._reacquire
+    reacquire = tracker_module.reacquire
 
-    def spy(self, *args):
-        out = reacquire(self, *args)
+    def spy(*args):
+        out = reacquire(*args)
         taken.append(out.copy())
         return out
 
-    monkeypatch.setattr(tracker_module.Tracker, "_reacquire", spy)
+    monkeypatch.setattr(tracker_module, "reacquire", spy)
     samples = []
     for i, sf in enumerate(sets):
         images = [im.copy() for im in sf.frames.images]

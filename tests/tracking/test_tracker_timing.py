@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from game.cli import main as rehab
-from tracking.offline import track_frames_of
+from tracking.drivers.offline import track_frames_of
+from tracking.pipeline.timing import image_velocity
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.studio import SimulationSettings, simulate_recording
 from tracking.sim.timing_eval import measured_rmse_mm, render
@@ -93,7 +94,7 @@ def test_live_sources_carry_the_recordings_stamps(tmp_path):
     """A recording tracked live (RecordingSource through DeviceSource, the tracker process's source)
     gives the tracker the same image instants as ``rehab track``."""
     from tracking.live.source import DeviceSource
-    from tracking.recording import read_timestamps
+    from tracking.io.recording import read_timestamps
     from tracking.sources.recording import RecordingSource
 
     settings = dataclasses.replace(BASE, seconds=0.3, camera_offsets=(0.0, 0.45, -0.4, 0.3), clock_drift=0.001,
@@ -112,10 +113,10 @@ def test_live_sources_carry_the_recordings_stamps(tmp_path):
 def test_sync_auto_estimates_the_clocks_of_a_recording_without_stamps(tmp_path):
     """``rehab track --sync auto`` on a recording whose cameras ran on their own clocks and left no
     timestamps.csv: the offsets against the first camera come from the markers' motion."""
-    from tracking.offline import estimated_skews
-    from tracking.recording import read_timestamps
-    from tracking.status import MarkerStatus
-    from tracking.trc import read_trc
+    from tracking.drivers.offline import estimated_skews
+    from tracking.io.recording import read_timestamps
+    from tracking.marker_status import MarkerStatus
+    from tracking.io.trc import read_trc
 
     settings = dataclasses.replace(BASE, fps=30.0, seconds=5.0, camera_offsets=(0.0, 0.4, -0.3, 0.2), images=True)
     rec = tmp_path / "rec"
@@ -139,7 +140,7 @@ def test_sync_auto_estimates_the_clocks_of_a_recording_without_stamps(tmp_path):
 
 def test_the_velocity_that_moves_the_views_does_not_change_with_the_views_taken():
     """The velocity that brings the views to the set's instant comes from each view's own image
-    motion since the last frame set (``Tracker._image_velocity``): a camera that joins or leaves a
+    motion since the last frame set (``tracking.pipeline.timing.image_velocity``): a camera that joins or leaves a
     marker's views, cameras whose instants lie far apart and a camera whose phase wrapped (two
     images 1 ms apart) leave it exact. Its first form, the change of the point triangulated from
     the views as seen, moved with the views taken (10-16 mm off in single frame sets of a fast swing)."""
@@ -152,7 +153,7 @@ def test_the_velocity_that_moves_the_views_does_not_change_with_the_views_taken(
     rng = np.random.default_rng(3)
     p0 = np.array([0.0, 0.9, 0.0]) + rng.uniform(-0.2, 0.2, (m, 3))
     v = rng.uniform(-1.2, 1.2, (m, 3))  # m/s
-    stack = tracker._stack
+    stack = tracker.setup.stack
 
     def views(t_set, skews, taken):
         at = t_set + np.broadcast_to(skews, (m, len(cams)))
@@ -160,16 +161,16 @@ def test_the_velocity_that_moves_the_views_does_not_change_with_the_views_taken(
         xn = np.where(taken[..., None], cam[..., :2] / cam[..., 2:], np.nan)
         return np.concatenate([xn, at[..., None]], axis=2)
 
-    tracker._pred_cam = stack.world_to_cameras(p0 + v / 30.0)
+    pred_cam = stack.world_to_cameras(p0 + v / 30.0)
     before = views(0.0, np.array([0.0, 0.016, -0.014, 0.016]), np.array([True, True, True, False]))
     now = views(1 / 30.0, np.array([0.0, 0.016, -0.014, -0.0163]), np.array([False, True, True, True]))
-    got = tracker._image_velocity(now, before)
+    got = image_velocity(stack, pred_cam, now, before)
     assert np.isfinite(got).all()
     assert np.abs(got - v).max() < 0.03 * np.abs(v).max()  # (the projection linearized over a period)
     # camera 4's phase wrapped (+16.4 ms -> -16.3 ms: an interval of 0.6 ms): it weighs little
     before = views(0.0, np.array([0.0, 0.016, -0.014, 0.0164]), np.ones(4, bool))
     now = views(1 / 30.0, np.array([0.0, 0.016, -0.014, -0.0163]), np.ones(4, bool))
-    assert np.abs(tracker._image_velocity(now, before) - v).max() < 0.03 * np.abs(v).max()
+    assert np.abs(image_velocity(stack, pred_cam, now, before) - v).max() < 0.03 * np.abs(v).max()
     one = now.copy()
     one[:, 1:, :2] = np.nan  # one camera seen twice: no velocity (the tracker keeps its last one)
-    assert np.isnan(tracker._image_velocity(one, before)).all()
+    assert np.isnan(image_velocity(stack, pred_cam, one, before)).all()

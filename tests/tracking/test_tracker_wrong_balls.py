@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 
 from tracking.angles import joint_angles
+from tracking.pipeline.views import view_to_drop
+from tracking.pipeline.windows import one_ball_one_marker
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.sim.validate import track_frames
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker
 
 
@@ -72,7 +74,7 @@ def test_of_two_views_that_each_fit_the_third_the_one_off_the_prediction_is_drop
     from tracking.sim.rigs import load_rig
 
     tracker = Tracker(load_rig("ring4", (640, 480)), load_markerset())
-    stack = tracker._stack
+    stack = tracker.setup.stack
     ball = np.array([0.25, 1.0, 0.1])
     centre1 = tracker.cameras[0].centre_m
     ray = (ball - centre1) / np.linalg.norm(ball - centre1)
@@ -86,9 +88,9 @@ def test_of_two_views_that_each_fit_the_third_the_one_off_the_prediction_is_drop
     assert np.linalg.norm(uv_other[0, 0] - uv_ball[0, 0]) < 1e-6  # the same image in camera 1
     seen = np.isfinite(uv[0, :, 0])
     xn = stack.undistort_points(uv)[0]
-    assert tracker._view_to_drop(0, seen, xn, ball + 0.005, worst=1) == 2
+    assert view_to_drop(tracker.setup, tracker.params, seen, xn, ball + 0.005, worst=1) == 2
     # predicted near the other ball, the same views give the other answer
-    assert tracker._view_to_drop(0, seen, xn, other, worst=1) == 1
+    assert view_to_drop(tracker.setup, tracker.params, seen, xn, other, worst=1) == 1
 
 
 def test_one_ball_is_one_markers_view():
@@ -129,7 +131,7 @@ def test_a_shared_ball_goes_to_the_marker_whose_prediction_makes_it_likelier():
         found = np.full((m_count, n_cams, 2), np.nan)
         found[elbow, 3] = found[wrist, 3] = ball
         rad = np.where(np.isnan(found[..., 0]), np.nan, 3.0)
-        tracker._one_ball_one_marker(uv, sigma, np.full((m_count, n_cams), 3.0), found, rad)
+        one_ball_one_marker(tracker.setup, tracker.params, uv, sigma, np.full((m_count, n_cams), 3.0), found, rad)
         kept = [m for m in (elbow, wrist) if np.isfinite(found[m, 3, 0])]
         assert len(kept) == 1 and np.isfinite(rad[kept[0], 3])
         return kept[0]

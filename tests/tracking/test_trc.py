@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from calibration.errors import RehabError
-from tracking.trc import TrcData, TrcError, read_trc, write_trc
+from tracking.io.trc import TrcData, TrcError, read_trc, write_trc
 
 NAMES = ("MB", "MP", "MRW2")
 

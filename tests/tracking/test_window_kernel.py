@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tracking import window_kernel
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.tracker import Tracker
 from tracking.triangulation import Triangulator, _triangulate_loop
@@ -202,7 +202,7 @@ def _crowded_scene(rng, h=48, w=56):
 @pytest.mark.parametrize("bits", [8, 6])
 def test_crowded_window_equals_find_blobs_and_the_arc_region(bits):
     from tracking.blobs import find_blobs
-    from tracking.measure import BlobGates
+    from tracking.full_frame import BlobGates
 
     table = ColourTable.build(PALETTE, bits=bits)
     rng = np.random.default_rng(11)

@@ -2,17 +2,15 @@
 
 The body model of the labelling needs the trunk (upper and lower trunk markers, left and right
 hip markers) and, per arm, the shoulder, the lateral and medial epicondyle and the radial and
-ulnar styloid markers. The marker set's ``hidden_markers`` section names them already (its
-``trunk`` entry, and each ``elbows`` entry: ``markers: [lateral, medial]``, ``shoulder``,
-``wrist: [radial, ulnar]``); the side of an arm is the side of its shoulder in
-``identification.left_right_pairs``.
+ulnar styloid markers: the marker set's ``roles:`` (:data:`tracking.markerset.ROLES`), the same
+roles the joint angles and the avatar read.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from tracking.markerset import MarkerSet
+from tracking.markerset import ROLES, MarkerSet
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,34 +54,16 @@ class BodyRoles:
 
     @staticmethod
     def of(markerset: MarkerSet) -> "BodyRoles | None":
-        """The roles of ``markerset``'s markers, or None when its YAML does not name them all."""
-        from tracking.hidden import estimator_config
+        """The roles of ``markerset``'s markers, or None when it has no identification rules or
+        its roles do not name every marker of both arms and the trunk (the body model needs all)."""
+        roles = markerset.roles
+        if markerset.identification is None or len(roles) != len(ROLES) or markerset.n_markers != len(ROLES):
+            return None
+        ix = {role: markerset.index(name) for role, name in roles.items()}
 
-        if markerset.identification is None or markerset.hidden is None:
-            return None
-        cfg = estimator_config(markerset)
-        trunk, hinges = cfg.get("trunk"), cfg.get("hinges") or []
-        if trunk is None or len(trunk) != 4:
-            return None
-        idx = {n: i for i, n in enumerate(markerset.names)}
-        pairs = [(idx.get(a), idx.get(b)) for a, b in markerset.identification.left_right_pairs]
-        left_of = {a: b for a, b in pairs}
-        arms = {}
-        for h in hinges:
-            if len(h.wrists) != 2:
-                continue
-            if h.shoulder in left_of:
-                side, sign = "left", -1.0
-            elif h.shoulder in left_of.values():
-                side, sign = "right", 1.0
-            else:
-                continue
-            # each elbow is listed once per marker: the first entry lists (lateral, medial)
-            arms.setdefault(side, ArmRoles(side, sign, h.shoulder, h.marker, h.partner, h.wrists[0], h.wrists[1]))
-        if set(arms) != {"left", "right"}:
-            return None
-        upper, lower, left_hip, right_hip = (int(k) for k in trunk)
-        used = [upper, lower, left_hip, right_hip, *arms["right"].markers, *arms["left"].markers]
-        if len(set(used)) != len(used) or len(used) != markerset.n_markers:
-            return None
-        return BodyRoles(upper, lower, left_hip, right_hip, (arms["right"], arms["left"]))
+        def arm(side: str, sign: float) -> ArmRoles:
+            return ArmRoles(side, sign, *(ix[f"{side}_{part}"] for part in (
+                "shoulder", "elbow_lateral", "elbow_medial", "wrist_radial", "wrist_ulnar")))
+
+        return BodyRoles(ix["trunk_upper"], ix["trunk_lower"], ix["left_hip"], ix["right_hip"],
+                         (arm("right", 1.0), arm("left", -1.0)))

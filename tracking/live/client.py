@@ -752,7 +752,7 @@ class LiveTracker:
         self._send(SetPatientInput(value))
 
     def set_colours(self, models, label_hs) -> None:
-        """Track with these marker colours (models, (256, 256) uint8 labels; :mod:`tracking.colour_pick`)."""
+        """Track with these marker colours (models, (256, 256) uint8 labels; :mod:`tracking.colour.pick`)."""
         self._colours = SetColours(tuple(models), np.asarray(label_hs, np.uint8))
         self._send(self._colours)
 

@@ -158,7 +158,7 @@ class TrackerLoop:
         tracker: the tracker (default: one for the source's cameras and marker set).
         clock: ``time.perf_counter`` (injected in tests).
         notify_fd: non-blocking pipe end that gets one byte per published sample (or None).
-        adapter: a :class:`tracking.colour_adapt.ColourAdapter` whose table the tracker reads; it
+        adapter: a :class:`tracking.colour.adapt.ColourAdapter` whose table the tracker reads; it
             learns from every tracked frame set (None: the colour table stays fixed).
         streamer: a :class:`tracking.live.stream.StreamSender` offered every tracked frame set
             (it queues or drops, never blocks); None: no streaming.
@@ -226,7 +226,7 @@ class TrackerLoop:
 
     def set_colours(self, models, label_hs) -> None:
         """Track with these colours from the next frame set (an adapter, if any, starts from them)."""
-        from tracking.colour_adapt import ColourAdapter, table_from_colours
+        from tracking.colour.adapt import ColourAdapter, table_from_colours
 
         models = list(models)
         label_hs = np.asarray(label_hs, np.uint8).reshape(256, 256)
@@ -533,7 +533,7 @@ def make_tracker(config: SourceConfig, source: FrameSource):
     (``rehab calibrate colour``), else the marker set's nominal table; with ``adapt_colours`` it
     is the adapter's table, starting from the same colours.
     """
-    from tracking.colour_table import ColourTable
+    from tracking.colour.table import ColourTable
     from tracking.tracker import Tracker
 
     learnt = learnt_colours_for(config, source.markerset)
@@ -541,14 +541,14 @@ def make_tracker(config: SourceConfig, source: FrameSource):
         log.info("tracking with the marker colours learnt into the calibration")
     adapter = None
     if config.adapt_colours:
-        from tracking.colour_adapt import ColourAdapter
+        from tracking.colour.adapt import ColourAdapter
 
         # learning once a second: a drift over a few seconds is followed (every 2 s lost markers on a 4-s
         # ramp, tests/test_live_colours.py) for ~0.8 ms per frame set at 30 fps (docs/COLOUR.md)
         adapter = ColourAdapter(source.cameras, source.markerset, start=learnt, every=max(1, round(config.fps)))
         table = adapter.table
     elif learnt is not None:
-        from tracking.colour_adapt import table_from_colours
+        from tracking.colour.adapt import table_from_colours
 
         table = table_from_colours(*learnt)
     else:

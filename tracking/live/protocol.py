@@ -53,7 +53,7 @@ class SourceConfig:
             the folder's calibration.toml). Marker colours learnt into it (``rehab calibrate
             colour``) replace the nominal colour table.
         adapt_colours: the colour table follows lighting drift, learning from the pixels of the
-            tracked markers (:class:`tracking.colour_adapt.ColourAdapter`, docs/COLOUR.md); False:
+            tracked markers (:class:`tracking.colour.adapt.ColourAdapter`, docs/COLOUR.md); False:
             the table stays as it starts.
         sim_clock: the simulated patient's clock. ``"wall"``: like a camera, its frame sets are
             tied to the wall clock and those the tracker is too late for are dropped (the motion
@@ -136,7 +136,7 @@ class LiveSample:
         t_published_s: ``time.perf_counter()`` when the sample was written to shared memory.
         state: ``tracking.tracker.TrackingState`` (0 WAITING, 1 TRACKING).
         positions_m: (M, 3) float64 world metres, NaN where lost.
-        status: (M,) uint8 ``tracking.status.MarkerStatus``.
+        status: (M,) uint8 ``tracking.marker_status.MarkerStatus``.
         angles_deg: (A,) float64 in :attr:`angle_names` order, NaN where undefined.
         message: one line (why WAITING, or a tracker error).
         windows_px: (M, C, 3) float64 (u, v, half size) of the search windows, NaN where none.
@@ -231,8 +231,8 @@ class SetColours:
     """Track with these marker colours from now on (taught in the camera monitor).
 
     Attributes:
-        models: one :class:`tracking.colour_learn.ColourModel` per marker colour.
-        label_hs: (256, 256) uint8 (hue byte, saturation byte) labels (:mod:`tracking.colour_learn`).
+        models: one :class:`tracking.colour.learn.ColourModel` per marker colour.
+        label_hs: (256, 256) uint8 (hue byte, saturation byte) labels (:mod:`tracking.colour.learn`).
     """
 
     models: tuple

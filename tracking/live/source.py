@@ -24,7 +24,7 @@ from typing import Protocol, Sequence
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.angles import ANGLE_COLUMNS, missing_markers
+from tracking.angles import supported_angles
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.live.protocol import LiveError, PatientInput, Reidentify, SetMotion, SetPatientInput, SourceConfig
 
@@ -106,7 +106,7 @@ def calibration_file_for(config: SourceConfig):
 def learnt_colours_for(config: SourceConfig, markerset: MarkerSet):
     """The marker colours learnt into the source's calibration file (``rehab calibrate colour``):
     (models, label_hs), or None (none saved, or a simulated source: the nominal table)."""
-    from tracking.colour_adapt import calibration_colours
+    from tracking.colour.adapt import calibration_colours
 
     path = calibration_file_for(config)
     return None if path is None else calibration_colours(path, markerset)
@@ -138,7 +138,7 @@ def resolve_config(config: SourceConfig) -> SourceConfig:
                         "set the cameras to one size and recalibrate")
     fps = config.fps
     if config.kind == "recording":
-        from tracking.recording import read_meta
+        from tracking.io.recording import read_meta
         from pathlib import Path
 
         fps = read_meta(Path(config.path)).fps
@@ -146,8 +146,8 @@ def resolve_config(config: SourceConfig) -> SourceConfig:
 
 
 def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:
-    """The joint angles the tracker reports for a marker set (none if it lacks their markers)."""
-    return tuple(ANGLE_COLUMNS) if not missing_markers(markerset.names) else ()
+    """The joint angles the tracker reports for a marker set: those its roles' markers give."""
+    return supported_angles(markerset.roles)
 
 
 def open_source(config: SourceConfig) -> FrameSource:

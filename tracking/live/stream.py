@@ -22,7 +22,7 @@ tracker never waits for a network). A thread sends from the queue:
 - **OSC** (``python-osc``, UDP) to HOST:PORT, one bundle per frame set: ``/rehab/frame index
   time_s state``, ``/rehab/marker name x y z status`` (metres, world frame) per marker,
   ``/rehab/angle name degrees`` per angle; and the **VMC** messages (Virtual Motion Capture
-  protocol) of the skeleton driven by the angles (:mod:`tracking.bvh`): ``/VMC/Ext/Root/Pos``,
+  protocol) of the skeleton driven by the angles (:mod:`tracking.io.bvh`): ``/VMC/Ext/Root/Pos``,
   ``/VMC/Ext/Bone/Pos`` for Hips, Spine, Neck, Head, Right/LeftUpperArm, LowerArm and Hand (local
   position and rotation, Unity's left-handed axes, rotations relative to a T-pose as VRM avatars
   rest), ``/VMC/Ext/OK 1`` and ``/VMC/Ext/T``.
@@ -261,7 +261,7 @@ class LslOutput:
 
 # ------------------------------------------------------------------------------------ OSC
 
-#: The skeleton's joints (tracking/bvh.py) -> Unity's humanoid bone names (VMC).
+#: The skeleton's joints (tracking/io/bvh.py) -> Unity's humanoid bone names (VMC).
 VMC_BONES = {"Hips": "Hips", "Spine": "Spine", "Neck": "Neck", "Head": "Head",
              "RightArm": "RightUpperArm", "RightForeArm": "RightLowerArm", "RightHand": "RightHand",
              "LeftArm": "LeftUpperArm", "LeftForeArm": "LeftLowerArm", "LeftHand": "LeftHand"}
@@ -288,7 +288,7 @@ def vmc_bones(angles: dict[str, float], skeleton=None) -> dict[str, tuple[np.nda
     T-pose (identity: the VRM rest pose)."""
     from scipy.spatial.transform import Rotation
 
-    from tracking.bvh import JOINTS, BvhSkeleton, joint_offsets_m, local_rotations
+    from tracking.io.bvh import JOINTS, BvhSkeleton, joint_offsets_m, local_rotations
 
     sk = skeleton or BvhSkeleton()
     local = {k: v[0] for k, v in local_rotations({k: np.array([v], np.float64) for k, v in angles.items()}).items()}
@@ -364,7 +364,7 @@ class OscOutput:
     def _send_vmc(self, angles: dict[str, float], time_s: float) -> None:
         from tracking.angles import ANGLE_COLUMNS
 
-        for name in ANGLE_COLUMNS:  # the skeleton holds an undefined angle (tracking/bvh.py)
+        for name in ANGLE_COLUMNS:  # the skeleton holds an undefined angle (tracking/io/bvh.py)
             value = angles.get(name, math.nan)
             if math.isfinite(value) or name not in self._held:
                 self._held[name] = value if math.isfinite(value) else 0.0

@@ -37,18 +37,11 @@ import pydantic
 from scipy.interpolate import CubicSpline
 
 from content import content_path
-from tracking.content import StrictModel, load_model
+from tracking.content_loader import StrictModel, load_model
 from tracking.errors import MotionError
 from tracking.markerset import load_markerset
-from tracking.sim.body import (
-    SIDES,
-    ArmPose,
-    BodyDimensions,
-    BodyModel,
-    Pose,
-    reference_pose,
-    slerp_rotation,
-)
+from tracking.sim.body import SIDES, ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
+from tracking.geometry.rotations import slerp_rotation
 from tracking.sim.motions import MIN_REFERENCE_HOLD_S, Motion, ease
 
 log = logging.getLogger(__name__)
@@ -521,7 +514,7 @@ def capture_motion(spec: CaptureSpec, yaml_path: Path, dims: BodyDimensions, c3d
 
 
 def _bundled_specs() -> list[tuple[Path, CaptureSpec]]:
-    from tracking.content import load_yaml
+    from tracking.content_loader import load_yaml
 
     out = []
     for p in sorted(content_path("motions").glob("*.yaml")):

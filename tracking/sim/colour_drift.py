@@ -1,8 +1,8 @@
 """The lighting-drift experiment: the fixed nominal colour table against the adapted one.
 
 One simulated recording is rendered once; every frame set goes to two trackers, one with the
-nominal table (:meth:`tracking.colour_table.ColourTable.build`) and one whose table a
-:class:`tracking.colour_adapt.ColourAdapter` learns from the markers it tracks. Both are scored
+nominal table (:meth:`tracking.colour.table.ColourTable.build`) and one whose table a
+:class:`tracking.colour.adapt.ColourAdapter` learns from the markers it tracks. Both are scored
 against the simulator's truth per marker: the shares of frames after identification in which the
 marker is measured, estimated or lost, and identity swaps (a marker measured on another marker's
 ball, as in :func:`tracking.sim.validate.validate_tracking`).
@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from tracking.colour_adapt import ColourAdapter
-from tracking.colour_table import ColourTable
+from tracking.colour.adapt import ColourAdapter
+from tracking.colour.table import ColourTable
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 DRIFT_SETTINGS = SimulationSettings(
     motion="shoulder_abduction", rig="ring4", size_px=(320, 240), seconds=10.0,

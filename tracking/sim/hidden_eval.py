@@ -3,7 +3,7 @@
 For each motion the true marker centres come from the body model, and which markers are hidden
 comes from rendering the studio: a marker is *measured* in a frame when at least two cameras see
 it (``seen_fraction`` of its disc visible and its disc not merged with a same-coloured one, the
-definitions of :mod:`tracking.evaluate`), otherwise it is *hidden*. Measured positions get
+definitions of :mod:`tracking.drivers.evaluate`), otherwise it is *hidden*. Measured positions get
 Gaussian noise (``noise_mm`` per coordinate). Each estimator then runs online over the frames, and
 is scored on:
 
@@ -36,7 +36,7 @@ import numpy as np
 from tracking.hidden import Estimator, Method, estimator_config
 from tracking.markerset import MarkerSet
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 log = logging.getLogger(__name__)
 
@@ -265,9 +265,10 @@ ESTIMATORS: dict[str, tuple[Method | None, bool]] = {
 
 
 def make_estimator(markerset: MarkerSet, label: str, fps: float, *, gates: bool = False) -> Estimator:
-    """An estimator of :data:`ESTIMATORS` configured by the marker set (``hidden_markers:``);
-    without ``gates`` nothing is dropped to LOST (raw accuracy)."""
-    method, own = ESTIMATORS[label]
+    """An estimator of :data:`ESTIMATORS` configured by the marker set (``hidden_markers:``), or
+    a registered estimator's name (:mod:`tracking.hidden.registry`) on every marker; without
+    ``gates`` nothing is dropped to LOST (raw accuracy)."""
+    method, own = ESTIMATORS[label] if label in ESTIMATORS else (label, False)
     cfg = estimator_config(markerset, method=method, own_velocity=own)
     if not gates:
         cfg["max_hidden_s"] = np.inf
@@ -469,7 +470,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--cache", type=Path, default=None, help="folder keeping the rendered visibility")
     ap.add_argument("--seeds", type=int, default=3, help="noise draws pooled per row")
     ap.add_argument("--noise-mm", type=float, default=1.0)
-    ap.add_argument("--estimators", nargs="*", default=list(ESTIMATORS), help="labels of ESTIMATORS to compare")
+    ap.add_argument("--estimators", nargs="*", default=list(ESTIMATORS), help="labels of ESTIMATORS (or registered estimator names) to compare")
     ap.add_argument("--population", type=int, default=None, metavar="N",
                     help="instead: the seed's experiment (right_external_rotation) on N patients of the "
                          "population (body size, placement errors), the recommended estimator")

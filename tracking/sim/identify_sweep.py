@@ -28,8 +28,8 @@ from typing import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from tracking.colour_table import ColourTable
-from tracking.content import available
+from tracking.colour.table import ColourTable
+from tracking.content_loader import available
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.body import (
     REFERENCE_ABDUCTION_DEG,
@@ -45,7 +45,7 @@ from tracking.sim.body import (
 from tracking.sim.rigs import load_rig
 from tracking.sim.room import SEAT_TOP_M
 from tracking.sim.studio import Studio
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
 
 #: (percentile, sex) of the swept bodies.

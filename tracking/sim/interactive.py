@@ -28,7 +28,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from tracking.sim.body import ArmPose, BodyModel, Pose, reference_pose, swing_twist
+from tracking.sim.body import ArmPose, BodyModel, Pose, reference_pose
+from tracking.geometry.rotations import swing_twist
 
 #: Largest elbow flexion the solver uses (a normal active range ends near 145 degrees).
 MAX_ELBOW_FLEXION_DEG = 145.0

@@ -29,20 +29,11 @@ import numpy as np
 import pydantic
 
 from content import content_path
-from tracking.content import StrictModel, available, load_model, load_yaml
+from tracking.content_loader import StrictModel, available, load_model, load_yaml
 from tracking.errors import ContentError, MotionError
 from tracking.markerset import load_markerset
-from tracking.sim.body import (
-    ArmPose,
-    BodyDimensions,
-    BodyModel,
-    Pose,
-    SIDES,
-    direction_from_clinical,
-    direction_from_plane,
-    reference_arm,
-    swing_twist,
-)
+from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, SIDES, reference_arm
+from tracking.geometry.rotations import direction_from_clinical, direction_from_plane, swing_twist
 
 log = logging.getLogger(__name__)
 

@@ -27,7 +27,8 @@ from typing import Iterable
 import numpy as np
 
 from tracking.markerset import MarkerSet, load_markerset
-from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, axis_angle_matrix
+from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose
+from tracking.geometry.rotations import axis_angle_matrix
 from tracking.sim.imaging import Webcam, WebcamPipeline, drawn_webcam
 
 #: seeds from here on are reported; below are for tuning
@@ -267,7 +268,7 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
     from tqdm import tqdm
 
     from tracking.sim.studio import Studio
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
     from tracking.tracker import Tracker, TrackerParams, TrackingState
 
     base = markerset or load_markerset()

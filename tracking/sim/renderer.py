@@ -60,8 +60,8 @@ import numpy as np
 
 from calibration.camera import Camera
 from calibration.errors import RehabError
-from tracking.sim.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
-from tracking.sim.meshes import cone_band
+from tracking.geometry.glsl import BAND_GLSL, OUTLINE_BOX_GLSL
+from tracking.geometry.meshes import cone_band
 from tracking.sim.room import build_room
 from tracking.sim.scene import SceneFrame
 

@@ -8,7 +8,7 @@ import numpy as np
 import pydantic
 
 from calibration.camera import Camera
-from tracking.content import StrictModel, load_model, resolve
+from tracking.content_loader import StrictModel, load_model, resolve
 from tracking.errors import ContentError
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracking.sim.meshes import box, icosphere
+from tracking.geometry.meshes import box, icosphere
 
 ROOM_HALF_WIDTH_M = 3.5
 ROOM_HEIGHT_M = 2.8

@@ -22,7 +22,7 @@ from tqdm import tqdm
 from calibration.camera import Camera
 from tracking.markerset import MarkerSet, load_markerset
 from calibration.files import save_calibration_toml
-from tracking.recording import FrameSet, RecordingWriter, write_timestamps
+from tracking.io.recording import FrameSet, RecordingWriter, write_timestamps
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
 from tracking.sim.clocks import CameraClocks, rolling_marker_positions
 from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise, exposure_offsets_s, integrate_exposure
@@ -291,8 +291,8 @@ def studio_from_settings(settings: SimulationSettings) -> tuple[Studio, Motion]:
 def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress: bool = False) -> str:
     """Write a recording folder with ground truth; return a one-line summary."""
     from tracking.angles import joint_angles
-    from tracking.tables import write_angles_csv
-    from tracking.trc import write_trc
+    from tracking.io.csv_tables import write_angles_csv
+    from tracking.io.trc import write_trc
 
     out_dir = Path(out_dir)
     studio, motion = studio_from_settings(settings)
@@ -348,7 +348,7 @@ def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress:
     frame_idx = np.arange(n_frames)
     times = frame_idx / settings.fps
     write_trc(out_dir / "truth.trc", ms.names, positions_m * 1000.0, settings.fps)
-    write_angles_csv(out_dir / "truth_angles.csv", frame_idx, times, joint_angles(positions_m, ms.names))
+    write_angles_csv(out_dir / "truth_angles.csv", frame_idx, times, joint_angles(positions_m, ms.names, roles=ms.roles))
     write_visibility_csv(out_dir / "truth_visibility.csv", [c.name for c in studio.cameras], ms.names, np.stack(vis_rows))
     return f"wrote {n_frames} frame sets from {len(studio.cameras)} cameras at {settings.size_px[0]}x{settings.size_px[1]} to {out_dir}"
 

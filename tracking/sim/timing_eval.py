@@ -16,7 +16,7 @@ import numpy as np
 
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.studio import SimulationSettings, studio_from_settings
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker
 
 
@@ -76,10 +76,10 @@ def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seco
     recordings into ``folder`` and removes them."""
     import shutil
 
-    from tracking.offline import estimated_skews, track_frames_of
-    from tracking.recording import read_timestamps
+    from tracking.drivers.offline import estimated_skews, track_frames_of
+    from tracking.io.recording import read_timestamps
     from tracking.sim.studio import simulate_recording
-    from tracking.trc import read_trc
+    from tracking.io.trc import read_trc
 
     def rmse(run, truth_mm):
         meas = run.status == MarkerStatus.MEASURED

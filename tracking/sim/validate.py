@@ -1,8 +1,8 @@
 """Measurement accuracy on the simulated patient, motion by motion (``rehab validate``).
 
 Each motion is rendered in memory (no video encoding) and measured by the same
-:class:`tracking.measure.FrameMeasurer` that ``rehab track`` uses; the points are compared with
-the simulator's truth by :func:`tracking.evaluate.evaluate_points`.
+:class:`tracking.full_frame.FrameMeasurer` that ``rehab track`` uses; the points are compared with
+the simulator's truth by :func:`tracking.drivers.evaluate.evaluate_points`.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
-from tracking.colour_table import ColourTable
-from tracking.evaluate import PointAccuracy, evaluate_points
-from tracking.measure import FrameMeasurer
+from tracking.colour.table import ColourTable
+from tracking.drivers.evaluate import PointAccuracy, evaluate_points
+from tracking.full_frame import FrameMeasurer
 from tracking.sim.motions import available_motions
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 
@@ -204,7 +204,7 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
 
     Args:
         positions_m: (T, M, 3) tracked positions after identification, NaN where LOST.
-        status: (T, M) uint8 :class:`~tracking.status.MarkerStatus`.
+        status: (T, M) uint8 :class:`~tracking.marker_status.MarkerStatus`.
         truth_m: (T, M, 3) true marker centres.
         names: the M marker names.
         frames, identified_at, swaps: passed through to the result.
@@ -212,7 +212,7 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
             a withheld supination); None: computed from the positions.
     """
     from tracking.angles import joint_angles
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
 
     pos = np.where((status != MarkerStatus.LOST)[..., None], positions_m, np.nan)
     err = np.linalg.norm(pos - truth_m, axis=-1) * 1000.0
@@ -292,7 +292,7 @@ class TrackedRun:
 
 def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np.ndarray]]) -> TrackedRun:
     """Run ``tracker`` over (images, time_s, true (M, 3) marker centres) frame sets."""
-    from tracking.status import MarkerStatus
+    from tracking.marker_status import MarkerStatus
     from tracking.tracker import TrackingState
 
     positions, status, truth, angles = [], [], [], []
@@ -348,9 +348,9 @@ def track_recording_with_truth(folder: Path, *, progress: bool = False) -> Track
     settings (the videos are lossless) without rendering again.
     """
     from tracking.markerset import load_markerset
-    from tracking.recording import Recording
+    from tracking.io.recording import Recording
     from tracking.tracker import Tracker
-    from tracking.trc import read_trc
+    from tracking.io.trc import read_trc
 
     folder = Path(folder)
     truth = read_trc(folder / "truth.trc")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from tracking.markerset import MarkerSet
-from tracking.recording import Recording
+from tracking.io.recording import Recording
 from tracking.sources.base import SourceError, SourceFrameSet
 
 log = logging.getLogger(__name__)
@@ -48,7 +48,7 @@ class RecordingSource:
         self.fps = self._rec.fps
         self.meta = self._rec.meta
         self.n_frames = self._rec.n_frames
-        from tracking.offline import image_skews
+        from tracking.drivers.offline import image_skews
 
         # each image's instant from timestamps.csv when the recording has one, as rehab track
         self._skews, self.timing = image_skews(self._rec)
@@ -58,7 +58,7 @@ class RecordingSource:
 
     def markerset(self, name: str | None = None) -> MarkerSet:
         """The recording's marker set (meta.yaml's, or ``name``) with meta.yaml's marker colours."""
-        from tracking.offline import markerset_for
+        from tracking.drivers.offline import markerset_for
 
         return markerset_for(self._rec, name, None)
 

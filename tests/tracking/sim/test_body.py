@@ -23,13 +23,15 @@ from tracking.sim.body import (
     BodyModel,
     Pose,
     _sdf_round_cones,
-    direction_from_clinical,
-    direction_from_plane,
-    humerus_rotation,
     is_occluded,
     occluded_fraction,
     reference_pose,
     scene_signed_distance,
+)
+from tracking.geometry.rotations import (
+    direction_from_clinical,
+    direction_from_plane,
+    humerus_rotation,
     slerp_rotation,
     swing_twist,
 )

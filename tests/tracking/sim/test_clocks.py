@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from calibration.files import load_calibration
-from tracking.colour_table import ColourTable
-from tracking.measure import FrameMeasurer
-from tracking.recording import read_timestamps
+from tracking.colour.table import ColourTable
+from tracking.full_frame import FrameMeasurer
+from tracking.io.recording import read_timestamps
 from tracking.sim.clocks import CameraClocks
 from tracking.sim.studio import SimulationSettings, simulate_recording, studio_from_settings
 

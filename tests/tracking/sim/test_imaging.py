@@ -5,7 +5,7 @@ import pytest
 
 import yaml
 
-from tracking.colour_table import ColourTable
+from tracking.colour.table import ColourTable
 from tracking.sim.imaging import (AutoCamera, Webcam, WebcamPipeline, add_sensor_noise, drawn_webcam,
                                   exposure_offsets_s, integrate_exposure, jpeg_roundtrip)
 

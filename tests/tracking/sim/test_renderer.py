@@ -22,7 +22,7 @@ from tracking.sim.renderer import (
     mannequin_scene,
     typical_studio_cameras,
 )
-from tracking.sim.meshes import box, cone_band, icosphere
+from tracking.geometry.meshes import box, cone_band, icosphere
 from tracking.sim.room import SEAT_TOP_M, build_room
 from tracking.sim.scene import SceneFrame
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from tracking.colour_table import ColourTable
-from tracking.measure import FrameMeasurer
+from tracking.colour.table import ColourTable
+from tracking.full_frame import FrameMeasurer
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 
 

@@ -10,7 +10,7 @@ from tracking.markerset import load_markerset
 from tracking.sim.body import BodyDimensions, BodyModel
 from tracking.sim.motions import load_motion
 from tracking.sim.validate import angle_markers, score_tracking
-from tracking.status import MarkerStatus
+from tracking.marker_status import MarkerStatus
 
 
 @pytest.fixture(scope="module")
