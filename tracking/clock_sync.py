@@ -148,7 +148,8 @@ def fit_clocks(ev: SkewEvidence, period_s: float, *, min_span_s: float = 3.0, ma
     kept while the cost falls). Points whose residual is beyond 3 standard deviations of the rest
     (a view of another ball, a centroid moved by an occlusion) are left out and the fit repeated.
     The skews' standard error comes from the cost's curvature (all cameras' offsets and drifts
-    together) and the residuals' noise; an estimate whose error exceeds ``max_sigma_s`` (RMS over
+    together) and the residuals' noise, times how much more the blocks scatter about the lines
+    than that noise explains (:func:`_scatter_factor`); an estimate whose error exceeds ``max_sigma_s`` (RMS over
     the study's frame sets: 2 standard errors within a millisecond) is not used (that camera keeps the first camera's instants), nor one whose
     views' image motion, after the point's shift is taken out, sums to less than ``min_info_px``
     per frame period in quadrature."""
@@ -189,10 +190,14 @@ def fit_clocks(ev: SkewEvidence, period_s: float, *, min_span_s: float = 3.0, ma
     if est.size:  # the curvature of the cost over every estimated camera's offset and drift
         a = np.zeros((frames.size, n_c, n_c))
         np.add.at(a, at[keep], ev.a[keep])
+        b = np.zeros((frames.size, n_c))
+        np.add.at(b, at[keep], ev.b[keep])
         cov = noise2 * np.linalg.pinv(_curvature(a[:, est][:, :, est], basis))
+        line = np.stack([offset[est] + rate[est] * t0, rate[est]], axis=1)
+        factor = _scatter_factor(frames, a, b, est, line, period_s, block_s, min_info_px, noise2, nb)
         for i, c in enumerate(est.tolist()):  # the skew's standard error, RMS over the frame sets
             block = cov[i * nb:(i + 1) * nb, i * nb:(i + 1) * nb]
-            sigma[c] = float(np.sqrt(max(np.mean(np.einsum("ti,ij,tj->t", basis, block, basis)), 0.0)))
+            sigma[c] = factor[i] * float(np.sqrt(max(np.mean(np.einsum("ti,ij,tj->t", basis, block, basis)), 0.0)))
     offset = _wrap(offset, period_s)
     unsure = np.isfinite(sigma) & (sigma > max_sigma_s)
     offset[unsure], rate[unsure] = 0.0, 0.0
@@ -214,10 +219,10 @@ def _lines_cost(t, a, b, est, line, period_s) -> float:
     return float(np.einsum("nc,ncd,nd->", tau, a, tau) - 2 * np.einsum("nc,nc->", b, tau))
 
 
-def _start_lines(t, a, b, est, period_s, span_s, max_rate, block_s, min_info_px) -> np.ndarray:
-    """(E, 2) a first line (offset at t = 0, drift) per estimated camera: each block's skews solved
-    together, weighted by their information, then each camera's line closest to them modulo the
-    period (:func:`_fit_one`)."""
+def _blocks(t, a, b, est, period_s, block_s, min_info_px) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per block of ``block_s`` seconds, the estimated cameras' skews solved together: (B,) the
+    blocks' mean instants, (B, E) skews and (B, E) their weights (the inverse of their variance
+    over the noise's; 0 where the block tells too little)."""
     seen, weight, centres = [], [], []
     for lo in np.arange(t[0], t[-1] + block_s, block_s):
         inside = (t >= lo) & (t < lo + block_s)
@@ -233,11 +238,36 @@ def _start_lines(t, a, b, est, period_s, span_s, max_rate, block_s, min_info_px)
         seen.append(tau)
         weight.append(w)
         centres.append(float(np.mean(t[inside])))
-    seen, weight, centres = np.array(seen), np.array(weight), np.array(centres)
+    return np.array(centres), np.array(seen).reshape(-1, est.size), np.array(weight).reshape(-1, est.size)
+
+
+def _start_lines(t, a, b, est, period_s, span_s, max_rate, block_s, min_info_px) -> np.ndarray:
+    """(E, 2) a first line (offset at t = 0, drift) per estimated camera: each block's skews solved
+    together (:func:`_blocks`), then each camera's line closest to them modulo the period
+    (:func:`_fit_one`)."""
+    centres, seen, weight = _blocks(t, a, b, est, period_s, block_s, min_info_px)
     line = np.zeros((est.size, 2))
     for i in range(est.size):
         line[i] = _fit_one(centres, weight[:, i], weight[:, i] * seen[:, i], period_s, span_s, max_rate)
     return line
+
+
+def _scatter_factor(t, a, b, est, line, period_s, block_s, min_info_px, noise2, n_coef) -> np.ndarray:
+    """(E,) how much more the blocks' skews scatter about the lines than the views' noise explains
+    (the square root of their median chi-square over its expected value, at least 1): errors that persist
+    over many frame sets (a partly hidden ball for a second) are not the independent noise the
+    curvature assumes."""
+    centres, seen, weight = _blocks(t, a, b, est, period_s, block_s, min_info_px)
+    d = _wrap(seen - (line[None, :, 0] + line[None, :, 1] * centres[:, None]), period_s)
+    out = np.ones(est.size)
+    for i in range(est.size):
+        used = weight[:, i] > 0
+        if used.sum() > n_coef:
+            # the median of chi-square with one degree of freedom is 0.455 (a median: a block that
+            # holds a wrap mixes two phases and must not count)
+            chi2 = weight[used, i] * d[used, i] ** 2 / max(noise2, 1e-30)
+            out[i] = max(float(np.sqrt(np.median(chi2) / 0.455)), 1.0)
+    return out
 
 
 def _refine_lines(t, a, b, est, basis, line, period_s, steps: int = 10, margin_s: float = 0.003) -> np.ndarray:
