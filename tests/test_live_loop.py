@@ -53,6 +53,8 @@ def test_steps_publish_tracked_samples_and_images(source, blocks):
     err = np.linalg.norm(last["positions_m"] - last["truth_m"], axis=1)
     assert err.max() < 0.008
     assert float(last["time_s"]) == pytest.approx(3 / 30.0)
+    # the simulated cameras give no stamps of their own: each image at the set's instant
+    assert last["stamps_s"].shape == (4,) and (last["stamps_s"] == last["time_s"]).all()
     names = loop.angle_names
     elbow = float(last["angles_deg"][names.index("right_elbow_flexion")])
     assert 0 < elbow < 30  # the reference pose: elbows nearly straight

@@ -81,6 +81,7 @@ def test_samples_arrive_identified_and_close_to_the_truth(live):
     assert np.isfinite(last.angle("right_elbow_flexion"))
     assert last.t_frame_ready_s <= last.t_published_s <= time.perf_counter()
     assert last.windows_px.shape == (14, 4, 3) and last.uv_px.shape == (14, 4, 2)
+    assert last.stamps_s.shape == (4,) and np.isfinite(last.stamps_s).all()  # each image's instant
     images = live.latest_images()
     assert len(images) == 4 and images[0].shape == (240, 320, 3) and images[0].dtype == np.uint8
     assert images[0].std() > 5  # a rendered scene, not a blank

@@ -33,6 +33,7 @@ def _publish(writer: RingWriter, k: int) -> None:
     rec["positions_m"] = np.full((14, 3), float(k))
     rec["status"] = k % 3
     rec["angles_deg"] = np.arange(16) + k
+    rec["stamps_s"] = k / 30.0 + np.array([0.0, 0.011, -0.004, np.nan])
     rec["message"] = encode_line(f"sample {k}")
     writer.publish()
 
@@ -47,6 +48,7 @@ def test_samples_round_trip_in_order(block):
     assert [int(r["frame_index"]) for r in got] == [100, 101, 102, 103, 104]
     np.testing.assert_array_equal(got[3]["positions_m"], np.full((14, 3), 3.0))
     np.testing.assert_array_equal(got[4]["angles_deg"], np.arange(16) + 4)
+    np.testing.assert_array_equal(got[1]["stamps_s"], 1 / 30.0 + np.array([0.0, 0.011, -0.004, np.nan]))
     assert decode_line(got[2]["message"]) == "sample 2"
     assert int(reader.latest()["frame_index"]) == 104
     assert reader.read_new() == [] and reader.dropped == 0

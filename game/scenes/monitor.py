@@ -15,6 +15,10 @@ Right choose a marker colour, a click on a ball of that colour in a camera image
 (learnt from the clicked ball's pixels); the table is rebuilt on a helper thread, the images are
 painted with it and the tracker tracks with it from then on. Enter saves the taught colours into
 the source's calibration file (cameras or a recording; the simulated studio has none).
+
+Under each image, the camera's clock as its image stamps show it over the last 10 s
+(:func:`tracking.clock_sync.stamp_timing`): its offset and drift against the first camera and its
+jitter, and in words when its timing is too irregular for the tracker to correct.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+from collections import deque
 
 import numpy as np
 
@@ -31,10 +36,16 @@ from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LiveLink
 from game.gfx.camera_overlay import overlay_cameras
+from tracking.clock_sync import IRREGULAR_ADVICE, StampTiming, stamp_timing
 
 log = logging.getLogger(__name__)
 
 Rect = tuple[float, float, float, float]
+
+#: The camera clocks are measured over this many recent samples (10 s at 30 frames/s) ...
+STAMP_HISTORY = 300
+#: ... and measured again after this many new ones.
+STAMP_EVERY = 15
 
 
 def grid_rects(area: Rect, n: int, image_aspect: float, gap: float) -> list[Rect]:
@@ -107,6 +118,10 @@ class MonitorScene(BaseScene):
         self.images: list[np.ndarray] = []   # the raw images the overlays show (a click is learnt from them)
         self.rects: list[Rect] = []          # where each camera image was drawn, screen pixels
         self._teacher: threading.Thread | None = None
+        self._stamps: deque = deque(maxlen=STAMP_HISTORY)  # recent samples' (C,) image stamps
+        self._stamped = -1          # number of the last sample whose stamps were taken
+        self._since = 0             # samples taken since the clocks were last measured
+        self.timing: StampTiming | None = None
 
     def enter(self, app) -> None:
         super().enter(app)
@@ -216,6 +231,21 @@ class MonitorScene(BaseScene):
         self._say(f"Colours saved in {path}", theme.ACCENT)
         return True
 
+    def _take_stamps(self) -> None:
+        """Keep the new samples' image stamps; measure the camera clocks now and then."""
+        for sample in getattr(self.link, "new_samples", ()) or ():
+            stamps = sample.stamps_s
+            if sample.number <= self._stamped or stamps is None:
+                continue
+            if self._stamps and len(self._stamps[-1]) != len(stamps):
+                self._stamps.clear()  # (another source: other cameras)
+            self._stamped = sample.number
+            self._stamps.append(np.asarray(stamps, dtype=np.float64))
+            self._since += 1
+        if self._since >= STAMP_EVERY or (self.timing is None and self._since):
+            self.timing = stamp_timing(np.array(self._stamps))
+            self._since = 0
+
     def _refresh(self) -> None:
         """Redraw the overlays when a new sample (or the colour table) arrived."""
         sample, markerset = self.link.latest, self.link.markerset
@@ -273,3 +303,18 @@ class MonitorScene(BaseScene):
         self.rects = grid_rects(area, len(self.overlays), iw / ih, 12 * s)
         for j, (img, rect) in enumerate(zip(self.overlays, self.rects)):
             c.image(f"camera{j}", img, rect)
+        self._take_stamps()
+        if self.timing is not None and len(self.timing.jitter_s) == len(self.rects):
+            cameras = self.link.cameras
+            names = [cam.name for cam in cameras] if len(cameras) == len(self.rects) else \
+                [f"camera {k + 1}" for k in range(len(self.rects))]
+            size = round(theme.SMALL * 0.75 * s)
+            for j, (line, rect) in enumerate(zip(self.timing.lines(names), self.rects)):
+                irregular = bool(self.timing.irregular[j])
+                rows = [line, IRREGULAR_ADVICE] if irregular else [line]
+                colour = theme.ATTENTION if irregular else theme.TEXT_DIM
+                x, y, rw, rh = rect
+                tall = len(rows) * (size + 4 * s) + 4 * s
+                c.rect((x, y + rh - tall, rw, tall), theme.OVERLAY)
+                for k, row in enumerate(rows):
+                    c.text(row, (x + 6 * s, y + rh - tall + 4 * s + k * (size + 4 * s)), size, colour)

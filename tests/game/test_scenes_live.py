@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from game.app import App, BaseScene, Services, Settings
+from game.gfx import theme
 from game.gfx.view3d import project_px
 from game.input import Action, Pointer, PointerKind, Press
 from game.live_link import LinkState, LiveLink
@@ -431,3 +432,47 @@ def test_camera_check_draws_the_overlays_of_each_camera(screen):
     assert (np.abs(edge - yellow).max(axis=1) < 80).sum() >= 3
     app.dispatch(Press(Action.BACK))
     assert app.scene is scene
+
+
+def test_camera_check_shows_each_cameras_clock_and_warns_of_an_irregular_one(screen, tmp_path):
+    """The samples' image stamps: camera 2 runs 12 ms after camera 1 and 0.1 % slow, camera 3's
+    stamps scatter by 5 ms (a busy USB bus), camera 4 runs 8 ms before camera 1."""
+    import dataclasses
+
+    app, scene, link, clock = make_app(screen, avatar=False)
+    images = [np.full((240, 320, 3), (40 * k, 80, 160), np.uint8) for k in range(4)]
+    link.latest_images = lambda: images
+    rng = np.random.default_rng(3)
+    period = 1 / 30
+    app.dispatch(Press(Action.MONITOR))
+    monitor = app.scene
+    for k in range(90):
+        sample = link.feed(reference_pose())
+        stamps = np.array([k * period, 0.012 + k * period * 1.001, k * period + rng.normal(0, 0.005),
+                           -0.008 + k * period])
+        link._queue[-1] = dataclasses.replace(sample, stamps_s=stamps)
+        if k % 30 == 29:
+            run_frames(app, clock, 1)
+    lines = monitor.timing.lines(["camera 1", "camera 2", "camera 3", "camera 4"])
+    assert lines[0] == "camera 1: the reference clock, jitter 0.0 ms"
+    assert lines[1].startswith("camera 2: +15.0 ms from camera 1, drift -0.100 %")  # 12 ms + 89 x 0.033 ms
+    assert lines[2].startswith("camera 3: timing too irregular to correct (jitter ")
+    assert 4.0 < float(lines[2].split("(jitter ")[1].split(" ms)")[0]) < 6.5  # 5 ms drawn, 90 stamps
+    assert lines[3].startswith("camera 4: -8.0 ms from camera 1, drift +0.000 %")
+    monitor._builder.join(30)
+    run_frames(app, clock, 2)
+    app.screen.save_png(tmp_path / "timing.png")
+    rgb = app.screen.read_rgb().astype(int)
+    w, h = SIZE
+    s = min(w / 1280, h / 720)
+    rects = grid_rects((28 * s, 66 * s, w - 56 * s, h - 100 * s), 4, 320 / 240, 12 * s)
+    amber = np.array(theme.ATTENTION)
+
+    def amber_pixels(rect):
+        x, y, rw, rh = (int(v) for v in rect)
+        band = rgb[y + rh - 24:y + rh, x:x + rw].reshape(-1, 3)
+        return int((np.abs(band - amber).max(axis=1) < 40).sum())
+
+    # the warning is written in amber under camera 3 only
+    assert amber_pixels(rects[2]) > 20
+    assert amber_pixels(rects[0]) == amber_pixels(rects[1]) == amber_pixels(rects[3]) == 0

@@ -226,7 +226,7 @@ def _track_labelled(folder, *, calibration, markerset, marker_colours, points_cs
 
 
 #: how much of a recording without time stamps ``--sync auto`` studies for the cameras' clocks
-SYNC_STUDY_S = 10.0
+SYNC_STUDY_S = 30.0
 
 
 def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tuple[np.ndarray | None, str]:
@@ -234,7 +234,7 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
     over the first ``SYNC_STUDY_S`` seconds: tracked as synchronized, estimated, tracked again with
     the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
     when every camera is within 1 ms of the first, and a line saying what was found)."""
-    from tracking.clock_sync import block_offsets, fit_clocks
+    from tracking.clock_sync import fit_clocks, skew_evidence
     from tracking.marker_status import MarkerStatus
 
     study = int(round(SYNC_STUDY_S * fps))
@@ -250,7 +250,7 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
             except RecordingError:  # (not named in the first seconds: the real pass says why)
                 return None, f"clock offsets not estimated: the markers were not named in the first {SYNC_STUDY_S:g} s"
             pos = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm / 1000.0, np.nan)
-            est = fit_clocks(*block_offsets(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
+            est = fit_clocks(skew_evidence(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
             skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
     finally:
         reading.setLevel(level)

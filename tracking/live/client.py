@@ -663,6 +663,7 @@ class LiveTracker:
             source_ms=float(rec["source_ms"]),
             number=int(rec["number"]),
             angle_names=self.angle_names,
+            stamps_s=rec["stamps_s"],
         )
 
     def poll(self) -> list[LiveSample]:

@@ -325,6 +325,7 @@ class TrackerLoop:
         uv = getattr(sample, "uv_px", None)
         rec["uv_px"] = self._nan_uv if uv is None else uv
         rec["truth_m"] = self._nan_truth if frame.truth_m is None else frame.truth_m
+        rec["stamps_s"] = time_s if frame.stamps_s is None else frame.stamps_s  # (None: taken at the set's instant)
         rec["message"] = encode_line(sample.message)
         rec["t_published_s"] = self.clock()
         self.writer.publish()

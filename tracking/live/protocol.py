@@ -147,6 +147,8 @@ class LiveSample:
         source_ms: time the source took to deliver it (rendering, for the simulator).
         number: sample number in the shared ring (0, 1, ...; continues across restarts).
         angle_names: the names of :attr:`angles_deg`.
+        stamps_s: (C,) float64 the instant of each camera's image, source seconds (NaN where a
+            camera gave none); None from a tracker that does not report them.
     """
 
     frame_index: int
@@ -165,6 +167,7 @@ class LiveSample:
     source_ms: float = math.nan
     number: int = -1
     angle_names: tuple[str, ...] = field(default=(), repr=False)
+    stamps_s: np.ndarray | None = field(default=None, repr=False)
 
     def angle(self, name: str) -> float:
         """The angle called ``name`` in degrees (NaN where undefined); KeyError if unknown."""

@@ -34,7 +34,7 @@ import numpy as np
 from calibration.errors import RehabError
 
 MAGIC = 0x5245484142_4C5632  # "REHABLV2"
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3  # 3: the images' stamps (stamps_s) in every sample
 #: Bytes of the one-line message of a sample and of the error line of the header (UTF-8).
 MESSAGE_BYTES = 240
 #: A reader gives up on a slot after this many torn copies in a row (the writer is far faster
@@ -70,6 +70,9 @@ def sample_dtype(n_markers: int, n_cameras: int, n_angles: int) -> np.dtype:
         state: ``tracking.tracker.TrackingState``.
         positions_m (M, 3), status (M,) uint8, angles_deg (A,), windows_px (M, C, 3),
         uv_px (M, C, 2), truth_m (M, 3).
+        stamps_s (C,): the instant of each camera's image the tracker used (the source's stamps,
+            the set's instant when the source gives none; the live camera check measures each
+            camera's clock from them).
         message: UTF-8 bytes, NUL padded.
     """
     m, c, a = int(n_markers), int(n_cameras), int(n_angles)
@@ -88,6 +91,7 @@ def sample_dtype(n_markers: int, n_cameras: int, n_angles: int) -> np.dtype:
         ("windows_px", "<f8", (m, c, 3)),
         ("uv_px", "<f8", (m, c, 2)),
         ("truth_m", "<f8", (m, 3)),
+        ("stamps_s", "<f8", (c,)),
         ("status", "u1", (m,)),
         ("message", f"S{MESSAGE_BYTES}"),
     ], align=True)

@@ -68,12 +68,13 @@ def evaluate(motion: str, seed: int, *, size=(640, 480), seconds: float = 8.0, f
 
 
 def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seconds: float = 8.0,
-                  fps: float = 30.0, drift: float = 0.001) -> dict:
+                  fps: float = 30.0, drift: float = 0.001, keep: bool = False) -> dict:
     """``--sync auto`` on a recording without time stamps: the first camera at offset 0, the others'
     drawn in +-0.5 frame period (from ``seed``), every camera's drift in +-``drift``; measured-marker
     RMSE with the estimate, with the stamps, as synchronized, and of the synchronized recording;
     the recovered skews' errors against the first camera (modulo the period). Writes the
-    recordings into ``folder`` and removes them."""
+    recordings into ``folder`` and removes them (``keep``: keeps them, and uses those already
+    there: the same motion, seed and size rendered once for several runs)."""
     import shutil
 
     from tracking.drivers.offline import estimated_skews, track_frames_of
@@ -89,10 +90,16 @@ def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seco
     rng = np.random.default_rng([seed, 99])
     offsets = (0.0, *(round(float(v), 3) for v in rng.uniform(-0.5, 0.5, 3)))
     base = SimulationSettings(motion=motion, size_px=tuple(size), fps=fps, seconds=seconds, seed=seed, images=True)
-    sync_dir, free_dir = folder / f"{motion}_{seed}_sync", folder / f"{motion}_{seed}_free"
+    tag = f"{motion}_{seed}_{size[0]}x{size[1]}_{seconds:g}s"
+    sync_dir, free_dir = folder / f"{tag}_sync", folder / f"{tag}_free"
+    stamps_file = free_dir / "timestamps.truth.csv"  # (the stamps, kept aside while --sync auto runs)
     try:
-        simulate_recording(sync_dir, base)
-        simulate_recording(free_dir, dataclasses.replace(base, camera_offsets=offsets, clock_drift=drift))
+        if not (sync_dir / "meta.yaml").exists():
+            simulate_recording(sync_dir, base)
+        if not stamps_file.exists():
+            simulate_recording(free_dir, dataclasses.replace(base, camera_offsets=offsets, clock_drift=drift))
+            shutil.copy(free_dir / "timestamps.csv", stamps_file)
+        shutil.copy(stamps_file, free_dir / "timestamps.csv")
         names = [f"cam{k + 1}" for k in range(4)]
         _, stamps = read_timestamps(free_dir, names)
         studio, mo = studio_from_settings(base)
@@ -107,12 +114,14 @@ def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seco
         d = np.abs((np.zeros_like(true_rel) if skews is None else skews) - true_rel)
         d = np.minimum(d, 1.0 / fps - d)[:, 1:] * 1000.0
         out["skew_error_ms"] = [float(np.median(d)), float(np.percentile(d, 95))]
+        out["skew_error_median_ms_per_camera"] = [round(float(v), 2) for v in np.median(d, axis=0)]
         out["auto"] = rmse(track_frames_of(free_dir), truth_first)
         out["none"] = rmse(track_frames_of(free_dir, sync="none"), truth_first)
         return out
     finally:
-        shutil.rmtree(sync_dir, ignore_errors=True)
-        shutil.rmtree(free_dir, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(sync_dir, ignore_errors=True)
+            shutil.rmtree(free_dir, ignore_errors=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -123,6 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seconds", type=float, default=8.0)
     p.add_argument("--auto", type=Path, default=None, metavar="FOLDER",
                    help="evaluate --sync auto instead (recordings written to FOLDER and removed)")
+    p.add_argument("--keep", action="store_true", help="with --auto: keep the recordings in FOLDER and use those "
+                   "already there")
     args = p.parse_args(argv)
     size = tuple(int(v) for v in args.size.split("x"))
     for motion in args.motions.split(","):
@@ -130,7 +141,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             t0 = time.perf_counter()
             if args.auto is not None:
                 args.auto.mkdir(parents=True, exist_ok=True)
-                r = evaluate_auto(motion, seed, args.auto, size=size, seconds=args.seconds)
+                r = evaluate_auto(motion, seed, args.auto, size=size, seconds=args.seconds, keep=args.keep)
             else:
                 r = evaluate(motion, seed, size=size, seconds=args.seconds)
             r["seconds"] = round(time.perf_counter() - t0, 1)
