@@ -17,7 +17,7 @@ from tracking.live import LiveTracker, PatientInput, SourceConfig
 from tracking.live.client import BLOCK_PREFIX, remove_stale_blocks
 from tracking.live.protocol import LiveError
 from tracking.live.ring import ProcessState
-from tracking.live.source import SimSource
+from tracking.sources.sim import SimulatedSource
 from tracking.status import MarkerStatus
 from tracking.tracker import TrackingState
 
@@ -205,7 +205,7 @@ def faulty_source(config):
         return step(self, images, time_s, stamps_s)
 
     Tracker.step = failing_step
-    return SimSource(config)
+    return SimulatedSource(config)
 
 
 def test_a_tracker_exception_reaches_the_game_as_a_status_line():
