@@ -684,7 +684,7 @@ def _cmd_colour(args) -> int:
     import shutil
 
     from tracking.colour_adapt import learn_colours, save_colours_to_calibration
-    from tracking.offline import markerset_for
+    from tracking.sources.recording import markerset_for
     from tracking.recording import Recording
 
     if args.frames < 1:

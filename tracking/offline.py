@@ -13,12 +13,23 @@ import numpy as np
 from tqdm import tqdm
 
 from calibration.atomic import written_via_temp
+from tracking.angles import ANGLE_COLUMNS
+# the file writers through their modules (a test replaces one to fail half-way through a file)
+import tracking.bvh as bvh_format
+import tracking.c3d_io as c3d_format
+import tracking.detections as detections_format
+import tracking.opensim_mot as mot_format
+import tracking.tables as tables_format
+import tracking.trc as trc_format
+from tracking.clock_sync import block_offsets, fit_clocks
+from tracking.colour_adapt import ColourAdapter, calibration_colours, read_colours, table_from_colours
 from tracking.colour_table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.measure import FrameMeasurer
 from tracking.errors import RecordingError
-# what a recording says about itself lives with its frame source; the names stay importable here
-from tracking.sources.recording import SYNC_MODES, RecordingSource, check_skews, image_skews, markerset_for
+from tracking.status import MarkerStatus
+from tracking.tracker import Tracker, TrackingState
+from tracking.sources.recording import RecordingSource
 
 log = logging.getLogger(__name__)
 
@@ -95,8 +106,6 @@ def track_recording(
 def learnt_colours(calibration: Path, ms: MarkerSet, colours: Path | None = None):
     """The learnt colours to track with: ``colours`` (a colour file) if given, else those saved in
     the calibration file, else None (the nominal table). Returns (models, label_hs) or None."""
-    from tracking.colour_adapt import calibration_colours, read_colours
-
     if colours is not None:
         return read_colours(colours, ms)
     found = calibration_colours(calibration, ms)
@@ -109,8 +118,6 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
     """The nominal table, or the table of ``learnt`` (models, label_hs) colours."""
     if learnt is None:
         return ColourTable.build(ms.palette)
-    from tracking.colour_adapt import table_from_colours
-
     return table_from_colours(*learnt)
 
 
@@ -151,8 +158,6 @@ class TrackedRecording:
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
                     c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
                     progress=False, sync="auto") -> str:
-    from tracking.status import MarkerStatus
-
     run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                           colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync)
     write_results(run, trc=trc, status_csv=status_csv, angles_csv=angles_csv, c3d=c3d, mot=mot, bvh=bvh,
@@ -175,9 +180,6 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
     over the first ``SYNC_STUDY_S`` seconds: tracked as synchronized, estimated, tracked again with
     the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
     when every camera is within 1 ms of the first, and a line saying what was found)."""
-    from tracking.clock_sync import block_offsets, fit_clocks
-    from tracking.status import MarkerStatus
-
     study = int(round(SYNC_STUDY_S * fps))
     skews = None
     est = None
@@ -209,12 +211,9 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
                     adapt_colours=False, progress=False, sync="auto", _skews=None, _max_frames=None
                     ) -> TrackedRecording:
     """Run the tracker over a recording folder; :class:`RecordingError` (one line) if it never
-    identified the markers. ``sync``: the images' instants (:func:`image_skews`; "auto" without
-    timestamps.csv estimates them, :func:`estimated_skews`)."""
-    from tracking.angles import ANGLE_COLUMNS
-    from tracking.status import MarkerStatus
-    from tracking.tracker import Tracker, TrackingState
-
+    identified the markers. ``sync``: the images' instants
+    (:func:`tracking.sources.recording.image_skews`; "auto" without timestamps.csv estimates them,
+    :func:`estimated_skews`)."""
     with RecordingSource(folder, calibration, markerset=markerset, marker_colours=marker_colours, sync=sync) as rec:
         ms = rec.markerset
         if _skews is not None:
@@ -226,8 +225,6 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         adapter = None
         learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
-            from tracking.colour_adapt import ColourAdapter
-
             adapter = ColourAdapter(rec.cameras, ms, start=learnt)
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
         else:
@@ -279,9 +276,6 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
 def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_csv=None, c3d=None, mot=None,
                   bvh=None, detections=None) -> None:
     """Write the asked result files of a tracked recording (docs/FILES.md)."""
-    from tracking.tables import write_angles_csv, write_status_csv
-    from tracking.trc import write_trc
-
     for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -290,47 +284,39 @@ def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_cs
     if trc:
         with written_via_temp(trc) as tmp:
             # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
-            write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
-                      times_s=run.times_s)
+            trc_format.write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
+                                 times_s=run.times_s)
     if status_csv:
         with written_via_temp(status_csv) as tmp:
-            write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
+            tables_format.write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
     if angles_csv:
         # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
         # without a supination whose elbow axis is a guess
         with written_via_temp(angles_csv) as tmp:
-            write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
+            tables_format.write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
     if c3d:
         with written_via_temp(c3d) as tmp:
             _write_c3d(tmp, run)
     if mot:
-        from tracking.opensim_mot import write_mot
-
         with written_via_temp(mot) as tmp:
-            write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
+            mot_format.write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
     if bvh:
-        from tracking.bvh import BvhSkeleton, write_bvh
-        from tracking.status import MarkerStatus
-
         # segment lengths from the measured positions only (an estimate must not teach them)
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
         with written_via_temp(bvh) as tmp:
-            write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
+            skeleton = bvh_format.BvhSkeleton.from_markers(run.names, measured_mm)
+            bvh_format.write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, skeleton)
     if detections:
-        from tracking.detections import write_detections_csv
-
         with written_via_temp(detections) as tmp:
-            write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras], run.names, run.uv_px)
+            detections_format.write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras],
+                                                   run.names, run.uv_px)
 
 
 def _write_c3d(path, run: TrackedRecording) -> None:
-    from tracking.c3d_io import C3dEvent, write_c3d
-    from tracking.detections import reprojection_residuals_mm, seen_by
-
-    residuals = reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
-    events = [C3dEvent("Identified", float(t - run.times_s[0]), "General",
-                       "markers identified in the reference pose; tracking starts")
+    residuals = detections_format.reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
+    events = [c3d_format.C3dEvent("Identified", float(t - run.times_s[0]), "General",
+                                  "markers identified in the reference pose; tracking starts")
               for t in run.times_s[run.identified]]
-    write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
-              camera_masks=seen_by(run.uv_px), angles_deg=run.angles_deg, subject=run.subject,
-              markerset=run.markerset, events=events)
+    c3d_format.write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
+                         camera_masks=detections_format.seen_by(run.uv_px), angles_deg=run.angles_deg,
+                         subject=run.subject, markerset=run.markerset, events=events)
