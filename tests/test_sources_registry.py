@@ -6,7 +6,7 @@ import pytest
 
 import tracking.sources as sources
 from tracking.live.protocol import LiveError, SetMotion, SourceConfig
-from tracking.live.source import open_source, source_geometry
+from tracking.live.source import calibration_file_for, open_source, resolve_config, source_geometry
 from tracking.markerset import load_markerset
 from tracking.sim.rigs import load_rig
 from tracking.sources.base import FrameRequest, FrameSet, InOrderSource, warnings_and_end
@@ -63,6 +63,8 @@ def test_a_registered_camera_type_is_opened_by_its_name(grey_kind):
     grey_kind.check()
     cameras, markerset = source_geometry(grey_kind)
     assert len(cameras) == 4 and cameras[0].size_px == (64, 48) and markerset.n_markers == 14
+    # the optional hooks left out: no calibration file (the nominal colours), the size as given
+    assert calibration_file_for(grey_kind) is None and resolve_config(grey_kind) == grey_kind
     source = open_source(grey_kind)
     first = source.read(FrameRequest(0, 0.0, False))
     assert source.read(FrameRequest(0, 0.0, True)) is first  # the live loop's warm-up set, again

@@ -17,8 +17,11 @@ from tracking.angles import ANGLE_COLUMNS, missing_markers
 from tracking.colour_adapt import calibration_colours
 from tracking.live.protocol import LiveError, SourceConfig
 from tracking.markerset import MarkerSet
-from tracking.recording import read_meta
-from tracking.sources import FrameSource, open_source as open_kind, source_geometry as kind_geometry
+from tracking.sources import FrameSource
+from tracking.sources import calibration_file as kind_calibration_file
+from tracking.sources import open_source as open_kind
+from tracking.sources import resolve as kind_resolve
+from tracking.sources import source_geometry as kind_geometry
 
 
 def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet]:
@@ -34,11 +37,7 @@ def source_geometry(config: SourceConfig) -> tuple[tuple[Camera, ...], MarkerSet
 
 def calibration_file_for(config: SourceConfig) -> Path | None:
     """The calibration file of a camera or recording source, None for a simulated one."""
-    if config.kind == "cameras" and config.calibration:
-        return Path(config.calibration)
-    if config.kind == "recording" and config.path:
-        return Path(config.calibration) if config.calibration else Path(config.path) / "calibration.toml"
-    return None
+    return None if ":" in config.kind else kind_calibration_file(config)
 
 
 def learnt_colours_for(config: SourceConfig, markerset: MarkerSet):
@@ -56,17 +55,7 @@ def resolve_config(config: SourceConfig) -> SourceConfig:
         RehabError: the recording or the calibration cannot be read (one line).
     """
     config.check()
-    if config.kind not in ("recording", "cameras"):
-        return config
-    cameras, _ = source_geometry(config)
-    sizes = sorted({tuple(c.size_px) for c in cameras})
-    if len(sizes) != 1:
-        raise LiveError(f"the cameras have different image sizes {sizes}: the live tracker needs one size; "
-                        "set the cameras to one size and recalibrate")
-    fps = config.fps
-    if config.kind == "recording":
-        fps = read_meta(Path(config.path)).fps
-    return replace(config, size=sizes[0], fps=fps, motion=None)
+    return config if ":" in config.kind else kind_resolve(config)
 
 
 def angle_names_for(markerset: MarkerSet) -> tuple[str, ...]:

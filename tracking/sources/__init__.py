@@ -11,7 +11,8 @@ Each is a :class:`~tracking.sources.base.FrameSource` (``read() -> FrameSet | No
 ``warnings()``, ``end_reason()``, ``handle(command)``, ``close()``, ``cameras``, ``markerset``,
 ``fps``); ``rehab track``, ``rehab record``, the live tracker process and the benchmarks use
 only that. A kind is found by name in :data:`KINDS`: a new camera type is one module with
-``from_config(config)`` and ``geometry(config)`` and one line there (or :func:`register`).
+``from_config(config)`` and ``geometry(config)`` (and, if it has them, ``calibration_file(config)``
+and ``resolve(config)``) and one line there (or :func:`register`).
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ from tracking.sources.base import FrameRequest, FrameSet, FrameSource, SourceErr
 
 #: Source kind -> the module that makes it: ``from_config(config) -> FrameSource`` opens one from
 #: a :class:`tracking.live.protocol.SourceConfig`, ``geometry(config) -> (cameras, markerset)``
-#: reads its cameras and marker set without opening devices.
+#: reads its cameras and marker set without opening devices; optionally ``calibration_file(config)
+#: -> Path | None`` (where learnt marker colours are kept) and ``resolve(config) -> config`` (the
+#: image size and frame rate the source itself decides).
 KINDS: dict[str, str] = {
     "sim": "tracking.sources.sim",
     "recording": "tracking.sources.recording",
@@ -61,5 +64,17 @@ def source_geometry(config) -> tuple:
     return kind_module(config.kind).geometry(config)
 
 
-__all__ = ["FrameRequest", "FrameSet", "FrameSource", "KINDS", "SourceError", "open_source", "register",
-           "source_geometry", "source_kinds"]
+def calibration_file(config):
+    """The calibration file of ``config``'s source (a Path), None if it has none (the simulator)."""
+    hook = getattr(kind_module(config.kind), "calibration_file", None)
+    return None if hook is None else hook(config)
+
+
+def resolve(config):
+    """``config`` with what its source decides itself (a recording's image size and frame rate)."""
+    hook = getattr(kind_module(config.kind), "resolve", None)
+    return config if hook is None else hook(config)
+
+
+__all__ = ["KINDS", "FrameRequest", "FrameSet", "FrameSource", "SourceError", "calibration_file", "open_source",
+           "register", "resolve", "source_geometry", "source_kinds"]

@@ -162,6 +162,16 @@ class InOrderSource:
                               "motions")
 
 
+def one_size(cameras: Sequence[Camera]) -> tuple[int, int]:
+    """The image size all ``cameras`` share (the live image block holds one size); one-line
+    :class:`LiveError` if they differ."""
+    sizes = sorted({tuple(c.size_px) for c in cameras})
+    if len(sizes) != 1:
+        raise LiveError(f"the cameras have different image sizes {sizes}: the live tracker needs one size; "
+                        "set the cameras to one size and recalibrate")
+    return sizes[0]
+
+
 def black_image(camera: Camera) -> np.ndarray:
     """(H, W, 3) uint8 zeros of ``camera``'s calibrated size: the image of a missing view."""
     w, h = camera.size_px

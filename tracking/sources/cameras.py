@@ -27,7 +27,8 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable, Sequence
 
 import cv2
@@ -36,7 +37,7 @@ import numpy as np
 from calibration.camera import Camera
 from calibration.files import check_camera_count, load_calibration
 from tracking.markerset import MarkerSet, load_markerset
-from tracking.sources.base import FrameSet, InOrderSource, SourceError, black_image, camera_names
+from tracking.sources.base import FrameSet, InOrderSource, SourceError, black_image, camera_names, one_size
 
 log = logging.getLogger(__name__)
 
@@ -143,6 +144,17 @@ def geometry(config) -> tuple[tuple[Camera, ...], MarkerSet]:
     """The calibrated cameras and the marker set of a live source configuration (no device opened)."""
     config.check()
     return calibrated_cameras(config), load_markerset(config.markerset)
+
+
+def calibration_file(config) -> Path | None:
+    """The cameras' calibration file."""
+    return Path(config.calibration) if config.calibration else None
+
+
+def resolve(config):
+    """``config`` with the calibrated image size, and no motion."""
+    config.check()
+    return replace(config, size=one_size(calibrated_cameras(config)), motion=None)
 
 
 def from_config(config) -> "CameraSource":

@@ -4,6 +4,7 @@ marker set (meta.yaml) and its images' instants (timestamps.csv)."""
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
@@ -12,8 +13,8 @@ import numpy as np
 from calibration.camera import Camera
 from tracking.errors import RecordingError
 from tracking.markerset import MarkerSet, load_markerset, parse_rgb
-from tracking.recording import Recording, read_timestamps
-from tracking.sources.base import FrameSet, InOrderSource, SourceError
+from tracking.recording import Recording, read_meta, read_timestamps
+from tracking.sources.base import FrameSet, InOrderSource, SourceError, one_size
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +94,19 @@ def geometry(config) -> tuple[tuple[Camera, ...], MarkerSet]:
     config.check()
     with RecordingSource(config.path, config.calibration) as rec:
         return rec.cameras, rec.markerset
+
+
+def calibration_file(config) -> Path | None:
+    """The recording's calibration (``calibration`` given, else the folder's calibration.toml)."""
+    if not config.path:
+        return None
+    return Path(config.calibration) if config.calibration else Path(config.path) / "calibration.toml"
+
+
+def resolve(config):
+    """``config`` with the recording's image size and frame rate (meta.yaml), and no motion."""
+    cameras, _ = geometry(config)
+    return replace(config, size=one_size(cameras), fps=read_meta(Path(config.path)).fps, motion=None)
 
 
 def from_config(config) -> "RecordingSource":

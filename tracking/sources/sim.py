@@ -13,7 +13,6 @@ from tracking.sim.body import BodyDimensions
 from tracking.sim.interactive import InteractivePatient
 from tracking.sim.motions import load_motion
 from tracking.sim.rigs import load_rig
-from tracking.sim.studio import Studio
 from tracking.sources.base import FrameRequest, FrameSet
 from tracking.sources.commands import PatientInput, Reidentify, SetMotion, SetPatientInput
 
@@ -49,6 +48,10 @@ class SimulatedSource:
     """
 
     def __init__(self, config, *, seconds: float | None = None, start_s: float = 0.0) -> None:
+        # the studio (OpenGL) only where a simulated source is made: the game reads the rig's
+        # geometry through this module without loading it
+        from tracking.sim.studio import Studio
+
         self.config = config
         self.paced_by_clock = config.sim_clock == "wall"
         cameras, markerset = geometry(config)
