@@ -694,7 +694,7 @@ def _cmd_colour(args) -> int:
     import shutil
 
     from tracking.colour.adapt import learn_colours, save_colours_to_calibration
-    from tracking.drivers.offline import markerset_for
+    from tracking.sources.recording import markerset_for
     from tracking.io.recording import Recording
 
     if args.frames < 1:

@@ -43,7 +43,7 @@ def add_commands(sub) -> None:
 
 def _cmd_learn(args) -> int:
     from tracking.colour.adapt import learn_colours
-    from tracking.drivers.offline import markerset_for
+    from tracking.sources.recording import markerset_for
     from tracking.io.recording import Recording
 
     if args.frames < 1:

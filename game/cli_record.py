@@ -52,15 +52,15 @@ def _cmd_record(args) -> int:
     check_new_folder(args.out_dir)
     n_frames = max(1, int(math.floor(args.seconds * args.fps + 1e-9)))
     if args.source == "sim":
-        from tracking.sim.studio import SimulationSettings  # lazy: only to run the simulated patient
+        from tracking.live.protocol import SourceConfig
         from tracking.sources.sim import SimulatedSource
 
         if args.cameras or args.calibration:
             raise RehabError("--cameras and --calibration are for live cameras: drop them with --source sim")
-        settings = SimulationSettings(motion=args.motion, rig=args.rig, size_px=args.size or (640, 480), fps=args.fps,
-                                      seconds=args.seconds, noise_sigma=args.noise, markerset=args.markerset,
-                                      seed=args.seed)
-        source = SimulatedSource(settings)
+        config = SourceConfig(kind="sim", rig=args.rig, size=tuple(args.size or (640, 480)), fps=args.fps,
+                              motion=args.motion, body="p50_female", markerset=args.markerset, seed=args.seed,
+                              noise_sigma=args.noise, sim_clock="frames")
+        source = SimulatedSource(config, seconds=args.seconds)
         markerset = source.markerset
         meta = {"source": "rehab record (simulated cameras)", "motion": args.motion, "rig": args.rig}
     else:
@@ -79,7 +79,7 @@ def _cmd_record(args) -> int:
                 raise RehabError(f"--size {args.size[0]}x{args.size[1]} but the calibration of {cam.name} is for "
                                  f"{w}x{h}: record at the calibrated size (leave out --size) or recalibrate")
         markerset = load_markerset(args.markerset)
-        source = CameraSource(cameras, devices, args.fps)
+        source = CameraSource(cameras, devices, args.fps, markerset=markerset)
         meta = {"source": "rehab record (live cameras)", "devices": devices}
     try:
         summary = record(source, args.out_dir, n_frames, markerset, images=args.images, progress=True, meta=meta)

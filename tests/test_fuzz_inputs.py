@@ -218,7 +218,7 @@ def _recording_kinds(tmp: Path) -> list[Kind]:
     stamps_seed.write_text("\n".join(rows) + "\n", encoding="utf-8")
 
     def read_stamps(p):
-        from tracking.drivers.offline import check_skews
+        from tracking.sources.recording import check_skews
         from tracking.io.recording import read_timestamps
 
         folder = p.parent / (p.stem + "_rec")

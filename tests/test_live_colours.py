@@ -13,6 +13,7 @@ from tracking.live.process import TrackerLoop, make_tracker
 from tracking.live.protocol import SourceConfig
 from tracking.live.ring import RingLayout, RingReader, RingWriter
 from tracking.live.source import angle_names_for, open_source
+from tracking.sources.base import FrameRequest
 from tracking.marker_status import MarkerStatus
 
 
@@ -85,7 +86,7 @@ def test_learnt_colours_in_the_calibration_are_used_live(drifting, tmp_path):
     try:
         tracker, adapter = make_tracker(config, source)
         assert adapter is None
-        frame = source.grab(0, 0.0, False)
+        frame = source.read(FrameRequest(0, 0.0, False))
         sample = tracker.step(frame.images, 0.0)
         assert not np.any(sample.status == MarkerStatus.MEASURED)
     finally:

@@ -8,7 +8,10 @@ import pytest
 from tracking.live.process import TrackerLoop
 from tracking.live.protocol import Pause, PatientInput, Reidentify, Resume, SetMotion, SetPatientInput, SourceConfig, Stop
 from tracking.live.ring import ImageLayout, ImageSlot, RingLayout, RingReader, RingWriter
-from tracking.live.source import SimSource, SourceFrame, angle_names_for
+import dataclasses
+
+from tracking.live.source import angle_names_for
+from tracking.sources.sim import SimulatedSource
 from tracking.marker_status import MarkerStatus
 from tracking.tracker import TrackingState
 
@@ -17,7 +20,7 @@ CONFIG = SourceConfig(size=(320, 240), fps=30.0, motion="reference")
 
 @pytest.fixture(scope="module")
 def source():
-    src = SimSource(CONFIG)
+    src = SimulatedSource(CONFIG)
     yield src
     src.close()
 
@@ -86,13 +89,19 @@ class _Broken:
     def __init__(self, inner):
         self.inner, self.cameras, self.markerset = inner, inner.cameras, inner.markerset
 
-    def grab(self, index, time_s, identified):
-        if index == 1:
+    def read(self, request):
+        if request.index == 1:
             raise OSError("camera 3 unplugged")
-        return self.inner.grab(index, time_s, identified)
+        return self.inner.read(request)
 
     def handle(self, command):
         self.inner.handle(command)
+
+    def warnings(self):
+        return self.inner.warnings()
+
+    def end_reason(self):
+        return self.inner.end_reason()
 
 
 def test_a_failing_frame_is_an_error_line_and_the_loop_goes_on(source, blocks):
@@ -109,9 +118,9 @@ def test_images_of_the_wrong_size_are_refused_before_tracking(source, blocks):
     writer, slot, reader = blocks
 
     class _Short(_Broken):
-        def grab(self, index, time_s, identified):
-            f = self.inner.grab(index, time_s, identified)
-            return SourceFrame([img[:100] for img in f.images], f.truth_m, f.t_ready_s, f.source_ms)
+        def read(self, request):
+            f = self.inner.read(request)
+            return dataclasses.replace(f, images=tuple(img[:100] for img in f.images))
 
     loop = TrackerLoop(_Short(source), writer, slot, fps=CONFIG.fps)
     assert not loop.step()
@@ -151,10 +160,10 @@ class _Slow(_Broken):
         super().__init__(inner)
         self.clock, self.paced_by_clock, self.times = clock, paced_by_clock, []
 
-    def grab(self, index, time_s, identified):
+    def read(self, request):
         self.clock.now_s += 2.5 / CONFIG.fps
-        self.times.append(time_s)
-        return self.inner.grab(index, time_s, identified)
+        self.times.append(request.time_s)
+        return self.inner.read(request)
 
 
 @pytest.mark.parametrize("paced_by_clock", [True, False])
@@ -192,9 +201,9 @@ def test_a_loop_on_time_grabs_every_frame_set_at_its_time(source, blocks):
     clock = _FakeClock()
 
     class _Quick(_Slow):
-        def grab(self, index, time_s, identified):
+        def read(self, request):
             self.clock.now_s += 0.2 / CONFIG.fps
-            return self.inner.grab(index, time_s, identified)
+            return self.inner.read(request)
 
     loop = TrackerLoop(_Quick(source, clock, True), writer, slot, fps=CONFIG.fps, clock=clock)
     loop.run(_Conn(clock, clock.now_s + 0.5))
@@ -207,7 +216,7 @@ def test_the_simulated_patient_is_tied_to_the_wall_clock_unless_asked_for_frame_
     from tracking.live.protocol import LiveError
 
     assert source.paced_by_clock                    # the default: like a camera
-    frames = SimSource(SourceConfig(size=(320, 240), fps=30.0, motion="reference", sim_clock="frames"))
+    frames = SimulatedSource(SourceConfig(size=(320, 240), fps=30.0, motion="reference", sim_clock="frames"))
     try:
         assert not frames.paced_by_clock
     finally:

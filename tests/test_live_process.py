@@ -17,7 +17,7 @@ from tracking.live import LiveTracker, PatientInput, SourceConfig
 from tracking.live.client import BLOCK_PREFIX, remove_stale_blocks
 from tracking.live.protocol import LiveError
 from tracking.live.ring import ProcessState
-from tracking.live.source import SimSource
+from tracking.sources.sim import SimulatedSource
 from tracking.marker_status import MarkerStatus
 from tracking.tracker import TrackingState
 
@@ -156,7 +156,9 @@ def test_a_killed_process_is_replaced_within_2_s_without_blocking(live):
     status = live.status()
     assert status.alive and status.restarts == 1 and live.pid != old
     assert "killed (SIGKILL)" in status.last_error
-    assert not os.path.exists(f"/proc/{old}")  # reaped
+    # reaped by the game's own status calls, never waiting for it (a loaded machine may take a moment
+    # to tear a killed process down)
+    assert _wait(lambda: live.status() and not os.path.exists(f"/proc/{old}"), 10.0, 0.05), "not reaped"
 
 
 def test_a_hung_process_is_replaced(live):
@@ -206,7 +208,7 @@ def faulty_source(config):
         return step(self, images, time_s, stamps_s)
 
     Tracker.step = failing_step
-    return SimSource(config)
+    return SimulatedSource(config)
 
 
 def test_a_tracker_exception_reaches_the_game_as_a_status_line():

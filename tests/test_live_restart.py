@@ -70,7 +70,7 @@ def failing_source(config):
     """The simulated patient, in a tracker process that cannot start the first few times
     (counted in the file named by REHAB_TEST_STARTS; a ``kind="module:function"`` source)."""
     from calibration.errors import RehabError
-    from tracking.live.source import SimSource
+    from tracking.sources.sim import SimulatedSource
 
     path = os.environ["REHAB_TEST_STARTS"]
     with open(path, "a+") as f:
@@ -79,7 +79,7 @@ def failing_source(config):
         n = len(f.read())
     if n <= 6:
         raise RehabError(f"injected start failure {n}")
-    return SimSource(config)
+    return SimulatedSource(config)
 
 
 def test_a_process_that_cannot_start_is_tried_again_for_as_long_as_it_takes(tmp_path, monkeypatch):

@@ -51,7 +51,7 @@ def test_meta_yaml_values_are_checked_once_at_load(tmp_path, text, words):
 def test_meta_yaml_with_3_of_14_colours_is_refused_not_ignored(tmp_path):
     from types import SimpleNamespace
 
-    from tracking.drivers.offline import markerset_for
+    from tracking.sources.recording import markerset_for
     from tracking.io.recording import RecordingMeta
 
     rec = SimpleNamespace(folder=tmp_path, meta=RecordingMeta(fps=30.0, marker_colours=((255, 0, 0),) * 3))

@@ -16,10 +16,10 @@ import pytest
 from tracking.live import LiveTracker, SourceConfig
 from tracking.live.process import TrackerLoop
 from tracking.live.ring import ImageLayout, ImageSlot, RingLayout, RingReader, RingWriter
-from tracking.live.source import DeviceSource, angle_names_for, resolve_config
+from tracking.live.source import angle_names_for, resolve_config
 from tracking.io.recording import Recording
 from tracking.sim.studio import SimulationSettings, simulate_recording
-from tracking.sources.base import SourceError
+from tracking.sources.base import FrameRequest, SourceError, warnings_and_end
 from tracking.sources.cameras import CameraSource
 from tracking.sources.recording import RecordingSource
 from tracking.marker_status import MarkerStatus
@@ -40,7 +40,7 @@ def recording(tmp_path_factory):
 def offline_positions(folder):
     """Positions the tracker gives frame by frame on the recording (what ``rehab track`` does)."""
     with RecordingSource(folder) as src:
-        tracker = Tracker(src.cameras, src.markerset(), fps=src.fps)
+        tracker = Tracker(src.cameras, src.markerset, fps=src.fps)
         out = []
         while (fs := src.read()) is not None:
             out.append(tracker.step(fs.images, fs.time_s))
@@ -150,11 +150,10 @@ def test_tracking_goes_on_with_the_other_cameras_when_one_stops(recording):
     t0 = time.perf_counter() + 0.1
     slow = 7.5  # half the recording's rate: the tracker keeps pace on a loaded machine
     devices = [ReplayDevice(images, t0, slow, stop_after=12 if c == 1 else None) for c, images in enumerate(per_camera)]
-    cameras = CameraSource(cams, ["0", "1", "2", "3"], slow, stall_s=0.5,
-                           capture_factory=lambda dev, size, fps: devices[int(dev)])
     with RecordingSource(recording) as rs:
-        markerset = rs.markerset()
-    source = DeviceSource(cameras, markerset)
+        markerset = rs.markerset
+    source = CameraSource(cams, ["0", "1", "2", "3"], slow, stall_s=0.5,
+                          capture_factory=lambda dev, size, fps: devices[int(dev)], markerset=markerset)
     ring = RingLayout(markerset.n_markers, 4, len(angle_names_for(markerset)), 64)
     shm = shared_memory.SharedMemory(create=True, size=ring.nbytes)
     writer, reader = RingWriter(shm.buf, ring, initialize=True), RingReader(shm.buf, ring)
@@ -162,7 +161,7 @@ def test_tracking_goes_on_with_the_other_cameras_when_one_stops(recording):
         loop = TrackerLoop(source, writer, None, fps=slow)
         seen = []
         for _ in range(40):
-            frame = source.grab(loop.frame_index, 0.0, True)
+            frame = source.read(FrameRequest(loop.frame_index, 0.0, True))
             if frame is None:
                 break
             loop.step()
@@ -197,10 +196,12 @@ def replayed_cameras_one_stops(config):
     t0 = time.perf_counter() + 0.5
     devices = [ReplayDevice(images, t0, config.fps, stop_after=10 if c == 1 else None)
                for c, images in enumerate(per_camera)]
-    source = CameraSource(cams, ["0", "1", "2", "3"], config.fps, stall_s=0.4,
-                          capture_factory=lambda dev, size, fps: devices[int(dev)])
     with RecordingSource(config.path) as rs:
-        return DeviceSource(source, rs.markerset())
+        markerset = rs.markerset
+    source = CameraSource(cams, ["0", "1", "2", "3"], config.fps, stall_s=0.4,
+                          capture_factory=lambda dev, size, fps: devices[int(dev)], markerset=markerset)
+    source.open()
+    return source
 
 
 def test_the_game_sees_a_stopped_camera_as_a_status_warning_and_tracking_goes_on(recording):
@@ -264,19 +265,18 @@ def test_device_source_repeats_the_warm_up_set_and_skips_ahead_after_a_restart(r
 
     with Recording(recording) as rec:
         expected = [fs.images for fs in rec]
-    rs = RecordingSource(recording)
-    source = DeviceSource(rs, rs.markerset())
+    source = RecordingSource(recording)
     try:
-        first = source.grab(0, 0.0, False)
-        assert source.grab(0, 0.0, True) is first  # the loop tracks the warm-up frame set first
-        later = source.grab(30, 0.0, True)  # a replacement process continues at frame 30
+        first = source.read(FrameRequest(0, 0.0, False))
+        assert source.read(FrameRequest(0, 0.0, True)) is first  # the loop tracks the warm-up frame set first
+        later = source.read(FrameRequest(30, 0.0, True))  # a replacement process continues at frame 30
         assert later.time_s == pytest.approx(30 / FPS)
         assert all(np.array_equal(a, b) for a, b in zip(later.images, expected[30]))
         source.handle(SetPatientInput(PatientInput()))  # ignored: no simulated patient here
         with pytest.raises(LiveError, match="plays no motions"):
             source.handle(SetMotion("reach"))
-        assert source.grab(50, 0.0, True) is None
-        assert source.warnings() == (f"the recording {recording} ended after 46 frame sets",)
+        assert source.read(FrameRequest(50, 0.0, True)) is None
+        assert warnings_and_end(source) == (f"the recording {recording} ended after 46 frame sets",)
     finally:
         source.close()
 

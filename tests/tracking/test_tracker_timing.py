@@ -91,10 +91,10 @@ def test_a_timestamps_file_that_does_not_fit_is_one_line(tmp_path, capsys):
 
 
 def test_live_sources_carry_the_recordings_stamps(tmp_path):
-    """A recording tracked live (RecordingSource through DeviceSource, the tracker process's source)
-    gives the tracker the same image instants as ``rehab track``."""
-    from tracking.live.source import DeviceSource
+    """A recording tracked live (RecordingSource read as the tracker process reads it) gives the
+    tracker the same image instants as ``rehab track``."""
     from tracking.io.recording import read_timestamps
+    from tracking.sources.base import FrameRequest
     from tracking.sources.recording import RecordingSource
 
     settings = dataclasses.replace(BASE, seconds=0.3, camera_offsets=(0.0, 0.45, -0.4, 0.3), clock_drift=0.001,
@@ -103,9 +103,8 @@ def test_live_sources_carry_the_recordings_stamps(tmp_path):
     times, stamps = read_timestamps(tmp_path / "rec", ["cam1", "cam2", "cam3", "cam4"])
     src = RecordingSource(tmp_path / "rec")
     assert src.timing.startswith("image time stamps from timestamps.csv")
-    device = DeviceSource(src, src.markerset())
     for k in range(len(times)):
-        frame = device.grab(k, k / BASE.fps, False)
+        frame = src.read(FrameRequest(k, k / BASE.fps, False))
         assert frame.time_s == pytest.approx(times[k], abs=1e-6)
         assert frame.stamps_s == pytest.approx(stamps[k], abs=1e-6)
 

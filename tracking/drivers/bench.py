@@ -26,7 +26,8 @@ from tracking import window_kernel
 from tracking.colour.table import ColourTable
 from tracking.full_frame import FrameMeasurer
 from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise
-from tracking.sim.studio import SimulationSettings, studio_from_settings
+from tracking.live.protocol import SourceConfig
+from tracking.sources.sim import SimulatedSource
 
 
 def _median_s(fn: Callable[[], object], repeats: int) -> float:
@@ -64,22 +65,19 @@ def _timed(fn: Callable[[], object]) -> tuple[float, float]:
     return time.perf_counter() - t0, time.thread_time() - c0
 
 
-def simulate_frames(settings: SimulationSettings, n_frames: int, start_s: float = 0.0
+def simulate_frames(config: SourceConfig, n_frames: int, start_s: float = 0.0
                     ) -> tuple[list[tuple[np.ndarray, ...]], float, object]:
-    """Render ``n_frames`` frame sets from ``start_s``; returns (images, frame sets per second, cameras)."""
-    studio, motion = studio_from_settings(settings)
-    with studio:
-        fps = settings.fps
-        start = max(0.0, min(motion.duration_s - n_frames / fps, start_s))
+    """Render ``n_frames`` frame sets of the simulated source ``config`` from its motion's time
+    ``start_s``; returns (images, frame sets per second, cameras)."""
+    with SimulatedSource(config) as source:
+        start = max(0.0, min(source.motion.duration_s - n_frames / config.fps, start_s))
+        source.start_s = start
         frames = []
         t0 = time.perf_counter()
-        for i in range(n_frames):
-            t = start + i / fps
-            sf = studio.render(motion.pose_at(t), i, t, noise_sigma=settings.noise_sigma, seed=i,
-                               with_visibility=False)
-            frames.append(sf.frames.images)
+        for _ in range(n_frames):
+            frames.append(source.read().images)
         rate = n_frames / (time.perf_counter() - t0)
-        return frames, rate, studio.cameras
+        return frames, rate, source.cameras
 
 
 #: the bench's cheap webcam: sensor noise added on top of the renders, the light 40 % darker with a
@@ -133,12 +131,13 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
     the full-frame pass just before it, and the best pass shows the code's speed where the machine
     interfered least (as ``timeit`` takes the minimum).
     """
-    base = SimulationSettings(motion=motion, rig="ring4", fps=15.0, noise_sigma=1.5)
+    base = SourceConfig(kind="sim", motion=motion, rig="ring4", fps=15.0, noise_sigma=1.5, body="p50_female",
+                        sim_clock="frames")
     yield f"rehab bench: 4 cameras, motion {motion}, {n_frames} frame sets per figure (medians)"
 
     # simulator throughput (the motion from its start: the tracker identifies on the reference pose)
-    _, rate_small, _ = simulate_frames(replace(base, size_px=(320, 240)), n_frames)
-    frames, rate_large, cameras = simulate_frames(replace(base, size_px=(640, 480)), n_frames)
+    _, rate_small, _ = simulate_frames(replace(base, size=(320, 240)), n_frames)
+    frames, rate_large, cameras = simulate_frames(replace(base, size=(640, 480)), n_frames)
     yield f"simulator (render + read back 4 cameras):  320x240 {rate_small:6.1f} frame sets/s   640x480 {rate_large:6.1f} frame sets/s"
 
     # memory floor: copying the frame set once

@@ -13,27 +13,25 @@ import numpy as np
 from tqdm import tqdm
 
 from calibration.atomic import written_via_temp
+from tracking.angles import ANGLE_COLUMNS
+# the file writers through their modules (a test replaces one to fail half-way through a file)
+import tracking.io.bvh as bvh_format
+import tracking.io.c3d as c3d_format
+import tracking.io.detections as detections_format
+import tracking.io.opensim_mot as mot_format
+import tracking.io.csv_tables as tables_format
+import tracking.io.trc as trc_format
+from tracking.clock_sync import fit_clocks, skew_evidence
+from tracking.colour.adapt import ColourAdapter, calibration_colours, read_colours, table_from_colours
 from tracking.colour.table import ColourTable
-from tracking.markerset import MarkerSet, load_markerset, parse_rgb
+from tracking.markerset import MarkerSet
 from tracking.full_frame import FrameMeasurer
 from tracking.errors import RecordingError
-from tracking.io.recording import Recording, read_timestamps
+from tracking.marker_status import MarkerStatus
+from tracking.tracker import Tracker, TrackingState
+from tracking.sources.recording import RecordingSource
 
 log = logging.getLogger(__name__)
-
-
-def markerset_for(recording: Recording, markerset: str | None, marker_colours: Sequence[str] | None) -> MarkerSet:
-    """The marker set of a recording: --markerset or meta.yaml's; colours: --marker-color, else meta.yaml's."""
-    ms = load_markerset(markerset or recording.meta.markerset)
-    if marker_colours:
-        return ms.with_colours([parse_rgb(c) for c in marker_colours])
-    if recording.meta.marker_colours:
-        if len(recording.meta.marker_colours) != ms.n_markers:
-            raise RecordingError(f"{recording.folder / 'meta.yaml'} gives {len(recording.meta.marker_colours)} "
-                                 f"marker_colours but the marker set {ms.name} has {ms.n_markers} markers: give one "
-                                 f"per marker ({', '.join(ms.names)}) or none")
-        return ms.with_colours(list(recording.meta.marker_colours))
-    return ms
 
 
 def track_recording(
@@ -71,8 +69,8 @@ def track_recording(
                                points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
                                c3d=c3d, mot=mot, bvh=bvh, detections=detections, colours=colours,
                                adapt_colours=adapt_colours, progress=progress, sync=sync)
-    with Recording(folder, calibration) as rec:
-        ms = markerset_for(rec, markerset, marker_colours)
+    with RecordingSource(folder, calibration, markerset=markerset, marker_colours=marker_colours, sync="none") as rec:
+        ms = rec.markerset
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
         measurer = FrameMeasurer(rec.cameras, table, ms.radius_m,
                                  markers_per_colour=np.bincount(ms.colour_index, minlength=table.n_colours))
@@ -86,7 +84,8 @@ def track_recording(
             writer = csv.writer(out) if out else None
             if writer:
                 writer.writerow(["frame", "time", "x_mm", "y_mm", "z_mm", "n_cameras", "reproj_px"])
-            frames = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
+            frames = tqdm(iter(rec.read, None), total=rec.n_frames, unit="frame", desc="tracking",
+                          disable=not progress)
             for fs in frames:
                 pts = measurer.measure(fs.images)
                 n_frames += 1
@@ -107,8 +106,6 @@ def track_recording(
 def learnt_colours(calibration: Path, ms: MarkerSet, colours: Path | None = None):
     """The learnt colours to track with: ``colours`` (a colour file) if given, else those saved in
     the calibration file, else None (the nominal table). Returns (models, label_hs) or None."""
-    from tracking.colour.adapt import calibration_colours, read_colours
-
     if colours is not None:
         return read_colours(colours, ms)
     found = calibration_colours(calibration, ms)
@@ -121,8 +118,6 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
     """The nominal table, or the table of ``learnt`` (models, label_hs) colours."""
     if learnt is None:
         return ColourTable.build(ms.palette)
-    from tracking.colour.adapt import table_from_colours
-
     return table_from_colours(*learnt)
 
 
@@ -160,58 +155,9 @@ class TrackedRecording:
     timing: str = ""
 
 
-SYNC_MODES = ("auto", "stamps", "none")
-
-
-def check_skews(path: Path, times: np.ndarray, skew: np.ndarray, fps: float, names=None) -> None:
-    """Stamps the tracker can use: frame-set instants that increase, and every image within one
-    frame period of its set's instant. A set joins each camera's image nearest its instant, so an
-    image stamped further away belongs to another set (or the stamps are wrong): bringing it to
-    this set's instant would extrapolate the motion over the gap. One-line :class:`RecordingError`."""
-    fix = "fix it, or track with --sync none (the cameras taken as synchronized)"
-    back = np.flatnonzero(np.diff(times) <= 0)
-    if back.size:
-        raise RecordingError(f"{path} line {int(back[0]) + 3}: the frame sets' times must increase: {fix}")
-    far = np.abs(np.nan_to_num(skew)) > 1.0 / fps
-    if far.any():
-        f, c = (int(v) for v in np.argwhere(far)[0])
-        name = names[c] if names is not None else f"camera {c + 1}"
-        raise RecordingError(f"{path} line {f + 2}: {name}'s image is {1000 * skew[f, c]:+.1f} ms from its "
-                             f"frame set's instant, more than one frame period ({1000 / fps:.1f} ms): {fix}")
-
-
-def image_skews(rec: Recording, sync: str = "auto") -> tuple[np.ndarray | None, str]:
-    """Each image's instant minus its frame set's, from the recording's ``timestamps.csv``.
-
-    ``sync``: "auto" and "stamps" use the file ("stamps" requires it), "none" takes the cameras as
-    synchronized. Returns (F, C) seconds (NaN unknown) or None, and one line saying what is used."""
-    if sync not in SYNC_MODES:
-        raise RecordingError(f"--sync {sync!r}: give one of {', '.join(SYNC_MODES)}")
-    rolling = [c.name for c in rec.cameras if c.rolling_shutter_s > 0]
-    shutter = (f"rolling shutter of {', '.join(rolling)} from the calibration ("
-               f"{1000 * max(c.rolling_shutter_s for c in rec.cameras):g} ms readout)") if rolling else ""
-    read = None if sync == "none" else read_timestamps(rec.folder, [c.name for c in rec.cameras])
-    if read is None:
-        if sync == "stamps":
-            raise RecordingError(f"{rec.folder}: no timestamps.csv for --sync stamps: give a recording from "
-                                 f"'rehab record', or --sync none")
-        what = "cameras taken as synchronized (--sync none)" if sync == "none" else ""
-        return None, "; ".join(x for x in (what, shutter) if x)
-    times, stamps = read
-    skew = stamps - times[:, None]
-    check_skews(rec.folder / "timestamps.csv", times, skew, rec.fps, [c.name for c in rec.cameras])
-    worst = float(np.nanmax(np.abs(skew))) if np.isfinite(skew).any() else 0.0
-    line = f"image time stamps from timestamps.csv (up to {1000 * worst:.1f} ms from their frame sets' instants)"
-    if len(times) < (rec.n_frames or 0):
-        line += f"; only {len(times)} of {rec.n_frames} frame sets stamped"
-    return skew, "; ".join(x for x in (line, shutter) if x)
-
-
 def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
                     c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
                     progress=False, sync="auto") -> str:
-    from tracking.marker_status import MarkerStatus
-
     run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                           colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync)
     write_results(run, trc=trc, status_csv=status_csv, angles_csv=angles_csv, c3d=c3d, mot=mot, bvh=bvh,
@@ -234,15 +180,14 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
     over the first ``SYNC_STUDY_S`` seconds: tracked as synchronized, estimated, tracked again with
     the estimate and estimated once more. Returns ((F, C) skews for the whole recording, or None
     when every camera is within 1 ms of the first, and a line saying what was found)."""
-    from tracking.clock_sync import fit_clocks, skew_evidence
-    from tracking.marker_status import MarkerStatus
-
     study = int(round(SYNC_STUDY_S * fps))
     skews = None
     est = None
-    reading = logging.getLogger("tracking.io.recording")
-    level = reading.level
-    reading.setLevel(logging.ERROR)  # the recording's warnings (a camera that ends early) once, in the real pass
+    # the recording's warnings (a camera that ends early) once, in the real pass
+    reading = [logging.getLogger(name) for name in ("tracking.io.recording", "tracking.sources.recording")]
+    levels = [r.level for r in reading]
+    for r in reading:
+        r.setLevel(logging.ERROR)
     try:
         for _ in range(2):
             try:
@@ -253,7 +198,8 @@ def estimated_skews(folder, n_frames: int | None, fps: float, **tracking) -> tup
             est = fit_clocks(skew_evidence(run.cameras, run.times_s, pos, run.uv_px), 1.0 / fps)
             skews = est.skews(np.arange(n_frames or len(run.times_s)) / fps)
     finally:
-        reading.setLevel(level)
+        for r, level in zip(reading, levels):
+            r.setLevel(level)
     names = [c.name for c in run.cameras]
     line = est.line(names)
     if np.abs(skews).max() < 0.001:  # (a camera not estimated keeps the first camera's instants)
@@ -265,26 +211,20 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
                     adapt_colours=False, progress=False, sync="auto", _skews=None, _max_frames=None
                     ) -> TrackedRecording:
     """Run the tracker over a recording folder; :class:`RecordingError` (one line) if it never
-    identified the markers. ``sync``: the images' instants (:func:`image_skews`; "auto" without
-    timestamps.csv estimates them, :func:`estimated_skews`)."""
-    from tracking.angles import ANGLE_COLUMNS
-    from tracking.marker_status import MarkerStatus
-    from tracking.tracker import Tracker, TrackingState
-
-    with Recording(folder, calibration) as rec:
-        ms = markerset_for(rec, markerset, marker_colours)
-        skews, timing = image_skews(rec, sync)
+    identified the markers. ``sync``: the images' instants
+    (:func:`tracking.sources.recording.image_skews`; "auto" without timestamps.csv estimates them,
+    :func:`estimated_skews`)."""
+    with RecordingSource(folder, calibration, markerset=markerset, marker_colours=marker_colours, sync=sync) as rec:
+        ms = rec.markerset
         if _skews is not None:
-            skews, timing = _skews, ""
-        elif sync == "auto" and skews is None and _max_frames is None:
+            rec.use_skews(_skews, "")
+        elif sync == "auto" and rec.skews is None and _max_frames is None:
             skews, found = estimated_skews(folder, rec.n_frames, rec.fps, calibration=calibration, markerset=markerset,
                                            marker_colours=marker_colours, colours=colours)
-            timing = "; ".join(x for x in (found, timing) if x)
+            rec.use_skews(skews, "; ".join(x for x in (found, rec.timing) if x))
         adapter = None
         learnt = learnt_colours(rec.calibration_path, ms, colours)
         if adapt_colours:
-            from tracking.colour.adapt import ColourAdapter
-
             adapter = ColourAdapter(rec.cameras, ms, start=learnt)
             tracker = Tracker(rec.cameras, ms, table=adapter.table, fps=rec.fps)
         else:
@@ -293,12 +233,12 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         positions, status, frames, times, angles, uv, identified = [], [], [], [], [], [], []
         waiting_message = ""
         was_tracking = False
-        frame_iter = tqdm(rec, total=rec.n_frames, unit="frame", desc="tracking", disable=not progress)
+        frame_iter = tqdm(iter(rec.read, None), total=rec.n_frames, unit="frame", desc="tracking",
+                          disable=not progress)
         for fs in frame_iter:
             if _max_frames is not None and fs.index >= _max_frames:
                 break
-            stamps = None if skews is None or fs.index >= len(skews) else fs.time_s + skews[fs.index]
-            sample = tracker.step(fs.images, fs.time_s, stamps)
+            sample = tracker.step(fs.images, fs.time_s, fs.stamps_s)
             tracking = sample.state == TrackingState.TRACKING
             if not tracking:
                 waiting_message = sample.message
@@ -315,6 +255,7 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
         cameras = tuple(rec.cameras)
         subject = rec.meta.extra.get("subject")
         rate = rec.fps
+        timing = rec.timing
     if not frames:
         raise RecordingError(f"{folder}: the recording has no frames")
     st = np.stack(status)
@@ -335,9 +276,6 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
 def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_csv=None, c3d=None, mot=None,
                   bvh=None, detections=None) -> None:
     """Write the asked result files of a tracked recording (docs/FILES.md)."""
-    from tracking.io.csv_tables import write_angles_csv, write_status_csv
-    from tracking.io.trc import write_trc
-
     for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -346,47 +284,39 @@ def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_cs
     if trc:
         with written_via_temp(trc) as tmp:
             # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
-            write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
-                      times_s=run.times_s)
+            trc_format.write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
+                                 times_s=run.times_s)
     if status_csv:
         with written_via_temp(status_csv) as tmp:
-            write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
+            tables_format.write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
     if angles_csv:
         # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
         # without a supination whose elbow axis is a guess
         with written_via_temp(angles_csv) as tmp:
-            write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
+            tables_format.write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
     if c3d:
         with written_via_temp(c3d) as tmp:
             _write_c3d(tmp, run)
     if mot:
-        from tracking.io.opensim_mot import write_mot
-
         with written_via_temp(mot) as tmp:
-            write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
+            mot_format.write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
     if bvh:
-        from tracking.io.bvh import BvhSkeleton, write_bvh
-        from tracking.marker_status import MarkerStatus
-
         # segment lengths from the measured positions only (an estimate must not teach them)
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
         with written_via_temp(bvh) as tmp:
-            write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, BvhSkeleton.from_markers(run.names, measured_mm))
+            skeleton = bvh_format.BvhSkeleton.from_markers(run.names, measured_mm)
+            bvh_format.write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, skeleton)
     if detections:
-        from tracking.io.detections import write_detections_csv
-
         with written_via_temp(detections) as tmp:
-            write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras], run.names, run.uv_px)
+            detections_format.write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras],
+                                                   run.names, run.uv_px)
 
 
 def _write_c3d(path, run: TrackedRecording) -> None:
-    from tracking.io.c3d import C3dEvent, write_c3d
-    from tracking.io.detections import reprojection_residuals_mm, seen_by
-
-    residuals = reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
-    events = [C3dEvent("Identified", float(t - run.times_s[0]), "General",
-                       "markers identified in the reference pose; tracking starts")
+    residuals = detections_format.reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
+    events = [c3d_format.C3dEvent("Identified", float(t - run.times_s[0]), "General",
+                                  "markers identified in the reference pose; tracking starts")
               for t in run.times_s[run.identified]]
-    write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
-              camera_masks=seen_by(run.uv_px), angles_deg=run.angles_deg, subject=run.subject,
-              markerset=run.markerset, events=events)
+    c3d_format.write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
+                         camera_masks=detections_format.seen_by(run.uv_px), angles_deg=run.angles_deg,
+                         subject=run.subject, markerset=run.markerset, events=events)

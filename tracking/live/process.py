@@ -45,7 +45,8 @@ import numpy as np
 from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetColours, SetMotion, SetPatientInput,
                                     SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
-from tracking.live.source import FrameSource, angle_names_for, learnt_colours_for, open_source
+from tracking.live.source import angle_names_for, learnt_colours_for, open_source
+from tracking.sources.base import FrameRequest, FrameSource, warnings_and_end
 
 log = logging.getLogger(__name__)
 
@@ -248,9 +249,9 @@ class TrackerLoop:
         index = self.frame_index
         time_s = index / self.fps
         try:
-            frame = self.source.grab(index, time_s, self.tracker.state == TrackingState.TRACKING)
+            frame = self.source.read(FrameRequest(index, time_s, self.tracker.state == TrackingState.TRACKING))
             if frame is None:  # the source ended (a recording): nothing more to track
-                self._warn(getattr(self.source, "warnings", tuple)())
+                self._warn(warnings_and_end(self.source))
                 return False
             self._check_images(frame.images)
         except Exception as exc:
@@ -258,7 +259,7 @@ class TrackerLoop:
             self._report("source", exc, index)
             return False
         self.frame_index += 1
-        self._warn(frame.warnings)
+        self._warn(self.source.warnings())
         if math.isfinite(frame.time_s):
             time_s = frame.time_s
         t0 = self.clock()
@@ -565,9 +566,9 @@ def _warm_up(source: FrameSource, tracker, progress=lambda what: None) -> None:
     heartbeats. ``progress`` is told before a long stage (the game then gives the start another
     ``START_TIMEOUT_S``).
     """
-    frame = source.grab(0, 0.0, False)
+    frame = source.read(FrameRequest(0, 0.0, False))
     if frame is None:
-        reason = "; ".join(getattr(source, "warnings", tuple)()) or "it ended at once"
+        reason = "; ".join(warnings_and_end(source)) or "it ended at once"
         raise LiveError(f"the source delivered no frame set: {reason}")
     tracker.step(frame.images, 0.0)
     compile_loops = getattr(tracker, "compile_loops", None)  # (a test's stand-in tracker may lack it)

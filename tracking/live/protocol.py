@@ -12,15 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from calibration.errors import RehabError
+from tracking.sources import source_kinds
+# the source commands are the sources' own; the game sends them through the control pipe
+from tracking.sources.commands import LiveError, PatientInput, Reidentify, SetMotion, SetPatientInput
 
 
-class LiveError(RehabError):
-    """The live tracker cannot start or was asked for something it cannot do."""
-
-
-#: The built-in source kinds of :class:`SourceConfig`.
-SOURCE_KINDS = ("sim", "recording", "cameras")
 #: Clocks of the simulated patient (:attr:`SourceConfig.sim_clock`).
 SIM_CLOCKS = ("wall", "frames")
 
@@ -30,9 +26,10 @@ class SourceConfig:
     """What the tracker process measures.
 
     Attributes:
-        kind: ``"sim"``: the simulated patient rendered by virtual cameras; ``"recording"``: a
-            recording folder (``path``) played once in real time; ``"cameras"``: live cameras
-            (``devices`` and ``calibration``). A ``"module:function"`` path names a factory
+        kind: a registered source kind (:mod:`tracking.sources`): ``"sim"``: the simulated
+            patient rendered by virtual cameras; ``"recording"``: a recording folder (``path``)
+            played once in real time; ``"cameras"``: live cameras (``devices`` and
+            ``calibration``). A ``"module:function"`` path names a factory
             ``function(config) -> FrameSource`` to import in the tracker process (how tests
             inject a faulty source).
         rig: camera layout (content/rigs name or file) of the simulated patient.
@@ -94,34 +91,13 @@ class SourceConfig:
             raise LiveError(f"source fps {self.fps:g}: give a frame rate between 1 and 240")
         if self.sim_clock not in SIM_CLOCKS:
             raise LiveError(f"sim_clock {self.sim_clock!r}: give one of {', '.join(SIM_CLOCKS)}")
-        if self.kind not in SOURCE_KINDS and ":" not in self.kind:
-            raise LiveError(f"source kind {self.kind!r}: give one of {', '.join(SOURCE_KINDS)} or module:function")
+        if self.kind not in source_kinds() and ":" not in self.kind:
+            raise LiveError(f"source kind {self.kind!r}: give one of {', '.join(source_kinds())} or module:function")
         if self.kind == "recording" and not self.path:
             raise LiveError("source kind 'recording' needs path: the recording folder")
         if self.kind == "cameras" and not (self.devices and self.calibration):
             raise LiveError("source kind 'cameras' needs devices (e.g. ('0', '1')) and calibration: the calibration file")
         self.body_percentile_sex()
-
-
-@dataclass(frozen=True, slots=True)
-class PatientInput:
-    """Drives the interactive simulated patient (``SourceConfig.motion`` None).
-
-    Attributes:
-        side: the active arm, ``"right"`` or ``"left"``.
-        hand_target_m: where the active hand (the wrist centre) should go, world metres
-            (docs/INTERFACES.md frame); None: the arm keeps its pose relative to the trunk.
-        forearm_rotation_deg: forearm supination (+, palm up) / pronation (-) of the active arm;
-            0 = thumb up.
-        trunk_forward_lean_deg: + leaning forward.
-        trunk_lateral_lean_deg: + leaning to the patient's right.
-    """
-
-    side: str = "right"
-    hand_target_m: tuple[float, float, float] | None = None
-    forearm_rotation_deg: float = 0.0
-    trunk_forward_lean_deg: float = 0.0
-    trunk_lateral_lean_deg: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -218,18 +194,6 @@ class Stop:
 
 
 @dataclass(frozen=True, slots=True)
-class Reidentify:
-    """Identify the markers again (the patient takes the reference pose)."""
-
-
-@dataclass(frozen=True, slots=True)
-class SetMotion:
-    """Play a scripted motion in a loop (from its start), or None for the interactive patient."""
-
-    name: str | None
-
-
-@dataclass(frozen=True, slots=True)
 class SetColours:
     """Track with these marker colours from now on (taught in the camera monitor).
 
@@ -240,13 +204,6 @@ class SetColours:
 
     models: tuple
     label_hs: np.ndarray
-
-
-@dataclass(frozen=True, slots=True)
-class SetPatientInput:
-    """New input for the interactive patient."""
-
-    value: PatientInput
 
 
 @dataclass(frozen=True, slots=True)

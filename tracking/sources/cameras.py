@@ -27,14 +27,17 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Callable, Sequence
 
 import cv2
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.sources.base import SourceError, SourceFrameSet, black_image, camera_names
+from calibration.files import check_camera_count, load_calibration
+from tracking.markerset import MarkerSet, load_markerset
+from tracking.sources.base import FrameSet, InOrderSource, SourceError, black_image, camera_names, one_size
 
 log = logging.getLogger(__name__)
 
@@ -129,6 +132,38 @@ def open_capture(device: str, size_px: tuple[int, int] | None, fps: float | None
     return cap
 
 
+def calibrated_cameras(config) -> tuple[Camera, ...]:
+    """The calibration of a live source configuration, one camera per device (one-line error)."""
+    cameras = tuple(load_calibration(config.calibration))
+    check_camera_count(cameras, len(config.devices), "the source", kind="camera devices",
+                       calibration_name=str(config.calibration))
+    return cameras
+
+
+def geometry(config) -> tuple[tuple[Camera, ...], MarkerSet]:
+    """The calibrated cameras and the marker set of a live source configuration (no device opened)."""
+    config.check()
+    return calibrated_cameras(config), load_markerset(config.markerset)
+
+
+def calibration_file(config) -> Path | None:
+    """The cameras' calibration file."""
+    return Path(config.calibration) if config.calibration else None
+
+
+def resolve(config):
+    """``config`` with the calibrated image size, and no motion."""
+    config.check()
+    return replace(config, size=one_size(calibrated_cameras(config)), motion=None)
+
+
+def from_config(config) -> "CameraSource":
+    """The live cameras of a source configuration, for the live tracker's loop."""
+    # a read never blocks the loop longer than half a second (its heartbeat is watched)
+    return CameraSource(calibrated_cameras(config), config.devices, config.fps,
+                        stall_s=min(max(5.0 / config.fps, 0.25), 0.5), markerset=load_markerset(config.markerset))
+
+
 @dataclass(slots=True)
 class _Frame:
     seq: int
@@ -189,7 +224,7 @@ class _Reader:
         return self.frames[-1].stamp if self.frames else -np.inf
 
 
-class CameraSource:
+class CameraSource(InOrderSource):
     """Live cameras read by OpenCV (or any object with ``VideoCapture``'s ``read``/``release``).
 
     Args:
@@ -201,12 +236,16 @@ class CameraSource:
         stall_s: a camera silent this long counts as stopped (default: 5 periods, at least 0.25 s).
         open_timeout_s: how long :meth:`open` waits for every camera's first frame.
         clock: host clock for the time stamps (``time.perf_counter``).
+        markerset: the markers the tracker looks for (None: the images only, ``rehab record``).
     """
 
     def __init__(self, cameras: Sequence[Camera], devices: Sequence[str], fps: float, *,
                  capture_factory: Callable = open_capture, stall_s: float | None = None,
-                 open_timeout_s: float = 5.0, clock: Callable[[], float] = time.perf_counter) -> None:
+                 open_timeout_s: float = 5.0, clock: Callable[[], float] = time.perf_counter,
+                 markerset: MarkerSet | None = None) -> None:
+        super().__init__()
         self.cameras = tuple(cameras)
+        self.markerset = markerset
         self.devices = tuple(str(d) for d in devices)
         if len(self.devices) != len(self.cameras):
             raise SourceError(f"{len(self.devices)} camera devices ({', '.join(self.devices) or 'none'}) for "
@@ -311,7 +350,7 @@ class CameraSource:
     def _stopped(self, r: _Reader, now: float) -> bool:
         return bool(r.ended) or now - r.newest_stamp() > self.stall_s
 
-    def read(self) -> SourceFrameSet | None:
+    def read_next(self) -> FrameSet | None:
         """The next frame set (it waits for the cameras' next frames); None when every camera ended
         for good (its driver reports failure; a silent camera may come back)."""
         self.open()
@@ -360,7 +399,7 @@ class CameraSource:
                 images.append(f.image)
                 stamps[k] = f.stamp - self._t0
                 missing[k] = False
-        fs = SourceFrameSet(self._index, t_ref - self._t0, tuple(images), stamps, missing)
+        fs = FrameSet(self._index, t_ref - self._t0, tuple(images), stamps, missing)
         self._index += 1
         self._log_new_warnings()
         return fs

@@ -14,6 +14,7 @@ from tracking.errors import RecordingError
 from tracking.markerset import MarkerSet
 from tracking.io.recording import RecordingWriter
 from tracking.sources.base import FrameSource
+from tracking.io.trc import write_trc
 
 log = logging.getLogger(__name__)
 
@@ -106,8 +107,6 @@ def record(source: FrameSource, folder: str | Path, n_frames: int, markerset: Ma
     writer.write_meta(markerset.name, markerset.rgb, cameras=[c.name for c in cams],
                       missing_images={c.name: int(n) for c, n in zip(cams, missing)}, **(meta or {}))
     if truth and len(truth) == writer.n_frames:
-        from tracking.io.trc import write_trc
-
         write_trc(folder / "truth.trc", markerset.names, np.stack(truth) * 1000.0, source.fps)
     if stopped:
         log.warning("recording stopped after %d frame sets: %s", writer.n_frames, stopped)
