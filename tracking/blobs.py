@@ -436,14 +436,19 @@ def _luma_rows(gx, gy, lum, n, scale, cx, cy, r, s, coef, jac, res):
         dx, dy = gx[i] - cx, gy[i] - cy
         d = math.sqrt(dx * dx + dy * dy) + 1e-9
         z = (r - d) * inv_s
-        cov = 0.5 * (1.0 + math.erf(z * inv_sqrt2))
+        gauss = math.exp(-0.5 * z * z)
+        # erf(z / sqrt 2) by Abramowitz & Stegun 7.1.26 (|error| < 1.5e-7) on the exp the
+        # derivative needs anyway: a luma error of ~1e-5 levels, a third of the pixel's cost
+        t = 1.0 / (1.0 + 0.3275911 * abs(z) * inv_sqrt2)
+        half = 0.5 * t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429)))) * gauss
+        cov = 1.0 - half if z >= 0.0 else half
         bx, by = gx[i] * scale, gy[i] * scale
         sh = coef[0] + coef[1] * bx + coef[2] * by + coef[3] * bx * bx + coef[4] * bx * by + coef[5] * by * by
         bg = coef[6] + coef[7] * bx + coef[8] * by
         e = lum[i] - (cov * sh + (1.0 - cov) * bg)
         res[i] = e
         sse += e * e
-        dens = (sh - bg) * math.exp(-0.5 * z * z) * dens_scale
+        dens = (sh - bg) * gauss * dens_scale
         row = jac[i]
         row[0], row[1], row[2], row[3] = dens * dx / d, dens * dy / d, dens, -dens * z
         row[4], row[5], row[6], row[7], row[8], row[9] = cov, cov * bx, cov * by, cov * bx * bx, cov * bx * by, cov * by * by
