@@ -9,7 +9,7 @@ A marker set may also say how its markers are identified on the first frame (doc
 the reference pose the patient takes, structure rules of that pose written as coordinate
 orderings in the patient's frame (:class:`OrderRule`), and distance ranges of markers on one
 rigid body part (:class:`DistanceRule`), each with a plain-words message for the therapist
-(``identification:`` in the YAML; :mod:`tracking.identify` applies them).
+(``identification:`` in the YAML; :mod:`tracking.labelling.rules` applies them).
 """
 
 from __future__ import annotations

@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from calibration.camera import Camera
-from tracking.identify import IdentificationError, Identifier, Rays, patient_axes, single_view_rays
+from tracking.labelling.body_frame import patient_axes
+from tracking.labelling.rays import Rays, single_view_rays
+from tracking.labelling.rules import IdentificationError, Identifier
 from tracking.markerset import load_markerset
 from tracking.reconstruction import CameraObservations, RigGeometry, reconstruct
 from tracking.sim.body import BodyDimensions, BodyModel
@@ -157,9 +159,9 @@ def test_pair_slacks_by_colour_blocks_match_the_full_ones():
     p[[3, 17]] = np.nan  # stand-ins
     col = rng.integers(0, 4, 40)
     c_pat = (p - np.nanmean(p, axis=0)) @ patient_axes(0.3)
-    full = identifier._pair_slack(p, c_pat, False)
-    blocks = identifier._pair_blocks(p, c_pat, col)
-    for k, (i, j) in enumerate(identifier.pairs):
+    full = identifier.constraints.pair_slack(p, c_pat, False)
+    blocks = identifier.constraints.pair_blocks(p, c_pat, col)
+    for k, (i, j) in enumerate(identifier.constraints.pairs):
         rows = np.flatnonzero(col == MS.colour_index[i])
         cols = np.flatnonzero(col == MS.colour_index[j])
         np.testing.assert_allclose(blocks.block[k], full[k][np.ix_(rows, cols)], atol=1e-12)

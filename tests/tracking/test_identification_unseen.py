@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from tracking.identify import IdentificationError, Identifier
+from tracking.labelling.rules import IdentificationError, Identifier
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 from tracking.sim.identify_sweep import perturbed_poses, seat_clash, wrong_poses

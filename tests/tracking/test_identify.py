@@ -17,14 +17,15 @@ from calibration.errors import RehabError
 from content import content_path
 from tracking.colour.table import ColourTable
 from tracking.errors import ContentError
-from tracking.identify import (
+from tracking.labelling.rules import (
     IdentificationError,
     Identifier,
-    colour_word,
     identify,
     identify_over_frames,
     try_identify,
 )
+from tracking.labelling.search import bitsets
+from tracking.labelling.words import colour_word
 from tracking.markerset import DistanceRule, OrderRule, load_markerset
 from tracking.full_frame import FrameMeasurer
 from tracking.reconstruction import Points3D
@@ -369,13 +370,11 @@ def test_the_default_rig_measures_and_identifies_every_marker(measured):
 
 
 def test_bitsets_beyond_62_points_match_the_fast_path():
-    from tracking.identify import _bitsets
-
     rng = np.random.default_rng(0)
     ok = rng.random((3, 70, 70)) < 0.5
-    big = _bitsets(ok)
+    big = bitsets(ok)
     for k in range(3):
         for p in range(70):
             assert big[k][p] == sum(1 << q for q in range(70) if ok[k, p, q])
-    small = _bitsets(ok[:, :10, :10])
+    small = bitsets(ok[:, :10, :10])
     assert small[1][4] == sum(1 << q for q in range(10) if ok[1, 4, q])

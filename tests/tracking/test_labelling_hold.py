@@ -98,13 +98,13 @@ def test_more_markers_without_a_point_than_the_fit_places_get_the_counts_without
     webcam images): more markers without a point than the fit ever places, so the rules' search on
     the single-camera rays (5-15 s per frame set here, and no confident naming possible) is not run:
     the message gives the counts at once."""
-    import tracking.identify
+    import tracking.pipeline.naming
     from tracking.sim.population import track_draws
 
     def no_search(*args, **kwargs):
         raise AssertionError("the rules' search on rays ran")
 
-    monkeypatch.setattr(tracking.identify, "try_identify", no_search)
+    monkeypatch.setattr(tracking.pipeline.naming, "try_identify", no_search)
     (result,) = track_draws([100037], size_px=(640, 480), fps=15.0, seconds=0.6)
     assert result.layout == "front4:2" and not result.one_colour
     assert math.isnan(result.identified_s)

@@ -8,7 +8,10 @@ could be within reach of the best and reports the best with a confidence: the ma
 second best. A labelling is used only when it is confident. The per-frame self-checks on the
 named markers (:mod:`.checks`) use the pose-independent parts of the same model.
 
-The body parts each marker stands for (:mod:`.roles`) come from the marker set's YAML.
+The body parts each marker stands for (:mod:`.roles`) come from the marker set's YAML. Where
+the YAML names no roles, the marker set's ordering rules name the markers (:mod:`.rules`, with
+:mod:`.constraints`, :mod:`.search`, :mod:`.ray_naming`, :mod:`.explain`); both use the
+single-camera rays (:mod:`.rays`) and the patient's frame (:mod:`.body_frame`).
 """
 
 from tracking.labelling.fit import Labeller, Labelling

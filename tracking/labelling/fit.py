@@ -13,12 +13,12 @@ is >= 0 and a part's cost is a lower bound of the whole:
    soon as a partial sum passes ``reach``.
 
 Markers without a point that a single camera sees lie on the rays of its blobs
-(:func:`tracking.identify.single_view_rays`): the labellings found with them unseen (a lower
+(:func:`tracking.labelling.rays.single_view_rays`): the labellings found with them unseen (a lower
 bound of their score) are then placed on the rays, best first (:meth:`Labeller._on_rays`), and a
 ray that no marker explains puts a labelling beyond reach.
 
 The patient's frame (+y up, their right +x) comes from the horizontal spread of the points
-(:func:`tracking.identify.yaw_from_points`), then from the best labelling's shoulders and hips;
+(:func:`tracking.labelling.body_frame.yaw_from_points`), then from the best labelling's shoulders and hips;
 the search is repeated in that frame when it turned more than a degree.
 
 The labelling is *confident* when the best scores at most ``max_score`` and the second best at
@@ -31,11 +31,15 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from itertools import permutations, product
 
 import numpy as np
 
+from tracking.errors import ContentError
 from tracking.labelling import prior as bm
+from tracking.labelling.body_frame import patient_axes, yaw_from_points
+from tracking.labelling.rays import sample_ray
 from tracking.labelling.roles import ArmRoles, BodyRoles
 
 log = logging.getLogger(__name__)
@@ -71,7 +75,7 @@ class Labelling:
         margin: every labelling that names a labelled marker otherwise scores at least this much
             more than the best (the search looks no further than ``min_margin``).
         confident: score <= max_score and margin >= min_margin.
-        yaw_deg: the patient frame's yaw (as :class:`tracking.identify.Identification`).
+        yaw_deg: the patient frame's yaw (as :class:`tracking.labelling.rules.Identification`).
         worst: (term, marker side or "", value) of the best labelling's largest cost, or None.
         terms: term name (with the side, e.g. "right humeral_rotation") -> value, of the best.
         ambiguous: markers that the labellings within the margin of the best name differently.
@@ -148,12 +152,11 @@ def _key(rows: np.ndarray, ball: np.ndarray, kind: np.ndarray) -> np.ndarray:
 def _ray_samples(pts: np.ndarray, short: np.ndarray, rays, radius_m: float
                  ) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
     """The candidate places of the balls seen by one camera: each ray of a colour short of
-    points sampled over the range its blob's size gives (:func:`tracking.identify.sample_ray`).
+    points sampled over the range its blob's size gives (:func:`tracking.labelling.rays.sample_ray`).
 
     Returns:
         (each kept ray's (S, 3) samples, (R,) each kept ray's colour, (R, 3) its direction).
     """
-    from tracking.identify import sample_ray
 
     out, colours, dirs = [], [], []
     if rays is not None and len(pts):
@@ -207,9 +210,7 @@ class Labeller:
         Raises:
             ContentError: the marker set's YAML does not name the body model's landmarks.
         """
-        from dataclasses import replace
 
-        from tracking.errors import ContentError
 
         roles = BodyRoles.of(markerset)
         if roles is None:
@@ -226,7 +227,7 @@ class Labeller:
     def takes(self, colour: np.ndarray, rays=None) -> bool:
         """Whether :meth:`label` searches these points at all: no colour with more points than
         markers, at most ``max_on_rays`` markers without a point, of them at most ``max_unseen``
-        without a ray of their colour (:func:`tracking.identify.single_view_rays`) either, and at
+        without a ray of their colour (:func:`tracking.labelling.rays.single_view_rays`) either, and at
         most ``_MAX_WAYS`` ways to choose which markers of a colour are the ones without a point
         (one colour: at most 3 of 14; the search's cost grows with them)."""
         short = self._short(np.asarray(colour, dtype=np.int64).reshape(-1))
@@ -244,11 +245,10 @@ class Labeller:
         Args:
             p_world_m: (P, 3) float64 points, world metres (rows with NaN are left out).
             colour: (P,) palette index of each point.
-            rays: the blobs no point uses (:class:`tracking.identify.Rays`), or None: a marker
+            rays: the blobs no point uses (:class:`tracking.labelling.rays.Rays`), or None: a marker
                 without a point of a colour with rays lies on one of them, within the range its
                 blob's size gives (the rest of them are unseen, at most ``max_unseen``).
         """
-        from tracking.identify import yaw_from_points
 
         p_world_m = np.asarray(p_world_m, dtype=np.float64).reshape(-1, 3)
         colour = np.asarray(colour, dtype=np.int64).reshape(-1)
@@ -331,7 +331,6 @@ class Labeller:
 
     def score_of(self, p_world_m: np.ndarray, index: np.ndarray, yaw_deg: float = 0.0) -> float:
         """The body model's score of a given labelling (index -1: unseen) in the frame of ``yaw_deg``."""
-        from tracking.identify import patient_axes
 
         index = np.asarray(index)
         p = np.where((index >= 0)[:, None], np.asarray(p_world_m, dtype=np.float64)[np.maximum(index, 0)], np.nan)
@@ -394,7 +393,6 @@ class Labeller:
         (:meth:`_place`), labelling by labelling in the order of their score without them (its
         terms that need them cost nothing: a lower bound), until no other can come within the
         margin of the best."""
-        from tracking.identify import patient_axes
 
         axes = patient_axes(math.radians(yaw_deg))
         centre = pts.mean(axis=0)
@@ -479,7 +477,6 @@ class Labeller:
         then every pair around the best few). Returns (score, positions) or None. With more than
         ``_MAX_ASSIGN`` assignments: ``lower`` (its score without them) and the positions
         without them, so that it counts as near as it might be."""
-        from itertools import permutations, product
 
         by_colour: dict[int, list[int]] = {}
         for m in without.tolist():

@@ -1,6 +1,6 @@
 """Identification: the markers named on the reference pose, once the patient holds it still, by the
 labelling's fit (:mod:`tracking.labelling`), or by the marker set's rules alone
-(:mod:`tracking.identify`) where its YAML does not name the body model's landmarks."""
+(:mod:`tracking.labelling.rules`) where its YAML does not name the body model's landmarks."""
 
 from __future__ import annotations
 
@@ -10,8 +10,9 @@ from typing import Sequence
 import numpy as np
 
 from calibration.camera import Camera
-from tracking.identify import IdentificationError, Identifier, single_view_rays, try_identify
 from tracking.labelling import BodyRoles, Labeller
+from tracking.labelling.rays import single_view_rays
+from tracking.labelling.rules import IdentificationError, Identifier, try_identify
 from tracking.labelling.still import Snapshot, Stillness
 from tracking.markerset import MarkerSet
 from tracking.pipeline.params import TrackerParams

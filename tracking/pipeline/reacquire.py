@@ -7,7 +7,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tracking.identify import Identifier
+from tracking.labelling.rules import Identifier
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.state import MarkerMemory, Setup
 from tracking.reconstruction import CameraObservations, Points3D

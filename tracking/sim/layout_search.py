@@ -96,7 +96,7 @@ def layout_cost(vis: np.ndarray, *, whole: float = 0.9, part: float = 0.8, max_u
         vis: (L, K, cases, markers) visible fraction of each marker from each of the K cameras of
             L layouts.
         max_unseen: markers per case that identification may leave unseen
-            (:meth:`tracking.identify.Identifier.identify_with_unseen`).
+            (:meth:`tracking.labelling.rules.Identifier.identify_with_unseen`).
 
     Returns:
         (L,) int cases with more than ``max_unseen`` markers not seen; (L,) int (case, marker)

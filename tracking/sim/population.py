@@ -26,6 +26,7 @@ from typing import Iterable
 
 import numpy as np
 
+from tracking.labelling.rays import RAY_FAR, RAY_FAR_WHOLE, RAY_NEAR, RAY_NEAR_WHOLE, Rays
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose
 from tracking.geometry.rotations import axis_angle_matrix
@@ -148,13 +149,11 @@ class LabelResult:
 
 def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Generator, *, noise_m: float = 0.0015,
                        whole_share: float = 0.5):
-    """:class:`tracking.identify.Rays` of balls at ``p_m`` seen by one camera each: a camera 1.7-2.6 m
+    """:class:`tracking.labelling.rays.Rays` of balls at ``p_m`` seen by one camera each: a camera 1.7-2.6 m
     away in front of or beside the patient, 1.3-2.5 m high; the ray through the ball's centre
     (``noise_m`` off it), its range the multiples of the blob-size distance of
-    :func:`tracking.identify.single_view_rays` (a blob round with probability ``whole_share``,
+    :func:`tracking.labelling.rays.single_view_rays` (a blob round with probability ``whole_share``,
     the distance from its size within 3 %; else partly hidden, 0.7-0.95 of the ball's size)."""
-    from tracking.identify import _RAY_FAR, _RAY_FAR_WHOLE, _RAY_NEAR, _RAY_NEAR_WHOLE, Rays
-
     n = len(p_m)
     az = rng.uniform(-100.0, 100.0, n)
     dist, height = rng.uniform(1.7, 2.6, n), rng.uniform(1.3, 2.5, n)
@@ -164,7 +163,7 @@ def single_camera_rays(p_m: np.ndarray, colour: np.ndarray, rng: np.random.Gener
     true = np.linalg.norm(d, axis=1)
     whole = rng.random(n) < whole_share
     seen = true * np.where(whole, rng.uniform(0.97, 1.03, n), 1.0 / rng.uniform(0.7, 0.95, n))
-    rng_m = np.stack([np.where(whole, _RAY_NEAR_WHOLE, _RAY_NEAR) * seen, np.where(whole, _RAY_FAR_WHOLE, _RAY_FAR) * seen],
+    rng_m = np.stack([np.where(whole, RAY_NEAR_WHOLE, RAY_NEAR) * seen, np.where(whole, RAY_FAR_WHOLE, RAY_FAR) * seen],
                      axis=1)
     return Rays(origin, d / true[:, None], np.asarray(colour, np.int64), rng_m, whole)
 
