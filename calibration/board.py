@@ -187,10 +187,12 @@ def _find_corners(gray: np.ndarray, board: Checkerboard) -> np.ndarray | None:
 
     The classic detector with sub-pixel refinement first (fast, ~0.06-0.1 px on sharp images);
     the sector-based detector (``findChessboardCornersSB``, slower, more tolerant of blur and
-    strong perspective) when it fails.
+    strong perspective) when it fails. The classic one starts with OpenCV's quick look for a
+    board (``CALIB_CB_FAST_CHECK``): without it, an image it cannot read costs its whole search
+    (0.12 s per image with OpenCV 4.8) before the sector-based detector runs anyway.
     """
     pattern = (board.cols, board.rows)
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
     found, corners = cv2.findChessboardCorners(gray, pattern, flags=flags)
     if found and corners is not None and len(corners) == board.n_corners:
         grid = corners.reshape(board.rows, board.cols, 2)
