@@ -166,6 +166,7 @@ class _Slow(_Broken):
         return self.inner.read(request)
 
 
+@pytest.mark.realtime
 @pytest.mark.parametrize("paced_by_clock", [True, False])
 def test_a_late_loop_drops_frame_sets_of_a_source_tied_to_the_clock(source, blocks, paced_by_clock):
     """Issue 25: on a busy machine the simulated patient played in slow motion (one frame period of

@@ -161,6 +161,7 @@ def test_a_killed_process_is_replaced_within_2_s_without_blocking(live):
     assert _wait(lambda: live.status() and not os.path.exists(f"/proc/{old}"), 10.0, 0.05), "not reaped"
 
 
+@pytest.mark.realtime
 def test_a_hung_process_is_replaced(live):
     assert _wait(lambda: live.status() and live.standby_ready, 60.0, 0.1), "no standby process"
     old = live.pid

@@ -20,6 +20,9 @@ pytest.importorskip("pythonosc")
 from pythonosc.dispatcher import Dispatcher  # noqa: E402
 from pythonosc.osc_server import ThreadingOSCUDPServer  # noqa: E402
 
+# rates and "no waiting" are checked against the wall clock: with no other test beside them
+pytestmark = pytest.mark.realtime
+
 NAMES = ("MB", "MP", "MRS")
 
 

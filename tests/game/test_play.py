@@ -68,6 +68,7 @@ def test_headless_play_saves_the_avatar(headless, tmp_path, capsys):
     assert multiprocessing.active_children() == []
 
 
+@pytest.mark.realtime
 def test_the_mouse_moves_the_hand_and_killing_the_tracker_keeps_the_window_drawing(headless, tmp_path):
     from tracking.live import LiveTracker, SourceConfig
 

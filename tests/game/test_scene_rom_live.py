@@ -30,6 +30,7 @@ def screen(open_headless):
     return open_headless((640, 360))
 
 
+@pytest.mark.realtime
 def test_rom_scene_on_the_tracker_process_stores_the_maximum_within_3_degrees(screen, tmp_path):
     from tracking.live import LiveTracker, SourceConfig
 
