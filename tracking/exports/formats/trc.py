@@ -21,4 +21,4 @@ class Trc(ExportFormat):
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
         # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
         trc_io.write_trc(path, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
-                         times_s=run.times_s)
+                         times_s=run.times_s, file_name=Path(asked).name)
