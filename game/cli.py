@@ -15,7 +15,7 @@ from pathlib import Path
 from calibration.errors import RehabError
 from game.cli_options import (COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, check_outputs, handle_broken_pipe,
                               number, size_px)
-from tracking import exports
+from tracking import exports  # rehab track's output options are made from the export formats (no pygame, no GL)
 
 log = logging.getLogger("rehab")
 
