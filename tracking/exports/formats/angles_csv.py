@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import tracking.io.csv_tables as tables_io
 from tracking.exports.registry import ExportFormat, register
 from tracking.exports.tracked import TrackedRecording
 
@@ -23,4 +22,8 @@ class AnglesCsv(ExportFormat):
     rank = 30
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
+        # lazy: the writer (and what it needs) loads when this file is written, not at every
+        # command's start: `rehab --help` reads the registry
+        import tracking.io.csv_tables as tables_io
+
         tables_io.write_angles_csv(path, run.frames, run.times_s, run.angles_deg)

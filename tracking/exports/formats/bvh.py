@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 
-import tracking.io.bvh as bvh_io
 from tracking.exports.registry import ExportFormat, register
 from tracking.exports.tracked import TrackedRecording
 from tracking.marker_status import MarkerStatus
@@ -25,6 +24,10 @@ class Bvh(ExportFormat):
     rank = 60
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
+        # lazy: the writer's scipy (0.2-0.4 s) loads when a BVH is written, not at every command's
+        # start (`rehab --help` reads this registry)
+        import tracking.io.bvh as bvh_io
+
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
         skeleton = bvh_io.BvhSkeleton.from_markers(run.names, measured_mm)
         bvh_io.write_bvh(path, run.times_s, run.angles_deg, run.rate_hz, skeleton)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import tracking.io.detections as detections_io
 from tracking.exports.registry import ExportFormat, register
 from tracking.exports.tracked import TrackedRecording
 
@@ -20,5 +19,9 @@ class Detections(ExportFormat):
     rank = 70
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
+        # lazy: the writer (and what it needs) loads when this file is written, not at every
+        # command's start: `rehab --help` reads the registry
+        import tracking.io.detections as detections_io
+
         detections_io.write_detections_csv(path, run.frames, run.times_s, [c.name for c in run.cameras], run.names,
                                            run.uv_px)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import tracking.io.csv_tables as tables_io
 from tracking.exports.registry import ExportFormat, register
 from tracking.exports.tracked import TrackedRecording
 
@@ -20,4 +19,8 @@ class StatusCsv(ExportFormat):
     rank = 20
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
+        # lazy: the writer (and what it needs) loads when this file is written, not at every
+        # command's start: `rehab --help` reads the registry
+        import tracking.io.csv_tables as tables_io
+
         tables_io.write_status_csv(path, run.frames, run.times_s, run.names, run.positions_mm, run.status)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import tracking.io.trc as trc_io  # through the module: a test replaces the writer
 from tracking.exports.registry import ExportFormat, register
 from tracking.exports.tracked import TrackedRecording
 
@@ -19,6 +18,10 @@ class Trc(ExportFormat):
     rank = 10
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
+        # lazy: the writer (and what it needs) loads when this file is written, not at every
+        # command's start: `rehab --help` reads the registry
+        import tracking.io.trc as trc_io
+
         # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
         trc_io.write_trc(path, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
                          times_s=run.times_s, file_name=Path(asked).name)
