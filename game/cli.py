@@ -15,6 +15,7 @@ from pathlib import Path
 from calibration.errors import RehabError
 from game.cli_options import (COUNT, FPS, NOISE, SECONDS, SEED, OneLineParser, check_outputs, handle_broken_pipe,
                               number, size_px)
+from tracking import exports  # rehab track's output options are made from the export formats (no pygame, no GL)
 
 log = logging.getLogger("rehab")
 
@@ -139,16 +140,8 @@ def _add_track(sub) -> None:
                         "(--marker-color R,G,B R,G,B ... or the flag repeated)")
     p.add_argument("--points", type=Path, default=None,
                    help="write unlabelled 3D points: frame,time,x_mm,y_mm,z_mm,n_cameras,reproj_px")
-    p.add_argument("--out", type=Path, default=None, help="labelled markers as an OpenSim TRC file (mm)")
-    p.add_argument("--status", type=Path, default=None,
-                   help="per-marker status CSV: frame,time,marker,x_mm,y_mm,z_mm,status")
-    p.add_argument("--angles", type=Path, default=None, help="joint angles CSV (docs/JOINT_ANGLES.md)")
-    p.add_argument("--c3d", type=Path, default=None,
-                   help="labelled markers and joint angles as a C3D file (residual > 0 measured, 0 estimated, -1 lost)")
-    p.add_argument("--mot", type=Path, default=None, help="joint angles as an OpenSim motion file (.mot)")
-    p.add_argument("--bvh", type=Path, default=None, help="the avatar's skeleton driven by the joint angles (.bvh)")
-    p.add_argument("--detections", type=Path, default=None,
-                   help="2D marker centroids per camera CSV: frame,time,camera,marker,u_px,v_px")
+    for fmt in exports.formats():   # one option per export format (tracking/exports/formats/)
+        p.add_argument(*fmt.options, dest=fmt.dest, type=Path, default=None, help=fmt.help)
     p.add_argument("--colours", type=Path, default=None, help="learned colour file from `rehab colour learn`")
     p.add_argument("--adapt-colours", action="store_true", help="adapt the colour table as the lighting drifts")
     p.add_argument("--sync", choices=("auto", "stamps", "none"), default="auto",
@@ -167,7 +160,8 @@ def _track_folder(args) -> Path:
     if colours and "," not in colours[-1]:
         args.marker_color = colours[:-1] or None
         return Path(colours[-1])
-    raise RehabError("give the recording folder: rehab track RECORDING --out markers.trc")
+    first = exports.formats()[0]
+    raise RehabError(f"give the recording folder: rehab track RECORDING {first.option} {first.example}")
 
 
 def _cmd_track(args) -> int:
@@ -175,28 +169,23 @@ def _cmd_track(args) -> int:
 
     args.recording = _track_folder(args)
 
-    labelled = args.out or args.status or args.angles or args.c3d or args.mot or args.bvh or args.detections
+    formats = exports.formats()
+    outputs = {fmt.name: getattr(args, fmt.dest) for fmt in formats}
+    labelled = any(outputs.values())
     if args.points and labelled:
         raise RehabError("--points (unlabelled full-frame points) cannot be combined with the labelled outputs: run them separately")
     if not (args.points or labelled):
-        raise RehabError("nothing to write: give --out markers.trc (and/or --status, --angles, --c3d, --mot, --bvh, "
-                         "--detections, --points)")
+        others = ", ".join([fmt.option for fmt in formats[1:]] + ["--points"])
+        raise RehabError(f"nothing to write: give {formats[0].option} {formats[0].example} (and/or {others})")
     # before the work, not after minutes of tracking
-    check_outputs({"--out": args.out, "--status": args.status, "--angles": args.angles, "--c3d": args.c3d,
-                   "--mot": args.mot, "--bvh": args.bvh, "--detections": args.detections, "--points": args.points})
+    check_outputs({**{fmt.option: outputs[fmt.name] for fmt in formats}, "--points": args.points})
     report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,
         markerset=args.markerset,
         marker_colours=args.marker_color,
         points_csv=args.points,
-        trc=args.out,
-        status_csv=args.status,
-        angles_csv=args.angles,
-        c3d=args.c3d,
-        mot=args.mot,
-        bvh=args.bvh,
-        detections=args.detections,
+        **outputs,
         colours=args.colours,
         adapt_colours=args.adapt_colours,
         progress=True,

@@ -51,8 +51,8 @@ def _plain(names: list[str]) -> list[str]:
     # the application's rendering: the avatar and the scenes take their GL helpers from
     # tracking.geometry, never from the simulator
     (["game.app", "game.avatar.*", "game.scenes.*", "game.gfx.*"], ("tracking.sim",)),
-    # pure packages: formats, colour and geometry
-    (["tracking.io.*", "tracking.colour.*", "tracking.geometry.*"],
+    # pure packages: formats (and the export formats' plug-ins), colour and geometry
+    (["tracking.io.*", "tracking.exports.*", "tracking.colour.*", "tracking.geometry.*"],
      ("tracking.sim", "tracking.drivers", "tracking.live", "game", "pygame", "moderngl")),
 ], ids=["per-frame path", "game rendering", "pure packages"])
 def test_group_does_not_load(group, forbidden):

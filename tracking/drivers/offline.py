@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
 
@@ -13,20 +12,15 @@ import numpy as np
 from tqdm import tqdm
 
 from calibration.atomic import written_via_temp
+from tracking import exports
 from tracking.angles import ANGLE_COLUMNS
-# the file writers through their modules (a test replaces one to fail half-way through a file)
-import tracking.io.bvh as bvh_format
-import tracking.io.c3d as c3d_format
-import tracking.io.detections as detections_format
-import tracking.io.opensim_mot as mot_format
-import tracking.io.csv_tables as tables_format
-import tracking.io.trc as trc_format
 from tracking.clock_sync import fit_clocks, skew_evidence
 from tracking.colour.adapt import ColourAdapter, calibration_colours, read_colours, table_from_colours
 from tracking.colour.table import ColourTable
 from tracking.markerset import MarkerSet
 from tracking.full_frame import FrameMeasurer
 from tracking.errors import RecordingError
+from tracking.exports import TrackedRecording
 from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker, TrackingState
 from tracking.sources.recording import RecordingSource
@@ -41,34 +35,26 @@ def track_recording(
     markerset: str | None = None,
     marker_colours: Sequence[str] | None = None,
     points_csv: Path | None = None,
-    trc: Path | None = None,
-    status_csv: Path | None = None,
-    angles_csv: Path | None = None,
-    c3d: Path | None = None,
-    mot: Path | None = None,
-    bvh: Path | None = None,
-    detections: Path | None = None,
     colours: Path | None = None,
     adapt_colours: bool = False,
     progress: bool = False,
     sync: str = "auto",
+    **outputs: Path | None,
 ) -> str:
     """Track a recording frame by frame and write what was asked. Returns a summary line.
 
-    ``points_csv`` gets the unlabelled full-frame points; ``trc``, ``status_csv``, ``angles_csv``,
-    ``c3d``, ``mot`` (OpenSim joint angles), ``bvh`` (the avatar's skeleton) and ``detections``
-    (2D centroids per camera) the labelled markers from the tracker (the online algorithm, no
-    look-ahead).
+    ``points_csv`` gets the unlabelled full-frame points; ``outputs`` (an export format's name ->
+    its file, :func:`write_results`: ``trc``, ``status_csv``, ``angles_csv``, ``c3d``, ``mot``
+    (OpenSim joint angles), ``bvh`` (the avatar's skeleton), ``detections`` (2D centroids per
+    camera), ...) the labelled markers from the tracker (the online algorithm, no look-ahead).
     ``colours`` is a learned colour file (``rehab colour learn``) used instead of the nominal
     table; without it, the colours learnt into the calibration file (``rehab calibrate colour``)
     are used when it holds them; ``adapt_colours`` lets the tracker's table follow the lighting
     (docs/COLOUR.md).
     """
-    if trc or status_csv or angles_csv or c3d or mot or bvh or detections:
+    if _asked_files(outputs):   # (an unknown format fails here, before the work)
         return _track_labelled(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
-                               points_csv=points_csv, trc=trc, status_csv=status_csv, angles_csv=angles_csv,
-                               c3d=c3d, mot=mot, bvh=bvh, detections=detections, colours=colours,
-                               adapt_colours=adapt_colours, progress=progress, sync=sync)
+                               colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync, **outputs)
     with RecordingSource(folder, calibration, markerset=markerset, marker_colours=marker_colours, sync="none") as rec:
         ms = rec.markerset
         table = _colour_table(ms, learnt_colours(rec.calibration_path, ms, colours))
@@ -121,47 +107,11 @@ def _colour_table(ms: MarkerSet, learnt) -> ColourTable:
     return table_from_colours(*learnt)
 
 
-@dataclass(frozen=True, slots=True, eq=False)  # arrays: no elementwise __eq__
-class TrackedRecording:
-    """What the tracker made of a recording, frame by frame (T frame sets, M markers, C cameras).
-
-    Attributes:
-        names: the M marker names; markerset: the marker set's name.
-        cameras: the C cameras.
-        frames: (T,) recording frame indices (0 = first image); times_s: (T,) seconds.
-        rate_hz: the recording's frame rate.
-        positions_mm: (T, M, 3) world millimetres, NaN where lost.
-        status: (T, M) :class:`~tracking.marker_status.MarkerStatus` codes.
-        angles_deg: angle name -> (T,) degrees (the tracker's, NaN where undefined).
-        uv_px: (T, M, C, 2) centroids each position was triangulated from, NaN where unused.
-        identified: (T,) bool, the frame sets where the tracker identified the markers (the first
-            TRACKING frame set after WAITING).
-        subject: meta.yaml's ``subject`` (a pseudonymous ID), or None.
-        timing: one line on the images' instants used (time stamps, rolling shutter), or "".
-    """
-
-    names: tuple[str, ...]
-    markerset: str
-    cameras: tuple
-    frames: np.ndarray
-    times_s: np.ndarray
-    rate_hz: float
-    positions_mm: np.ndarray
-    status: np.ndarray
-    angles_deg: dict[str, np.ndarray]
-    uv_px: np.ndarray
-    identified: np.ndarray
-    subject: str | None = None
-    timing: str = ""
-
-
-def _track_labelled(folder, *, calibration, markerset, marker_colours, points_csv, trc, status_csv, angles_csv,
-                    c3d, mot=None, bvh=None, detections=None, colours=None, adapt_colours=False,
-                    progress=False, sync="auto") -> str:
+def _track_labelled(folder, *, calibration, markerset, marker_colours, colours=None, adapt_colours=False,
+                    progress=False, sync="auto", **outputs) -> str:
     run = track_frames_of(folder, calibration=calibration, markerset=markerset, marker_colours=marker_colours,
                           colours=colours, adapt_colours=adapt_colours, progress=progress, sync=sync)
-    write_results(run, trc=trc, status_csv=status_csv, angles_csv=angles_csv, c3d=c3d, mot=mot, bvh=bvh,
-                  detections=detections)
+    write_results(run, **outputs)
     st = run.status
     share = {s.name.lower(): float(np.mean(st == s)) for s in MarkerStatus}
     return (
@@ -273,50 +223,27 @@ def track_frames_of(folder, *, calibration=None, markerset=None, marker_colours=
     )
 
 
-def write_results(run: TrackedRecording, *, trc=None, status_csv=None, angles_csv=None, c3d=None, mot=None,
-                  bvh=None, detections=None) -> None:
-    """Write the asked result files of a tracked recording (docs/FILES.md)."""
-    for path in (trc, status_csv, angles_csv, c3d, mot, bvh, detections):
-        if path:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
+def write_results(run: TrackedRecording, **paths: str | Path | None) -> None:
+    """Write the asked result files of a tracked recording (docs/FILES.md).
+
+    ``paths``: an export format's name (:mod:`tracking.exports`: ``trc``, ``status_csv``,
+    ``angles_csv``, ``c3d``, ``mot``, ``bvh``, ``detections``, ...) -> its file (None: not asked),
+    written in the formats' order.
+    """
+    asked = _asked_files(paths)
+    for _, path in asked:
+        path.parent.mkdir(parents=True, exist_ok=True)
     # each file through a temporary file beside it, renamed when whole: a kill or a failure
     # half-way never leaves half a file under the asked name
-    if trc:
-        with written_via_temp(trc) as tmp:
-            # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
-            trc_format.write_trc(tmp, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
-                                 times_s=run.times_s)
-    if status_csv:
-        with written_via_temp(status_csv) as tmp:
-            tables_format.write_status_csv(tmp, run.frames, run.times_s, run.names, run.positions_mm, run.status)
-    if angles_csv:
-        # the tracker's angles: those of the positions (as `rehab angles` on the TRC gives), but
-        # without a supination whose elbow axis is a guess
-        with written_via_temp(angles_csv) as tmp:
-            tables_format.write_angles_csv(tmp, run.frames, run.times_s, run.angles_deg)
-    if c3d:
-        with written_via_temp(c3d) as tmp:
-            _write_c3d(tmp, run)
-    if mot:
-        with written_via_temp(mot) as tmp:
-            mot_format.write_mot(tmp, run.times_s, run.angles_deg, name=Path(mot).stem)
-    if bvh:
-        # segment lengths from the measured positions only (an estimate must not teach them)
-        measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
-        with written_via_temp(bvh) as tmp:
-            skeleton = bvh_format.BvhSkeleton.from_markers(run.names, measured_mm)
-            bvh_format.write_bvh(tmp, run.times_s, run.angles_deg, run.rate_hz, skeleton)
-    if detections:
-        with written_via_temp(detections) as tmp:
-            detections_format.write_detections_csv(tmp, run.frames, run.times_s, [c.name for c in run.cameras],
-                                                   run.names, run.uv_px)
+    for fmt, path in asked:
+        with written_via_temp(path) as tmp:
+            fmt.write(run, tmp, asked=path)
 
 
-def _write_c3d(path, run: TrackedRecording) -> None:
-    residuals = detections_format.reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
-    events = [c3d_format.C3dEvent("Identified", float(t - run.times_s[0]), "General",
-                                  "markers identified in the reference pose; tracking starts")
-              for t in run.times_s[run.identified]]
-    c3d_format.write_c3d(path, run.names, run.positions_mm, run.rate_hz, residuals=residuals, status=run.status,
-                         camera_masks=detections_format.seen_by(run.uv_px), angles_deg=run.angles_deg,
-                         subject=run.subject, markerset=run.markerset, events=events)
+def _asked_files(paths) -> list[tuple[exports.ExportFormat, Path]]:
+    """(format, file) of each asked file in the formats' order; a TypeError, as for any unknown
+    keyword, when ``paths`` names a format that is not registered."""
+    unknown = sorted(set(paths) - set(exports.names()))
+    if unknown:
+        raise TypeError(f"unexpected keyword argument {unknown[0]!r}: export formats are {', '.join(exports.names())}")
+    return [(fmt, Path(paths[fmt.name])) for fmt in exports.formats() if paths.get(fmt.name)]

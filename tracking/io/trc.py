@@ -91,11 +91,12 @@ def write_trc(
     *,
     frame_numbers: np.ndarray | None = None,
     times_s: np.ndarray | None = None,
+    file_name: str | None = None,
 ) -> None:
     """Write marker trajectories as an OpenSim TRC file (Units mm).
 
     Args:
-        path: file to write; its name goes in the first header line.
+        path: file to write; its name goes in the first header line unless ``file_name`` is given.
         names: the M marker names (unique; no tabs or line breaks).
         positions_mm: (T, M, 3) float positions in millimetres, world frame; NaN = no position
             (a marker with any NaN coordinate is written as three empty cells).
@@ -103,6 +104,8 @@ def write_trc(
         frame_numbers: (T,) integer ``Frame#`` values; default ``1 .. T`` (OpenSim counts from 1:
             give a recording's frame indices plus one).
         times_s: (T,) times in seconds; default ``(frame_numbers - frame_numbers[0]) / rate_hz``.
+        file_name: the name for the first header line (a file written through a temporary file
+            names the file it becomes).
     """
     path = Path(path)
     names = [str(n) for n in names]
@@ -129,7 +132,7 @@ def write_trc(
     rate = _format_rate(rate_hz)
     first = int(frames[0]) if n_frames else 1
     header = [
-        f"PathFileType\t4\t(X/Y/Z)\t{path.name}",
+        f"PathFileType\t4\t(X/Y/Z)\t{path.name if file_name is None else file_name}",
         "\t".join(_METADATA_KEYS),
         "\t".join([rate, rate, str(n_frames), str(n_markers), "mm", rate, str(first), str(n_frames)]),
         "Frame#\tTime\t" + "".join(f"{name}\t\t\t" for name in names),
