@@ -28,7 +28,6 @@ import math
 import os
 import re
 import sqlite3
-import sys
 import uuid
 from dataclasses import asdict, dataclass, fields
 from datetime import datetime, timedelta, timezone
@@ -37,9 +36,10 @@ from typing import Any, Iterable, Sequence
 
 from calibration.errors import RehabError
 from game.db.dialect import SQLITE, Dialect
-from game.db.location import ServerUrl, db_location
+from game.db.location import ServerUrl, db_location, default_db_path
 from game.db.migrations import LATEST_VERSION, STEPS, schema_v1_sql
 from game.db.private import DIR_MODE, FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
+from game.rom.spec import available_rom_tests
 
 log = logging.getLogger(__name__)
 
@@ -70,21 +70,6 @@ _TABLES = ("schema_version", "patients", "sessions", "rom_results", "exercise_re
            "audit")
 _TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES[:6], 4: _TABLES}
 _UTC = re.compile(r"^\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?Z$")
-
-
-def default_db_path() -> Path:
-    """The database in the user's data directory.
-
-    Linux and others: ``$XDG_DATA_HOME/rehab/rehab.sqlite3`` (default ``~/.local/share``);
-    Windows: ``%LOCALAPPDATA%\\rehab\\rehab.sqlite3``; macOS: ``~/Library/Application Support/rehab/``.
-    """
-    if sys.platform.startswith("win"):
-        base = Path(os.environ.get("LOCALAPPDATA") or os.environ.get("APPDATA") or Path.home() / "AppData" / "Local")
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Application Support"
-    else:
-        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
-    return base / "rehab" / "rehab.sqlite3"
 
 
 def utc_now(ago_s: float = 0.0) -> str:
@@ -369,8 +354,6 @@ def check_result_values(table: str, values: dict, where: str) -> dict:
         raise DatabaseError(f"{where}: a result has no uid")
     _utc_text(v.get("recorded_utc"), "recorded_utc", where)
     if table == "rom_results":
-        from game.rom.spec import available_rom_tests
-
         if v.get("test") not in available_rom_tests():
             raise DatabaseError(f"{where}: unknown ROM test {v.get('test')!r}: use one of "
                                 f"{', '.join(available_rom_tests())}")
@@ -423,6 +406,7 @@ class Database:
         self.path = db_location(path)
         self._conn = None
         if isinstance(self.path, ServerUrl):
+            # lazy: import cycle: game.db.server (psycopg) imports this module
             from game.db.server import POSTGRESQL, connect
 
             self._dialect = POSTGRESQL
@@ -432,7 +416,7 @@ class Database:
             self._dialect = SQLITE
             self._conn = _open_checked(self.path, check_integrity=check_integrity, busy_timeout_s=busy_timeout_s)
         if store_pending:
-            from game.db.pending import store_pending_results
+            from game.db.pending import store_pending_results  # lazy: import cycle: game.db.pending imports this module
 
             store_pending_results(self)
 
@@ -692,7 +676,7 @@ class Database:
         return dest
 
     def _backup_server(self, tmp: Path) -> None:
-        from game.db.copy import copy_database
+        from game.db.copy import copy_database  # lazy: import cycle: game.db.copy imports this module
 
         tmp.unlink()
         self.conn.execute(self._dialect.read_snapshot)   # one consistent snapshot

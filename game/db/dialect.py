@@ -49,7 +49,7 @@ class Dialect:
 
 
 def _sqlite_error(location, exc):
-    from game.db.database import sqlite_error
+    from game.db.database import sqlite_error  # lazy: import cycle: game.db.database imports this module for SQLITE
 
     return sqlite_error(location, exc)
 

@@ -385,6 +385,7 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
     path = _resolve(name_or_path)
     # The replay pulls in ezc3d and scipy: import it only when a capture is asked for.
     if path.suffix.lower() == ".c3d":
+        # lazy: import cycle: tracking.sim.capture_replay imports this module
         from tracking.sim.capture_replay import replay_c3d
 
         motion: Motion = replay_c3d(path, dims)
@@ -394,6 +395,7 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         if kind == "scripted":
             motion = scripted_motion(load_model(path, _ScriptedSpec), path.stem, dims)
         elif kind == "capture":
+            # lazy: import cycle: tracking.sim.capture_replay imports this module
             from tracking.sim.capture_replay import CaptureSpec, capture_motion
 
             motion = capture_motion(load_model(path, CaptureSpec), path, dims)
