@@ -72,7 +72,6 @@ import numpy as np
 from calibration import foreign
 from calibration.camera import Camera, check_rotation
 from calibration.errors import CalibrationError, utf8_text
-from calibration.foreign import check_units
 
 __all__ = [
     "load_calibration",
@@ -125,7 +124,7 @@ def load_calibration(path: str | os.PathLike, *, allow_fisheye: bool = True) -> 
         )
     _check_camera_set(path, cameras)
 
-    check_units(path, cameras)
+    foreign.check_units(path, cameras)
     return cameras
 
 

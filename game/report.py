@@ -16,9 +16,9 @@ import base64
 import csv
 import html
 import io
+import json
 from collections import defaultdict
 from dataclasses import dataclass
-import json
 from pathlib import Path
 from typing import Sequence
 

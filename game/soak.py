@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-import signal
 
 from game.cli_options import OneLineParser, number
 

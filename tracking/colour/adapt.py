@@ -22,9 +22,9 @@ from __future__ import annotations
 import base64
 import logging
 import time
+import tomllib
 import zlib
 from pathlib import Path
-import tomllib
 from typing import Iterable, Sequence
 
 import numpy as np

@@ -25,12 +25,12 @@ import multiprocessing
 import os
 import secrets
 import select
+import signal
 import threading
 import time
 from dataclasses import replace
 from multiprocessing import shared_memory
 from pathlib import Path
-import signal
 
 import numpy as np
 

@@ -35,11 +35,11 @@ import logging
 import math
 import os
 import queue
+import socket
 import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-import socket
 
 import numpy as np
 

@@ -383,9 +383,8 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         ContentError: a malformed motion YAML (the message names the file and key).
     """
     path = _resolve(name_or_path)
-    # The replay pulls in ezc3d and scipy: import it only when a capture is asked for.
     if path.suffix.lower() == ".c3d":
-        # lazy: import cycle: tracking.sim.capture_replay imports this module
+        # lazy: the replay pulls in ezc3d and scipy, only for a capture (and it imports this module)
         from tracking.sim.capture_replay import replay_c3d
 
         motion: Motion = replay_c3d(path, dims)
@@ -395,7 +394,7 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         if kind == "scripted":
             motion = scripted_motion(load_model(path, _ScriptedSpec), path.stem, dims)
         elif kind == "capture":
-            # lazy: import cycle: tracking.sim.capture_replay imports this module
+            # lazy: the replay pulls in ezc3d and scipy, only for a capture (and it imports this module)
             from tracking.sim.capture_replay import CaptureSpec, capture_motion
 
             motion = capture_motion(load_model(path, CaptureSpec), path, dims)
