@@ -43,7 +43,7 @@ from tracking.errors import MotionError
 from tracking.markerset import load_markerset
 from tracking.sim.body import SIDES, ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 from tracking.geometry.rotations import slerp_rotation
-from tracking.sim.motions import MIN_REFERENCE_HOLD_S, Motion, ease
+from tracking.sim.motion_base import MIN_REFERENCE_HOLD_S, Motion, ease
 
 log = logging.getLogger(__name__)
 
