@@ -161,9 +161,7 @@ def detect_board(image: np.ndarray, board) -> tuple[Detection | None, str]:
         (detection, "") or (None, reason) with a reason a person can act on.
     """
     if not isinstance(board, Checkerboard):
-        from calibration.charuco import detect_charuco  # charuco imports this module
-
-        return detect_charuco(image, board)
+        return board.detect(image)  # a ChArUco board (calibration.charuco imports this module)
     gray, reason = usable_gray(image)
     if gray is None:
         return None, reason

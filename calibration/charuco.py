@@ -151,6 +151,11 @@ class CharucoBoard:
         h = self.squares_y * px_per_square + 2 * margin_px
         return self.cv_board().generateImage((w, h), marginSize=margin_px, borderBits=1)
 
+    def detect(self, image: np.ndarray) -> tuple[Detection | None, str]:
+        """The corners of this board in ``image`` (:func:`detect_charuco`; what
+        :func:`calibration.board.detect_board` calls for a ChArUco board)."""
+        return detect_charuco(image, self)
+
 
 @lru_cache(maxsize=8)
 def _cv_board(sx: int, sy: int, square_m: float, marker_m: float, dictionary: str):

@@ -33,7 +33,7 @@ from typing import Mapping, Sequence
 import cv2
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import bmat, lil_matrix
 
 from calibration.board import Detection
 from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
@@ -330,8 +330,6 @@ class LensPrior:
     def extend_sparsity(self, sparsity, row_groups: Sequence[np.ndarray], group_cams: Sequence[int]):
         """The adjustment's Jacobian pattern with the lens columns and the prior's rows added:
         ``row_groups[k]`` are data rows of camera ``group_cams[k]``."""
-        from scipy.sparse import bmat
-
         n_lens = self.x0.size
         lens = lil_matrix((sparsity.shape[0], n_lens), dtype=int)
         for rows, c in zip(row_groups, group_cams):

@@ -69,6 +69,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from calibration import foreign
 from calibration.camera import Camera, check_rotation
 from calibration.errors import CalibrationError, utf8_text
 
@@ -122,9 +123,8 @@ def load_calibration(path: str | os.PathLike, *, allow_fisheye: bool = True) -> 
             "--out intrinsics.toml', then place them with 'rehab calibrate extrinsics' or 'wand'"
         )
     _check_camera_set(path, cameras)
-    from calibration.foreign import check_units
 
-    check_units(path, cameras)
+    foreign.check_units(path, cameras)
     return cameras
 
 
@@ -136,8 +136,6 @@ def read_cameras(path: str | os.PathLike, *, size_px=None) -> tuple[tuple[Camera
     files count as placed (lens-only ones hold zeros). ``size_px`` is the image size for formats
     that do not store it (stereo_calib). No camera-count or units check here.
     """
-    from calibration import foreign
-
     path = Path(path)
     suffix = path.suffix.lower()
     if not (suffix in TOML_SUFFIXES + OPENCV_SUFFIXES or foreign.is_qualisys(path)):

@@ -111,6 +111,7 @@ def solve_rig(cameras: Sequence[Camera], board, rig: RigViews, floor: Sequence[D
         CalibrationError: cameras not linked, no camera sees the floor board, or a world frame no
             room has (:func:`calibration.extrinsics.check_world_frame`).
     """
+    # lazy: calibration.extrinsics (scipy.optimize) only to solve the rig; the game imports this module
     from calibration.extrinsics import calibrate_extrinsics
 
     if not rig.linked():
@@ -185,7 +186,9 @@ def solve_rig_wand(cameras: Sequence[Camera], wand: WandViews, length_m: float, 
         CalibrationError: cameras not linked, no camera sees the floor board, the wand solve fails,
             or a world frame no room has.
     """
+    # lazy: calibration.extrinsics (scipy.optimize) only to solve the rig; the game imports this module
     from calibration.extrinsics import ExtrinsicsResult, world_from_floor_board
+    # lazy: calibration.wand (scipy.optimize) only to solve the rig; the game imports this module
     from calibration.wand import calibrate_wand
 
     if not wand.linked():
@@ -245,6 +248,7 @@ class WandCheck:
 
 def wand_check(cameras: Sequence[Camera], uv_px: np.ndarray, length_m: float) -> WandCheck:
     """Measure the wand with a finished calibration: (C, T, 2, 2) ball centroids (NaN: not seen)."""
+    # lazy: calibration.wand (scipy.optimize) only to check the wand; the game imports this module
     from calibration.wand import triangulate
 
     uv = np.asarray(uv_px, np.float64)
@@ -364,6 +368,7 @@ def _corner_ids(det: Detection, board) -> np.ndarray:
 def board_lengths_mm(cameras: Sequence[Camera], board, views: dict[str, list[Detection | None]]) -> np.ndarray:
     """Measured minus printed length (mm) of the board's two edges and diagonal between its outer
     inner corners, in every view where two or more cameras saw those corners."""
+    # lazy: calibration.wand (scipy.optimize) only to measure the board; the game imports this module
     from calibration.wand import triangulate
 
     cols, rows = board.cols, board.rows

@@ -19,11 +19,18 @@ from __future__ import annotations
 import json
 import uuid
 from dataclasses import dataclass
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Sequence
 
+import pydantic
+
 from calibration.errors import RehabError
+from game.db.database import utc_now
+from game.db.private import make_private_dir, open_private
 from game.report import NORMAL_BAND_FRACTION
+from game.rom.spec import STANDARDS, load_rom_test
+from tracking.errors import ContentError
 
 SNOMED = "http://snomed.info/sct"
 UCUM = "http://unitsofmeasure.org"
@@ -63,8 +70,6 @@ def _joint(angle: str) -> str:
 
 
 def _version() -> str:
-    from importlib import metadata
-
     try:
         return metadata.version("rehab-mocap")
     except metadata.PackageNotFoundError:
@@ -82,8 +87,6 @@ class _TestWords:
 
 
 def _test_words(test: str) -> _TestWords:
-    from game.rom.spec import load_rom_test
-    from tracking.errors import ContentError
 
     try:
         t = load_rom_test(test)
@@ -134,8 +137,6 @@ def observation(row, device_url: str, position_words: str, title: str) -> dict:
         ],
     }
     if row.reference_deg is not None:
-        from game.rom.spec import STANDARDS
-
         normal = float(row.reference_deg)
         obs["referenceRange"] = [{
             "low": _deg(normal * (1.0 - NORMAL_BAND_FRACTION)), "high": _deg(normal),
@@ -185,10 +186,10 @@ def validate_bundle(bundle: dict, where: str) -> None:
         RehabError: the bundle is not valid FHIR (a bug: the message names the first problem).
     """
     try:
+        # lazy: fhir.resources (0.2 s) only to validate; a one-line error when missing
         from fhir.resources.R4B.bundle import Bundle
     except ImportError:
         raise RehabError("the FHIR export needs fhir.resources: pip install 'fhir.resources>=8'") from None
-    import pydantic
 
     try:
         Bundle.model_validate(bundle)
@@ -204,8 +205,6 @@ def export_fhir(db, out_dir: str | Path, patient_id: str | None = None) -> dict[
     ``patient_id`` None exports everyone (patients without ROM results get no file). Returns
     ``{"bundles": ..., "observations": ...}``.
     """
-    from game.db.database import utc_now
-    from game.db.private import make_private_dir, open_private
 
     if patient_id is not None:
         db.require_patient(patient_id)

@@ -20,6 +20,8 @@ import time
 from typing import Callable
 
 from calibration.errors import RehabError
+from tracking.sources.cameras import is_pace_warning
+from tracking.sources.recording import is_normal_end
 
 log = logging.getLogger(__name__)
 
@@ -177,8 +179,6 @@ class LiveLink:
         status = self.status
         if status is not None and getattr(status, "errors", 0):
             return f"the tracker reported {status.errors} error(s), the last: {status.last_error}"
-        from tracking.sources.cameras import is_pace_warning
-        from tracking.sources.recording import is_normal_end
 
         # frames dropped on a busy machine weaken the measurement but do not fail the run
         kept = [w for w in self.warning.split("; ") if w and not is_pace_warning(w)] if self.warning else []

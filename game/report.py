@@ -16,6 +16,7 @@ import base64
 import csv
 import html
 import io
+import json
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,7 +24,11 @@ from typing import Sequence
 
 from calibration.errors import RehabError
 from game.db.database import Database, ExerciseRow, RomRow, utc_now
+from game.db.private import make_private_dir, open_private
+from game.rom.sdc import change_words, is_real_change
 from game.rom.session import round_to_5
+from game.rom.spec import STANDARDS, check_standard, load_rom_test
+from tracking.errors import ContentError
 
 #: The normal band: from this fraction below the standard's normal value up to it.
 NORMAL_BAND_FRACTION = 0.10
@@ -51,8 +56,6 @@ class SessionChange:
 
 def session_changes(rows: Sequence[RomRow], order: dict[str, int], sdc_deg: float | None) -> list[SessionChange]:
     """Every change between consecutive sessions of one test's results (both sides), in order."""
-    from game.rom.sdc import change_words, is_real_change
-
     out = []
     for side in ("right", "left"):
         mine = sorted((r for r in rows if r.side == side), key=lambda r: (order[r.session_uid], r.recorded_utc))
@@ -141,7 +144,7 @@ def plot_rom_history(ax, rows: Sequence[RomRow], order: dict[str, int], normal_d
     Returns:
         The session numbers shown and each one's date text, for the caller's x tick labels.
     """
-    from matplotlib.ticker import MultipleLocator
+    from matplotlib.ticker import MultipleLocator  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     values = [r.value_deg for r in rows]
     if normal_deg is not None:
@@ -191,8 +194,6 @@ class _TestInfo:
 
 
 def _test_info(test: str, standard: str) -> _TestInfo:
-    from game.rom.spec import load_rom_test
-    from tracking.errors import ContentError
 
     try:
         t = load_rom_test(test)
@@ -202,6 +203,7 @@ def _test_info(test: str, standard: str) -> _TestInfo:
 
 
 def _png(fig) -> str:
+    # lazy: matplotlib (0.4 s to import) only when a plot is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     FigureCanvasAgg(fig)
@@ -222,7 +224,7 @@ def session_order(rows: Sequence[RomRow | ExerciseRow]) -> dict[str, int]:
 def rom_plot_png(title: str, rows: Sequence[RomRow], order: dict[str, int], normal_deg: float | None,
                  standard: str) -> str:
     """One test's maxima over the sessions (both sides) as a base64 PNG."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     fig = Figure(figsize=(7.5, 3.4))
     ax = fig.add_subplot(1, 1, 1)
@@ -264,8 +266,6 @@ class DemoPart:
 
 def demo_part(row: ExerciseRow) -> DemoPart:
     """The demo's share of a game result (none for results stored before it was logged)."""
-    import json
-
     try:
         d = json.loads(row.details) if row.details else {}
     except ValueError:
@@ -290,8 +290,8 @@ def plot_games(ax_reps, ax_minutes, rows: Sequence[ExerciseRow], order: dict[str
     """Repetitions per game and minutes per session as bars, the demo's part of each stacked on
     the patient's own, hatched and faded; returns the legend handles (one per game, and one for
     the demo when it played)."""
-    from matplotlib.patches import Patch
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.patches import Patch  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
+    from matplotlib.ticker import MaxNLocator  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     games = sorted({r.game for r in rows})
     width = 0.8 / max(len(games), 1)
@@ -336,7 +336,7 @@ def plot_games(ax_reps, ax_minutes, rows: Sequence[ExerciseRow], order: dict[str
 
 def exercise_plot_png(rows: Sequence[ExerciseRow], order: dict[str, int]) -> str:
     """Repetitions per game and session, and session durations, as a base64 PNG (the demo's part hatched)."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     fig = Figure(figsize=(7.5, 4.6))
     ax1, ax2 = fig.add_subplot(2, 1, 1), fig.add_subplot(2, 1, 2, sharex=None)
@@ -370,8 +370,6 @@ def write_report(db: Database, patient_id: str, out_html: str | Path, *, standar
         DatabaseError: unknown patient.
         RehabError: the output folder cannot be written.
     """
-    from game.rom.spec import STANDARDS, check_standard
-
     check_standard(standard)
     db.require_patient(patient_id)
     out_html = Path(out_html)
@@ -456,7 +454,6 @@ markers.</p>
     else:
         parts.append("<p>No game results yet.</p>")
     parts.append("</body></html>\n")
-    from game.db.private import make_private_dir, open_private
 
     try:   # patient data: the user's only (0600), each file whole or not at all
         make_private_dir(out_html.parent)

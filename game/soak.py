@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from game.cli_options import OneLineParser, number
 
 _PAGE_KB = os.sysconf("SC_PAGE_SIZE") // 1024 if hasattr(os, "sysconf") else 4
 
@@ -233,8 +236,6 @@ def report(r: SoakResult, max_growth_mb: float) -> tuple[list[str], bool]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from game.cli_options import OneLineParser, number
-
     parser = OneLineParser(prog="python -m game.soak", description=__doc__.split("\n\n")[0])
     parser.add_argument("--minutes", type=number(0.1, 24 * 60.0), default=60.0, help="length of the session")
     parser.add_argument("--sample-every", type=number(0.5, 600.0), default=10.0, metavar="S",
@@ -249,7 +250,6 @@ def main(argv: list[str] | None = None) -> int:
     if not Path("/proc/self/stat").exists():
         print("soak: needs Linux (/proc)")
         return 2
-    import signal
 
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))   # a kill ends the session it runs too
     print(f"soak: {args.minutes:g} min of rehab play --headless ...", flush=True)

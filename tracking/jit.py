@@ -37,7 +37,7 @@ def compile_loop(fn: Callable, helpers: tuple[Callable, ...] = ()) -> Callable |
     result = None
     if INSTALLED:
         try:
-            from numba import njit
+            from numba import njit  # lazy: numba may be missing or fail to import: the numpy paths then run
 
             for helper in helpers:
                 helper = getattr(helper, "py_func", helper)  # (its name may already be rebound)

@@ -21,6 +21,7 @@ import uuid
 from dataclasses import dataclass
 
 from calibration.errors import RehabError
+from game.db.database import DatabaseError, utc_now
 
 ROLES = ("therapist", "patient")
 #: action -> the roles that may do it (a patient account only for its own patient).
@@ -93,8 +94,6 @@ def accounts_in_use(db) -> bool:
 
 def add_account(db, name: str, role: str, secret: str, patient_id: str | None = None) -> Account:
     """Add an account; a patient account names its (existing) patient. Raises a one-line error."""
-    from game.db.database import DatabaseError, utc_now
-
     if not _NAME.match(name or ""):
         raise DatabaseError(f"account name {name!r}: use letters, digits, '_', '.', '-' (up to 32), never a "
                             f"patient's real name")
@@ -128,8 +127,6 @@ def accounts(db) -> list[Account]:
 
 def record(db, account: str, action: str, patient_id: str | None, what: str, *, uid: str | None = None) -> None:
     """One audit row in its own transaction (``uid`` makes it idempotent)."""
-    from game.db.database import utc_now
-
     db._write("INSERT INTO audit (uid, at_utc, account, action, patient_id, what) VALUES (?, ?, ?, ?, ?, ?) "
               "ON CONFLICT DO NOTHING", (uid or uuid.uuid4().hex, utc_now(), account or "-", action, patient_id, what))
 

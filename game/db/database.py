@@ -28,39 +28,24 @@ import math
 import os
 import re
 import sqlite3
-import sys
 import uuid
 from dataclasses import asdict, dataclass, fields
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from calibration.errors import RehabError
 from game.db.dialect import SQLITE, Dialect
-from game.db.location import ServerUrl, db_location
+from game.db.errors import (DatabaseError, DatabaseLocked, DatabaseUnreachable,  # noqa: F401 (re-exported)
+                             ResultRejected, damaged, sqlite_error)
+from game.db.location import ServerUrl, db_location, default_db_path
 from game.db.migrations import LATEST_VERSION, STEPS, schema_v1_sql
 from game.db.private import DIR_MODE, FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
+from game.rom.spec import available_rom_tests
 
 log = logging.getLogger(__name__)
 
 _SQLITE_HEADER = b"SQLite format 3\x00"
 _PATIENT_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,31}$")
-
-
-class DatabaseError(RehabError):
-    """The database file cannot be used (damaged, not a rehab database, newer schema) or bad input."""
-
-
-class DatabaseLocked(DatabaseError):
-    """Another program holds the database (a write transaction or an exclusive lock) past the wait."""
-
-
-class DatabaseUnreachable(DatabaseError):
-    """The database server does not answer (or the connection broke): results wait on the station."""
-
-
-class ResultRejected(DatabaseError):
-    """A result that cannot be stored in any database: a value out of range, an unknown patient."""
 
 
 #: How long one statement waits for another program's lock before :class:`DatabaseLocked`.
@@ -72,49 +57,10 @@ _TABLES_BY_VERSION = {1: _TABLES[:4], 2: _TABLES[:5], 3: _TABLES[:6], 4: _TABLES
 _UTC = re.compile(r"^\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(\.\d+)?Z$")
 
 
-def default_db_path() -> Path:
-    """The database in the user's data directory.
-
-    Linux and others: ``$XDG_DATA_HOME/rehab/rehab.sqlite3`` (default ``~/.local/share``);
-    Windows: ``%LOCALAPPDATA%\\rehab\\rehab.sqlite3``; macOS: ``~/Library/Application Support/rehab/``.
-    """
-    if sys.platform.startswith("win"):
-        base = Path(os.environ.get("LOCALAPPDATA") or os.environ.get("APPDATA") or Path.home() / "AppData" / "Local")
-    elif sys.platform == "darwin":
-        base = Path.home() / "Library" / "Application Support"
-    else:
-        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
-    return base / "rehab" / "rehab.sqlite3"
-
-
 def utc_now(ago_s: float = 0.0) -> str:
     """ISO 8601 UTC time stamp with seconds, e.g. ``2026-11-22T01:30:00Z`` (``ago_s`` seconds before now)."""
     ago_s = ago_s if math.isfinite(ago_s) and 0.0 <= ago_s < 1e7 else 0.0
     return (datetime.now(timezone.utc) - timedelta(seconds=ago_s)).strftime("%Y-%m-%dT%H:%M:%SZ")
-
-
-def _damaged(path: Path, detail: str) -> DatabaseError:
-    detail = " ".join(str(detail).split())   # SQLite's integrity report spans lines
-    return DatabaseError(f"{path} is not a rehab database or is damaged ({detail}): restore a backup "
-                         f"(rehab backup) or move it away")
-
-
-def sqlite_error(path: Path, exc: sqlite3.Error) -> DatabaseError:
-    """The one-line error for an SQLite failure: locked, read-only, unopenable, full disk or damaged."""
-    code = (getattr(exc, "sqlite_errorcode", None) or 0) & 0xFF
-    text = str(exc)
-    if code in (5, 6) or "locked" in text or "busy" in text:   # SQLITE_BUSY, SQLITE_LOCKED
-        return DatabaseLocked(f"{path} is in use by another program (a database browser or another rehab) that "
-                              f"holds it locked: close that program and try again")
-    if code == 8 or "readonly" in text or "read-only" in text:   # SQLITE_READONLY
-        return DatabaseError(f"{path} is read-only ({text}): make the file and its folder writable "
-                             f"(chmod u+w), or copy it to a folder you can write")
-    if code == 14 or "unable to open" in text:   # SQLITE_CANTOPEN (also the -wal/-shm beside it)
-        return DatabaseError(f"{path}: cannot open the database ({text}): check the path and that you can write "
-                             f"its folder")
-    if code == 13 or "full" in text:   # SQLITE_FULL
-        return DatabaseError(f"{path}: the disk is full ({text}): free some space and try again")
-    return _damaged(path, text)
 
 
 def _guarded(method):
@@ -129,7 +75,7 @@ def _guarded(method):
         except self._dialect.errors as exc:
             raise self._dialect.error(self.path, exc) from None
         except UnicodeDecodeError:   # a TEXT cell that is not UTF-8: the file was damaged
-            raise _damaged(self.path, "text that is not UTF-8") from None
+            raise damaged(self.path, "text that is not UTF-8") from None
 
     return wrapper
 
@@ -369,8 +315,6 @@ def check_result_values(table: str, values: dict, where: str) -> dict:
         raise DatabaseError(f"{where}: a result has no uid")
     _utc_text(v.get("recorded_utc"), "recorded_utc", where)
     if table == "rom_results":
-        from game.rom.spec import available_rom_tests
-
         if v.get("test") not in available_rom_tests():
             raise DatabaseError(f"{where}: unknown ROM test {v.get('test')!r}: use one of "
                                 f"{', '.join(available_rom_tests())}")
@@ -423,6 +367,7 @@ class Database:
         self.path = db_location(path)
         self._conn = None
         if isinstance(self.path, ServerUrl):
+            # lazy: game.db.server loads psycopg (an optional extra): only for a server URL
             from game.db.server import POSTGRESQL, connect
 
             self._dialect = POSTGRESQL
@@ -432,7 +377,7 @@ class Database:
             self._dialect = SQLITE
             self._conn = _open_checked(self.path, check_integrity=check_integrity, busy_timeout_s=busy_timeout_s)
         if store_pending:
-            from game.db.pending import store_pending_results
+            from game.db.pending import store_pending_results  # lazy: import cycle: game.db.pending imports this module
 
             store_pending_results(self)
 
@@ -692,7 +637,7 @@ class Database:
         return dest
 
     def _backup_server(self, tmp: Path) -> None:
-        from game.db.copy import copy_database
+        from game.db.copy import copy_database  # lazy: import cycle: game.db.copy imports this module
 
         tmp.unlink()
         self.conn.execute(self._dialect.read_snapshot)   # one consistent snapshot
@@ -845,7 +790,7 @@ def _version(conn: sqlite3.Connection, path: Path) -> int:
     if not row or row[0] is None:
         return 0
     if isinstance(row[0], float) or not isinstance(row[0], int):
-        raise _damaged(path, f"schema_version {row[0]!r} is not a whole number")
+        raise damaged(path, f"schema_version {row[0]!r} is not a whole number")
     return row[0]
 
 
@@ -876,7 +821,7 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
             raise DatabaseError(f"{path}: cannot read the database ({exc.strerror or exc}): check its "
                                 f"permissions") from None
         if head and head != _SQLITE_HEADER:
-            raise _damaged(path, "no SQLite header")
+            raise damaged(path, "no SQLite header")
         for p in (path, Path(f"{path}-wal"), Path(f"{path}-shm")):
             make_private(p)
         if path.parent.absolute() == default_db_path().parent.absolute():
@@ -892,7 +837,7 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
         if check_integrity and _table_names(conn, SQLITE):
             problems = [r[0] for r in conn.execute("PRAGMA integrity_check").fetchall()]
             if problems != ["ok"]:
-                raise _damaged(path, f"integrity check: {problems[0]}")
+                raise damaged(path, f"integrity check: {problems[0]}")
         version = _checked_version(conn, SQLITE, path)
         conn.execute("PRAGMA journal_mode = WAL")
         conn.execute("PRAGMA synchronous = FULL")  # a commit that returned survives a crash or power cut
@@ -903,7 +848,7 @@ def _open_checked(path: Path, *, check_integrity: bool, busy_timeout_s: float) -
         raise sqlite_error(path, exc) from None
     except UnicodeDecodeError:
         conn.close()
-        raise _damaged(path, "text that is not UTF-8") from None
+        raise damaged(path, "text that is not UTF-8") from None
     except BaseException:
         conn.close()
         raise
@@ -920,14 +865,14 @@ def _checked_version(conn, dialect: Dialect, path) -> int:
     if not tables:
         return 0
     if "schema_version" not in tables:
-        raise _damaged(path, "no schema_version table")
+        raise damaged(path, "no schema_version table")
     version = _version(conn, path)
     if version > LATEST_VERSION:
         raise DatabaseError(f"{path} has schema version {version}, newer than this rehab knows "
                             f"({LATEST_VERSION}): update rehab")
     missing = [t for t in _TABLES_BY_VERSION.get(version, _TABLES) if t not in tables]
     if version < 1 or missing:
-        raise _damaged(path, f"missing table {missing[0]}" if missing else f"schema version {version}")
+        raise damaged(path, f"missing table {missing[0]}" if missing else f"schema version {version}")
     return version
 
 

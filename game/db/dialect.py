@@ -15,6 +15,8 @@ import sqlite3
 from dataclasses import dataclass
 from typing import Any, Callable
 
+from game.db.errors import sqlite_error
+
 
 @dataclass(frozen=True)
 class Dialect:
@@ -48,12 +50,6 @@ class Dialect:
         return script
 
 
-def _sqlite_error(location, exc):
-    from game.db.database import sqlite_error
-
-    return sqlite_error(location, exc)
-
-
 SQLITE = Dialect(
     name="sqlite",
     begin="BEGIN IMMEDIATE",   # take the write lock at once: two writers never deadlock on an upgrade
@@ -62,7 +58,7 @@ SQLITE = Dialect(
     read_snapshot="BEGIN",   # SQLite's read transaction is a snapshot (WAL)
     ddl=(),
     errors=(sqlite3.Error,),
-    error=_sqlite_error,
+    error=sqlite_error,
 )
 
 #: The SQLite spellings of the migration scripts and their PostgreSQL equivalents.

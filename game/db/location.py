@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
@@ -46,6 +47,21 @@ class ServerUrl:
         return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_.")[:120]
 
 
+def default_db_path() -> Path:
+    """The database in the user's data directory.
+
+    Linux and others: ``$XDG_DATA_HOME/rehab/rehab.sqlite3`` (default ``~/.local/share``);
+    Windows: ``%LOCALAPPDATA%\\rehab\\rehab.sqlite3``; macOS: ``~/Library/Application Support/rehab/``.
+    """
+    if sys.platform.startswith("win"):
+        base = Path(os.environ.get("LOCALAPPDATA") or os.environ.get("APPDATA") or Path.home() / "AppData" / "Local")
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Application Support"
+    else:
+        base = Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share")
+    return base / "rehab" / "rehab.sqlite3"
+
+
 def is_server_url(value: object) -> bool:
     return isinstance(value, ServerUrl) or (isinstance(value, str) and bool(_URL.match(value.strip())))
 
@@ -57,8 +73,6 @@ def db_location(value: str | Path | ServerUrl | None = None) -> Path | ServerUrl
     if value is None or (isinstance(value, str) and not value.strip()):
         value = os.environ.get(ENV_VAR, "").strip() or None
         if value is None:
-            from game.db.database import default_db_path
-
             return default_db_path()
     if is_server_url(value):
         return ServerUrl(str(value).strip())
@@ -68,7 +82,5 @@ def db_location(value: str | Path | ServerUrl | None = None) -> Path | ServerUrl
 def local_folder(location: Path | ServerUrl) -> Path:
     """The station's own folder for files about ``location``: beside a file, or the user's data folder."""
     if isinstance(location, ServerUrl):
-        from game.db.database import default_db_path
-
         return default_db_path().parent
     return Path(location).parent

@@ -14,8 +14,8 @@ from __future__ import annotations
 import logging
 from functools import lru_cache
 
-from game.db.database import DatabaseError, DatabaseLocked, DatabaseUnreachable
 from game.db.dialect import POSTGRESQL_DDL, Dialect
+from game.db.errors import DatabaseError, DatabaseLocked, DatabaseUnreachable
 from game.db.location import ServerUrl
 
 log = logging.getLogger(__name__)

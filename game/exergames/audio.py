@@ -16,6 +16,7 @@ import sys
 import tempfile
 
 import numpy as np
+import pygame
 
 from game.exergames.session import Cue
 
@@ -92,8 +93,6 @@ class Sounds:
         if mute or os.environ.get("SDL_AUDIODRIVER", "") == "dummy" or _mixer_failed:
             return
         try:
-            import pygame
-
             if not pygame.mixer.get_init():
                 with _stderr_to_log():
                     pygame.mixer.init(frequency=RATE_HZ, size=-16, channels=2)

@@ -22,7 +22,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from game.rom.simulated import run_simulated_test
 from game.rom.spec import RomTest
+from tracking.angles import joint_angles
+from tracking.markerset import load_markerset
 
 #: 1.96 * sqrt(2): SDC95 = SDC_FACTOR * SEM
 SDC_FACTOR = 1.96 * math.sqrt(2.0)
@@ -57,7 +60,7 @@ def sdc_from_results(values_deg: Iterable[float]) -> SdcEstimate:
     Raises:
         ValueError: fewer than 3 finite results.
     """
-    from scipy.stats import chi2
+    from scipy.stats import chi2  # lazy: scipy.stats (0.8 s to import) only to compute the SDC
 
     v = np.asarray([x for x in values_deg if math.isfinite(x)], dtype=np.float64)
     if v.size < 3:
@@ -106,11 +109,9 @@ def motion_peak_s(test: RomTest, side: str, fps: float = 30.0) -> tuple[float, f
     """When the test's simulated motion is at its peak: the first and last time its test value
     (true markers, no rendering) is within :data:`PEAK_BAND_DEG` of its largest value (a motion
     holds its peak a moment, and the recorded maximum may fall anywhere in that hold)."""
-    from tracking.angles import joint_angles
-    from tracking.markerset import load_markerset
     from tracking.sim.body import BodyDimensions, BodyModel  # lazy: only to run the simulated patient
-    from tracking.sim.motions import load_motion
-    from tracking.sim.studio import SimulationSettings
+    from tracking.sim.motions import load_motion  # lazy: only to run the simulated patient
+    from tracking.sim.studio import SimulationSettings  # lazy: only to run the simulated patient
 
     settings = SimulationSettings()
     dims = BodyDimensions.from_percentile(settings.percentile, settings.sex)
@@ -146,8 +147,6 @@ def measure_sdc(test: RomTest, side: str, seeds: Iterable[int], *, size_px: tupl
     reason, e.g. a marker put on so far off that the start angle is outside the start window). A
     draw whose recorded maximum is not the motion's peak is counted as failed with the reason.
     """
-    from game.rom.simulated import run_simulated_test
-
     peak_from_s, peak_to_s = motion_peak_s(test, side, fps)
     draws = []
     for seed in seeds:

@@ -20,6 +20,7 @@ import numpy as np
 from calibration.errors import RehabError
 from game.rom.session import RomProgress, RomResult, RomState, RomTestSession
 from game.rom.spec import RomTest
+from tracking.angles import joint_angles
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,8 +85,8 @@ def run_simulated_test(test: RomTest, side: str, standard: str, *, motion: str |
     Raises:
         RehabError: no motion for this test and side, or an unknown motion/rig.
     """
-    from tracking.angles import joint_angles
-    from tracking.sim.studio import SimulationSettings, studio_from_settings
+    from tracking.sim.studio import SimulationSettings, studio_from_settings  # lazy: only to run the simulated patient
+    # lazy: the tracker only with the simulated patient (the game imports this module)
     from tracking.tracker import Tracker
 
     name = motion or test.simulated_motion.get(side)

@@ -39,14 +39,23 @@ import cv2
 import numpy as np
 
 from calibration.board import Checkerboard, Detection, detect_board
-from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
+from calibration.camera import Camera
 from calibration.errors import RehabError
-from calibration.intrinsics import COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of
-from calibration.guided import GOOD_LENGTH_MM
+from calibration.files import load_calibration, save_calibration_toml, write_lens_information
+from calibration.intrinsics import (COVERAGE_GRID, IntrinsicsResult, calibrate_intrinsics, coverage_of,
+                                    steady_lens_information)
+from calibration.guided import (GOOD_LENGTH_MM, MIN_WAND_FRAMES, RigViews, WAND_FRAMES, WandViews,
+                                quality_report, solve_rig, solve_rig_wand, wand_check)
 from calibration.view_selection import coverage_hint
 from game.app import BaseScene, Frame
+from game.db import default_db_path
 from game.gfx import theme
 from game.input import Action, InputEvent, Pointer, PointerKind, Press
+from game.scenes.calibrate_rig import (CameraRigFeed, SimRigFeed, board_pose_between, draw_wand, floor_board_picture,
+                                      link_diagram)
+from tracking.colour.table import ColourTable
+from tracking.sources.base import SourceError
+from tracking.sources.cameras import open_capture
 
 log = logging.getLogger(__name__)
 
@@ -78,14 +87,6 @@ class BoardFeed(Protocol):
         ...
 
 
-def _between(a, b, f: float):
-    """Board pose a fraction ``f`` of the way from ``a`` to ``b`` (position linear, rotation geodesic)."""
-    from tracking.sim.calibration_material import BoardPose
-
-    rel = rvec_from_rotation(b.R @ a.R.T)
-    return BoardPose(rotation_from_rvec(f * rel) @ a.R, (1 - f) * a.t_m + f * b.t_m)
-
-
 class SimBoardFeed:
     """A simulated helper moving the board in front of one simulated camera.
 
@@ -105,6 +106,7 @@ class SimBoardFeed:
 
     def __init__(self, camera: Camera, background: np.ndarray, board: Checkerboard, *, n_poses: int = 12,
                  hold: int = 6, move: int = 4, seed: int = 0, noise_sigma: float = 1.5) -> None:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import BoardRaycaster, intrinsics_poses
 
         self.name = camera.name
@@ -121,6 +123,7 @@ class SimBoardFeed:
         self._clean = background
 
     def _make_path(self, poses, hold: int, move: int) -> list:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import BoardPose
 
         path = []
@@ -132,10 +135,11 @@ class SimBoardFeed:
                 out = BoardPose(pose.R, pose.t_m + pose.R[:, 0] * 0.6 * bw)
                 path += [out] * max(move, 2)
                 pose = out
-            path += [_between(pose, nxt, (k + 1) / (move + 1)) for k in range(move)]
+            path += [board_pose_between(pose, nxt, (k + 1) / (move + 1)) for k in range(move)]
         return path
 
     def next_frame(self) -> np.ndarray:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import add_noise, board_light
 
         pose = self._path[self._k % len(self._path)]
@@ -160,9 +164,12 @@ def sim_feeds(rig: str = "ring4", size_px: tuple[int, int] = (640, 480), board: 
             state are changed: the screen rebinds its own every frame); None: a standalone one.
         kwargs: passed to :class:`SimBoardFeed`.
     """
+    # lazy: the simulator only for the demo calibration (tests/test_layout.py)
     from tracking.sim.calibration_material import DEFAULT_BOARD
+    # lazy: the simulator only for the demo calibration (tests/test_layout.py)
     from tracking.sim.renderer import DEMO_LENS, StudioRenderer
-    from tracking.sim.rigs import load_rig
+    from tracking.sim.rigs import load_rig  # lazy: the simulator only for the demo calibration (tests/test_layout.py)
+    # lazy: the simulator only for the demo calibration (tests/test_layout.py)
     from tracking.sim.scene import SceneFrame
 
     board = board or DEFAULT_BOARD
@@ -187,8 +194,6 @@ class CameraBoardFeed:
     """
 
     def __init__(self, name: str, capture, *, max_failed_reads: int = 25) -> None:
-        from tracking.sources.base import SourceError
-
         self.name = name
         self.truth = None
         self._capture = capture
@@ -214,8 +219,6 @@ class CameraBoardFeed:
         Raises:
             SourceError: the camera stopped delivering (``max_failed_reads`` reads in a row failed).
         """
-        from tracking.sources.base import SourceError
-
         if not self._given_first:
             self._given_first = True
             return self._last
@@ -240,8 +243,6 @@ def camera_feeds(devices: Sequence[str], *, size_px: tuple[int, int] | None = No
     Raises:
         SourceError: a device cannot be opened or delivers nothing (the ones opened are released).
     """
-    from tracking.sources.base import SourceError
-    from tracking.sources.cameras import open_capture
 
     feeds: list[CameraBoardFeed] = []
     try:
@@ -265,8 +266,6 @@ def lenses_for_feeds(path: Path, feeds: Sequence[BoardFeed]) -> list[Camera]:
     Raises:
         RehabError: a feed's camera is not in the file, or its pictures have another shape.
     """
-    from calibration.files import load_calibration
-
     cameras = load_calibration(path)
     source = str(path)
     by_name = {c.name: c for c in cameras}
@@ -286,8 +285,6 @@ def lenses_for_feeds(path: Path, feeds: Sequence[BoardFeed]) -> list[Camera]:
 
 def default_calibration_path() -> Path:
     """``calibration.toml`` in the user's data directory (beside the database)."""
-    from game.db import default_db_path
-
     return default_db_path().parent / "calibration.toml"
 
 
@@ -530,8 +527,6 @@ class CalibrateScene(BaseScene):
     def save(self) -> Path | None:
         """Write the lens data of every calibrated camera (2 or more) to :meth:`lens_data_path`;
         returns the path written. The positions and the floor follow (Next step)."""
-        from calibration.files import save_calibration_toml, write_lens_information
-
         done = [p.result for p in self.progress if p.result is not None]
         if len(done) < 2:
             self._say(f"Calibrate at least 2 cameras before saving ({len(done)} done; Tab: next camera)",
@@ -625,10 +620,6 @@ class CalibrateScene(BaseScene):
             self._say("Lay the board face up on the seat as in the picture", theme.TEXT)
 
     def to_positions(self, *, keep: bool) -> None:
-        from calibration.guided import RigViews
-
-        from game.scenes.calibrate_rig import CameraRigFeed, SimRigFeed
-
         if self.rig_feed is None:
             sim = all(isinstance(f, SimBoardFeed) for f in self.feeds)
             ctx = None if self.threaded or self.app is None else self.app.screen.ctx   # GL on the thread that reads
@@ -648,8 +639,6 @@ class CalibrateScene(BaseScene):
 
     def to_wand(self) -> None:
         """Step 2 with the wand instead of the board (cameras taking pictures at the same instant only)."""
-        from calibration.guided import WandViews
-
         if not self.wand_ready():
             self._say("The wand needs cameras that take their pictures at the same instant; these are read one "
                       "after the other: use the board", theme.ATTENTION)
@@ -662,7 +651,7 @@ class CalibrateScene(BaseScene):
 
     def _find_wand(self, images: list[np.ndarray]) -> np.ndarray:
         """(C, 2, 2) the two balls' centroids in every camera's image, NaN where not seen once exactly."""
-        from tracking.colour.table import ColourTable
+        # lazy: the blob finder (scipy, 0.2 s) only at the wand step; keeps the game's start-up short
         from tracking.drivers.wand_capture import wand_centroids_in_images
 
         if self._table is None:
@@ -683,8 +672,6 @@ class CalibrateScene(BaseScene):
                 self._update_report()
 
     def _update_report(self) -> None:
-        from calibration.guided import quality_report, wand_check
-
         res = self.rig_result
         check = None
         if self.wand_ready():
@@ -728,6 +715,7 @@ class CalibrateScene(BaseScene):
 
     def floor_origin_m(self) -> tuple[float, float, float]:
         """The floor board's first corner in the world, its centre where the helper lays it."""
+        # lazy: calibration.extrinsics (scipy.optimize) only once the rig is solved; keeps the game's start-up short
         from calibration.extrinsics import floor_board_centre_m
 
         known = getattr(self.rig_feed, "seat_board_centre_m", None)
@@ -738,15 +726,11 @@ class CalibrateScene(BaseScene):
         """The information matrices of the lenses calibrated here from 10 views or more (the board
         path refines them with the positions, as ``rehab calibrate extrinsics`` does); None for the
         others and for lens data given from a file."""
-        from calibration.intrinsics import steady_lens_information
-
         results = [p.result for p in self.progress]
         return steady_lens_information([r.information for r in results], [len(r.per_view_rms_px) for r in results])
 
     def capture_floor(self) -> bool:
         """Solve the rig with the board on the seat, report its quality and save the calibration."""
-        from calibration.files import save_calibration_toml
-        from calibration.guided import solve_rig, solve_rig_wand
 
         if self.rig_images is None or not any(d is not None for d in self.rig_detections):
             self._say("No camera sees the board on the seat yet", theme.FAILURE)
@@ -907,8 +891,6 @@ class CalibrateScene(BaseScene):
             x = x0 + (k % cols) * (cell_w + 8 * s)
             y = y0 + (k // cols) * (cell_h + 30 * s)
             if wand:
-                from game.scenes.calibrate_rig import draw_wand
-
                 balls = int(np.all(np.isfinite(self.wand_uv[k]), axis=1).sum())
                 picture, found = draw_wand(img, self.wand_uv[k]), balls == 2
                 label = f"{self.feeds[k].name}: " + ("both balls" if found else f"{balls} of 2 balls")
@@ -936,8 +918,6 @@ class CalibrateScene(BaseScene):
         return x, self._side_text(c, [instruction], x, 72 * s, s, col_w, theme.SMALL, colour), col_w
 
     def _render_positions(self, c, w: float, h: float, s: float) -> None:
-        from game.scenes.calibrate_rig import link_diagram
-
         x, y, col_w = self._rig_layout(c, w, h, s, "Hold the board still where two or more cameras see all of it; go round the "
                                 "cameras so that every neighbouring pair shares 3 views.", theme.TEXT_DIM)
         side = min(col_w, 0.36 * h)
@@ -953,8 +933,6 @@ class CalibrateScene(BaseScene):
         self._side_text(c, [self.message], x, y + 6 * s, s, col_w, theme.SMALL * 0.9, self.message_colour)
 
     def _render_wand(self, c, w: float, h: float, s: float) -> None:
-        from calibration.guided import MIN_WAND_FRAMES, WAND_FRAMES
-        from game.scenes.calibrate_rig import link_diagram
 
         views = self.wand_views
         x, y, col_w = self._rig_layout(c, w, h, s, f"Wave the wand ({1000 * self.wand_length_m:.0f} mm) slowly through the "
@@ -969,8 +947,6 @@ class CalibrateScene(BaseScene):
         self._side_text(c, [views.advice()], x, y, s, col_w, theme.SMALL, theme.ACCENT if views.ready() else theme.ATTENTION)
 
     def _render_floor(self, c, w: float, h: float, s: float) -> None:
-        from game.scenes.calibrate_rig import floor_board_picture
-
         x, y, col_w = self._rig_layout(c, w, h, s, "Lay the board face up on the seat, its rows across the patient, "
                                        "the black corner square at the patient's front left.", theme.TEXT)
         side = min(col_w / 1.2, 0.42 * h)
@@ -981,8 +957,6 @@ class CalibrateScene(BaseScene):
         self._side_text(c, [self.message], x, y + 36 * s, s, col_w, theme.SMALL * 0.9, self.message_colour)
 
     def _render_report(self, c, w: float, h: float, s: float) -> None:
-        from calibration.extrinsics import rig_errors
-
         m = theme.MARGIN * s
         rep, res = self.report, self.rig_result
         colour = {"good": theme.ACCENT, "usable": theme.ATTENTION, "redo": theme.FAILURE}[rep.verdict]
@@ -996,6 +970,9 @@ class CalibrateScene(BaseScene):
         truth = getattr(self.rig_feed, "truth", None)
         pos = ang = None
         if truth is not None:
+            # lazy: calibration.extrinsics (scipy.optimize) only once the rig is solved; keeps the game's start-up short
+            from calibration.extrinsics import rig_errors
+
             pos, ang = rig_errors(res.cameras, truth)
         what = "wand balls" if self.method == "wand" else "board corners"
         wand_px = None if rep.wand is None else rep.wand.rms_px

@@ -18,7 +18,7 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from calibration.camera import Camera
+from calibration.camera import Camera, rotation_from_rvec, rvec_from_rotation
 from calibration.guided import MIN_SHARED_VIEWS
 
 _TEAL = (190, 200, 94)  # BGR of theme.ACCENT
@@ -26,6 +26,14 @@ _AMBER = (92, 190, 242)  # BGR of theme.ATTENTION
 _TEXT = (245, 240, 236)
 _DIM = (190, 174, 163)
 _BACK = (43, 33, 27)
+
+
+def board_pose_between(a, b, f: float):
+    """Board pose a fraction ``f`` of the way from ``a`` to ``b`` (position linear, rotation geodesic)."""
+    from tracking.sim.calibration_material import BoardPose  # lazy: the simulator only for the demo calibration
+
+    rel = rvec_from_rotation(b.R @ a.R.T)
+    return BoardPose(rotation_from_rvec(f * rel) @ a.R, (1 - f) * a.t_m + f * b.t_m)
 
 
 class SimRigFeed:
@@ -52,9 +60,8 @@ class SimRigFeed:
     def __init__(self, cameras: Sequence[Camera], backgrounds: Sequence[np.ndarray], board, *, per_pair: int = 3,
                  hold: int = 4, move: int = 3, seed: int = 0, noise_sigma: float = 1.5, wand_fps: float = 10.0,
                  ctx=None) -> None:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import BoardRaycaster, extrinsics_poses, seat_board_pose
-
-        from game.scenes.calibrate import _between
 
         self.names = [c.name for c in cameras]
         self.truth = list(cameras)
@@ -67,7 +74,7 @@ class SimRigFeed:
         self._path = []
         for i, pose in enumerate(poses):
             nxt = poses[(i + 1) % len(poses)]
-            self._path += [pose] * hold + [_between(pose, nxt, (k + 1) / (move + 1)) for k in range(move)]
+            self._path += [pose] * hold + [board_pose_between(pose, nxt, (k + 1) / (move + 1)) for k in range(move)]
         self._seat = seat_board_pose(board)
         centre = board.object_points().mean(axis=0)
         self.seat_board_centre_m = self._seat.R @ centre + self._seat.t_m  # where the helper lays it
@@ -103,7 +110,9 @@ class SimRigFeed:
         self.mode = "wand"
 
     def _wand_frames(self) -> list[np.ndarray]:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import wand_path, wand_scene
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.renderer import StudioRenderer
 
         if self._renderer is None:   # the given context, or a standalone one made on the thread that reads the feed
@@ -120,6 +129,7 @@ class SimRigFeed:
             self._renderer = None
 
     def next_frames(self) -> list[np.ndarray]:
+        # lazy: the simulator only for the demo calibration (tests/test_layout.py)
         from tracking.sim.calibration_material import add_noise, board_light
 
         if self.mode == "wand":

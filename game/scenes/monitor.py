@@ -37,6 +37,11 @@ from game.input import Action, InputEvent, Pointer, PointerKind, Press
 from game.live_link import LiveLink
 from game.gfx.camera_overlay import overlay_cameras
 from tracking.clock_sync import IRREGULAR_ADVICE, StampTiming, stamp_timing
+from tracking.colour.adapt import nominal_models, save_colours_to_calibration
+from tracking.colour.pick import ColourPickError, ManualColours
+from tracking.colour.table import ColourTable
+from tracking.live.source import calibration_file_for, learnt_colours_for
+from tracking.markerset import load_markerset
 
 log = logging.getLogger(__name__)
 
@@ -130,12 +135,8 @@ class MonitorScene(BaseScene):
             self._builder.start()
 
     def _build_table(self) -> None:
-        from tracking.colour.table import ColourTable
-
         markerset = self.link.markerset
         if markerset is None:
-            from tracking.markerset import load_markerset
-
             markerset = load_markerset(getattr(getattr(self.link.tracker, "source", None), "markerset",
                                                "upper_limb_seated"))
         self.colour_table = ColourTable.build(markerset.palette)
@@ -164,8 +165,6 @@ class MonitorScene(BaseScene):
 
     def teach(self, camera: int, uv_px) -> bool:
         """Learn the selected colour from the ball at ``uv_px`` in camera ``camera``'s image shown."""
-        from tracking.colour.pick import ColourPickError, ManualColours
-
         markerset = self.link.markerset
         if markerset is None or camera >= len(self.images):
             return False
@@ -191,8 +190,6 @@ class MonitorScene(BaseScene):
 
     def _start_models(self, markerset):
         """The colours to teach from: those learnt into the calibration file if any, else the nominal ones."""
-        from tracking.colour.adapt import nominal_models
-        from tracking.live.source import learnt_colours_for
 
         config = getattr(getattr(self.link, "tracker", None), "source", None)
         try:
@@ -211,8 +208,6 @@ class MonitorScene(BaseScene):
 
     def save_colours(self) -> bool:
         """Write the taught colours into the source's calibration file ([metadata.marker_colours])."""
-        from tracking.colour.adapt import save_colours_to_calibration
-        from tracking.live.source import calibration_file_for
 
         if self.manual is None or not self.manual.picks.any():
             self._say("Nothing taught yet: click a ball in a camera image first", theme.ATTENTION)

@@ -59,6 +59,7 @@ _GAME_LOOK = HistoryLook(
 
 def _figure_rgb(fig) -> np.ndarray:
     """(H, W, 3) uint8 RGB of a matplotlib figure drawn by Agg."""
+    # lazy: matplotlib (0.4 s to import) only when a plot is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     canvas = FigureCanvasAgg(fig)
@@ -84,7 +85,7 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
         order: session uid -> session number (:func:`game.report.session_order`).
         normal_deg: the standard's normal value for the test's position (None: no band).
     """
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     dpi = 100
     fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
@@ -107,7 +108,7 @@ def rom_plot_rgb(title: str, rows: Sequence, order: dict[str, int], normal_deg: 
 def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, int]) -> np.ndarray:
     """Repetitions per game and minutes played per session as an (H, W, 3) uint8 RGB image; what
     the automatic demo played is stacked on the patient's own, hatched and faded."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # lazy: matplotlib (0.4 s to import) only when a plot is drawn
 
     dpi = 100
     fig = Figure(figsize=(size_px[0] / dpi, size_px[1] / dpi), dpi=dpi, facecolor=_BG)
@@ -130,6 +131,7 @@ def games_plot_rgb(rows: Sequence, order: dict[str, int], size_px: tuple[int, in
 
 def _legend_share(fig, legend) -> float:
     """The share of the figure's width left of a legend placed at its right edge."""
+    # lazy: matplotlib (0.4 s to import) only when a plot is drawn
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     renderer = FigureCanvasAgg(fig).get_renderer()

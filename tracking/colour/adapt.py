@@ -22,6 +22,7 @@ from __future__ import annotations
 import base64
 import logging
 import time
+import tomllib
 import zlib
 from pathlib import Path
 from typing import Iterable, Sequence
@@ -29,6 +30,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from calibration.camera import Camera
+from calibration.files import read_metadata_section, write_metadata_section
 from tracking.colour.learn import (
     ColourModel,
     ColourStats,
@@ -41,7 +43,7 @@ from tracking.colour.learn import (
     outside_discs_sample,
 )
 from tracking.colour.table import ColourTable, DEFAULT_HUE_TOL_DEG, DEFAULT_MIN_SATURATION
-from tracking.errors import ContentError
+from tracking.errors import ContentError, RecordingError
 from tracking.markerset import MarkerSet
 from tracking.marker_status import MarkerStatus
 
@@ -251,8 +253,6 @@ def save_colours(path: Path, markerset: MarkerSet, models: Sequence[ColourModel]
 def save_colours_to_calibration(path: Path, markerset: MarkerSet, models: Sequence[ColourModel], label_hs: np.ndarray) -> None:
     """Learned colours -> the ``[metadata.marker_colours]`` section of a TOML calibration file
     (replacing an older one; the cameras are kept as they are)."""
-    from calibration.files import write_metadata_section
-
     text = ("# Marker colours learned by `rehab calibrate colour` (tracking/colour/adapt.py)\n"
             + colours_toml(markerset, models, label_hs, prefix=f"metadata.{CALIBRATION_SECTION}"))
     write_metadata_section(path, CALIBRATION_SECTION, text)
@@ -281,8 +281,6 @@ def calibration_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourMo
     Raises:
         ContentError: the section is malformed or for other colours.
     """
-    from calibration.files import read_metadata_section
-
     section = read_metadata_section(path, CALIBRATION_SECTION)
     if section is None:
         return None
@@ -296,8 +294,6 @@ def read_colours(path: Path, markerset: MarkerSet) -> tuple[list[ColourModel], n
     Raises:
         ContentError: the file is missing, malformed, or for another number of colours.
     """
-    import tomllib
-
     path = Path(path)
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -346,7 +342,7 @@ def learn_colours(frame_sets: Iterable, cameras: Sequence[Camera], markerset: Ma
     Raises:
         RecordingError: the markers were never identified, or a marker colour was never measured.
     """
-    from tracking.errors import RecordingError
+    # lazy: the tracker only to learn colours from a recording (the game imports this module)
     from tracking.tracker import Tracker, TrackingState
 
     tracker = Tracker(cameras, markerset, table=table)

@@ -50,8 +50,8 @@ from tracking.colour.table import (
     DEFAULT_MIN_VALUE,
     DEFAULT_NOISE_COUNTS,
     ColourTable,
-    _hsv_deg,
-    _value_saturation_gate,
+    hsv_deg,
+    value_saturation_gate,
 )
 from tracking.errors import ContentError
 
@@ -230,7 +230,7 @@ class LutBuilder:
         dummy = np.zeros((self.n_colours, 3))
         # min_saturation 0: the learned saturation floor is in label_hs; the gate keeps the value
         # floor and the noise margin
-        self.gate = _value_saturation_gate(dummy, 0.0, self.min_value, self.noise_counts).reshape(-1)
+        self.gate = value_saturation_gate(dummy, 0.0, self.min_value, self.noise_counts).reshape(-1)
         self.order, self.value_sorted, self.starts = self._sorted_colours()
         self.label_hs: np.ndarray | None = None  # the target labels (staged or applied)
         self.pending = np.zeros(0, np.int64)  # keys H << 8 | S still to rewrite
@@ -354,4 +354,4 @@ def outside_discs_sample(image_bgr: np.ndarray, centres_uv: np.ndarray, radii_px
 
 def nominal_hue_deg(palette_rgb: np.ndarray) -> np.ndarray:
     """(K,) hue in degrees of each nominal palette colour."""
-    return _hsv_deg(np.asarray(palette_rgb))[:, 0]
+    return hsv_deg(np.asarray(palette_rgb))[:, 0]

@@ -109,7 +109,7 @@ MIN_PALETTE_VALUE = 0.3
 _HUE_UNITS_PER_DEG = 256.0 / 360.0  # OpenCV *_FULL hue: 0..255 for 0..360 deg
 
 
-def _hsv_deg(rgb: np.ndarray) -> np.ndarray:
+def hsv_deg(rgb: np.ndarray) -> np.ndarray:
     """(N, 3) sRGB 0..255 -> (N, 3) float64 hue in deg [0, 360), saturation 0..1, value 0..1."""
     rgb = np.asarray(rgb, dtype=np.float64)
     mx = rgb.max(axis=1)
@@ -134,7 +134,7 @@ def _hue_labels(palette_hsv: np.ndarray, hue_tol_deg: float) -> np.ndarray:
     return np.where(np.isfinite(dh.min(axis=0)), np.argmin(dh, axis=0) + 1, 0).astype(np.uint8)
 
 
-def _value_saturation_gate(
+def value_saturation_gate(
     palette_hsv: np.ndarray, min_saturation: float, min_value: float, noise_counts: float
 ) -> np.ndarray:
     """(K + 1, 256, 256) uint8 ``gate[label, V, S]``: the label if a colour of that hue label with
@@ -176,7 +176,7 @@ def _fill_table(
     step = 1 << (8 - bits)
     levels = (np.arange(n) * step + step // 2).astype(np.uint8)
     hue_label = _hue_labels(palette_hsv, hue_tol_deg)
-    gate = _value_saturation_gate(palette_hsv, min_saturation, min_value, noise_counts).reshape(-1)
+    gate = value_saturation_gate(palette_hsv, min_saturation, min_value, noise_counts).reshape(-1)
     table = np.empty((n, n, n), dtype=np.uint8)  # [R, G, B]
     plane = np.empty((n, n, 3), dtype=np.uint8)  # [G, B] -> BGR
     plane[..., 0] = levels[None, :]
@@ -262,7 +262,7 @@ class ColourTable:
         if not 0.0 <= noise_counts <= 50.0:
             raise ValueError(f"noise_counts must be 0..50, got {noise_counts}")
         pal = pal.astype(np.uint8)
-        palette_hsv = _hsv_deg(pal)
+        palette_hsv = hsv_deg(pal)
         for rgb, (_, s, v) in zip(pal.tolist(), palette_hsv):
             if s < MIN_PALETTE_SATURATION or v < MIN_PALETTE_VALUE:
                 raise ContentError(
@@ -468,7 +468,8 @@ def benchmark(*, repeats: int = 30, seed: int = 0) -> dict[str, float]:
         image, i.e. refined centroids) and ``classify_find_blobs_binary_4cams_640x480_s`` (binary
         centroids). The scene has 14 marker discs of radius 7 px per frame.
     """
-    from tracking.blobs import find_blobs  # blobs imports nothing from here at module level
+    # lazy: tracking.blobs (scipy, 0.2 s) only for this benchmark; the game imports this module
+    from tracking.blobs import find_blobs
 
     palette = np.array([(255, 214, 0), (0, 200, 70), (225, 0, 210)], dtype=np.uint8)
     rng = np.random.default_rng(seed)

@@ -27,7 +27,9 @@ from tracking.colour.table import ColourTable
 from tracking.full_frame import FrameMeasurer
 from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise
 from tracking.live.protocol import SourceConfig
+from tracking.markerset import load_markerset
 from tracking.sources.sim import SimulatedSource
+from tracking.tracker import Tracker, TrackerParams, TrackingState
 
 
 def _median_s(fn: Callable[[], object], repeats: int) -> float:
@@ -101,8 +103,6 @@ def webcam_frames(frames: Sequence[tuple[np.ndarray, ...]], seed: int = 0) -> li
 
 def _webcam_worst(frames, cameras, ms, table, fps: float, warm: int) -> Iterator[str]:
     """Median and worst frame set (CPU) of full-frame measurement and tracking on :func:`webcam_frames`."""
-    from tracking.tracker import Tracker, TrackerParams, TrackingState
-
     noisy = webcam_frames(frames)
     with one_core():
         measurer = FrameMeasurer(cameras, table, ms.radius_m, markers_per_colour=np.bincount(ms.colour_index))
@@ -143,8 +143,6 @@ def run_benchmarks(n_frames: int = 60, motion: str = "shoulder_abduction", passe
     # memory floor: copying the frame set once
     copy_s = float(np.median([_median_s(lambda f=f: [img.copy() for img in f], 3) for f in frames]))
 
-    from tracking.markerset import load_markerset
-    from tracking.tracker import Tracker, TrackerParams, TrackingState
 
     ms = load_markerset(base.markerset)
     table = ColourTable.build(ms.palette)

@@ -11,6 +11,7 @@ from calibration.camera import Camera
 from tracking.markerset import load_markerset
 from tracking.io.recording import Recording
 from tracking.marker_status import MarkerStatus
+from tracking.tracker import Tracker
 
 
 def track_positions(folder: str | Path, cameras: Sequence[Camera]) -> tuple[np.ndarray, np.ndarray]:
@@ -20,8 +21,6 @@ def track_positions(folder: str | Path, cameras: Sequence[Camera]) -> tuple[np.n
         positions_m: (T, M, 3) world metres, NaN unless measured (triangulated) in that frame.
         status: (T, M) MarkerStatus values.
     """
-    from tracking.tracker import Tracker
-
     with Recording(folder) as rec:
         ms = load_markerset(rec.meta.markerset)
         if rec.meta.marker_colours and len(rec.meta.marker_colours) == ms.n_markers:

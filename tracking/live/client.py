@@ -25,6 +25,7 @@ import multiprocessing
 import os
 import secrets
 import select
+import signal
 import threading
 import time
 from dataclasses import replace
@@ -117,8 +118,6 @@ def _exit_reason(exitcode: int | None) -> str:
     if exitcode is None:
         return "stopped answering (no heartbeat)"
     if exitcode < 0:
-        import signal
-
         try:
             name = signal.Signals(-exitcode).name
         except ValueError:
@@ -179,6 +178,7 @@ def _check_motion(name: str | None) -> None:
     """Raise :class:`LiveError` unless ``name`` is None, a built-in motion or an existing file."""
     if name is None:
         return
+    # lazy: the simulator only when the simulated patient is the source (tests/test_layout.py)
     from tracking.sim.motions import available_motions
 
     if name not in available_motions() and not Path(name).is_file():

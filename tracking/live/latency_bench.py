@@ -21,6 +21,8 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
+import socket
 import sys
 import time
 
@@ -28,6 +30,7 @@ import numpy as np
 
 from tracking.live.client import LiveTracker, process_cpu_s
 from tracking.live.protocol import SourceConfig
+from tracking.live.stream import StreamConfig, quiet_lsl
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +50,6 @@ class StreamConsumers:
     inlet per stream pulling, and a UDP socket draining the OSC datagrams."""
 
     def __init__(self, stream) -> None:
-        import socket
-
         self.inlets = []
         self.sock = None
         self.received = 0
@@ -60,9 +61,7 @@ class StreamConsumers:
 
     def connect(self, timeout_s: float = 10.0) -> None:
         if self.stream.lsl:
-            import pylsl
-
-            from tracking.live.stream import quiet_lsl
+            import pylsl  # lazy: pylsl loads its native liblsl: only when LSL output is on
 
             quiet_lsl()
             for kind in ("markers", "angles", "status"):
@@ -90,8 +89,6 @@ class StreamConsumers:
 
 
 def free_udp_port() -> int:
-    import socket
-
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
@@ -196,8 +193,6 @@ def measure_latency(seconds: float = 10.0, size: tuple[int, int] = (320, 240), *
 def compare_streaming(seconds: float, passes: int = 3, size: tuple[int, int] = (320, 240)) -> list[str]:
     """The tracker process with streaming off and on (LSL and OSC, received in this process), in
     alternating passes of ``seconds``: its step time and CPU time per frame set. Lines to print."""
-    from tracking.live.stream import StreamConfig
-
     stream = StreamConfig(lsl=True, osc=("127.0.0.1", free_udp_port()), name="rehab-bench")
     rows = {"off": [], "on": []}
     for _ in range(passes):
@@ -232,8 +227,6 @@ def measure_kill_both(n: int = 10, size: tuple[int, int] = (320, 240), *, log=pr
     """Kill the running tracker process and its warm standby together (SIGKILL, as the
     out-of-memory killer may) ``n`` times; returns the seconds from the kills to the first new
     sample published (``status()`` and ``poll()`` called every 5 ms, as a game would each frame)."""
-    import signal
-
     times = []
     with LiveTracker(SourceConfig(size=size, motion="shoulder_flexion")) as live:
         for i in range(n):

@@ -38,15 +38,21 @@ import signal
 import sys
 import time
 from dataclasses import dataclass
+from multiprocessing import shared_memory
 from typing import Callable
 
 import numpy as np
 
+from calibration.errors import RehabError
+from tracking.colour.adapt import ColourAdapter, table_from_colours
+from tracking.colour.table import ColourTable
 from tracking.live.protocol import (Activate, LiveError, Pause, PatientInput, Reidentify, Resume, SetColours, SetMotion, SetPatientInput,
                                     SourceConfig, Stop)
 from tracking.live.ring import ImageLayout, ImageSlot, ProcessState, RingLayout, RingWriter, encode_line
 from tracking.live.source import angle_names_for, learnt_colours_for, open_source
+from tracking.live.stream import StreamFrame, StreamSender
 from tracking.sources.base import FrameRequest, FrameSource, warnings_and_end
+from tracking.sources.cameras import is_pace_warning
 
 log = logging.getLogger(__name__)
 
@@ -168,6 +174,7 @@ class TrackerLoop:
     def __init__(self, source: FrameSource, writer: RingWriter, images: ImageSlot | None, *, fps: float,
                  tracker=None, clock: Callable[[], float] = time.perf_counter, notify_fd: int | None = None,
                  adapter=None, streamer=None) -> None:
+        # lazy: the tracker only in the tracker process (the game imports this module)
         from tracking.tracker import Tracker
 
         self.source = source
@@ -227,8 +234,6 @@ class TrackerLoop:
 
     def set_colours(self, models, label_hs) -> None:
         """Track with these colours from the next frame set (an adapter, if any, starts from them)."""
-        from tracking.colour.adapt import ColourAdapter, table_from_colours
-
         models = list(models)
         label_hs = np.asarray(label_hs, np.uint8).reshape(256, 256)
         if len(models) != self.source.markerset.palette.shape[0] or int(label_hs.max()) > len(models):
@@ -244,6 +249,7 @@ class TrackerLoop:
     # ------------------------------------------------------------------ the step
     def step(self) -> bool:
         """Grab, track and publish one frame set; False if it failed (the error is published)."""
+        # lazy: the tracker only in the tracker process (the game imports this module)
         from tracking.tracker import TrackingState
 
         index = self.frame_index
@@ -290,7 +296,6 @@ class TrackerLoop:
         if warnings == self._raw_warnings:
             return
         self._raw_warnings = warnings
-        from tracking.sources.cameras import is_pace_warning
 
         # failures first: the published line has a length limit, and what it cuts must be the
         # pace warnings (frames dropped on a busy machine), never a stopped camera
@@ -337,8 +342,6 @@ class TrackerLoop:
                 pass  # the reader is far behind (the pipe is full) or gone: the ring has the sample
 
     def _stream(self, index: int, time_s: float, frame, sample) -> None:
-        from tracking.live.stream import StreamFrame
-
         angles = sample.angles_deg
         self.streamer.offer(StreamFrame(
             frame_index=index, time_s=time_s, t_ready_s=frame.t_ready_s, state=int(sample.state),
@@ -434,8 +437,6 @@ def _wait_for_activation(conn, parent_pid: int) -> Activate | None:
 
 def tracker_main(args: ProcessArgs, conn) -> None:
     """Entry of the tracker process (see the module docstring)."""
-    from multiprocessing import shared_memory
-
     _die_with_parent(args.parent_pid, args.die_with_parent)
     # Mesa llvmpipe (the simulated cameras' renderer) rasterizes in this thread rather than on
     # threads of its own: its 4 small images fit the frame period on one core, and its extra
@@ -516,7 +517,6 @@ def _open_streamer(args: ProcessArgs, source: FrameSource, writer: RingWriter):
     (a missing library, a bad address) becomes the error line; tracking goes on without them."""
     if args.stream is None or not args.stream.enabled:
         return None
-    from tracking.live.stream import StreamSender
 
     ms = source.markerset
     try:
@@ -535,23 +535,18 @@ def make_tracker(config: SourceConfig, source: FrameSource):
     (``rehab calibrate colour``), else the marker set's nominal table; with ``adapt_colours`` it
     is the adapter's table, starting from the same colours.
     """
-    from tracking.colour.table import ColourTable
-    from tracking.tracker import Tracker
+    from tracking.tracker import Tracker  # lazy: the tracker only in the tracker process (the game imports this module)
 
     learnt = learnt_colours_for(config, source.markerset)
     if learnt is not None:
         log.info("tracking with the marker colours learnt into the calibration")
     adapter = None
     if config.adapt_colours:
-        from tracking.colour.adapt import ColourAdapter
-
         # learning once a second: a drift over a few seconds is followed (every 2 s lost markers on a 4-s
         # ramp, tests/test_live_colours.py) for ~0.8 ms per frame set at 30 fps (docs/COLOUR.md)
         adapter = ColourAdapter(source.cameras, source.markerset, start=learnt, every=max(1, round(config.fps)))
         table = adapter.table
     elif learnt is not None:
-        from tracking.colour.adapt import table_from_colours
-
         table = table_from_colours(*learnt)
     else:
         table = ColourTable.build(source.markerset.palette)
@@ -582,8 +577,6 @@ def _warm_up(source: FrameSource, tracker, progress=lambda what: None) -> None:
 
 
 def _is_user_error(exc: BaseException) -> bool:
-    from calibration.errors import RehabError
-
     return isinstance(exc, RehabError)
 
 

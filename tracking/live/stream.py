@@ -35,6 +35,7 @@ import logging
 import math
 import os
 import queue
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -43,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from calibration.errors import RehabError
+from tracking.angles import ANGLE_COLUMNS
 
 log = logging.getLogger(__name__)
 
@@ -78,15 +80,16 @@ class StreamConfig:
         """:class:`StreamError` (one line) if the libraries or the target are missing."""
         if self.lsl:
             try:
+                # lazy: checks that pylsl and its native liblsl load
                 import pylsl  # noqa: F401
             except (ImportError, RuntimeError) as exc:
                 raise StreamError(f"--lsl needs pylsl with its liblsl ({exc}); install rehab-mocap's dependencies") from None
         if self.osc is not None:
             try:
+                # lazy: checks that python-osc is installed
                 import pythonosc  # noqa: F401
             except ImportError:
                 raise StreamError("--osc needs python-osc; install rehab-mocap's dependencies") from None
-            import socket
 
             try:
                 socket.getaddrinfo(self.osc[0], self.osc[1], type=socket.SOCK_DGRAM)
@@ -190,7 +193,7 @@ class StreamSender:
 def quiet_lsl() -> None:
     """liblsl logs INFO lines to stderr; keep warnings only, unless the user configured LSL
     (a config file LSL would read, whose KnownPeers or SessionID must stay in force)."""
-    import pylsl
+    import pylsl  # lazy: pylsl loads its native liblsl: only when LSL output is on
 
     user_files = [os.environ.get("LSLAPICFG", ""), "lsl_api.cfg", str(Path.home() / "lsl_api" / "lsl_api.cfg"),
                   "/etc/lsl_api/lsl_api.cfg"]
@@ -205,7 +208,7 @@ class LslOutput:
     """The three LSL outlets (module docstring)."""
 
     def __init__(self, name: str, names: tuple[str, ...], markerset: str, angle_names: tuple[str, ...], fps: float):
-        import pylsl
+        import pylsl  # lazy: pylsl loads its native liblsl: only when LSL output is on
 
         quiet_lsl()
         self._pylsl = pylsl
@@ -270,7 +273,7 @@ VMC_BONES = {"Hips": "Hips", "Spine": "Spine", "Neck": "Neck", "Head": "Head",
 @functools.lru_cache(maxsize=1)
 def _rest_to_t_pose() -> dict[str, np.ndarray]:
     """Per joint, the rotation C taking its T-pose rest direction to the skeleton's (arms hanging)."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: scipy.spatial.transform (0.3 s to import) only for VMC output
 
     eye = np.eye(3)
     arm = {"Right": Rotation.from_euler("z", -90, degrees=True).as_matrix(),  # +X (T-pose) -> -Y (hanging)
@@ -286,8 +289,9 @@ def vmc_bones(angles: dict[str, float], skeleton=None) -> dict[str, tuple[np.nda
     """Unity humanoid bone -> (local position (3,) metres, local rotation quaternion x, y, z, w),
     in Unity's axes (left-handed: x right, y up, z forward of the avatar), rotations relative to a
     T-pose (identity: the VRM rest pose)."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # lazy: scipy.spatial.transform (0.3 s to import) only for VMC output
 
+    # lazy: tracking.io.bvh loads scipy.spatial.transform: only for VMC output
     from tracking.io.bvh import JOINTS, BvhSkeleton, joint_offsets_m, local_rotations
 
     sk = skeleton or BvhSkeleton()
@@ -308,7 +312,7 @@ def vmc_bones(angles: dict[str, float], skeleton=None) -> dict[str, tuple[np.nda
 def _osc_message(address: str, *args) -> bytes:
     """One OSC message's bytes (python-osc's encoders: its builder also parses back each message it
     builds, which tripled the sender's time per frame set)."""
-    from pythonosc.parsing import osc_types
+    from pythonosc.parsing import osc_types  # lazy: python-osc only when OSC output is on
 
     tags, body = [","], []
     for a in args:
@@ -328,7 +332,7 @@ class _OscBundle:
     """An OSC bundle to be sent at once (what ``UDPClient.send`` needs: its ``dgram``)."""
 
     def __init__(self, messages: list[bytes]) -> None:
-        from pythonosc.parsing import osc_types
+        from pythonosc.parsing import osc_types  # lazy: python-osc only when OSC output is on
 
         parts = [osc_types.write_string("#bundle"), osc_types.write_date(osc_types.IMMEDIATELY)]
         for m in messages:
@@ -341,9 +345,7 @@ class OscOutput:
     """OSC bundles to one UDP target (module docstring)."""
 
     def __init__(self, target: tuple[str, int], names: tuple[str, ...], angle_names: tuple[str, ...]):
-        from pythonosc.udp_client import SimpleUDPClient
-
-        from tracking.angles import ANGLE_COLUMNS
+        from pythonosc.udp_client import SimpleUDPClient  # lazy: python-osc only when OSC output is on
 
         self.client = SimpleUDPClient(*target)
         self.names = names
@@ -362,8 +364,6 @@ class OscOutput:
         self._send_vmc(angles, frame.time_s)
 
     def _send_vmc(self, angles: dict[str, float], time_s: float) -> None:
-        from tracking.angles import ANGLE_COLUMNS
-
         for name in ANGLE_COLUMNS:  # the skeleton holds an undefined angle (tracking/io/bvh.py)
             value = angles.get(name, math.nan)
             if math.isfinite(value) or name not in self._held:

@@ -32,12 +32,14 @@ from typing import Iterator, Sequence
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 import yaml
 
 from calibration.board import Checkerboard
 from calibration.camera import Camera, rotation_from_rvec
 from calibration.files import save_calibration_toml
 from tracking.errors import RecordingError
+from tracking.sim.renderer import StudioRenderer
 from tracking.sim.scene import SceneFrame
 
 log = logging.getLogger(__name__)
@@ -307,8 +309,6 @@ def neighbour_pairs(cams: Sequence[Camera], target_m=(0.0, 1.0, 0.0)) -> list[tu
 
 def room_backgrounds(cams: Sequence[Camera]) -> list[np.ndarray]:
     """The empty room as each camera sees it (GL renderer, no noise)."""
-    from tracking.sim.renderer import StudioRenderer
-
     with StudioRenderer(cams) as renderer:
         return list(renderer.render(SceneFrame.empty(), with_visibility=False).images)
 
@@ -387,8 +387,6 @@ def wand_scene(balls_m: np.ndarray, radius_m: float = WAND_BALL_RADIUS_M,
 def render_wand(cams: Sequence[Camera], balls_m: np.ndarray, *, noise_sigma: float = 1.5, seed: int = 0,
                 colours_rgb255=WAND_COLOURS_RGB255) -> Iterator[tuple[np.ndarray, ...]]:
     """Images of every camera, frame by frame, of the wand at ``balls_m`` (T, 2, 3)."""
-    from tracking.sim.renderer import StudioRenderer
-
     with StudioRenderer(cams) as renderer:
         for k, balls in enumerate(balls_m):
             yield renderer.render(wand_scene(balls, colours_rgb255=colours_rgb255), noise_sigma=noise_sigma,
@@ -407,8 +405,6 @@ def write_calibration_material(out_dir: Path, cams: Sequence[Camera], *, board: 
     partly out of the picture. With ``charuco_extrinsics`` (a ChArUco board large enough to be
     seen from the cameras' distance), also ``extrinsics_charuco/``: its shared views and the seat.
     """
-    from tqdm import tqdm
-
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     save_calibration_toml(out_dir / "truth_calibration.toml", cams)
@@ -481,8 +477,6 @@ def write_wand_sequence(folder: Path, cams: Sequence[Camera], balls_m: np.ndarra
                         noise_sigma: float = 1.5, seed: int = 0, progress: bool = False,
                         colours_rgb255=WAND_COLOURS_RGB255) -> None:
     """A wand recording: one lossless FFV1 video per camera, meta.yaml, truth_wand.csv (mm)."""
-    from tqdm import tqdm
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     fourcc = cv2.VideoWriter_fourcc(*"FFV1")

@@ -32,17 +32,18 @@ import logging
 from pathlib import Path
 from typing import Literal
 
+import ezc3d
 import numpy as np
 import pydantic
 from scipy.interpolate import CubicSpline
 
 from content import content_path
-from tracking.content_loader import StrictModel, load_model
+from tracking.content_loader import StrictModel, load_model, load_yaml
 from tracking.errors import MotionError
 from tracking.markerset import load_markerset
 from tracking.sim.body import SIDES, ArmPose, BodyDimensions, BodyModel, Pose, reference_pose
 from tracking.geometry.rotations import slerp_rotation
-from tracking.sim.motions import MIN_REFERENCE_HOLD_S, Motion, ease
+from tracking.sim.motion_base import MIN_REFERENCE_HOLD_S, Motion, ease
 
 log = logging.getLogger(__name__)
 
@@ -149,8 +150,6 @@ def read_c3d_points(path: Path, labels: dict[str, str], source: str = "") -> tup
     Raises:
         MotionError: unreadable file or labels not in it (one line naming them).
     """
-    import ezc3d
-
     try:
         c3d = ezc3d.c3d(str(path))
     except Exception as exc:  # ezc3d raises plain RuntimeError/IOError on bad files
@@ -514,8 +513,6 @@ def capture_motion(spec: CaptureSpec, yaml_path: Path, dims: BodyDimensions, c3d
 
 
 def _bundled_specs() -> list[tuple[Path, CaptureSpec]]:
-    from tracking.content_loader import load_yaml
-
     out = []
     for p in sorted(content_path("motions").glob("*.yaml")):
         data = load_yaml(p)

@@ -19,6 +19,7 @@ from tracking.colour.adapt import ColourAdapter
 from tracking.colour.table import ColourTable
 from tracking.sim.studio import SimulationSettings, studio_from_settings
 from tracking.marker_status import MarkerStatus
+from tracking.tracker import Tracker, TrackingState
 
 DRIFT_SETTINGS = SimulationSettings(
     motion="shoulder_abduction", rig="ring4", size_px=(320, 240), seconds=10.0,
@@ -120,8 +121,6 @@ class DriftResult:
 def run_drift(settings: SimulationSettings = DRIFT_SETTINGS, *, every: int = 60, rate: float = 0.3,
               progress: bool = False) -> DriftResult:
     """Render ``settings`` once and track it with the fixed and the adaptive colour table."""
-    from tracking.tracker import Tracker, TrackingState
-
     studio, motion = studio_from_settings(settings)
     with studio:
         ms = studio.markerset

@@ -32,11 +32,16 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from tqdm import tqdm
 
 from tracking.hidden import Estimator, Method, estimator_config
-from tracking.markerset import MarkerSet
+from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
 from tracking.marker_status import MarkerStatus
+from tracking.sim.motions import load_motion
+from tracking.sim.population import REPORTED_SEEDS_FROM, draw
+from tracking.sim.rigs import load_rig
+from tracking.sim.studio import SimulationSettings, Studio, studio_from_settings
 
 log = logging.getLogger(__name__)
 
@@ -139,8 +144,6 @@ class PopulationPatient:
 
     @classmethod
     def draw(cls, seed: int, markerset: MarkerSet) -> "PopulationPatient":
-        from tracking.sim.population import draw
-
         d = draw(seed, markerset)
         bases = _skin_bases(BodyModel(d.dims, markerset), d.pose)
         return cls(seed, d.dims, np.einsum("md,mkd->mk", d.offsets_m, bases))
@@ -155,14 +158,10 @@ def occlusion_data(motion: str, *, fps: float = 30.0, size_px: tuple[int, int] =
     female, markers on their landmarks). The cache key hashes the true trajectories and the
     cameras, so a changed body, placement, motion or rig is rendered again.
     """
-    from tracking.sim.motions import load_motion
-    from tracking.sim.studio import SimulationSettings, Studio, studio_from_settings
 
     if patient is None:
         studio, mot = studio_from_settings(SimulationSettings(motion=motion, rig=rig, size_px=size_px, fps=fps))
     else:
-        from tracking.markerset import load_markerset
-        from tracking.sim.rigs import load_rig
 
         ms = load_markerset()
         studio = Studio(load_rig(rig, size_px), ms, patient.dims)
@@ -403,8 +402,6 @@ def population_scores(seeds: Sequence[int], markerset: MarkerSet, *, motion: str
                       progress: bool = False) -> list[DrawScore]:
     """The seed's experiment on each drawn patient (body and placement errors of
     :mod:`tracking.sim.population`), the recommended estimator with and without its gates."""
-    from tqdm import tqdm
-
     label = "recommended (per marker)"
     out = []
     for seed in tqdm(list(seeds), unit="patient", desc="hidden markers", disable=not progress):
@@ -462,8 +459,6 @@ def population_report(scores: Sequence[DrawScore], names: Sequence[str], *, moti
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    from tracking.markerset import load_markerset
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--motions", nargs="*", default=list(MOTIONS))
     ap.add_argument("--fps", nargs="*", type=int, default=[15, 30], help="15 and/or 30 (15 = every other 30 fps frame)")
@@ -481,8 +476,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     logging.basicConfig(level=logging.INFO if args.population is None else logging.WARNING, format="%(message)s")
     ms = load_markerset()
     if args.population is not None:
-        from tracking.sim.population import REPORTED_SEEDS_FROM
-
         first = REPORTED_SEEDS_FROM if args.first_seed is None else args.first_seed
         if args.population < 1:
             raise SystemExit("--population needs a number of patients >= 1")

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import logging
 import math
-from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -33,31 +32,13 @@ from tracking.content_loader import StrictModel, available, load_model, load_yam
 from tracking.errors import ContentError, MotionError
 from tracking.markerset import load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose, SIDES, reference_arm
+from tracking.sim.motion_base import MIN_REFERENCE_HOLD_S, Motion, ease
 from tracking.geometry.rotations import direction_from_clinical, direction_from_plane, swing_twist
 
 log = logging.getLogger(__name__)
 
-#: Identification needs the reference pose held at least this long at the start of every motion.
-MIN_REFERENCE_HOLD_S = 1.0
-
-
 # ---------------------------------------------------------------------------------------------
 # Interpolation
-
-
-def ease(tau: np.ndarray | float, kind: str = "minimum_jerk") -> np.ndarray | float:
-    """Blend weight 0..1 for a progress ``tau`` in 0..1 (clipped).
-
-    ``minimum_jerk``: 10t^3 - 15t^4 + 6t^5 (zero velocity and acceleration at both ends, the
-    profile of smooth human point-to-point movements); ``cosine``: (1 - cos(pi t)) / 2;
-    ``linear``: t.
-    """
-    t = np.clip(tau, 0.0, 1.0)
-    if kind == "minimum_jerk":
-        return t * t * t * (10.0 - 15.0 * t + 6.0 * t * t)
-    if kind == "cosine":
-        return 0.5 - 0.5 * np.cos(np.pi * t)
-    return t
 
 
 def slerp_unit(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
@@ -110,27 +91,6 @@ class ArmKey:
             lin(self.forearm_supination_deg, other.forearm_supination_deg),
             lin(self.shoulder_shrug_m, other.shoulder_shrug_m),
         )
-
-
-# ---------------------------------------------------------------------------------------------
-# Motion interface
-
-
-class Motion(ABC):
-    """A pose for every instant of ``[0, duration_s]``; before 0 and after the end it holds."""
-
-    name: str
-    duration_s: float
-
-    @abstractmethod
-    def pose_at(self, t_s: float) -> Pose:
-        """The pose at ``t_s`` seconds from the start (clamped to the motion's span)."""
-
-    def times(self, fps: float) -> np.ndarray:
-        """(T,) sample times in seconds at ``fps`` frames per second over the whole motion."""
-        if fps <= 0:
-            raise MotionError(f"frame rate {fps:g} must be positive")
-        return np.arange(int(math.floor(self.duration_s * fps + 1e-9)) + 1) / fps
 
 
 class ScriptedMotion(Motion):
@@ -383,8 +343,8 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         ContentError: a malformed motion YAML (the message names the file and key).
     """
     path = _resolve(name_or_path)
-    # The replay pulls in ezc3d and scipy: import it only when a capture is asked for.
     if path.suffix.lower() == ".c3d":
+        # lazy: the replay pulls in ezc3d and scipy.interpolate: only for a capture
         from tracking.sim.capture_replay import replay_c3d
 
         motion: Motion = replay_c3d(path, dims)
@@ -394,6 +354,7 @@ def load_motion(name_or_path: str | Path, dims: BodyDimensions) -> Motion:
         if kind == "scripted":
             motion = scripted_motion(load_model(path, _ScriptedSpec), path.stem, dims)
         elif kind == "capture":
+            # lazy: the replay pulls in ezc3d and scipy.interpolate: only for a capture
             from tracking.sim.capture_replay import CaptureSpec, capture_motion
 
             motion = capture_motion(load_model(path, CaptureSpec), path, dims)

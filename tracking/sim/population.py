@@ -26,11 +26,14 @@ from typing import Iterable
 
 import numpy as np
 
+from calibration.camera import Camera
 from tracking.labelling.rays import RAY_FAR, RAY_FAR_WHOLE, RAY_NEAR, RAY_NEAR_WHOLE, Rays
 from tracking.markerset import MarkerSet, load_markerset
 from tracking.sim.body import ArmPose, BodyDimensions, BodyModel, Pose
 from tracking.geometry.rotations import axis_angle_matrix
+from tracking.marker_status import MarkerStatus
 from tracking.sim.imaging import Webcam, WebcamPipeline, drawn_webcam
+from tracking.sim.rigs import load_rig
 
 #: seeds from here on are reported; below are for tuning
 REPORTED_SEEDS_FROM = 100_000
@@ -78,6 +81,7 @@ def draw(seed: int, markerset: MarkerSet, *, one_colour: bool | None = None, max
 
 
 def _possible(d: Draw, markerset: MarkerSet) -> bool:
+    # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
     from tracking.sim.identify_sweep import seat_clash
 
     body = BodyModel(d.dims, markerset)
@@ -173,6 +177,7 @@ def label_draws(seeds: Iterable[int], *, noise_m: float = 0.0015, one_colour: bo
     """Label each draw's points (shuffled, with ``noise_m`` of measurement noise per axis); with
     ``rays``, each marker without a point is seen by one camera (:func:`single_camera_rays`);
     None: a draw with markers without a point is labelled both ways (two results)."""
+    # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
     from tracking.labelling import Labeller
 
     base = markerset or load_markerset()
@@ -209,9 +214,6 @@ LAYOUTS = ("tri3", "front3", "wall3", "ring4", "front4", "corners4", "front4:2",
 
 def layout_cameras(name: str, rng: np.random.Generator, size_px: tuple[int, int]):
     """The cameras of a layout of :data:`LAYOUTS` (a random one drawn from ``rng``)."""
-    from calibration.camera import Camera
-    from tracking.sim.rigs import load_rig
-
     if name.startswith("random"):
         n = int(name[len("random"):])
         w, h = size_px
@@ -264,10 +266,11 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
     ``webcams``: the images are also what a drawn cheap webcam delivers (:func:`draw_imaging`:
     sensor noise, lighting drift, auto exposure / white balance, MJPEG) instead of ``noise_sigma``
     alone."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
 
+    # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
     from tracking.sim.studio import Studio
-    from tracking.marker_status import MarkerStatus
+    # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
     from tracking.tracker import Tracker, TrackerParams, TrackingState
 
     base = markerset or load_markerset()

@@ -22,7 +22,11 @@ from tqdm import tqdm
 from calibration.camera import Camera
 from tracking.markerset import MarkerSet, load_markerset
 from calibration.files import save_calibration_toml
+from tracking.angles import joint_angles
+from tracking.errors import ContentError
+from tracking.io.csv_tables import write_angles_csv
 from tracking.io.recording import FrameSet, RecordingWriter, write_timestamps
+from tracking.io.trc import write_trc
 from tracking.sim.body import BodyDimensions, BodyModel, Pose
 from tracking.sim.clocks import CameraClocks, rolling_marker_positions
 from tracking.sim.imaging import Webcam, WebcamPipeline, add_sensor_noise, exposure_offsets_s, integrate_exposure
@@ -79,8 +83,6 @@ class SimulationSettings:
         if isinstance(offsets, str) or offsets is None:
             offsets = None if offsets == "random" else (0.0,) * n_cameras
         elif len(offsets) != n_cameras:
-            from tracking.errors import ContentError
-
             raise ContentError(f"--camera-offsets gives {len(offsets)} offsets for {n_cameras} cameras: give one per "
                                f"camera (fractions of a frame period) or 'random'")
         return CameraClocks.drawn(n_cameras, self.seed, offsets=offsets, drift=self.clock_drift,
@@ -279,8 +281,6 @@ def studio_from_settings(settings: SimulationSettings) -> tuple[Studio, Motion]:
     cameras = load_rig(settings.rig, settings.size_px)
     if settings.n_cameras is not None:
         if not 2 <= settings.n_cameras <= len(cameras):
-            from tracking.errors import ContentError
-
             raise ContentError(f"--cameras {settings.n_cameras}: the rig {settings.rig} has {len(cameras)} cameras; give 2..{len(cameras)}")
         cameras = cameras[: settings.n_cameras]
     dims = BodyDimensions.from_percentile(settings.percentile, settings.sex)
@@ -290,9 +290,6 @@ def studio_from_settings(settings: SimulationSettings) -> tuple[Studio, Motion]:
 
 def simulate_recording(out_dir: Path, settings: SimulationSettings, *, progress: bool = False) -> str:
     """Write a recording folder with ground truth; return a one-line summary."""
-    from tracking.angles import joint_angles
-    from tracking.io.csv_tables import write_angles_csv
-    from tracking.io.trc import write_trc
 
     out_dir = Path(out_dir)
     studio, motion = studio_from_settings(settings)

@@ -8,14 +8,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
+from tracking.drivers.offline import estimated_skews, track_frames_of
+from tracking.io.recording import read_timestamps
+from tracking.io.trc import read_trc
 from tracking.sim.clocks import CameraClocks
-from tracking.sim.studio import SimulationSettings, studio_from_settings
+from tracking.sim.studio import SimulationSettings, simulate_recording, studio_from_settings
 from tracking.marker_status import MarkerStatus
 from tracking.tracker import Tracker
 
@@ -75,12 +79,6 @@ def evaluate_auto(motion: str, seed: int, folder: Path, *, size=(320, 240), seco
     the recovered skews' errors against the first camera (modulo the period). Writes the
     recordings into ``folder`` and removes them (``keep``: keeps them, and uses those already
     there: the same motion, seed and size rendered once for several runs)."""
-    import shutil
-
-    from tracking.drivers.offline import estimated_skews, track_frames_of
-    from tracking.io.recording import read_timestamps
-    from tracking.sim.studio import simulate_recording
-    from tracking.io.trc import read_trc
 
     def rmse(run, truth_mm):
         meas = run.status == MarkerStatus.MEASURED

@@ -14,11 +14,17 @@ from typing import Iterable, Iterator, Sequence
 import numpy as np
 from tqdm import tqdm
 
+from tracking.angles import joint_angles
 from tracking.colour.table import ColourTable
 from tracking.drivers.evaluate import PointAccuracy, evaluate_points
 from tracking.full_frame import FrameMeasurer
+from tracking.io.recording import Recording
+from tracking.io.trc import read_trc
+from tracking.marker_status import MarkerStatus
+from tracking.markerset import load_markerset
 from tracking.sim.motions import available_motions
 from tracking.sim.studio import SimulationSettings, studio_from_settings
+from tracking.tracker import Tracker, TrackingState
 
 
 def validate_motion(settings: SimulationSettings, *, progress: bool = False) -> PointAccuracy:
@@ -164,8 +170,6 @@ def angle_sensitivity(truth_m: np.ndarray, names: Sequence[str], uses: dict[str,
     """Per angle, (T,) the largest change (degrees) of its true value when one of its markers
     moves by ``step_m`` along one world axis: how much marker error the angle amplifies in each
     frame (NaN where the angle is undefined)."""
-    from tracking.angles import joint_angles
-
     base = joint_angles(truth_m, names)
     sens = {name: np.where(np.isfinite(v), 0.0, np.nan) for name, v in base.items()}
     for m in np.flatnonzero(np.any(list(uses.values()), axis=0)):
@@ -185,8 +189,6 @@ def angle_markers(truth_m: np.ndarray, names: Sequence[str]) -> dict[str, np.nda
     Found on the true poses: an angle reads marker m if hiding m (NaN) makes it undefined in a
     frame where it is defined. Shape of ``truth_m``: (T, M, 3) world metres.
     """
-    from tracking.angles import joint_angles
-
     base = joint_angles(truth_m, names)
     uses = {name: np.zeros(len(names), dtype=bool) for name in base}
     for m in range(len(names)):
@@ -211,8 +213,6 @@ def score_tracking(positions_m: np.ndarray, status: np.ndarray, truth_m: np.ndar
         angles_deg: the tracker's reported angles, name -> (T,) (NaN where it reported none, e.g.
             a withheld supination); None: computed from the positions.
     """
-    from tracking.angles import joint_angles
-    from tracking.marker_status import MarkerStatus
 
     pos = np.where((status != MarkerStatus.LOST)[..., None], positions_m, np.nan)
     err = np.linalg.norm(pos - truth_m, axis=-1) * 1000.0
@@ -292,8 +292,6 @@ class TrackedRun:
 
 def track_frames(tracker, frames: Iterable[tuple[Sequence[np.ndarray], float, np.ndarray]]) -> TrackedRun:
     """Run ``tracker`` over (images, time_s, true (M, 3) marker centres) frame sets."""
-    from tracking.marker_status import MarkerStatus
-    from tracking.tracker import TrackingState
 
     positions, status, truth, angles = [], [], [], []
     identified_at, swaps, total = -1, 0, 0
@@ -328,8 +326,6 @@ def validate_tracking(settings: SimulationSettings, *, progress: bool = False) -
 
 def track_simulated(settings: SimulationSettings, *, progress: bool = False) -> TrackedRun:
     """Render one motion and run the tracker on it; the frame-by-frame output with the truth."""
-    from tracking.tracker import Tracker
-
     studio, motion = studio_from_settings(settings)
     with studio:
         tracker = Tracker(studio.cameras, studio.markerset, fps=settings.fps)
@@ -347,10 +343,6 @@ def track_recording_with_truth(folder: Path, *, progress: bool = False) -> Track
     Tracking a cached recording gives the same figures as :func:`validate_tracking` on the same
     settings (the videos are lossless) without rendering again.
     """
-    from tracking.markerset import load_markerset
-    from tracking.io.recording import Recording
-    from tracking.tracker import Tracker
-    from tracking.io.trc import read_trc
 
     folder = Path(folder)
     truth = read_trc(folder / "truth.trc")

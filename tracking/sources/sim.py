@@ -50,6 +50,7 @@ class SimulatedSource:
     def __init__(self, config, *, seconds: float | None = None, start_s: float = 0.0) -> None:
         # the studio (OpenGL) only where a simulated source is made: the game reads the rig's
         # geometry through this module without loading it
+        # lazy: the simulator only when the simulated patient is the source (tests/test_layout.py)
         from tracking.sim.studio import Studio
 
         self.config = config
