@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from tracking.angles import ANGLE_COLUMNS
 from tracking.geometry.rotations import direction_from_plane, swing_matrix
 
 _MIRROR = np.diag([-1.0, 1.0, 1.0])
@@ -226,7 +227,6 @@ def write_bvh(path: str | Path, times_s: np.ndarray, angles_deg: Mapping[str, np
         rate_hz: frame rate.
         skeleton: segment lengths (default :class:`BvhSkeleton`).
     """
-    from tracking.angles import ANGLE_COLUMNS
 
     missing = [c for c in ANGLE_COLUMNS if c not in angles_deg]
     if missing:

@@ -32,6 +32,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import ezc3d
 import numpy as np
 
 from calibration.errors import RehabError
@@ -103,7 +104,6 @@ def write_c3d(
             set's name for ``SUBJECTS:MARKER_SETS``. Neither: no ``SUBJECTS`` group.
         events: entries of the ``EVENT`` group.
     """
-    import ezc3d  # heavy import, only where C3D files are written
 
     names = [str(n) for n in names]
     p = np.asarray(positions_mm, dtype=np.float64)
@@ -266,7 +266,6 @@ def read_c3d_points(
             is missing (residual < 0).
         rate_hz: ``POINT:RATE``.
     """
-    import ezc3d
 
     path = Path(path)
     if not path.is_file():
@@ -333,7 +332,6 @@ def check_c3d_layout(path: Path) -> tuple[int, int, int]:
     Raises:
         C3dError: not a C3D file, or a damaged header or parameter section.
     """
-    import struct
 
     size = path.stat().st_size
     with open(path, "rb") as fh:
@@ -381,7 +379,6 @@ def _walk_parameters(path: Path, params: bytes, endian: str) -> dict[tuple[bytes
 
     Returns the whole-number scalar parameters, e.g. ``{(b"POINT", b"FRAMES"): 580}``.
     """
-    import struct
 
     groups: dict[int, bytes] = {}
     owners: set[int] = set()

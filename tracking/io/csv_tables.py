@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from calibration.errors import RehabError
-from tracking.angles import ANGLE_COLUMNS, MissingMarkersError
+from tracking.angles import ANGLE_COLUMNS, REQUIRED_MARKERS, MissingMarkersError, joint_angles, require_markers
+from tracking.io.trc import read_trc
 from tracking.marker_status import MarkerStatus
 
 __all__ = [
@@ -134,8 +136,6 @@ def angles_csv_from_trc(trc_path: str | Path, out_csv: str | Path, marker_map: M
     :class:`~tracking.angles.MissingMarkersError` (one line, naming the markers wanted and those
     found) if the TRC lacks a marker the angles need. Returns the number of frames written.
     """
-    from tracking.angles import joint_angles, require_markers
-    from tracking.io.trc import read_trc
 
     trc = read_trc(trc_path)
     if trc.n_frames == 0:
@@ -172,9 +172,7 @@ def read_marker_map(path: str | Path) -> dict[str, str]:
     One-line :class:`TableError` if the file is missing, not such a mapping, names a marker the
     angles do not use, or maps two markers to one name.
     """
-    import yaml
 
-    from tracking.angles import REQUIRED_MARKERS
 
     path = Path(path)
     try:

@@ -22,8 +22,6 @@ class AnglesCsv(ExportFormat):
     rank = 30
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.csv_tables as tables_io
+        import tracking.io.csv_tables as tables_io  # lazy: loads on write, not at each command's start
 
         tables_io.write_angles_csv(path, run.frames, run.times_s, run.angles_deg)

@@ -24,9 +24,9 @@ class Bvh(ExportFormat):
     rank = 60
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer's scipy (0.2-0.4 s) loads when a BVH is written, not at every command's
+        # the writer's scipy (0.2-0.4 s) loads when a BVH is written, not at every command's
         # start (`rehab --help` reads this registry)
-        import tracking.io.bvh as bvh_io
+        import tracking.io.bvh as bvh_io  # lazy: loads on write, not at each command's start
 
         measured_mm = np.where((run.status == MarkerStatus.MEASURED)[..., None], run.positions_mm, np.nan)
         skeleton = bvh_io.BvhSkeleton.from_markers(run.names, measured_mm)

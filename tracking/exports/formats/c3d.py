@@ -23,10 +23,8 @@ class C3d(ExportFormat):
     rank = 40
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.c3d as c3d_io
-        import tracking.io.detections as detections_io
+        import tracking.io.c3d as c3d_io  # lazy: loads on write, not at each command's start
+        import tracking.io.detections as detections_io  # lazy: loads on write, not at each command's start
 
         residuals = detections_io.reprojection_residuals_mm(run.cameras, run.positions_mm / 1000.0, run.uv_px)
         events = [c3d_io.C3dEvent("Identified", float(t - run.times_s[0]), "General",

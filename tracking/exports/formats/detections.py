@@ -19,9 +19,7 @@ class Detections(ExportFormat):
     rank = 70
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.detections as detections_io
+        import tracking.io.detections as detections_io  # lazy: loads on write, not at each command's start
 
         detections_io.write_detections_csv(path, run.frames, run.times_s, [c.name for c in run.cameras], run.names,
                                            run.uv_px)

@@ -18,9 +18,7 @@ class Mot(ExportFormat):
     rank = 50
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.opensim_mot as mot_io
+        import tracking.io.opensim_mot as mot_io  # lazy: loads on write, not at each command's start
 
         # the header's name is the asked file's, not the temporary file's
         mot_io.write_mot(path, run.times_s, run.angles_deg, name=Path(asked).stem)

@@ -19,8 +19,6 @@ class StatusCsv(ExportFormat):
     rank = 20
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.csv_tables as tables_io
+        import tracking.io.csv_tables as tables_io  # lazy: loads on write, not at each command's start
 
         tables_io.write_status_csv(path, run.frames, run.times_s, run.names, run.positions_mm, run.status)

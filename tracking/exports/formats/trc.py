@@ -18,9 +18,7 @@ class Trc(ExportFormat):
     rank = 10
 
     def write(self, run: TrackedRecording, path: Path, *, asked: Path) -> None:
-        # lazy: the writer (and what it needs) loads when this file is written, not at every
-        # command's start: `rehab --help` reads the registry
-        import tracking.io.trc as trc_io
+        import tracking.io.trc as trc_io  # lazy: loads on write, not at each command's start
 
         # Frame# from 1 as OpenSim numbers frames: the first image (index 0) is frame 1
         trc_io.write_trc(path, run.names, run.positions_mm, run.rate_hz, frame_numbers=run.frames + 1,
