@@ -204,36 +204,15 @@ def find_blobs(
     Returns:
         The accepted :class:`Blobs`.
     """
-    if labels.ndim != 2 or labels.dtype != np.uint8:
-        raise ValueError(f"labels must be a (H, W) uint8 array, got {labels.dtype} {labels.shape}")
-    if image_bgr is not None and (image_bgr.shape[:2] != labels.shape or image_bgr.dtype != np.uint8):
-        raise ValueError(
-            f"image_bgr {image_bgr.dtype} {image_bgr.shape} does not match labels {labels.shape}: "
-            "pass the same window of the image as the labels"
-        )
+    _check_labels(labels, image_bgr)
     if labels.size == 0:
         return Blobs.empty()
     ox, oy = float(offset_px[0]), float(offset_px[1])
     rows: list[tuple[int, int, int, float, float, float, float]] = []
     for k in range(n_colours) if colours is None else sorted(c for c in colours if 0 <= c < n_colours):
-        mask = np.equal(labels, k + 1).view(np.uint8)
-        # the outer contours of the 8-connected regions: ~50x faster than connectedComponentsWithStats
-        # on sparse masks, and filling one gives its region with the holes filled
-        contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
         cap = max_per_colour if max_per_colour is None or isinstance(max_per_colour, int) else int(max_per_colour[k])
-        if cap is not None and len(contours) > cap:
-            contours = _cap_regions(contours, k, cap, min_area_px, max_area_px)
-        for contour in contours:
-            x, y, w, h = cv2.boundingRect(contour)
-            if w * h < min_area_px:
-                continue
-            measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px)
-            if measured is None or measured[3] < min_roundness:
-                continue
-            if luma and image_bgr is not None:  # (only the regions that passed the gates pay for the fit)
-                fit = luma_centre(image_bgr, labels, k, measured[0], measured[1], math.sqrt(measured[2] / math.pi))
-                if fit is not None and math.hypot(fit[0] - measured[0], fit[1] - measured[1]) > LUMA_CONFIRM_PX:
-                    measured = (fit[0], fit[1], measured[2], measured[3])
+        for contour, measured in _colour_regions(labels, image_bgr, k, cap, min_area_px, max_area_px, min_roundness,
+                                                 luma):
             first_x, first_y = (int(c) for c in contour[0, 0])
             rows.append((k, first_y, first_x, measured[0] + ox, measured[1] + oy, measured[2], measured[3]))
     if not rows:
@@ -248,6 +227,41 @@ def find_blobs(
         roundness=arr[:, 3].copy(),
         radius_px=np.sqrt(area / np.pi),
     )
+
+
+def _check_labels(labels: np.ndarray, image_bgr: np.ndarray | None) -> None:
+    """:func:`find_blobs`' arguments: (H, W) uint8 labels and, given, the image window they came from."""
+    if labels.ndim != 2 or labels.dtype != np.uint8:
+        raise ValueError(f"labels must be a (H, W) uint8 array, got {labels.dtype} {labels.shape}")
+    if image_bgr is not None and (image_bgr.shape[:2] != labels.shape or image_bgr.dtype != np.uint8):
+        raise ValueError(
+            f"image_bgr {image_bgr.dtype} {image_bgr.shape} does not match labels {labels.shape}: "
+            "pass the same window of the image as the labels"
+        )
+
+
+def _colour_regions(labels: np.ndarray, image_bgr: np.ndarray | None, k: int, cap: int | None, min_area_px: float,
+                    max_area_px: float, min_roundness: float, luma: bool):
+    """Yield (contour, (u, v, area, roundness)) of each accepted region of colour ``k`` (as
+    :func:`find_blobs`; centres in label-image pixels)."""
+    mask = np.equal(labels, k + 1).view(np.uint8)
+    # the outer contours of the 8-connected regions: ~50x faster than connectedComponentsWithStats
+    # on sparse masks, and filling one gives its region with the holes filled
+    contours, _ = cv2.findContours(mask, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+    if cap is not None and len(contours) > cap:
+        contours = _cap_regions(contours, k, cap, min_area_px, max_area_px)
+    for contour in contours:
+        x, y, w, h = cv2.boundingRect(contour)
+        if w * h < min_area_px:
+            continue
+        measured = _measure(labels, image_bgr, contour, k, x, y, w, h, min_area_px, max_area_px)
+        if measured is None or measured[3] < min_roundness:
+            continue
+        if luma and image_bgr is not None:  # (only the regions that passed the gates pay for the fit)
+            fit = luma_centre(image_bgr, labels, k, measured[0], measured[1], math.sqrt(measured[2] / math.pi))
+            if fit is not None and math.hypot(fit[0] - measured[0], fit[1] - measured[1]) > LUMA_CONFIRM_PX:
+                measured = (fit[0], fit[1], measured[2], measured[3])
+        yield contour, measured
 
 
 def _cap_regions(contours, colour: int, cap: int, min_area_px: float, max_area_px: float) -> list:
@@ -368,6 +382,18 @@ def luma_centre(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float
         ok = loop(image_bgr, labels, colour + 1, x0, y0, x1, y1, float(u), float(v), float(radius_px), reach,
                   _LUMA_ITERATIONS, LUMA_MAX_SE_PX, out)
         return (u + out[0], v + out[1]) if ok else None
+    gx, gy, lum = _luma_pixels(image_bgr, labels, colour, u, v, reach, (x0, y0, x1, y1))
+    if gx.size < 16:
+        return None
+    fit = _luma_fit(gx, gy, lum, radius_px)
+    return None if fit is None else (u + fit[0], v + fit[1])
+
+
+def _luma_pixels(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float, v: float, reach: float,
+                 box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pixels :func:`luma_centre` fits: within ``reach`` of (u, v) in ``box`` (x0, y0, x1, y1),
+    background or ``colour``; (x, y) about the start and their luma."""
+    x0, y0, x1, y1 = box
     lab = labels[y0:y1, x0:x1]
     yy, xx = np.mgrid[y0:y1, x0:x1]
     near = ((xx - u) ** 2 + (yy - v) ** 2 <= reach * reach) & ((lab == 0) | (lab == colour + 1))
@@ -375,9 +401,13 @@ def luma_centre(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float
     lum = image_bgr[y0:y1, x0:x1][py, px] @ _LUMA_BGR
     gx = px + (x0 - u)  # pixel positions about the start
     gy = py + (y0 - v)
+    return gx, gy, lum
+
+
+def _luma_fit(gx: np.ndarray, gy: np.ndarray, lum: np.ndarray, radius_px: float) -> tuple[float, float] | None:
+    """:func:`luma_centre`'s Gauss-Newton fit in numpy on the pixels ``gx``, ``gy`` (about the
+    start) of luma ``lum``: the centre's offset from the start, or None (as :func:`luma_centre`)."""
     n = gx.size
-    if n < 16:
-        return None
     scale = 1.0 / max(radius_px, 1.0)
     bx, by = gx * scale, gy * scale
     one = np.ones(n)
@@ -422,7 +452,7 @@ def luma_centre(image_bgr: np.ndarray, labels: np.ndarray, colour: int, u: float
         return None
     if not var[0, 0] + var[1, 1] <= LUMA_MAX_SE_PX ** 2:
         return None
-    return u + cx, v + cy
+    return cx, cy
 
 
 def _luma_rows(gx, gy, lum, n, scale, cx, cy, r, s, coef, jac, res):
@@ -687,19 +717,32 @@ def _arc_starts(q: np.ndarray, first: Sequence[int], count: Sequence[int], radiu
     Returns:
         (S, 2) starting centres.
     """
-    n_reg = len(count)
     loop = _arc_starts_compiled() if compiled else None
     if loop is not None:
-        out = np.empty((n_reg, 2))
-        if prior is None:
-            prior_a, weight = np.zeros((n_reg, 2)), np.zeros(n_reg)
-        else:
-            sigma = np.ones(n_reg) if prior_sigma is None else np.asarray(prior_sigma, dtype=np.float64)
-            prior_a, weight = np.ascontiguousarray(prior, dtype=np.float64), (ARC_START_EDGE_SIGMA_PX / sigma) ** 2
-        loop(np.ascontiguousarray(q[0]), np.ascontiguousarray(q[1]), np.asarray(first, dtype=np.int64),
-             np.asarray(count, dtype=np.int64), np.asarray(radius, dtype=np.float64), ARC_START_TAU_PX, prior_a,
-             weight, _ARC_START_GRID, _ARC_FINE_STEPS, out)
-        return out
+        return _arc_starts_by_loop(loop, q, first, count, radius, prior, prior_sigma)
+    return _arc_starts_numpy(q, first, count, radius, prior, prior_sigma)
+
+
+def _arc_starts_by_loop(loop, q: np.ndarray, first: Sequence[int], count: Sequence[int], radius: Sequence[float],
+                        prior: np.ndarray | None, prior_sigma: np.ndarray | None) -> np.ndarray:
+    """:func:`_arc_starts` by its compiled ``loop`` (:func:`_arc_starts_loop`)."""
+    n_reg = len(count)
+    out = np.empty((n_reg, 2))
+    if prior is None:
+        prior_a, weight = np.zeros((n_reg, 2)), np.zeros(n_reg)
+    else:
+        sigma = np.ones(n_reg) if prior_sigma is None else np.asarray(prior_sigma, dtype=np.float64)
+        prior_a, weight = np.ascontiguousarray(prior, dtype=np.float64), (ARC_START_EDGE_SIGMA_PX / sigma) ** 2
+    loop(np.ascontiguousarray(q[0]), np.ascontiguousarray(q[1]), np.asarray(first, dtype=np.int64),
+         np.asarray(count, dtype=np.int64), np.asarray(radius, dtype=np.float64), ARC_START_TAU_PX, prior_a,
+         weight, _ARC_START_GRID, _ARC_FINE_STEPS, out)
+    return out
+
+
+def _arc_starts_numpy(q: np.ndarray, first: Sequence[int], count: Sequence[int], radius: Sequence[float],
+                      prior: np.ndarray | None, prior_sigma: np.ndarray | None) -> np.ndarray:
+    """:func:`_arc_starts` in numpy: every region's candidates at once."""
+    n_reg = len(count)
     sel = np.concatenate([np.arange(a, a + n) for a, n in zip(first, count)])
     px, py = q[0].take(sel), q[1].take(sel)  # the selected regions' edge points, region after region
     bounds = np.zeros(n_reg, dtype=np.intp)
@@ -1021,6 +1064,50 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     k_count = start_px.shape[0]
     if k_count == 0 or win.size == 0:
         return np.array(start_px, dtype=np.float64)
+    edges = _arc_edges(win, x, y, box_lo, box_hi, k_count)
+    # (the few per-region numbers in plain floats: numpy's per-call cost exceeds their work)
+    radius = radius_px.tolist()
+    start = start_px.tolist()
+    cx, cy = _arc_fit_starts(edges, win, k_count, radius, start, prior_px, prior_sigma_px)
+    # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region (in
+    # numpy the per-region sums of one iteration are one product with the (K, E) region indicator)
+    cx, cy = _fit_arcs(edges.q, edges.pw, radius_px, cx, cy, inside_tol_px, compiled)
+    # a fit that wandered off (too few edge points for the radius) is not a better centre
+    for k in range(k_count):
+        if not math.hypot(cx[k] - start[k][0], cy[k] - start[k][1]) <= radius[k]:  # (NaN too)
+            cx[k], cy[k] = start[k]
+    if colours is not None:
+        _subpixel_arcs(edges, k_count, radius_px, cx, cy, colours, prior_px, prior_sigma_px, compiled)
+    return np.array([cx, cy]).T
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _ArcEdges:
+    """The regions' pixels in one occupancy grid and their edge points (:func:`arc_centres`).
+
+    Attributes:
+        grid: (K * h_grid * w_grid,) whether each cell of the grid is a region pixel; flat: (P,)
+            each pixel's cell; w_grid: the grid's width.
+        xy: (2, P) the pixels' coordinates.
+        at: (E,) each edge point's neighbour d of pixel i as ``d * P + i``, grouped by region;
+            pw: (E,) its region; q: (2, E) the edge points (midpoints to the outside neighbours).
+        counts, firsts: each region's number of edge points and its first.
+    """
+
+    grid: np.ndarray
+    flat: np.ndarray
+    w_grid: int
+    xy: np.ndarray
+    at: np.ndarray
+    pw: np.ndarray
+    q: np.ndarray
+    counts: list
+    firsts: list
+
+
+def _arc_edges(win: np.ndarray, x: np.ndarray, y: np.ndarray, box_lo: np.ndarray, box_hi: np.ndarray,
+               k_count: int) -> _ArcEdges:
+    """The edge points of every region of :func:`arc_centres` (its arguments)."""
     # every region's pixels in one occupancy grid (K regions x rows x columns, a border of one
     # empty pixel all round); the 4 neighbours of every pixel at once, by flat offsets in it
     x0, y0 = float(x.min()) - 1.0, float(y.min()) - 1.0
@@ -1044,16 +1131,21 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     pw = pw.take(by_region)
     q = (xy[:, None, :] + _ARC_HALF_STEP).reshape(2, 4 * n_px).take(at, axis=1)  # (2, E) edge points
     counts = np.bincount(pw, minlength=k_count).tolist()
+    firsts = [0] + list(itertools.accumulate(counts))[:-1]  # each region's first edge point
+    return _ArcEdges(grid, flat, w_grid, xy, at, pw, q, counts, firsts)
+
+
+def _arc_fit_starts(edges: _ArcEdges, win: np.ndarray, k_count: int, radius: list, start: list,
+                    prior_px: np.ndarray | None, prior_sigma_px: np.ndarray | None) -> tuple[list, list]:
+    """The binary arc fits' starting centres (cx, cy): each region's centroid ``start``, its
+    smallest enclosing circle where much is hidden, the searched start on small balls."""
+    q, counts, firsts = edges.q, edges.counts, edges.firsts
     # a ball hidden by much is a poor start: its centroid lies so far towards the visible part that
     # the arc opposite the cut looks inside the circle; the smallest circle enclosing the edge
     # points is the ball's while more than half of it shows (too noisy on balls of a few pixels)
-    # (the few per-region numbers in plain floats: numpy's per-call cost exceeds their work)
     area = np.bincount(win, minlength=k_count).tolist()
-    radius = radius_px.tolist()
-    start = start_px.tolist()
     cx, cy = [p[0] for p in start], [p[1] for p in start]
     q32 = None
-    firsts = [0] + list(itertools.accumulate(counts))[:-1]  # each region's first edge point
     for k in range(k_count):
         r_k, n_k, first = radius[k], counts[k], firsts[k]
         if area[k] < ARC_ENCLOSING_BELOW * np.pi * (r_k * r_k) and r_k >= ARC_ENCLOSING_MIN_PX and n_k >= 3:
@@ -1073,27 +1165,29 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
                              None if prior_sigma_px is None else prior_sigma_px[small])
         for k, (sx, sy) in zip(small, starts.tolist()):
             cx[k], cy[k] = sx, sy
-    # Gauss-Newton for min sum (|q - c| - r)^2 over the kept edge points q of each region (in
-    # numpy the per-region sums of one iteration are one product with the (K, E) region indicator)
-    cx, cy = _fit_arcs(q, pw, radius_px, cx, cy, inside_tol_px, compiled)
-    # a fit that wandered off (too few edge points for the radius) is not a better centre
-    for k in range(k_count):
-        if not math.hypot(cx[k] - start[k][0], cy[k] - start[k][1]) <= radius[k]:  # (NaN too)
-            cx[k], cy[k] = start[k]
-    if colours is None:
-        return np.array([cx, cy]).T
-    # the same arcs on edge points placed by coverage, with the ball's full radius
+    return cx, cy
+
+
+def _subpixel_arcs(edges: _ArcEdges, k_count: int, radius_px: np.ndarray, cx: list, cy: list, colours: tuple,
+                   prior_px: np.ndarray | None, prior_sigma_px: np.ndarray | None, compiled: bool) -> None:
+    """The same arcs on edge points placed by coverage (:func:`_subpixel_edges`), with the ball's
+    full radius: each fit replaces the binary one (``cx``, ``cy``, in place) where it keeps an arc
+    within ``ARC_SUBPIXEL_MAX_SHIFT_PX`` of it (:func:`arc_centres`' ``colours``)."""
+    counts, firsts, pw, at = edges.counts, edges.firsts, edges.pw, edges.at
     fit = [k for k in range(k_count) if counts[k] >= 3]
     if not fit:
-        return np.array([cx, cy]).T
+        return
+    n_px = edges.xy.shape[1]
     pixel, direction = at % n_px, at // n_px
-    inner = grid[flat.take(pixel) - (_ARC_STEP[1, direction, 0] * w_grid + _ARC_STEP[0, direction, 0])]
-    q_sub = _subpixel_edges(xy, pixel, direction, pw, inner, colours, compiled)
+    inner = edges.grid[edges.flat.take(pixel) - (_ARC_STEP[1, direction, 0] * edges.w_grid
+                                                 + _ARC_STEP[0, direction, 0])]
+    q_sub = _subpixel_edges(edges.xy, pixel, direction, pw, inner, colours, compiled)
     full_r = radius_px + ARC_EDGE_SHRINK_PX
     # a small ball's sub-pixel fit starts from the searched start (from the binary fit, a region
     # hidden by its occluder's edge may keep that edge for its arc); a larger one's from the binary
     # fit, which is sure there (and the search costs ~0.1 ms per frame set at 640x480)
     sx, sy = list(cx), list(cy)
+    radius = radius_px.tolist()
     small = [k for k in fit if radius[k] < ARC_ENCLOSING_MIN_PX]
     if small:
         starts = _arc_starts(q_sub, [firsts[k] for k in small], [counts[k] for k in small], full_r[small].tolist(),
@@ -1109,4 +1203,3 @@ def arc_centres(win: np.ndarray, x: np.ndarray, y: np.ndarray, start_px: np.ndar
     for k in fit:
         if kept[k] >= 3 and math.hypot(sx[k] - cx[k], sy[k] - cy[k]) <= ARC_SUBPIXEL_MAX_SHIFT_PX:
             cx[k], cy[k] = sx[k], sy[k]
-    return np.array([cx, cy]).T

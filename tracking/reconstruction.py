@@ -242,10 +242,31 @@ def _size_ratio(geo: RigGeometry, p: np.ndarray, r_obs: np.ndarray, params: Reco
 
 def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], rnd: list[np.ndarray],
                         params: ReconstructionParams):
-    """Yield (point, obs index per camera (C,) with -1, rms px) for one colour."""
-    n_cams = geo.n_cameras
+    """Yield (point, obs index per camera (C,) with -1, rms px) for one colour: proposals from
+    every epipolar-consistent pair (1), support from the other cameras (2), triangulated with the
+    disagreeing and partial views dropped (3), checked (:func:`_valid`) and accepted greedily (4, 5)."""
     counts = [len(x) for x in xn]
-    # 1. proposals from every epipolar-consistent pair
+    proposed = _proposals(geo, xn, counts, params)
+    if proposed is None:
+        return
+    xn_obs, seen, obs, gather = proposed
+    p2 = triangulate(geo.extrinsics, xn_obs, seen)
+    _gather_support(geo, xn, counts, p2, xn_obs, seen, obs, gather, params)
+    # 3. triangulate with everything, dropping disagreeing views
+    p, err, seen = _refine(geo, xn_obs, seen, params)
+    p, err, seen, ratio, belongs = _drop_partial_views(geo, rad, counts, xn_obs, seen, obs, p, err, params)
+    obs = np.where(seen, obs, -1)
+    depth = _depths(geo, p)
+    _partial_elsewhere(geo, xn, rad, counts, p, depth, seen, belongs, params)
+    valid, n_used, rms, round_obs = _valid(rnd, counts, seen, obs, err, depth, ratio, belongs, params)
+    yield from _accept(counts, p, seen, obs, belongs, valid, n_used, rms, round_obs, params)
+
+
+def _proposals(geo: RigGeometry, xn: list[np.ndarray], counts: list[int], params: ReconstructionParams):
+    """1. Proposals from every epipolar-consistent pair: (K, C, 2) normalized observations, (K, C)
+    seen, (K, C) observation index (-1), (K,) whether the proposal gathers support (the first
+    half; the second half is every pair again as a bare two-camera candidate), or None."""
+    n_cams = geo.n_cameras
     props = []  # (cam_i, k_i, cam_j, k_j)
     for i in range(n_cams):
         for j in range(i + 1, n_cams):
@@ -256,7 +277,7 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
             for a, b in zip(ki, kj):
                 props.append((i, a, j, b))
     if not props:
-        return
+        return None
     K = len(props)
     xn_obs = np.full((K, n_cams, 2), np.nan)
     seen = np.zeros((K, n_cams), dtype=bool)
@@ -269,10 +290,15 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     # centroid that another point owns, the clean pair is still there to be taken
     xn_obs, seen, obs = (np.concatenate([a, a]) for a in (xn_obs, seen, obs))
     gather = np.arange(2 * K) < K
-    K = 2 * K
-    p2 = triangulate(geo.extrinsics, xn_obs, seen)
-    # 2. gather support from the other cameras
-    for c in range(n_cams):
+    return xn_obs, seen, obs, gather
+
+
+def _gather_support(geo: RigGeometry, xn: list[np.ndarray], counts: list[int], p2: np.ndarray, xn_obs: np.ndarray,
+                    seen: np.ndarray, obs: np.ndarray, gather: np.ndarray, params: ReconstructionParams) -> None:
+    """2. Support from the other cameras: each gathering proposal (its pair's point ``p2``) takes
+    the nearest centroid of every camera it does not use within twice the gate (in place)."""
+    K = len(p2)
+    for c in range(geo.n_cameras):
         if counts[c] == 0:
             continue
         free = ~seen[:, c] & gather
@@ -288,10 +314,16 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         xn_obs[ok, c] = xn[c][best[ok]]
         seen[ok, c] = True
         obs[ok, c] = best[ok]
-    # 3. triangulate with everything, dropping disagreeing views
-    p, err, seen = _refine(geo, xn_obs, seen, params)
-    # a partly hidden ball shows a smaller blob whose centroid is shifted: leave such views out
-    # of points that keep two or more full-size views
+
+
+def _drop_partial_views(geo: RigGeometry, rad: list[np.ndarray], counts: list[int], xn_obs: np.ndarray,
+                        seen: np.ndarray, obs: np.ndarray, p: np.ndarray, err: np.ndarray,
+                        params: ReconstructionParams):
+    """A partly hidden ball shows a smaller blob whose centroid is shifted: such views are left
+    out of points that keep two or more full-size views, and the points triangulated again.
+    Returns (points, errors, seen, (K, C) size ratios, (K, C) the dropped views that still
+    belong to each point, -1 elsewhere)."""
+    K, n_cams = seen.shape
     r_obs = np.full((K, n_cams), np.nan)
     for c in range(n_cams):
         if counts[c]:
@@ -307,11 +339,17 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
         p_r, err_r, seen_r = _refine(geo, xn_obs[redo], seen[redo], params)
         p[redo], err[redo], seen[redo] = p_r, err_r, seen_r
         ratio[redo] = _size_ratio(geo, p_r, r_obs[redo], params)
-    obs = np.where(seen, obs, -1)
-    # any undersized blob at the point's projection in a camera the point does not use is the same
-    # ball, partly hidden there (dropped above, or never gathered): it belongs to the point too
-    depth = _depths(geo, p)
-    for c in range(n_cams):
+    return p, err, seen, ratio, belongs
+
+
+def _partial_elsewhere(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.ndarray], counts: list[int],
+                       p: np.ndarray, depth: np.ndarray, seen: np.ndarray, belongs: np.ndarray,
+                       params: ReconstructionParams) -> None:
+    """Any undersized blob at the point's projection in a camera the point does not use is the
+    same ball, partly hidden there (dropped above, or never gathered): it belongs to the point
+    too (``belongs``, in place)."""
+    K = len(p)
+    for c in range(geo.n_cameras):
         if counts[c] == 0:
             continue
         cam = geo.extrinsics[c]
@@ -324,6 +362,15 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
             small = rad[c][near] / (geo.focal_px[c] * params.marker_radius_m / depth[:, c])
         hit = ~seen[:, c] & (dist[np.arange(K), near] < 2.0 * params.gate_px) & (small < params.size_ratio_range_two_view[0])
         belongs[hit, c] = near[hit]
+
+
+def _valid(rnd: list[np.ndarray], counts: list[int], seen: np.ndarray, obs: np.ndarray,
+           err: np.ndarray, depth: np.ndarray, ratio: np.ndarray, belongs: np.ndarray, params: ReconstructionParams):
+    """The candidates that may be accepted: one of each set of centroids, seen by two cameras or
+    more, within the reprojection and depth gates, their blob sizes fitting the depth (two-camera
+    points: every view round and of the right size). Returns (valid, views used, rms px, (K, C)
+    each view's roundness)."""
+    K, n_cams = seen.shape
     # proposals that ended with the same centroids are one candidate
     # (the one that carries dropped partial views is kept)
     pref = np.argsort(~(belongs >= 0).any(axis=1), kind="stable")
@@ -349,6 +396,15 @@ def _reconstruct_colour(geo: RigGeometry, xn: list[np.ndarray], rad: list[np.nda
     two_view_fit &= np.where(seen, round_obs, 0.0).max(axis=1) >= r_best
     two_view_fit &= rms <= params.max_rms_px_two_view
     valid &= size_fit & ((n_used > 2) | two_view_fit)
+    return valid, n_used, rms, round_obs
+
+
+def _accept(counts: list[int], p: np.ndarray, seen: np.ndarray, obs: np.ndarray, belongs: np.ndarray,
+            valid: np.ndarray, n_used: np.ndarray, rms: np.ndarray, round_obs: np.ndarray,
+            params: ReconstructionParams):
+    """Yield the accepted candidates (point, obs index per camera, rms px), each centroid serving
+    one point: 4. points seen by 3+ cameras first, 5. then the unambiguous two-camera ones."""
+    _, r_best = params.roundness_two_view
     # 4. greedy acceptance, points seen by 3+ cameras first (more cameras, then smaller error);
     #    each centroid serves one point
     order = np.lexsort((rms, -n_used))

@@ -5,7 +5,10 @@ body model (:mod:`.prior`): segment lengths within population ranges, left/right
 the reference pose as a prior with tolerances. Colours decide wherever they differ (a marker is
 only ever given a point of its own colour). The search (:mod:`.fit`) scores every labelling that
 could be within reach of the best and reports the best with a confidence: the margin to the
-second best. A labelling is used only when it is confident. The per-frame self-checks on the
+second best. A labelling is used only when it is confident. Its parts: :mod:`.body_score` the
+body model's score of labelled positions, :mod:`.parts` the labellings within reach built arm by
+arm and trunk and joined, :mod:`.on_rays` markers without a point placed on single-camera rays,
+:mod:`.advice` the one line on a labelling that is not confident. The per-frame self-checks on the
 named markers (:mod:`.checks`) use the pose-independent parts of the same model.
 
 The body parts each marker stands for (:mod:`.roles`) come from the marker set's YAML. Where
