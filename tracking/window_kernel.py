@@ -322,3 +322,29 @@ def crowded_window(image, lut: np.ndarray, bits: int, box, own: int, pred_px, ga
         image, lut, int(bits), x0, y0, x1, y1, int(own), float(pred_px[0]) - x0, float(pred_px[1]) - y0,
         float(gate.min_area_px), float(gate.max_area_px), float(gate.min_roundness))
     return found, (u + x0, v + y0), area, roundness, xs, ys
+
+
+def _fill_labels(images, lut, cam, boxes, bits, labels):
+    for k in range(cam.shape[0]):
+        img = images[cam[k]]
+        out = labels[cam[k]]
+        for y in range(boxes[k, 1], boxes[k, 3]):
+            for x in range(boxes[k, 0], boxes[k, 2]):
+                out[y, x] = lut[_table_index(img, y, x, bits)]
+
+
+def fill_labels(images, lut: np.ndarray, cam: np.ndarray, boxes: np.ndarray, bits: int, labels) -> None:
+    """Write the colour table's label of every pixel of each box into ``labels``, all boxes in one
+    compiled pass (:func:`usable` images).
+
+    Args:
+        images: the frame set's C-contiguous (H, W, 3) uint8 BGR images.
+        lut: the colour table; ``bits`` its bits per channel.
+        cam: (K,) image of each box; boxes: (K, 4) ``x0, y0, x1, y1`` inside it, end exclusive.
+        labels: one C-contiguous (H, W) uint8 array per image, written in the boxes only.
+    """
+    kernel = compile_loop(_fill_labels, helpers=(_table_index,))
+    if kernel is None:
+        raise RuntimeError("numba is not installed or does not import: the tracker uses its numpy path")
+    kernel(tuple(images), lut, np.ascontiguousarray(cam, dtype=np.int64),
+           np.ascontiguousarray(boxes, dtype=np.int64), int(bits), tuple(labels))
