@@ -104,11 +104,11 @@ class TrackerParams:
             4:2:2), which moves the colour mask's edge; the luma is at full resolution
             (docs/TRACKING.md, "Luma centres in the search windows"). False: the colour centroids
             alone.
-        window_luma_confirm_px: 0: a sure fit always replaces the window's centroid. (The full
-            frame keeps its colour centre within ``LUMA_CONFIRM_PX`` = 0.2 px of the fit because
-            its coverage unmixing is the more exact on full-resolution colour; a window's binary
-            mask centroid is not: on the test balls, lossless, median 0.111 px against the fit's
-            0.019.)
+        window_luma_confirm_px: the fit's centre replaces the window's centroid only where they
+            differ by more than this, as the full frame keeps its colour centre within
+            ``tracking.blobs.LUMA_CONFIRM_PX`` of the fit. On the population's tuning draws 1-20
+            (webcams, 7 draws named) 0.2 px made the measured RMSE of all 7 smaller (median ratio
+            0.984), 0 of 6 (0.985, one 3 % worse); 0: every sure fit is taken.
     """
 
     base_sigma_m: float = 0.008
@@ -139,7 +139,7 @@ class TrackerParams:
     arc_fit_all_below_px: float = 4.0
     arc_subpixel: bool = True
     window_luma: bool = False
-    window_luma_confirm_px: float = 0.0
+    window_luma_confirm_px: float = 0.2
     window_ball_factor: float = 1.2
     window_margin_px: float = 2.0
     min_depth_m: float = 1e-3

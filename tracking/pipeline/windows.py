@@ -243,7 +243,7 @@ def queue_partial_balls(arcs: ArcRegions, p: TrackerParams, win: SearchWindows, 
 
 def luma_windows(setup: Setup, table: ColourTable, images: Sequence[np.ndarray], wm: WindowMoments,
                  whole: np.ndarray, luma: LumaLabels, compiled: bool, uv_out: np.ndarray,
-                 confirm_px: float = 0.0) -> None:
+                 confirm_px: float = 0.2) -> None:
     """The centres of the windows' whole balls (``whole``: one ball, not fitted to its arc) from
     the luma, with the full-frame detection's fit and gates (:func:`tracking.blobs.find_blobs`
     with ``luma=True``): of the balls within the camera's blob gates, each centroid is checked
