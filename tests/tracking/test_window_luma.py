@@ -8,25 +8,13 @@ import numpy as np
 import pytest
 
 from tracking import window_kernel
-from tracking.colour.table import ColourTable
 from tracking.full_frame import BlobGates
-from tracking.markerset import load_markerset
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.windows import LumaLabels, SearchWindows, luma_windows, window_moments
 from tracking.sim.imaging import jpeg_roundtrip
-from tests.tracking.test_blobs import BACKGROUNDS_RGB, LIGHTS, canvas, draw_ball, to_bgr
+from tests.tracking.test_blobs import BACKGROUNDS_RGB, LIGHTS, canvas, draw_ball, palette, table, to_bgr  # noqa: F401 (fixtures)
 
 TRIALS = 24
-
-
-@pytest.fixture(scope="module")
-def palette() -> np.ndarray:
-    return load_markerset("upper_limb_seated").palette
-
-
-@pytest.fixture(scope="module")
-def table(palette) -> ColourTable:
-    return ColourTable.build(palette)
 
 
 def _balls(palette, quality, chroma="420"):
