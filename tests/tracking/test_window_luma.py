@@ -12,6 +12,8 @@ from tracking.full_frame import BlobGates
 from tracking.pipeline.params import TrackerParams
 from tracking.pipeline.windows import LumaLabels, SearchWindows, luma_windows, window_moments
 from tracking.sim.imaging import jpeg_roundtrip
+from tracking.sim.studio import SimulationSettings, studio_from_settings
+from tracking.tracker import Tracker
 from tests.tracking.test_blobs import BACKGROUNDS_RGB, LIGHTS, canvas, draw_ball, palette, table, to_bgr  # noqa: F401 (fixtures)
 
 TRIALS = 24
@@ -92,3 +94,23 @@ def test_window_luma_makes_lossless_centres_no_worse(table, palette):
     colour_err, luma_err = _window_centres(table, palette, None, window_kernel.AVAILABLE)
     assert np.median(luma_err) < np.median(colour_err)
     assert np.percentile(luma_err, 90) <= np.percentile(colour_err, 90) + 1e-9
+
+
+def test_tracker_with_window_luma_tracks_as_without():
+    """The option through the tracker: the same markers measured, the points within a few
+    millimetres of the colour centroids' (the luma moves centres by fractions of a pixel), and
+    some moved (the fits are used)."""
+    studio, motion = studio_from_settings(SimulationSettings(motion="reach", size_px=(320, 240), fps=15.0))
+    with studio:
+        plain = Tracker(studio.cameras, studio.markerset, fps=15.0)
+        luma = Tracker(studio.cameras, studio.markerset, fps=15.0, params=TrackerParams(window_luma=True))
+        luma.compile_loops(next(iter(studio.play(motion, 15.0, seconds=0.1))).frames.images)
+        moved = 0.0
+        for i, sf in enumerate(studio.play(motion, 15.0, seconds=1.0, noise_sigma=1.5)):
+            a = plain.step(sf.frames.images, sf.frames.time_s)
+            b = luma.step(sf.frames.images, sf.frames.time_s)
+            np.testing.assert_array_equal(a.status, b.status)
+            d = np.linalg.norm(a.positions_m - b.positions_m, axis=1)
+            assert np.nanmax(d) < 0.004
+            moved = max(moved, float(np.nanmax(d)))
+    assert i >= 10 and moved > 1e-5
