@@ -49,7 +49,7 @@ from tracking.pipeline.state import FrameState, MarkerMemory, Setup
 from tracking.pipeline.timing import correct_to_set_instant, frame_skew
 from tracking.pipeline.update import estimate_hidden, remember
 from tracking.pipeline.views import choose_views, full_views_as_rays
-from tracking.pipeline.windows import ImageSizes, window_observations
+from tracking.pipeline.windows import ImageSizes, LumaLabels, window_observations
 from tracking.reconstruction import CameraObservations, Points3D, RigGeometry
 from tracking.marker_status import MarkerStatus
 
@@ -156,6 +156,7 @@ class Tracker:
         self.checks = SelfChecks(self.naming.roles) if self.naming.roles is not None else None
         self.times = StageTimes(STEP_STAGES)
         self._sizes = ImageSizes()
+        self._luma = LumaLabels()
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -193,6 +194,9 @@ class Tracker:
                                      self.table.bits)
         window_kernel.crowded_window(images[0], self.table.lut, self.table.bits, (0, 0, 2, 2), int(label[0]),
                                      np.zeros(2), self.gates[0])
+        if self.params.window_luma:
+            window_kernel.fill_labels(images, self.table.lut, np.arange(n), boxes, self.table.bits,
+                                      self._luma.of(images))
         seen = np.zeros((1, n), dtype=bool)
         seen[0, :2] = True
         self.setup.triangulate(np.zeros((1, n, 2)), seen)
@@ -285,7 +289,7 @@ class Tracker:
         setup, p, mem = self.setup, self.params, self.memory
         predict(frame, mem, p)
         t0 = time.perf_counter()
-        uv, rad = window_observations(setup, p, self.table, frame, mem, self.fps, self._sizes, images)
+        uv, rad = window_observations(setup, p, self.table, frame, mem, self.fps, self._sizes, images, self._luma)
         t1 = time.perf_counter()
         choice = choose_views(setup, p, frame, uv, rad)
         new_pos, measured = accept(setup, p, frame, mem, choice, uv, rad)

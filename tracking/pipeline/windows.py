@@ -9,6 +9,8 @@ all cameras are gathered for one table look-up (compiled: :mod:`tracking.window_
 :mod:`tracking.pipeline.moments`). A window whose mask is too large or not round holds several
 balls (or clutter): then its regions are separated and the one nearest to the prediction is taken.
 Partly hidden balls have their centres fitted to their visible arcs (:mod:`tracking.pipeline.arcs`).
+With ``TrackerParams.window_luma`` a window's whole ball has its centre checked against a fit in the
+luma, which webcams send at full resolution while their colour is halved (:func:`luma_windows`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from tracking import window_kernel
-from tracking.blobs import ARC_EDGE_SHRINK_PX, PIXEL_MOMENT, axis_ratio, find_blobs
+from tracking.blobs import ARC_EDGE_SHRINK_PX, PIXEL_MOMENT, axis_ratio, find_blobs, luma_centre
 from tracking.colour.table import ColourTable
 from tracking.pipeline.arcs import ArcRegions
 from tracking.pipeline.moments import window_moments_numpy
@@ -42,6 +44,21 @@ class ImageSizes:
             self._shapes = shapes
             self._size = np.array([s[1::-1] for s in shapes], dtype=np.int64)  # (C, 2) width, height
         return self._size
+
+
+class LumaLabels:
+    """One (H, W) uint8 colour-label image per camera for the luma fits of the windows
+    (:func:`luma_windows`), kept from frame set to frame set. Each fit's box is labelled from the
+    colour table just before the fit: a label is a function of its pixel alone, so boxes that
+    overlap write the same labels, and a fit never reads a cell outside its own box."""
+
+    def __init__(self) -> None:
+        self._labels: list[np.ndarray] = []
+
+    def of(self, images: Sequence[np.ndarray]) -> list[np.ndarray]:
+        if [lab.shape for lab in self._labels] != [img.shape[:2] for img in images]:
+            self._labels = [np.zeros(img.shape[:2], np.uint8) for img in images]
+        return self._labels
 
 
 @dataclass(frozen=True, slots=True)
@@ -113,8 +130,11 @@ def search_windows(setup: Setup, p: TrackerParams, frame: FrameState, memory: Ma
 
 
 def window_observations(setup: Setup, p: TrackerParams, table: ColourTable, frame: FrameState, memory: MarkerMemory,
-                        fps: float, sizes: ImageSizes, images: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Each marker's centroid in each camera, from the colour table inside its search window.
+                        fps: float, sizes: ImageSizes, images: Sequence[np.ndarray],
+                        luma: LumaLabels | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each marker's centroid in each camera, from the colour table inside its search window
+    (the whole balls' centres checked in the luma where ``p.window_luma``; ``luma`` keeps the
+    label images of those fits between frame sets).
 
     Returns:
         uv (M, C, 2) float64 centroids (NaN where none), radius (M, C) equivalent radius in px.
@@ -131,7 +151,10 @@ def window_observations(setup: Setup, p: TrackerParams, table: ColourTable, fram
         uv_out.reshape(-1, 2)[wm.at[wm.simple]] = wm.centre[wm.simple] + wm.mxy[wm.simple]
         rad_out.reshape(-1)[wm.at[wm.simple]] = wm.radius[wm.simple]
         arcs = ArcRegions()
-        queue_partial_balls(arcs, p, win, wm)
+        part = queue_partial_balls(arcs, p, win, wm)
+        if p.window_luma:
+            luma_windows(setup, table, images, wm, wm.simple & ~part, luma or LumaLabels(), compiled, uv_out,
+                         p.window_luma_confirm_px)
         # several regions in the window: separate them, in a window of the size that the markers
         # measured last frame share in this camera (the largest of theirs), or of the marker's own
         recent = frame.known & (memory.frames_unmeasured == 0)
@@ -189,10 +212,10 @@ def window_moments(setup: Setup, p: TrackerParams, table: ColourTable, images: S
                          radius)
 
 
-def queue_partial_balls(arcs: ArcRegions, p: TrackerParams, win: SearchWindows, wm: WindowMoments) -> None:
+def queue_partial_balls(arcs: ArcRegions, p: TrackerParams, win: SearchWindows, wm: WindowMoments) -> np.ndarray:
     """A partly hidden ball: its region's centroid lies towards the visible part; its centre comes
     from the visible arc instead (only these few windows pay for it), all in one call with those of
-    the crowded windows."""
+    the crowded windows. Returns (K,) which windows were queued."""
     m00 = wm.count.astype(np.float64)
     simple = wm.simple
     edge_r = wm.r_k - ARC_EDGE_SHRINK_PX
@@ -215,6 +238,48 @@ def queue_partial_balls(arcs: ArcRegions, p: TrackerParams, win: SearchWindows, 
                       win.uv.reshape(-1, 2)[at[part]] - centre[part], edge_r[part], wm.first.T[part],
                       (wm.hi - 1 - centre)[part], centre[part], wm.mi[part], wm.ci[part],
                       win.sigma_px.reshape(-1)[at[part]])
+    return part
+
+
+def luma_windows(setup: Setup, table: ColourTable, images: Sequence[np.ndarray], wm: WindowMoments,
+                 whole: np.ndarray, luma: LumaLabels, compiled: bool, uv_out: np.ndarray,
+                 confirm_px: float = 0.2) -> None:
+    """The centres of the windows' whole balls (``whole``: one ball, not fitted to its arc) from
+    the luma, with the full-frame detection's fit and gates (:func:`tracking.blobs.find_blobs`
+    with ``luma=True``): of the balls within the camera's blob gates, each centroid is checked
+    against :func:`~tracking.blobs.luma_centre`, and the fit's centre taken where the fit is sure
+    and differs by more than ``confirm_px`` (``TrackerParams.window_luma_confirm_px``). The
+    labels of all the fits' boxes are written in one compiled pass; the fits are one call each
+    (``luma_centre`` is the blobs module's one entry to the fit)."""
+    m00 = wm.count.astype(np.float64)
+    min_area = np.array([g.min_area_px for g in setup.gates])[wm.ci]
+    max_area = np.array([g.max_area_px for g in setup.gates])[wm.ci]
+    min_round = np.array([g.min_roundness for g in setup.gates])[wm.ci]
+    fit = np.flatnonzero(whole & (m00 >= min_area) & (m00 <= max_area) & (wm.round_px >= min_round))
+    if not fit.size:
+        return
+    uv = wm.centre[fit] + wm.mxy[fit]  # (F, 2) the colour centroids
+    radius = wm.radius[fit]
+    ci = wm.ci[fit]
+    # each fit reads the pixels within radius + 3 of its start (luma_centre): a box around that
+    reach = np.ceil(radius)[:, None] + 5.0
+    size = np.array([img.shape[1::-1] for img in images], dtype=np.int64)[ci]
+    lo = np.clip(np.floor(uv - reach), 0, size).astype(np.int64)
+    hi = np.clip(np.ceil(uv + reach) + 1, 0, size).astype(np.int64)
+    hi = np.maximum(hi, lo)
+    labels = luma.of(images)
+    if compiled:
+        window_kernel.fill_labels(images, table.lut, ci, np.concatenate([lo, hi], axis=1), table.bits, labels)
+    else:
+        for c, (x0, y0), (x1, y1) in zip(ci.tolist(), lo.tolist(), hi.tolist()):
+            labels[c][y0:y1, x0:x1] = table.classify_window(images[c], x0, y0, x1, y1)
+    colour = setup.colour[wm.mi[fit]]
+    for j, k in enumerate(fit.tolist()):
+        c = int(ci[j])
+        u, v = float(uv[j, 0]), float(uv[j, 1])
+        centre = luma_centre(images[c], labels[c], int(colour[j]), u, v, float(radius[j]), compiled=compiled)
+        if centre is not None and math.hypot(centre[0] - u, centre[1] - v) > confirm_px:
+            uv_out[wm.mi[k], c] = centre
 
 
 def crowded_windows(setup: Setup, p: TrackerParams, table: ColourTable, images: Sequence[np.ndarray],

@@ -259,13 +259,14 @@ class TrackResult:
 
 def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), fps: float = 30.0,
                 seconds: float = 1.0, noise_sigma: float = 1.5, markerset: MarkerSet | None = None,
-                webcams: bool = True, progress: bool = False) -> list[TrackResult]:
+                webcams: bool = True, progress: bool = False, params=None) -> list[TrackResult]:
     """Render each draw's reference pose (still, ``seconds`` long, sensor noise) in a layout of
     :data:`LAYOUTS` drawn from the seed, and track it from the first frame set.
 
     ``webcams``: the images are also what a drawn cheap webcam delivers (:func:`draw_imaging`:
     sensor noise, lighting drift, auto exposure / white balance, MJPEG) instead of ``noise_sigma``
-    alone."""
+    alone. ``params``: the tracker's :class:`~tracking.tracker.TrackerParams` (default: the
+    defaults with the population's hold of the reference pose)."""
     from tqdm import tqdm  # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
 
     # lazy: `rehab --help` imports this module (REPORTED_SEEDS_FROM): keep it light
@@ -284,7 +285,7 @@ def track_draws(seeds: Iterable[int], *, size_px: tuple[int, int] = (640, 480), 
         cams = layout_cameras(layout, rng, size_px)
         with Studio(cams, ms, d.dims) as studio:
             studio.body = BodyModel(d.dims, ms, d.offsets_m)
-            tracker = Tracker(cams, ms, fps=fps, params=TrackerParams(identify_hold_s=HOLD_S))
+            tracker = Tracker(cams, ms, fps=fps, params=params or TrackerParams(identify_hold_s=HOLD_S))
             n = max(int(round(seconds * fps)), tracker.hold_frames + 2)
             imaging = draw_imaging(seed, n, noise_sigma) if webcams else None
             camera = WebcamPipeline(imaging.webcam if imaging else Webcam(), len(cams))
