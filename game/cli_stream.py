@@ -9,8 +9,8 @@ from __future__ import annotations
 import time
 
 from calibration.errors import RehabError
-from game.cli import add_tracker_source_options
 from game.cli_options import SECONDS
+from game.cli_source import add_tracker_source_options, check_motion, play_source
 
 #: Seconds between the progress lines of ``rehab stream``.
 REPORT_EVERY_S = 5.0
@@ -60,7 +60,6 @@ def add_commands(sub) -> None:
 
 
 def _cmd_stream(args) -> int:
-    from game.cli import play_source, check_motion
     from tracking.live import LiveTracker, SourceConfig
 
     stream = stream_config(args)

@@ -11,7 +11,7 @@ import pytest
 from game.cli import main
 from game.db import Database
 from game.db.accounts import AccessDenied, Account, audit_rows, authenticate, hash_secret, verify_secret
-from game.db.pending import keep_pending, store_pending_results
+from game.db.pending import keep_pending
 from game.play import PlayOptions, check_account
 from pg_station import make_record
 
@@ -99,7 +99,7 @@ def test_accepting_changing_and_exporting_are_audited_once(clinic, tmp_path, cap
     assert main(["patients", "--add", "P003", "--db", str(clinic)]) == 0
     assert main(["export", "--out", str(tmp_path / "csv"), "--patient", "P001", "--db", str(clinic)]) == 0
     with Database(clinic) as db:   # this open stores the two pending results
-        assert store_pending_results(db) == 0
+        assert db.store_pending_results() == 0
         rows = audit_rows(db)
         assert len(db.rom_results("P001")) == 3
     accepts = [r for r in rows if r.action == "accept"]

@@ -11,8 +11,13 @@ duplicate uids, the schema version) and SQLite's own page-level check where it a
 
 from __future__ import annotations
 
-from game.db.database import EXERCISE_COLUMNS, LIMIT_COLUMNS, ROM_COLUMNS, Database, insert_result_sql
+from typing import TYPE_CHECKING
+
+from game.db.columns import EXERCISE_COLUMNS, LIMIT_COLUMNS, ROM_COLUMNS, insert_result_sql
 from game.db.migrations import LATEST_VERSION
+
+if TYPE_CHECKING:   # the databases are given; this module never opens one
+    from game.db.database import Database
 
 #: table -> (columns compared and copied, the SELECT reading them by stable keys, in insertion order)
 _SNAPSHOT = {

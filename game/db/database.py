@@ -20,6 +20,7 @@ No video or images are stored.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import functools
 import json
@@ -34,10 +35,12 @@ from datetime import datetime, timedelta, timezone
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
+from game.db.columns import EXERCISE_COLUMNS, LIMIT_COLUMNS, RESULT_COLUMNS, ROM_COLUMNS, insert_result_sql  # noqa: F401 (re-exported)
+from game.db.copy import copy_database
 from game.db.dialect import SQLITE, Dialect
 from game.db.errors import (DatabaseError, DatabaseLocked, DatabaseUnreachable,  # noqa: F401 (re-exported)
                              ResultRejected, damaged, sqlite_error)
-from game.db.location import ServerUrl, db_location, default_db_path
+from game.db.location import ServerUrl, db_location, default_db_path, pending_dir
 from game.db.migrations import LATEST_VERSION, STEPS, schema_v1_sql
 from game.db.private import DIR_MODE, FILE_MODE, commit_temp, make_private, make_private_dir, open_private, temp_path_beside
 from game.rom.spec import available_rom_tests
@@ -170,19 +173,6 @@ class ExerciseRow:
 
 
 # --------------------------------------------------------------------------------- a result to store
-ROM_COLUMNS = ("uid", "test", "side", "angle", "mode", "position", "standard", "reference_deg", "value_deg",
-                "start_deg", "range_deg", "compensation", "estimated_markers", "duration_s", "recorded_utc")
-EXERCISE_COLUMNS = ("uid", "game", "repetitions", "duration_s", "score", "details", "recorded_utc")
-_RESULT_COLUMNS = {"rom_results": ROM_COLUMNS, "exercise_results": EXERCISE_COLUMNS}
-
-
-def insert_result_sql(table: str) -> str:
-    """Insert a result of ``table`` (session id, then its columns); a result already there (uid) is left alone."""
-    columns = _RESULT_COLUMNS[table]
-    return (f"INSERT INTO {table} (session_id, {', '.join(columns)}) VALUES (?, {', '.join('?' * len(columns))}) "
-            f"ON CONFLICT DO NOTHING")
-
-
 @dataclass(frozen=True, slots=True)
 class ResultRecord:
     """One result with its session, stored in one transaction (or kept in a pending file meanwhile).
@@ -234,8 +224,8 @@ class ResultRecord:
 
     def check(self, where: str) -> None:
         """Raise a one-line DatabaseError if any field or value is out of place."""
-        if self.table not in _RESULT_COLUMNS or not isinstance(self.values, dict) or \
-                set(self.values) != set(_RESULT_COLUMNS[self.table]):
+        if self.table not in RESULT_COLUMNS or not isinstance(self.values, dict) or \
+                set(self.values) != set(RESULT_COLUMNS[self.table]):
             raise DatabaseError(f"{where}: not a result of rom_results or exercise_results")
         check_session_fields(self.session_kind, self.session_started_utc, None, where)
         check_result_values(self.table, self.values, where)
@@ -377,9 +367,7 @@ class Database:
             self._dialect = SQLITE
             self._conn = _open_checked(self.path, check_integrity=check_integrity, busy_timeout_s=busy_timeout_s)
         if store_pending:
-            from game.db.pending import store_pending_results  # lazy: import cycle: game.db.pending imports this module
-
-            store_pending_results(self)
+            self.store_pending_results()
 
     @_guarded
     def _prepare_server(self) -> None:
@@ -496,6 +484,39 @@ class Database:
         return [SessionRow(*r) for r in rows]
 
     # ------------------------------------------------------------------ results
+    def store_pending_results(self) -> int:
+        """Store every result kept pending for this database (:mod:`game.db.pending`) and remove its
+        file; returns how many were stored.
+
+        A file that cannot be stored now stays (logged); one that is not a pending result is renamed
+        ``.bad`` and logged, never deleted.
+        """
+        folder = pending_dir(self.path)
+        if not folder.is_dir():
+            return 0
+        n = 0
+        for path in sorted(folder.glob("*.json")):
+            try:
+                record = ResultRecord.from_json(path.read_text(encoding="utf-8"), str(path))
+            except FileNotFoundError:
+                continue   # another process of this station has just sent it
+            except (OSError, UnicodeDecodeError, DatabaseError) as exc:
+                log.warning("pending result %s cannot be read (%s): kept as %s.bad", path, exc, path.name)
+                with contextlib.suppress(OSError):
+                    path.rename(path.with_suffix(".json.bad"))
+                continue
+            try:
+                self.store_result(record)
+            except DatabaseError as exc:
+                log.warning("pending result %s not stored yet: %s", path.name, exc)
+                if isinstance(exc, (DatabaseLocked, DatabaseUnreachable)):
+                    break
+                continue
+            path.unlink(missing_ok=True)
+            n += 1
+            log.info("stored pending result %s in %s", record.uid, self.path)
+        return n
+
     @_guarded
     def store_result(self, record: ResultRecord) -> str:
         """Store a result with its session in one durable transaction; returns its uid once on disk.
@@ -514,7 +535,7 @@ class Database:
             values = check_result_values(record.table, record.values, f"result of {record.patient_id}")
         except DatabaseError as exc:
             raise ResultRejected(str(exc)) from None
-        columns = _RESULT_COLUMNS[record.table]
+        columns = RESULT_COLUMNS[record.table]
         c = self.conn
         with self._transaction():
             if not self.has_patient(record.patient_id):
@@ -550,7 +571,7 @@ class Database:
     @_guarded
     def _add_to_session(self, session_id: int, record: ResultRecord) -> str:
         values = check_result_values(record.table, record.values, f"result of session {session_id}")
-        columns = _RESULT_COLUMNS[record.table]
+        columns = RESULT_COLUMNS[record.table]
         self._write(f"INSERT INTO {record.table} (session_id, {', '.join(columns)}) "
                     f"VALUES (?, {', '.join('?' * len(columns))})", (session_id, *(values[k] for k in columns)))
         return record.uid
@@ -637,8 +658,6 @@ class Database:
         return dest
 
     def _backup_server(self, tmp: Path) -> None:
-        from game.db.copy import copy_database  # lazy: import cycle: game.db.copy imports this module
-
         tmp.unlink()
         self.conn.execute(self._dialect.read_snapshot)   # one consistent snapshot
         try:
@@ -722,7 +741,7 @@ class Database:
                      s["note"])).rowcount
             for table, rows in (("rom_results", roms), ("exercise_results", exes)):
                 path = src / f"{table}.csv"
-                columns = _RESULT_COLUMNS[table]
+                columns = RESULT_COLUMNS[table]
                 for line, r in rows:
                     where = f"{path} line {line}"
                     sid = _session_id(c, r["session_uid"], path, line)
@@ -746,8 +765,6 @@ class Database:
                     tuple(g[k] for k in LIMIT_COLUMNS)).rowcount
         return added
 
-
-LIMIT_COLUMNS = ("patient_id", "game", "limits", "updated_utc")
 
 
 def _no_constant(name: str):

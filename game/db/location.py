@@ -84,3 +84,11 @@ def local_folder(location: Path | ServerUrl) -> Path:
     if isinstance(location, ServerUrl):
         return default_db_path().parent
     return Path(location).parent
+
+
+def pending_dir(db_path: str | Path | ServerUrl) -> Path:
+    """The folder of results waiting for the database ``db_path`` (a file or a server URL)."""
+    location = db_location(db_path)
+    if isinstance(location, ServerUrl):
+        return local_folder(location) / "pending" / location.key
+    return location.with_name(location.name + ".pending")

@@ -14,7 +14,6 @@ in the database or in its file.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import time
 from dataclasses import dataclass
@@ -22,9 +21,9 @@ from pathlib import Path
 from typing import Callable
 
 from calibration.errors import RehabError
-from game.db.database import (BUSY_TIMEOUT_S, Database, DatabaseError, DatabaseLocked, DatabaseUnreachable, ResultRecord,
+from game.db.database import (BUSY_TIMEOUT_S, Database, DatabaseError, DatabaseLocked, ResultRecord,
                               ResultRejected)
-from game.db.location import ServerUrl, db_location, local_folder
+from game.db.location import db_location, pending_dir
 from game.db.private import make_private_dir, open_private
 
 log = logging.getLogger(__name__)
@@ -60,14 +59,6 @@ class StoreOutcome:
                 f"time rehab opens it")
 
 
-def pending_dir(db_path: str | Path | ServerUrl) -> Path:
-    """The folder of results waiting for the database ``db_path`` (a file or a server URL)."""
-    location = db_location(db_path)
-    if isinstance(location, ServerUrl):
-        return local_folder(location) / "pending" / location.key
-    return location.with_name(location.name + ".pending")
-
-
 def keep_pending(db_path: str | Path, record: ResultRecord) -> Path:
     """Write ``record`` to its pending file (whole, flushed to disk, 0600); returns the file.
 
@@ -84,39 +75,6 @@ def keep_pending(db_path: str | Path, record: ResultRecord) -> Path:
         raise RehabError(f"the result could neither be stored in {db_path} nor kept in {folder} ({exc}): note it "
                          f"down: {record.table} {record.values}") from None
     return path
-
-
-def store_pending_results(db: Database) -> int:
-    """Store every pending result of ``db`` and remove its file; returns how many were stored.
-
-    A file that cannot be stored now stays (logged); one that is not a pending result is renamed
-    ``.bad`` and logged, never deleted.
-    """
-    folder = pending_dir(db.path)
-    if not folder.is_dir():
-        return 0
-    n = 0
-    for path in sorted(folder.glob("*.json")):
-        try:
-            record = ResultRecord.from_json(path.read_text(encoding="utf-8"), str(path))
-        except FileNotFoundError:
-            continue   # another process of this station has just sent it
-        except (OSError, UnicodeDecodeError, DatabaseError) as exc:
-            log.warning("pending result %s cannot be read (%s): kept as %s.bad", path, exc, path.name)
-            with contextlib.suppress(OSError):
-                path.rename(path.with_suffix(".json.bad"))
-            continue
-        try:
-            db.store_result(record)
-        except DatabaseError as exc:
-            log.warning("pending result %s not stored yet: %s", path.name, exc)
-            if isinstance(exc, (DatabaseLocked, DatabaseUnreachable)):
-                break
-            continue
-        path.unlink(missing_ok=True)
-        n += 1
-        log.info("stored pending result %s in %s", record.uid, db.path)
-    return n
 
 
 def store_durably(db_path: str | Path, record: ResultRecord, *, wait_s: float = WAIT_S,
