@@ -179,7 +179,8 @@ def _cmd_track(args) -> int:
         others = ", ".join([fmt.option for fmt in formats[1:]] + ["--points"])
         raise RehabError(f"nothing to write: give {formats[0].option} {formats[0].example} (and/or {others})")
     # before the work, not after minutes of tracking
-    check_outputs({**{fmt.option: outputs[fmt.name] for fmt in formats}, "--points": args.points})
+    check_outputs({**{fmt.option: outputs[fmt.name] for fmt in formats}, "--points": args.points},
+                  {**{fmt.option: fmt.example for fmt in formats}, "--points": "points.csv"})
     report = _writing(track_recording, "the results")(
         args.recording,
         calibration=args.calibration,

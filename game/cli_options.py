@@ -87,12 +87,13 @@ def handle_broken_pipe() -> int:
     return 141
 
 
-def check_outputs(outputs: dict[str, Path | None]) -> None:
+def check_outputs(outputs: dict[str, Path | None], examples: dict[str, str] | None = None) -> None:
     """Check the files a command will write, before its work: each writable, none a folder, no two the same.
 
     Missing folders are created (as the writers do); a probe file shows that the folder takes
     files (a read-only disk, a folder of someone else). ``outputs`` maps an option (``--out``) to
-    its path (None: not asked for).
+    its path (None: not asked for); ``examples`` an option to a file name the fix suggests
+    (``markers.trc``).
 
     Raises:
         RehabError: one line naming the option, the path and the fix.
@@ -112,7 +113,8 @@ def check_outputs(outputs: dict[str, Path | None]) -> None:
             raise RehabError(f"{option} {path} is also given to {seen[key]}: give each output its own file")
         seen[key] = option
         if path.is_dir():
-            raise RehabError(f"{option} {path} is a folder: give a file name, e.g. {path / 'out'}")
+            name = (examples or {}).get(option, "out")
+            raise RehabError(f"{option} {path} is a folder: give a file name, e.g. {path / name}")
         if path.name in ("", ".", ".."):
             raise RehabError(f"{option} {path}: give a file name")
         folder = path.parent

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -158,6 +159,7 @@ def test_one_image_of_another_size_is_one_line(tmp_path):
 @pytest.mark.parametrize("option", ["--out", "--status", "--angles", "--c3d", "--mot", "--bvh", "--detections",
                                     "--points"])
 def test_track_refuses_an_impossible_output_before_the_work(tmp_path, capsys, monkeypatch, option):
+    option_suffix = {"--out": ".trc", "--c3d": ".c3d", "--mot": ".mot", "--bvh": ".bvh"}
     """A folder given as the file, a folder under a regular file, a folder that takes no files
     (/proc refuses new files even to root, as a read-only disk does): one line naming the
     option and the path, before any tracking."""
@@ -172,6 +174,9 @@ def test_track_refuses_an_impossible_output_before_the_work(tmp_path, capsys, mo
         code = main(["track", str(tmp_path / "rec"), option, str(target)])
         err = capsys.readouterr().err
         assert code == 1 and words in err and option in err and str(target) in err and err.count("\n") == 1, err
+        if words == "is a folder":   # the fix names a file of the option's kind
+            suffix = ".csv" if option in ("--status", "--angles", "--detections", "--points") else option_suffix[option]
+            assert f"e.g. {target}{os.sep}" in err and err.rstrip().endswith(suffix), err
 
 
 def test_the_same_file_for_two_outputs_is_refused(tmp_path, capsys):
