@@ -450,6 +450,13 @@ class CalibrateScene(BaseScene):
         detection, reason = detect_board(image, self.board)
         return index, image, detection, reason
 
+    def lens_hint(self) -> str:
+        """The lens step's next instruction, in plain words: how to keep a board that is found,
+        then where to move it (:func:`coverage_hint`)."""
+        if not self.current.views and self.detection is not None and not self.auto:
+            return "Press Space to capture this view, or A to capture as you move the board"
+        return coverage_hint(self.current.views, self.feed.size_px)
+
     def next_frame(self) -> None:
         """Read the feed's next image and look for the board in it (on this thread)."""
         self._show(*self._grab(self.index))
@@ -838,7 +845,7 @@ class CalibrateScene(BaseScene):
                round(theme.SMALL * s), theme.ACCENT if n >= self.need_views else theme.TEXT_DIM)
         y += 40 * s
         col_w = w - x - m
-        hint = coverage_hint(self.current.views, self.feed.size_px)
+        hint = self.lens_hint()
         for line in c.wrap(hint, round(theme.BODY * s), col_w)[:2]:
             c.text(line, (x, y), round(theme.BODY * s), theme.ACCENT if hint.startswith("Good") else theme.ATTENTION)
             y += 38 * s

@@ -76,6 +76,8 @@ def test_corners_drawn_where_the_board_is_and_capture_only_when_found(screen, tm
         step(app, clock)
         before = len(scene.current.views)
         found = scene.detection is not None
+        if before == 0:   # what to do next, as the screen says it: keep a board that is there, else show one
+            assert scene.lens_hint().startswith("Press Space to capture" if found else "Hold the whole board")
         app.dispatch(Press(Action.SELECT))
         assert len(scene.current.views) == before + found
         if found and not found_seen:
